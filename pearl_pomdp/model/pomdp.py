@@ -1,0 +1,181 @@
+"""The flat POMDP and its array conventions (DESIGN.md §2).
+
+Conventions, used by every module of the project:
+
+* ``T[a][s, s'] = P(s' | s, a)`` — one ``S×S`` matrix per action, a dense
+  ``numpy.ndarray`` or a ``scipy.sparse.csr_matrix`` (large models).
+* ``O[a, s', o] = P(o | s', a)`` — observation after arriving in ``s'``; dense ``A×S×Z``.
+* ``R[s, a]`` — expected immediate reward for doing ``a`` in ``s``.
+* ``b0[s]`` — start belief; ``discount`` in (0, 1].
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from typing import List, Optional, Sequence, Union
+
+import numpy as np
+import scipy.sparse as sp
+
+Matrix = Union[np.ndarray, sp.csr_matrix]
+
+#: A model with more than this many S×S entries per action keeps T sparse.
+DENSE_LIMIT = 4_000_000
+
+
+@dataclass
+class Pomdp:
+    """A flat, discrete POMDP (S, A, Z, T, O, R, b0, γ).
+
+    Build one with :func:`Pomdp.create` (which validates and picks dense or
+    sparse storage) or through a reader such as
+    :func:`pearl_pomdp.model.pomdp_format.read_pomdp`.
+    """
+
+    states: List[str]
+    actions: List[str]
+    observations: List[str]
+    T: List[Matrix]
+    O: np.ndarray
+    R: np.ndarray
+    b0: np.ndarray
+    discount: float
+    name: str = "pomdp"
+    #: Optional per-(a, s, s', o) reward information is reduced to R[s, a] by the readers.
+    metadata: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ build
+    @classmethod
+    def create(
+        cls,
+        states: Sequence[str],
+        actions: Sequence[str],
+        observations: Sequence[str],
+        T,
+        O,
+        R,
+        b0=None,
+        discount: float = 0.95,
+        name: str = "pomdp",
+        sparse: Optional[bool] = None,
+        tolerance: float = 1e-6,
+    ) -> "Pomdp":
+        """Validate the arrays and build a model.
+
+        Args:
+            T: ``[A, S, S]`` array, or a list of ``A`` matrices (dense or sparse).
+            O: ``[A, S, Z]`` array.
+            R: ``[S, A]`` array.
+            b0: ``[S]`` start belief; uniform when ``None``.
+            sparse: force sparse (True) or dense (False) T; default by size.
+            tolerance: how far a probability row may be from summing to 1.
+
+        Raises:
+            ValueError: a shape is wrong or a row is not a distribution (the
+                message names the action, state and the sum).
+        """
+        S, A, Z = len(states), len(actions), len(observations)
+        if S == 0 or A == 0 or Z == 0:
+            raise ValueError(f"a POMDP needs at least one state, action and observation (got {S}, {A}, {Z})")
+        if sparse is None:
+            sparse = S * S > DENSE_LIMIT
+        mats: List[Matrix] = []
+        if len(T) != A:
+            raise ValueError(f"T has {len(T)} action matrices, expected {A}")
+        for a, Ta in enumerate(T):
+            m = sp.csr_matrix(Ta, dtype=float) if sparse else (Ta.toarray() if sp.issparse(Ta) else np.asarray(Ta, dtype=float))
+            if m.shape != (S, S):
+                raise ValueError(f"T[{actions[a]}] has shape {m.shape}, expected ({S}, {S})")
+            mats.append(m)
+        O = np.asarray(O, dtype=float)
+        if O.shape != (A, S, Z):
+            raise ValueError(f"O has shape {O.shape}, expected ({A}, {S}, {Z})")
+        R = np.asarray(R, dtype=float)
+        if R.shape != (S, A):
+            raise ValueError(f"R has shape {R.shape}, expected ({S}, {A})")
+        b0 = np.full(S, 1.0 / S) if b0 is None else np.asarray(b0, dtype=float)
+        if b0.shape != (S,):
+            raise ValueError(f"b0 has shape {b0.shape}, expected ({S},)")
+        if not 0.0 < discount <= 1.0:
+            raise ValueError(f"discount {discount} is not in (0, 1]")
+        model = cls(list(states), list(actions), list(observations), mats, O, R, b0, float(discount), name)
+        model.check(tolerance)
+        return model
+
+    # ---------------------------------------------------------------- checks
+    def check(self, tolerance: float = 1e-6) -> None:
+        """Raise ``ValueError`` naming the first row of T, O or b0 that is not a distribution."""
+        for a, Ta in enumerate(self.T):
+            sums = np.asarray(Ta.sum(axis=1)).ravel()
+            mins = Ta.min() if not sp.issparse(Ta) else min(Ta.data.min(initial=0.0), 0.0)
+            if mins < -tolerance:
+                raise ValueError(f"T[{self.actions[a]}] has a negative entry ({mins})")
+            bad = np.flatnonzero(np.abs(sums - 1.0) > tolerance)
+            if bad.size:
+                s = bad[0]
+                raise ValueError(f"T[{self.actions[a]}][{self.states[s]}, :] sums to {sums[s]:.9g}, expected 1")
+        if (self.O < -tolerance).any():
+            a, s, o = np.argwhere(self.O < -tolerance)[0]
+            raise ValueError(f"O[{self.actions[a]}, {self.states[s]}, {self.observations[o]}] is negative")
+        sums = self.O.sum(axis=2)
+        bad = np.argwhere(np.abs(sums - 1.0) > tolerance)
+        if bad.size:
+            a, s = bad[0]
+            raise ValueError(f"O[{self.actions[a]}, {self.states[s]}, :] sums to {sums[a, s]:.9g}, expected 1")
+        if (self.b0 < -tolerance).any() or abs(self.b0.sum() - 1.0) > tolerance:
+            raise ValueError(f"b0 sums to {self.b0.sum():.9g} (or has a negative entry), expected a distribution")
+        if not np.isfinite(self.R).all():
+            raise ValueError("R has a non-finite entry")
+
+    # ------------------------------------------------------------ properties
+    @property
+    def num_states(self) -> int:
+        return len(self.states)
+
+    @property
+    def num_actions(self) -> int:
+        return len(self.actions)
+
+    @property
+    def num_observations(self) -> int:
+        return len(self.observations)
+
+    @property
+    def is_sparse(self) -> bool:
+        """True when T is stored as scipy sparse matrices."""
+        return sp.issparse(self.T[0])
+
+    def T_dense(self) -> np.ndarray:
+        """``T`` as one ``[A, S, S]`` array (raises MemoryError-prone models as ValueError)."""
+        S, A = self.num_states, self.num_actions
+        if A * S * S > 50 * DENSE_LIMIT:
+            raise ValueError(f"a dense T of {A}x{S}x{S} is too large; use the sparse matrices in Pomdp.T")
+        return np.stack([Ta.toarray() if sp.issparse(Ta) else Ta for Ta in self.T])
+
+    def index(self, kind: str, name: str) -> int:
+        """Index of a state/action/observation ``name`` (``kind`` is 'states', 'actions' or 'observations')."""
+        names = getattr(self, kind)
+        try:
+            return names.index(name)
+        except ValueError:
+            raise KeyError(f"unknown {kind[:-1]} {name!r}; known: {', '.join(names[:20])}{' …' if len(names) > 20 else ''}") from None
+
+    def fingerprint(self) -> str:
+        """A SHA-256 over names, arrays and discount: policies record it to detect a model mismatch."""
+        h = hashlib.sha256()
+        for names in (self.states, self.actions, self.observations):
+            h.update("\x1f".join(names).encode())
+            h.update(b"\x1e")
+        for Ta in self.T:
+            # Same bytes whether T is stored dense or sparse.
+            c = sp.csr_matrix(Ta, dtype=float)
+            c.sum_duplicates()
+            c.eliminate_zeros()
+            c.sort_indices()
+            h.update(np.round(c.data, 12).tobytes())
+            h.update(c.indices.astype(np.int64).tobytes())
+            h.update(c.indptr.astype(np.int64).tobytes())
+        for arr in (self.O, self.R, self.b0):
+            h.update(np.round(arr, 12).tobytes())
+        h.update(repr(round(self.discount, 12)).encode())
+        return h.hexdigest()

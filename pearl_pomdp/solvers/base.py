@@ -1,0 +1,87 @@
+"""What every solver returns: an α-vector policy and a result record.
+
+A value function is a set Γ of α-vectors, each labelled with an action
+(DESIGN.md §2): ``V(b) = max_k Γ[k]·b`` and the policy takes the action of the
+maximising vector, a single matrix-vector product.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import List, Optional
+
+import numpy as np
+
+
+@dataclass
+class AlphaVectorPolicy:
+    """A piecewise-linear value function with an action per vector.
+
+    Attributes:
+        alphas: ``[K, S]`` array, one α-vector per row.
+        actions: ``[K]`` int array, the action index of each vector.
+    """
+
+    alphas: np.ndarray
+    actions: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.alphas = np.atleast_2d(np.asarray(self.alphas, dtype=float))
+        self.actions = np.asarray(self.actions, dtype=np.int64).ravel()
+        if self.alphas.shape[0] != self.actions.shape[0]:
+            raise ValueError(
+                f"{self.alphas.shape[0]} α-vectors but {self.actions.shape[0]} action labels"
+            )
+
+    @property
+    def num_vectors(self) -> int:
+        return int(self.alphas.shape[0])
+
+    def values(self, belief: np.ndarray) -> np.ndarray:
+        """``Γ·b`` for every vector (or ``[N, K]`` for a batch of beliefs ``[N, S]``)."""
+        return np.asarray(belief, dtype=float) @ self.alphas.T
+
+    def value(self, belief: np.ndarray) -> float:
+        """``V(b) = max_k α_k·b``."""
+        return float(np.max(self.values(belief)))
+
+    def best_vector(self, belief: np.ndarray) -> int:
+        """Index of the maximising α-vector at ``belief``."""
+        return int(np.argmax(self.values(belief)))
+
+    def action(self, belief: np.ndarray) -> int:
+        """The action index the policy takes at ``belief``."""
+        return int(self.actions[self.best_vector(belief)])
+
+
+@dataclass
+class SolveResult:
+    """Outcome of a solver run.
+
+    Attributes:
+        policy: the lower-bound α-vector policy.
+        method: ``"incprune"``, ``"pointbased"``, ``"qmdp"``...
+        value_at_start: ``V(b0)`` of the policy's value function (a lower bound
+            for point-based methods).
+        upper_bound: an upper bound on the optimal value at ``b0`` when the
+            method has one, else ``None``.
+        iterations: epochs (exact) or backup rounds (point-based).
+        seconds: wall-clock solve time.
+        vectors_per_epoch: for exact solvers, ``|Γ_t|`` after each epoch.
+        converged: whether the stopping criterion was met (vs. a time/horizon limit).
+        extra: method-specific figures (kept JSON-serialisable).
+    """
+
+    policy: AlphaVectorPolicy
+    method: str
+    value_at_start: float
+    upper_bound: Optional[float] = None
+    iterations: int = 0
+    seconds: float = 0.0
+    vectors_per_epoch: List[int] = field(default_factory=list)
+    converged: bool = False
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def gap(self) -> Optional[float]:
+        """``upper_bound - value_at_start`` or ``None``."""
+        return None if self.upper_bound is None else float(self.upper_bound - self.value_at_start)

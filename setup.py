@@ -1,0 +1,63 @@
+"""ament_python / pip package for Pearl POMDP.
+
+The same file serves ``pip install -e .`` (console scripts land in the venv's
+``bin/``) and colcon (``setup.cfg`` moves them to ``lib/pearl_pomdp`` so that
+``ros2 run`` finds them).
+"""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "pearl_pomdp"
+
+
+def _version() -> str:
+    # One fact in one place: the version lives in package.xml (ROS reads it there).
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).parent / "package.xml").read_text(encoding="utf-8")
+    return re.search(r"<version>([^<]+)</version>", text).group(1)
+
+
+NODES = {
+    "belief_tracker": "pearl_pomdp.nodes.belief_tracker:main",
+    "hierarchical_policy": "pearl_pomdp.nodes.hierarchical_policy:main",
+    "action_executor": "pearl_pomdp.nodes.action_executor:main",
+}
+
+setup(
+    name=PACKAGE,
+    version=_version(),
+    packages=find_packages(exclude=["test", "test.*", "bench"]),
+    package_data={PACKAGE: ["py.typed"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/launch", glob("launch/*.xml")),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/config/scenarios", glob("config/scenarios/*.yaml")),
+    ],
+    python_requires=">=3.10",
+    install_requires=["numpy>=1.24", "scipy>=1.11", "PyYAML>=6", "tqdm>=4.60"],
+    extras_require={
+        "ros": [
+            "ros-jazzy-rclpy",
+            "ros-jazzy-common-interfaces",
+            "ros-jazzy-rmw-fastrtps-cpp",
+            "mcap>=1.1",
+            "mcap-ros2-support>=0.5",
+            "matplotlib>=3.6",
+        ],
+        "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6"],
+    },
+    zip_safe=True,
+    maintainer="Pearl POMDP developers",
+    maintainer_email="pearl-pomdp@example.org",
+    description="Hierarchical POMDP behaviour manager for ROS 2 service robots (after Pineau & Thrun).",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": ["pearl = pearl_pomdp.cli:main"]
+        + [f"{name} = {target}" for name, target in NODES.items()],
+    },
+)
