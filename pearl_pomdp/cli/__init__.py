@@ -1,0 +1,92 @@
+"""The ``pearl`` command.
+
+Each subcommand lives in its own module of this package and exposes::
+
+    COMMAND = "solve"                       # the subcommand name
+    HELP = "one line for `pearl --help`"
+    def add_arguments(parser: argparse.ArgumentParser) -> None: ...
+    def run(args: argparse.Namespace) -> int: ...   # exit code
+
+Modules are discovered automatically, so adding a command never edits this file.
+User errors (:class:`~pearl_pomdp.errors.PearlError`, missing files) print one
+line ``pearl <command>: error: …`` on stderr and exit 2, without a traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import pkgutil
+import sys
+from typing import List, Optional
+
+from pearl_pomdp.errors import PearlError
+
+
+def _command_modules():
+    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"{__name__}.{info.name}")
+        if hasattr(module, "COMMAND") and hasattr(module, "run"):
+            yield module
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser, with every discovered subcommand."""
+    from pearl_pomdp import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="pearl",
+        description="Pearl POMDP: hierarchical POMDP behaviour manager for ROS 2 service robots.",
+    )
+    parser.add_argument("--version", action="version", version=f"pearl {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for module in _command_modules():
+        p = sub.add_parser(module.COMMAND, help=module.HELP, description=getattr(module, "__doc__", None),
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def print_json(obj) -> None:
+    """Print one JSON object on stdout (the ``--json`` contract of every command)."""
+    json.dump(obj, sys.stdout, indent=None, sort_keys=False, default=_json_default)
+    sys.stdout.write("\n")
+    sys.stdout.flush()
+
+
+def _json_default(value):
+    import numpy as np
+
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Entry point of the ``pearl`` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "_run", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args._run(args) or 0)
+    except PearlError as err:
+        print(f"pearl {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except (FileNotFoundError, IsADirectoryError, PermissionError) as err:
+        name = getattr(err, "filename", None) or ""
+        print(f"pearl {args.command}: error: {name}: {err.strerror or err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"pearl {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
