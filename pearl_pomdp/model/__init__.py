@@ -1,1 +1,28 @@
+"""Models: the flat :class:`Pomdp`, the ``.pomdp``/PomdpX formats and factored YAML domains."""
+from __future__ import annotations
 
+from pathlib import Path
+from typing import Union
+
+from pearl_pomdp.model.pomdp import Pomdp
+
+__all__ = ["Pomdp", "load_model"]
+
+
+def load_model(path: Union[str, Path]) -> Pomdp:
+    """Load a flat model from a ``.pomdp`` file or a factored domain ``.yaml``.
+
+    Raises:
+        pearl_pomdp.errors.SpecError: the file is invalid (the message names file and line/field).
+        FileNotFoundError: no such file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(2, "no such model file", str(path))
+    if path.suffix.lower() in (".yaml", ".yml"):
+        from pearl_pomdp.model.factored import load_domain
+
+        return load_domain(path).compile()
+    from pearl_pomdp.model.pomdp_format import read_pomdp
+
+    return read_pomdp(path)

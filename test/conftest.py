@@ -1,0 +1,16 @@
+"""Shared fixtures: where the benchmark models live."""
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+BENCHMARKS = SHARED / "benchmarks" / "pomdp"
+
+
+@pytest.fixture(scope="session")
+def benchmarks_dir() -> Path:
+    """``../shared/benchmarks/pomdp`` (CI clones the repo with ``shared/`` beside it)."""
+    if not BENCHMARKS.is_dir():
+        pytest.fail(f"benchmark models not found at {BENCHMARKS}; clone with ../shared beside the repo")
+    return BENCHMARKS
