@@ -1,0 +1,169 @@
+"""Solve a POMDP and optionally save the policy.
+
+    pearl solve MODEL [--method incprune|pointbased|qmdp] [--horizon N] [--epsilon E]
+                      [--time-limit S] [--out POLICY] [--json]
+
+MODEL is a Cassandra ``.pomdp`` file or a factored domain ``.yaml``.
+
+Methods:
+  incprune    exact incremental pruning (Cassandra, Littman & Zhang 1997); finite horizon
+              with --horizon, else infinite horizon until the epsilon stop.
+  pointbased  point-based α-vector lower bound with an upper bound (the gap is reported);
+              anytime, stops at --time-limit (default 60 s) or when the gap at b0 ≤ --epsilon.
+  qmdp        the QMDP approximation (one α-vector per action; an upper bound of the optimum).
+
+Default method: incprune when --horizon is given or the model is tiny
+(|S|·|A|·|Z| ≤ 32, e.g. tiger: 12, 1d: 16), else pointbased.
+
+--json prints one object: states, actions, observations, method, value_at_start (the
+policy's value at b0; a lower bound for pointbased), upper_bound (null if none),
+alpha_vectors, iterations, seconds, converged, and for incprune vectors_per_epoch.
+Progress goes to stderr (tqdm); --quiet turns it off.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+from pearl_pomdp.errors import PearlError
+
+COMMAND = "solve"
+HELP = "solve a .pomdp or domain .yaml model (incremental pruning, point-based, QMDP)"
+
+METHODS = ("incprune", "pointbased", "qmdp")
+#: Models with |S|·|A|·|Z| up to this are solved exactly by default.
+TINY_MODEL = 32
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {value}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0 or not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("model", metavar="MODEL", help="a .pomdp file or a factored domain .yaml")
+    parser.add_argument("--method", choices=METHODS, default=None,
+                        help="solver (default: incprune for tiny models or with --horizon, else pointbased)")
+    parser.add_argument("--horizon", type=_positive_int, default=None,
+                        help="incprune: number of epochs (default: infinite horizon, stop at --epsilon)")
+    parser.add_argument("--epsilon", type=_positive_float, default=None,
+                        help="incprune: pruning/stop tolerance (default 1e-9); pointbased: target gap at b0 (default 1e-3)")
+    parser.add_argument("--time-limit", type=_positive_float, default=None, metavar="S",
+                        help="stop after S seconds (pointbased default 60; incprune default none)")
+    parser.add_argument("--seed", type=int, default=0, help="pointbased: random seed (default 0)")
+    parser.add_argument("--out", metavar="POLICY", default=None,
+                        help="save the policy: POLICY (.npz) plus its JSON header beside it")
+    parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
+
+
+def default_method(model, horizon=None) -> str:
+    """The method used when --method is not given (see the module doc)."""
+    if horizon is not None:
+        return "incprune"
+    size = model.num_states * model.num_actions * model.num_observations
+    return "incprune" if size <= TINY_MODEL else "pointbased"
+
+
+def solve(model, method: str, horizon=None, epsilon=None, time_limit=None, seed=0, progress=False):
+    """Run ``method`` on ``model``; the solver modules are imported here, when needed."""
+    if horizon is not None and method != "incprune":
+        raise PearlError(f"--horizon applies to incprune only, not to {method}")
+    try:
+        if method == "incprune":
+            from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
+
+            kwargs = {"horizon": horizon, "time_limit": time_limit, "progress": progress}
+            if epsilon is not None:
+                kwargs["epsilon"] = epsilon
+            return solve_incremental_pruning(model, **kwargs)
+        if method == "pointbased":
+            from pearl_pomdp.solvers.point_based import solve_point_based
+
+            kwargs = {"time_limit": 60.0 if time_limit is None else time_limit, "seed": seed, "progress": progress}
+            if epsilon is not None:
+                kwargs["epsilon"] = epsilon
+            return solve_point_based(model, **kwargs)
+        if method == "qmdp":
+            from pearl_pomdp.solvers.mdp import solve_qmdp
+
+            return solve_qmdp(model)
+    except ImportError as err:
+        raise PearlError(f"method {method} is not available in this installation ({err})") from None
+    raise PearlError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+
+
+def summary(model, result) -> dict:
+    """The --json object for a :class:`~pearl_pomdp.solvers.base.SolveResult`."""
+    out = {
+        "model": model.name,
+        "states": model.num_states,
+        "actions": model.num_actions,
+        "observations": model.num_observations,
+        "discount": model.discount,
+        "method": result.method,
+        "value_at_start": float(result.value_at_start),
+        "upper_bound": None if result.upper_bound is None else float(result.upper_bound),
+        "gap": None if result.upper_bound is None else float(result.upper_bound - result.value_at_start),
+        "alpha_vectors": int(result.policy.alphas.shape[0]),
+        "iterations": int(result.iterations),
+        "seconds": float(result.seconds),
+        "converged": bool(result.converged),
+    }
+    if result.method == "incprune":
+        out["vectors_per_epoch"] = [int(v) for v in result.vectors_per_epoch]
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from pearl_pomdp.cli import print_json
+    from pearl_pomdp.model import load_model
+
+    model = load_model(args.model)
+    method = args.method or default_method(model, args.horizon)
+    result = solve(model, method, horizon=args.horizon, epsilon=args.epsilon, time_limit=args.time_limit,
+                   seed=args.seed, progress=not args.quiet)
+    info = summary(model, result)
+    if args.horizon is not None:
+        info["horizon"] = args.horizon
+    if args.out:
+        from pearl_pomdp.policy_io import header_path, save_policy
+
+        meta = {k: info[k] for k in ("method", "value_at_start", "upper_bound", "seconds", "iterations", "converged")}
+        meta.update({"horizon": args.horizon, "epsilon": args.epsilon, "time_limit": args.time_limit,
+                     "source": str(args.model)})
+        if "vectors_per_epoch" in info:
+            meta["vectors_per_epoch"] = info["vectors_per_epoch"]
+        path = save_policy(args.out, result.policy, model, meta)
+        info["policy"] = str(path)
+        info["policy_header"] = str(header_path(path))
+    if args.json:
+        print_json(info)
+        return 0
+    gamma = f"γ = {model.discount:g}"
+    print(f"{model.name}: {model.num_states} states, {model.num_actions} actions, "
+          f"{model.num_observations} observations ({gamma})")
+    stop = "converged" if result.converged else "stopped at its horizon/time limit"
+    what = "epochs" if result.method == "incprune" else "iterations"
+    print(f"{result.method}: {info['alpha_vectors']} α-vectors after {info['iterations']} {what} "
+          f"in {info['seconds']:.3f} s ({stop})")
+    line = f"V(b0) = {info['value_at_start']:.10g}"
+    if info["upper_bound"] is not None:
+        line += f"   upper bound {info['upper_bound']:.10g}   gap {info['gap']:.4g}"
+    print(line)
+    if result.method == "incprune" and info["vectors_per_epoch"] and len(info["vectors_per_epoch"]) <= 30:
+        print("vectors per epoch: " + " ".join(map(str, info["vectors_per_epoch"])))
+    if args.out:
+        print(f"policy written to {info['policy']} (header {info['policy_header']})")
+    sys.stdout.flush()
+    return 0
