@@ -1,0 +1,1013 @@
+"""Factored (DBN-style) POMDP domains written in YAML, compiled to a flat :class:`Pomdp`.
+
+A domain lists state *features* (each with ordered values), *actions* whose
+*effects* give, per feature, the next value's distribution conditioned on a few
+parent features of the current state (default: the feature persists),
+observation *symbols* grouped by *modality* with per-action tables over a few
+features of the next state, additive *reward rules*, a factorised *start*
+distribution and the *discount*. The full format is documented in
+``docs/domain-format.md``; DESIGN.md §3 explains why the structure is kept
+(automatic abstraction in the hierarchy, per-feature marginals on the belief topic).
+
+State index convention (mixed radix, first feature most significant)::
+
+    s = Σ_f v_f · Π_{g > f} |values(g)|        state_values[s, f] = v_f
+
+so for Pearl ``s = 0`` is ``RobotLocation=home,UserLocation=room,…`` (every
+feature at its first value) and the last feature changes fastest.
+
+Compiled arrays follow the project conventions (DESIGN.md §2):
+``T[a][s, s'] = Π_f P(s'_f | parents_f(s), a)``, ``O[a, s', o] = P(o | parents(s'), a)``,
+``R[s, a] = Σ`` of the rewards of all rules matching ``(s, a)``,
+``b0[s] = Π_f start_f(s_f)``.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+from typing import Any, Dict, Iterable, List, Optional, Sequence, Set, Tuple, Union
+
+import numpy as np
+import scipy.sparse as sp
+import yaml
+
+from pearl_pomdp.errors import SpecError
+from pearl_pomdp.model.pomdp import DENSE_LIMIT, Pomdp
+
+__all__ = [
+    "StateFeature",
+    "FactoredDomain",
+    "RewardRule",
+    "load_domain",
+    "parse_domain",
+    "KEEP",
+    "ROW_TOLERANCE",
+]
+
+#: Pseudo-value in a transition row: "stay at the current value" (makes the feature its own parent).
+KEEP = "keep"
+#: How far a probability row may be from summing to 1.
+ROW_TOLERANCE = 1e-6
+#: Top-level keys a domain file may have.
+TOP_KEYS = ("name", "discount", "description", "features", "start", "modalities", "keywords",
+            "defaults", "actions", "observations", "rewards", "horizon")
+
+
+# ====================================================================== YAML with line numbers
+class _Map(dict):
+    """A mapping that remembers the 1-based line of each key (``lines``) and of itself (``line``)."""
+
+    line: Optional[int] = None
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.lines: Dict[Any, int] = {}
+
+
+class _Seq(list):
+    """A sequence that remembers the line of each item (``lines``) and of itself (``line``)."""
+
+    line: Optional[int] = None
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.lines: List[int] = []
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader with YAML 1.2 booleans (``yes``/``no``/``on``/``off`` stay strings) and line marks.
+
+    Pearl's domain uses ``yes``/``no`` as feature values and speech symbols; YAML 1.1
+    would silently turn them into booleans.
+    """
+
+
+_Loader.yaml_implicit_resolvers = {
+    ch: [(tag, rx) for tag, rx in resolvers if tag != "tag:yaml.org,2002:bool"]
+    for ch, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF"))
+
+
+def _construct_map(loader: yaml.SafeLoader, node: yaml.MappingNode) -> _Map:
+    loader.flatten_mapping(node)
+    out = _Map()
+    out.line = node.start_mark.line + 1
+    for key_node, value_node in node.value:
+        key = loader.construct_object(key_node, deep=True)
+        try:
+            hash(key)
+        except TypeError:
+            raise SpecError(loader.name, "", f"unhashable mapping key {key!r}", line=key_node.start_mark.line + 1) from None
+        if key in out:
+            raise SpecError(loader.name, str(key), "duplicate key (YAML would silently keep only the last one)",
+                            line=key_node.start_mark.line + 1)
+        out[key] = loader.construct_object(value_node, deep=True)
+        out.lines[key] = key_node.start_mark.line + 1
+    return out
+
+
+def _construct_seq(loader: yaml.SafeLoader, node: yaml.SequenceNode) -> _Seq:
+    out = _Seq()
+    out.line = node.start_mark.line + 1
+    for item in node.value:
+        out.append(loader.construct_object(item, deep=True))
+        out.lines.append(item.start_mark.line + 1)
+    return out
+
+
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_map)
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_seq)
+
+
+def _line_of(container: Any, key: Any = None) -> Optional[int]:
+    if key is not None:
+        lines = getattr(container, "lines", None)
+        if isinstance(lines, dict) and key in lines:
+            return lines[key]
+        if isinstance(lines, list) and isinstance(key, int) and 0 <= key < len(lines):
+            return lines[key]
+    return getattr(container, "line", None)
+
+
+# ====================================================================== public data types
+@dataclass(frozen=True)
+class StateFeature:
+    """One state variable: ``name`` and its ordered ``values`` (value index = position)."""
+
+    name: str
+    values: Tuple[str, ...]
+
+    def index(self, value: str) -> int:
+        """Position of ``value`` (raises ``KeyError`` naming the feature and its values)."""
+        try:
+            return self.values.index(value)
+        except ValueError:
+            raise KeyError(f"{self.name} has no value {value!r}; values: {', '.join(self.values)}") from None
+
+    def __len__(self) -> int:
+        return len(self.values)
+
+
+@dataclass
+class RewardRule:
+    """``reward`` is added to ``R[s, a]`` for every action in ``actions`` and state matching ``when``.
+
+    ``when`` maps a feature name to the set of allowed value indices; an empty
+    ``when`` matches every state. ``why`` is the designer's one-line reason.
+    """
+
+    actions: Tuple[str, ...]
+    when: Dict[str, Tuple[int, ...]]
+    reward: float
+    why: str
+    where: str = ""
+
+
+@dataclass
+class _Cpt:
+    """A conditional table ``P(child | parents)`` as an array ``[n_p1, …, n_pk, n_child]``."""
+
+    parents: Tuple[int, ...]  # feature indices
+    table: np.ndarray
+    why: str = ""
+
+
+# ====================================================================== the domain
+@dataclass
+class FactoredDomain:
+    """A validated factored POMDP domain.
+
+    Attributes:
+        name: domain name (``name:`` in the file, else the file stem).
+        source: the file it came from (for messages).
+        features: ordered list of :class:`StateFeature` (first = most significant digit of the state index).
+        actions: action names, in file order (= action index of the compiled model).
+        modalities: modality → list of its observation symbols, in file order.
+        observations: all symbols, modality after modality (= observation index).
+        discount: γ.
+        keywords: speech symbol → list of keywords/phrases for :class:`pearl_pomdp.speech.KeywordFilter`.
+        rewards: the reward rules, in file order.
+        reward_shaping: always ``None`` here; shaping belongs to the hierarchy spec.
+        categories: action → category string (``Communicate``, ``Move``…), when given.
+    """
+
+    name: str
+    source: str
+    features: List[StateFeature]
+    actions: List[str]
+    modalities: Dict[str, List[str]]
+    discount: float
+    keywords: Dict[str, List[str]]
+    rewards: List[RewardRule]
+    _transitions: List[List[_Cpt]]  # [action][feature]
+    _observations: List[_Cpt]  # [action]; table [..., Z]
+    _start: List[np.ndarray]  # per feature distribution
+    horizon: Optional[int] = None
+    description: str = ""
+    categories: Dict[str, str] = field(default_factory=dict)
+    reward_shaping: Any = None
+    _compiled: Optional[Pomdp] = field(default=None, repr=False)
+    _state_values: Optional[np.ndarray] = field(default=None, repr=False)
+
+    # ---------------------------------------------------------------- sizes and names
+    @property
+    def observations(self) -> List[str]:
+        """All observation symbols, modality after modality (the compiled observation order)."""
+        return [z for syms in self.modalities.values() for z in syms]
+
+    @property
+    def feature_names(self) -> List[str]:
+        return [f.name for f in self.features]
+
+    @property
+    def radix(self) -> np.ndarray:
+        """``[F]`` number of values of each feature."""
+        return np.array([len(f) for f in self.features], dtype=np.int64)
+
+    @property
+    def strides(self) -> np.ndarray:
+        """``[F]`` weight of each feature in the state index (last feature has stride 1)."""
+        r = self.radix
+        return np.concatenate([np.cumprod(r[::-1])[::-1][1:], [1]]).astype(np.int64)
+
+    @property
+    def num_states(self) -> int:
+        return int(np.prod(self.radix))
+
+    def feature(self, name: str) -> StateFeature:
+        """The feature called ``name`` (``KeyError`` lists the known ones)."""
+        for f in self.features:
+            if f.name == name:
+                return f
+        raise KeyError(f"unknown feature {name!r}; features: {', '.join(self.feature_names)}")
+
+    def feature_index(self, name: str) -> int:
+        return self.feature_names.index(self.feature(name).name)
+
+    @property
+    def state_values(self) -> np.ndarray:
+        """``[S, F]`` int array: ``state_values[s, f]`` is the value index of feature ``f`` in state ``s``."""
+        if self._state_values is None:
+            grids = np.indices(tuple(self.radix)).reshape(len(self.features), -1).T
+            self._state_values = np.ascontiguousarray(grids, dtype=np.int64)
+        return self._state_values
+
+    def state_names(self) -> List[str]:
+        """``["RobotLocation=home,UserLocation=room,…", …]`` in state-index order."""
+        sv = self.state_values
+        return [",".join(f"{f.name}={f.values[v]}" for f, v in zip(self.features, row)) for row in sv]
+
+    def state_index(self, assignment: Dict[str, str]) -> int:
+        """Index of the state with the given value of *every* feature (``{"Battery": "ok", …}``).
+
+        Raises:
+            KeyError: a feature is missing or unknown, or a value is unknown.
+        """
+        missing = [f.name for f in self.features if f.name not in assignment]
+        if missing:
+            raise KeyError(f"state_index needs every feature; missing: {', '.join(missing)}")
+        extra = [k for k in assignment if k not in self.feature_names]
+        if extra:
+            raise KeyError(f"unknown feature(s) {', '.join(map(repr, extra))}; features: {', '.join(self.feature_names)}")
+        digits = [f.index(str(assignment[f.name])) for f in self.features]
+        return int(np.dot(digits, self.strides))
+
+    def state_assignment(self, s: int) -> Dict[str, str]:
+        """Inverse of :meth:`state_index`: feature → value name of state ``s``."""
+        row = self.state_values[int(s)]
+        return {f.name: f.values[v] for f, v in zip(self.features, row)}
+
+    def states_matching(self, partial: Dict[str, Union[str, Sequence[str]]]) -> np.ndarray:
+        """``[S]`` bool mask of the states whose features take the given value(s)."""
+        mask = np.ones(self.num_states, dtype=bool)
+        sv = self.state_values
+        for name, value in partial.items():
+            f = self.feature_index(name)
+            vals = [value] if isinstance(value, str) else list(value)
+            idx = [self.features[f].index(v) for v in vals]
+            mask &= np.isin(sv[:, f], idx)
+        return mask
+
+    def feature_marginals(self, belief: np.ndarray) -> Dict[str, np.ndarray]:
+        """Per-feature marginals of a belief ``b[S]``: feature → ``[|values|]`` (sums to ``b.sum()``)."""
+        b = np.asarray(belief, dtype=float).ravel()
+        if b.shape[0] != self.num_states:
+            raise ValueError(f"belief has {b.shape[0]} entries, the domain has {self.num_states} states")
+        sv = self.state_values
+        return {f.name: np.bincount(sv[:, i], weights=b, minlength=len(f)) for i, f in enumerate(self.features)}
+
+    # ---------------------------------------------------------------- structure for the hierarchy
+    def _action_index(self, action: Union[str, int]) -> int:
+        if isinstance(action, (int, np.integer)):
+            return int(action)
+        try:
+            return self.actions.index(action)
+        except ValueError:
+            raise KeyError(f"unknown action {action!r}; actions: {', '.join(self.actions)}") from None
+
+    def transition_parents(self, action: Union[str, int]) -> Dict[str, List[str]]:
+        """Feature → the current-state features its next value depends on under ``action``.
+
+        A feature that just persists has parents ``[itself]``; one set to a fixed value has ``[]``.
+        """
+        a = self._action_index(action)
+        names = self.feature_names
+        return {names[f]: [names[p] for p in cpt.parents] for f, cpt in enumerate(self._transitions[a])}
+
+    def reward_features(self, action: Union[str, int]) -> Set[str]:
+        """Features read by the reward rules that apply to ``action``."""
+        name = self.actions[self._action_index(action)]
+        return {f for rule in self.rewards if name in rule.actions for f in rule.when}
+
+    def observation_parents(self, action: Union[str, int]) -> Set[str]:
+        """Next-state features the observation table of ``action`` reads."""
+        a = self._action_index(action)
+        return {self.feature_names[p] for p in self._observations[a].parents}
+
+    def modality_of(self, symbol: str) -> str:
+        """The modality a symbol belongs to (``KeyError`` for an unknown symbol)."""
+        for modality, syms in self.modalities.items():
+            if symbol in syms:
+                return modality
+        raise KeyError(f"unknown observation symbol {symbol!r}; symbols: {', '.join(self.observations)}")
+
+    def transition_table(self, action: Union[str, int], feature: str) -> Tuple[List[str], np.ndarray]:
+        """``(parents, table)`` with ``table[v_p1, …, v_pk, v'] = P(feature' = v' | parents, action)``."""
+        a = self._action_index(action)
+        cpt = self._transitions[a][self.feature_index(feature)]
+        return [self.feature_names[p] for p in cpt.parents], cpt.table.copy()
+
+    def observation_table(self, action: Union[str, int]) -> Tuple[List[str], np.ndarray]:
+        """``(parents, table)`` with ``table[v_p1', …, v_pk', o] = P(o | next-state parents, action)``."""
+        cpt = self._observations[self._action_index(action)]
+        return [self.feature_names[p] for p in cpt.parents], cpt.table.copy()
+
+    # ---------------------------------------------------------------- compile
+    def feature_transition(self, action: Union[str, int], f: int) -> np.ndarray:
+        """``[S, |f|]``: ``P(s'_f = v | s, action)`` for every current state ``s``."""
+        cpt = self._transitions[self._action_index(action)][f]
+        sv = self.state_values
+        return cpt.table[tuple(sv[:, p] for p in cpt.parents)] if cpt.parents else np.broadcast_to(
+            cpt.table, (self.num_states, cpt.table.shape[-1]))
+
+    def transition_matrix(self, action: Union[str, int]) -> sp.csr_matrix:
+        """``T[a]`` as CSR ``[S, S]``, built from the per-feature factors without a dense ``S×S`` product.
+
+        Each row's support is expanded one feature at a time (only non-zero factors),
+        so the cost is proportional to the number of non-zeros of ``T[a]``.
+        """
+        a = self._action_index(action)
+        S = self.num_states
+        rows = np.arange(S, dtype=np.int64)
+        cols = np.zeros(S, dtype=np.int64)
+        probs = np.ones(S, dtype=float)
+        for f, stride in enumerate(self.strides):
+            M = self.feature_transition(a, f)  # [S, n_f]
+            m = M[rows]  # factor of each partial entry, [E, n_f]
+            e_idx, v = np.nonzero(m > 0.0)
+            probs = probs[e_idx] * m[e_idx, v]
+            rows = rows[e_idx]
+            cols = cols[e_idx] + v * stride
+        return sp.csr_matrix((probs, (rows, cols)), shape=(S, S))
+
+    def observation_matrix(self, action: Union[str, int]) -> np.ndarray:
+        """``[S, Z]``: ``O[a, s', o]`` for one action."""
+        cpt = self._observations[self._action_index(action)]
+        sv = self.state_values
+        if not cpt.parents:
+            return np.broadcast_to(cpt.table, (self.num_states, cpt.table.shape[-1])).copy()
+        return cpt.table[tuple(sv[:, p] for p in cpt.parents)]
+
+    def reward_matrix(self) -> np.ndarray:
+        """``R[s, a]``: the sum of the rewards of all rules matching ``(s, a)``."""
+        S, A = self.num_states, len(self.actions)
+        R = np.zeros((S, A))
+        sv = self.state_values
+        col = {name: i for i, name in enumerate(self.actions)}
+        for rule in self.rewards:
+            mask = np.ones(S, dtype=bool)
+            for fname, vals in rule.when.items():
+                mask &= np.isin(sv[:, self.feature_index(fname)], vals)
+            for name in rule.actions:
+                R[mask, col[name]] += rule.reward
+        return R
+
+    def start_belief(self) -> np.ndarray:
+        """``b0[S]``: the product of the per-feature start distributions."""
+        b = np.ones(1)
+        for dist in self._start:
+            b = np.multiply.outer(b, dist).ravel()
+        return b
+
+    def compile(self) -> Pomdp:
+        """The flat :class:`Pomdp` (cached). T is dense up to ``pomdp.DENSE_LIMIT`` entries, else CSR.
+
+        ``metadata`` records the domain name, source and features so tools can map
+        state indices back to feature values.
+        """
+        if self._compiled is None:
+            S = self.num_states
+            T = [self.transition_matrix(a) for a in range(len(self.actions))]
+            O = np.stack([self.observation_matrix(a) for a in range(len(self.actions))])
+            model = Pomdp.create(
+                self.state_names(), list(self.actions), self.observations, T, O, self.reward_matrix(),
+                b0=self.start_belief(), discount=self.discount, name=self.name,
+                sparse=S * S > DENSE_LIMIT, tolerance=1e-6,
+            )
+            model.metadata.update({
+                "domain": self.name,
+                "source": self.source,
+                "features": {f.name: list(f.values) for f in self.features},
+                "modalities": {m: list(z) for m, z in self.modalities.items()},
+            })
+            if self.horizon is not None:
+                model.metadata["horizon"] = self.horizon
+            self._compiled = model
+        return self._compiled
+
+
+# ====================================================================== loading and validation
+def load_domain(path: Union[str, Path]) -> FactoredDomain:
+    """Read and validate a domain YAML file.
+
+    Raises:
+        SpecError: the file is not valid; the message names the file, the line when
+            known, the field path (``actions.GuideToPhysio.effects.UserLocation[room]``)
+            and what is wrong.
+        FileNotFoundError: no such file.
+    """
+    path = Path(path)
+    text = path.read_text(encoding="utf-8")
+    return parse_domain(text, source=str(path), default_name=path.name.split(".")[0])
+
+
+def parse_domain(text: str, source: str = "<string>", default_name: str = "domain") -> FactoredDomain:
+    """Parse and validate a domain from YAML text (see :func:`load_domain`)."""
+    try:
+        loader = _Loader(text)
+        loader.name = source
+        try:
+            data = loader.get_single_data()
+        finally:
+            loader.dispose()
+    except yaml.MarkedYAMLError as err:
+        mark = err.problem_mark or err.context_mark
+        line = mark.line + 1 if mark is not None else None
+        raise SpecError(source, "", f"YAML syntax: {err.problem or err}", line=line) from None
+    except yaml.YAMLError as err:
+        raise SpecError(source, "", f"YAML syntax: {err}") from None
+    return _Builder(source, data, default_name).build()
+
+
+class _Builder:
+    """Validates the parsed YAML and builds the :class:`FactoredDomain` (one method per section)."""
+
+    def __init__(self, source: str, data: Any, default_name: str):
+        self.source = source
+        self.data = data
+        self.default_name = default_name
+
+    # ------------------------------------------------------------ error helpers
+    def fail(self, where: str, problem: str, container: Any = None, key: Any = None) -> SpecError:
+        return SpecError(self.source, where, problem, line=_line_of(container, key) if container is not None else None)
+
+    def need_map(self, value: Any, where: str, container: Any, key: Any) -> dict:
+        if not isinstance(value, dict):
+            raise self.fail(where, f"expected a mapping, got {_kind(value)}", container, key)
+        return value
+
+    def need_list(self, value: Any, where: str, container: Any, key: Any) -> list:
+        if not isinstance(value, list):
+            raise self.fail(where, f"expected a list, got {_kind(value)}", container, key)
+        return value
+
+    def prob(self, value: Any, where: str, container: Any, key: Any) -> float:
+        p = _number(value)
+        if p is None:
+            raise self.fail(where, f"probability {value!r} is not a number (write 0.25 or 1/4)", container, key)
+        if not (0.0 <= p <= 1.0 + ROW_TOLERANCE) or math.isnan(p):
+            raise self.fail(where, f"probability {p:g} is outside [0, 1]", container, key)
+        return p
+
+    # ------------------------------------------------------------ top level
+    def build(self) -> FactoredDomain:
+        d = self.data
+        if not isinstance(d, dict):
+            raise self.fail("", f"a domain file is a mapping with features, actions, …; got {_kind(d)}")
+        for key in d:
+            if key not in TOP_KEYS:
+                raise self.fail(str(key), f"unknown top-level key; expected one of {', '.join(TOP_KEYS)}", d, key)
+        for key in ("features", "actions", "modalities", "observations", "rewards", "discount"):
+            if key not in d:
+                raise self.fail(key, "missing (required)", d)
+        name = d.get("name", self.default_name)
+        if not isinstance(name, str) or not name:
+            raise self.fail("name", "expected a non-empty string", d, "name")
+        discount = _number(d["discount"])
+        if discount is None or not 0.0 < discount <= 1.0:
+            raise self.fail("discount", f"{d['discount']!r} is not a number in (0, 1]", d, "discount")
+        horizon = d.get("horizon")
+        if horizon is not None and (not isinstance(horizon, int) or isinstance(horizon, bool) or horizon < 1):
+            raise self.fail("horizon", f"{horizon!r} is not a positive integer", d, "horizon")
+        if discount == 1.0 and horizon is None:
+            raise self.fail("discount", "discount 1 needs a finite 'horizon'", d, "discount")
+
+        self.features = self.build_features(d["features"])
+        self.fnames = [f.name for f in self.features]
+        self.modalities = self.build_modalities(d["modalities"])
+        self.symbols = [z for zs in self.modalities.values() for z in zs]
+        actions_node = self.need_map(d["actions"], "actions", d, "actions")
+        if not actions_node:
+            raise self.fail("actions", "no actions", d, "actions")
+        self.actions = [str(a) for a in actions_node]
+        for a in actions_node:
+            if not isinstance(a, str) or not _NAME.match(a):
+                raise self.fail(f"actions.{a}", "action names are identifiers (letters, digits, _ - .)", actions_node, a)
+        categories: Dict[str, str] = {}
+        default_effects = self.build_defaults(d.get("defaults"), d)
+        transitions = []
+        for a in self.actions:
+            spec = actions_node[a]
+            transitions.append(self.build_action(a, spec, actions_node, default_effects, categories))
+        observations = self.build_observations(d["observations"], d)
+        rewards = self.build_rewards(d["rewards"], d)
+        start = self.build_start(d.get("start"), d)
+        keywords = self.build_keywords(d.get("keywords"), d)
+        description = d.get("description", "")
+        return FactoredDomain(
+            name=name, source=self.source, features=self.features, actions=self.actions,
+            modalities=self.modalities, discount=float(discount), keywords=keywords, rewards=rewards,
+            _transitions=transitions, _observations=observations, _start=start, horizon=horizon,
+            description=str(description or ""), categories=categories,
+        )
+
+    def build_features(self, node: Any) -> List[StateFeature]:
+        node = self.need_map(node, "features", self.data, "features")
+        if not node:
+            raise self.fail("features", "no features", self.data, "features")
+        out = []
+        for name, values in node.items():
+            where = f"features.{name}"
+            if not isinstance(name, str) or not _NAME.match(name):
+                raise self.fail(where, "feature names are identifiers (letters, digits, _ - .)", node, name)
+            values = self.need_list(values, where, node, name)
+            vals = [str(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v for v in values]
+            for i, v in enumerate(vals):
+                if not isinstance(v, str) or not _NAME.match(v):
+                    raise self.fail(f"{where}[{i}]", f"value {v!r} is not a name (letters, digits, _ - .)", values, i)
+                if v == KEEP or v == "*":
+                    raise self.fail(f"{where}[{i}]", f"{v!r} is reserved", values, i)
+            if len(vals) < 1:
+                raise self.fail(where, "a feature needs at least one value", node, name)
+            if len(set(vals)) != len(vals):
+                dup = next(v for v in vals if vals.count(v) > 1)
+                raise self.fail(where, f"value {dup!r} listed twice", node, name)
+            out.append(StateFeature(name, tuple(vals)))
+        return out
+
+    def build_modalities(self, node: Any) -> Dict[str, List[str]]:
+        node = self.need_map(node, "modalities", self.data, "modalities")
+        if not node:
+            raise self.fail("modalities", "no modalities (a POMDP needs at least one observation symbol)", self.data, "modalities")
+        out: Dict[str, List[str]] = {}
+        seen: Dict[str, str] = {}
+        for modality, syms in node.items():
+            where = f"modalities.{modality}"
+            syms = self.need_list(syms, where, node, modality)
+            if not syms:
+                raise self.fail(where, "a modality needs at least one symbol", node, modality)
+            for i, z in enumerate(syms):
+                if not isinstance(z, str) or not _NAME.match(z):
+                    raise self.fail(f"{where}[{i}]", f"symbol {z!r} is not a name", syms, i)
+                if z in seen:
+                    raise self.fail(f"{where}[{i}]", f"symbol {z!r} already belongs to modality {seen[z]} "
+                                    "(symbols are unique across modalities)", syms, i)
+                seen[z] = str(modality)
+            out[str(modality)] = [str(z) for z in syms]
+        return out
+
+    # ------------------------------------------------------------ transitions
+    def build_defaults(self, node: Any, parent: Any) -> Dict[int, Tuple[Any, str, Any, Any]]:
+        """Effects applied to every action for the features the action does not mention."""
+        if node is None:
+            return {}
+        node = self.need_map(node, "defaults", parent, "defaults")
+        for key in node:
+            if key != "effects":
+                raise self.fail(f"defaults.{key}", "unknown key; expected 'effects'", node, key)
+        effects = self.need_map(node.get("effects", {}), "defaults.effects", node, "effects")
+        out = {}
+        for fname, spec in effects.items():
+            where = f"defaults.effects.{fname}"
+            f = self.feature_ref(fname, where, effects, fname)
+            out[f] = (spec, where, effects, fname)
+        return out
+
+    def build_action(self, a: str, spec: Any, container: Any, defaults, categories) -> List[_Cpt]:
+        where = f"actions.{a}"
+        if spec is None:
+            spec = {}
+        spec = self.need_map(spec, where, container, a)
+        for key in spec:
+            if key not in ("effects", "category", "why", "description"):
+                raise self.fail(f"{where}.{key}", "unknown key; expected effects, category, why or description", spec, key)
+        if "category" in spec:
+            categories[a] = str(spec["category"])
+        effects = spec.get("effects") or {}
+        effects = self.need_map(effects, f"{where}.effects", spec, "effects")
+        given: Dict[int, Tuple[Any, str, Any, Any]] = dict(defaults)
+        for fname, fspec in effects.items():
+            fwhere = f"{where}.effects.{fname}"
+            f = self.feature_ref(fname, fwhere, effects, fname)
+            given[f] = (fspec, fwhere, effects, fname)
+        cpts = []
+        for f in range(len(self.features)):
+            if f in given:
+                fspec, fwhere, cont, key = given[f]
+                cpts.append(self.build_effect(f, fspec, fwhere, cont, key))
+            else:
+                cpts.append(_persist(f, len(self.features[f])))
+        return cpts
+
+    def feature_ref(self, name: Any, where: str, container: Any, key: Any) -> int:
+        if name not in self.fnames:
+            raise self.fail(where, f"unknown feature {name!r}; features: {', '.join(self.fnames)}", container, key)
+        return self.fnames.index(name)
+
+    def build_effect(self, f: int, spec: Any, where: str, container: Any, key: Any) -> _Cpt:
+        feat = self.features[f]
+        n = len(feat)
+        if spec in ("persist", KEEP):
+            return _persist(f, n)
+        if isinstance(spec, str):
+            raise self.fail(where, f"unknown shorthand {spec!r}; use 'persist', {{set: VALUE}} or "
+                            "{parents: [...], table: {...}}", container, key)
+        spec = self.need_map(spec, where, container, key)
+        why = str(spec.get("why", ""))
+        if "set" in spec:
+            for k in spec:
+                if k not in ("set", "why"):
+                    raise self.fail(f"{where}.{k}", "unexpected beside 'set'", spec, k)
+            row = self.dist_row(spec["set"], feat.values, f"{where}.set", spec, "set", allow_keep=False,
+                                noun=f"value of {feat.name}")
+            return _Cpt((), row, why)
+        for k in spec:
+            if k not in ("parents", "table", "why"):
+                raise self.fail(f"{where}.{k}", "unknown key; expected set, parents, table or why", spec, k)
+        if "table" not in spec:
+            raise self.fail(where, "missing 'table' (or use 'set: VALUE' / 'persist')", container, key)
+        parents_node = spec.get("parents", [])
+        if isinstance(parents_node, str):
+            parents_node = [parents_node]
+        parents_node = self.need_list(parents_node, f"{where}.parents", spec, "parents")
+        parents = []
+        for i, p in enumerate(parents_node):
+            pi = self.feature_ref(p, f"{where}.parents[{i}]", parents_node, i)
+            if pi in parents:
+                raise self.fail(f"{where}.parents[{i}]", f"parent {p!r} listed twice", parents_node, i)
+            parents.append(pi)
+        table = self.need_map(spec["table"], f"{where}.table", spec, "table")
+        uses_keep = any(isinstance(r, dict) and KEEP in r or r == KEEP for r in table.values())
+        implicit_self = uses_keep and f not in parents
+        full_parents = parents + ([f] if implicit_self else [])
+        shape = tuple(len(self.features[p]) for p in full_parents) + (n,)
+        out = np.full(shape, np.nan)
+
+        def row_fn(row_node, rwhere, cont, rkey):
+            return ("row", row_node, rwhere, cont, rkey)
+
+        assigned = self.fill_rows(table, parents, where, spec, "table", row_fn)
+        # assigned: dict combo(tuple over `parents`) -> (row_node, rwhere, cont, rkey)
+        for combo, (row_node, rwhere, cont, rkey) in assigned.items():
+            if implicit_self:
+                for v in range(n):
+                    out[combo + (v,)] = self.dist_row(row_node, feat.values, rwhere, cont, rkey, allow_keep=True,
+                                                      current=v, noun=f"value of {feat.name}")
+            else:
+                cur = combo[parents.index(f)] if f in parents else None
+                out[combo] = self.dist_row(row_node, feat.values, rwhere, cont, rkey, allow_keep=cur is not None,
+                                           current=cur, noun=f"value of {feat.name}")
+        return _Cpt(tuple(full_parents), out, why)
+
+    def fill_rows(self, table: dict, parents: List[int], where: str, container: Any, key: Any, row_fn) -> Dict[tuple, tuple]:
+        """Match table rows (first match wins) to every parent-value combination; check coverage."""
+        pvals = [self.features[p].values for p in parents]
+        combos = {}
+        used = {}
+        for rkey, row_node in table.items():
+            rwhere = f"{where}[{rkey}]"
+            patterns = self.row_pattern(rkey, parents, rwhere, table)
+            count = 0
+            for combo in _product(patterns):
+                if combo not in combos:
+                    combos[combo] = (row_node, rwhere, table, rkey)
+                    count += 1
+            used[rkey] = count
+        for rkey, count in used.items():
+            if count == 0:
+                raise self.fail(f"{where}[{rkey}]", "row is never used: earlier rows already cover all its parent "
+                                "combinations (rows match in order, first match wins)", table, rkey)
+        total = int(np.prod([len(v) for v in pvals])) if pvals else 1
+        if len(combos) < total:
+            for combo in _product([range(len(v)) for v in pvals]):
+                if combo not in combos:
+                    desc = ",".join(v[i] for v, i in zip(pvals, combo)) or "(no parents)"
+                    names = ",".join(self.fnames[p] for p in parents)
+                    raise self.fail(where, f"no row for {names}={desc}; tables have no implicit default — add that row "
+                                    "or a '*' row (rows match in order, first match wins)", container, key)
+        return combos
+
+    def row_pattern(self, rkey: Any, parents: List[int], where: str, table: Any) -> List[List[int]]:
+        """Parse a row key ``"room,*"`` / ``"physio|vitamin,yes"`` / ``"*"`` / ``default`` into value-index lists."""
+        if isinstance(rkey, bool) or rkey is None:
+            raise self.fail(where, f"row key {rkey!r} is not a parent-value combination", table, rkey)
+        text = str(rkey).strip()
+        k = len(parents)
+        if text in ("*", "default"):
+            return [list(range(len(self.features[p]))) for p in parents]
+        parts = [t.strip() for t in text.split(",")] if text else []
+        if k == 0:
+            raise self.fail(where, "this table has no parents: use a single '*' row", table, rkey)
+        if len(parts) != k:
+            names = ",".join(self.fnames[p] for p in parents)
+            raise self.fail(where, f"row key has {len(parts)} value(s), expected {k} (one per parent: {names})", table, rkey)
+        out = []
+        for part, p in zip(parts, parents):
+            feat = self.features[p]
+            if part == "*":
+                out.append(list(range(len(feat))))
+                continue
+            idx = []
+            for alt in part.split("|"):
+                alt = alt.strip()
+                if alt not in feat.values:
+                    raise self.fail(where, f"unknown value {alt!r} of parent {feat.name}; values: {', '.join(feat.values)}",
+                                    table, rkey)
+                idx.append(feat.values.index(alt))
+            out.append(idx)
+        return out
+
+    def dist_row(self, node: Any, values: Sequence[str], where: str, container: Any, key: Any, allow_keep: bool,
+                 current: Optional[int] = None, noun: str = "value") -> np.ndarray:
+        """A distribution over ``values`` from ``{v: p, …}`` (missing = 0) or a single value name (p = 1)."""
+        n = len(values)
+        row = np.zeros(n)
+        if isinstance(node, (int, float)) and not isinstance(node, bool):
+            node = str(node)
+        if isinstance(node, str):
+            if node == KEEP:
+                if not allow_keep:
+                    raise self.fail(where, f"'{KEEP}' is only allowed in transition rows", container, key)
+                row[current] = 1.0
+                return row
+            if node not in values:
+                raise self.fail(where, f"unknown {noun} {node!r}; expected one of {', '.join(values)}", container, key)
+            row[values.index(node)] = 1.0
+            return row
+        if not isinstance(node, dict):
+            raise self.fail(where, f"expected a distribution {{value: probability}} or a value name, got {_kind(node)}",
+                            container, key)
+        for v, p in node.items():
+            v_s = str(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+            if v_s == "why":
+                continue
+            pr = self.prob(p, f"{where}.{v_s}", node, v)
+            if v_s == KEEP:
+                if not allow_keep:
+                    raise self.fail(f"{where}.{v_s}", f"'{KEEP}' is only allowed in transition rows", node, v)
+                row[current] += pr
+                continue
+            if v_s not in values:
+                raise self.fail(f"{where}.{v_s}", f"unknown {noun} {v_s!r}; expected one of {', '.join(values)}", node, v)
+            row[values.index(v_s)] += pr
+        total = row.sum()
+        if abs(total - 1.0) > ROW_TOLERANCE:
+            raise self.fail(where, f"row sums to {total:.6g}, expected 1", container, key)
+        return row / total
+
+    # ------------------------------------------------------------ observations
+    def build_observations(self, node: Any, parent: Any) -> List[_Cpt]:
+        node = self.need_map(node, "observations", parent, "observations")
+        for key in node:
+            if key != "default" and key not in self.actions:
+                raise self.fail(f"observations.{key}", f"unknown action {key!r} (keys are action names or 'default'); "
+                                f"actions: {', '.join(self.actions)}", node, key)
+        out = []
+        cache: Dict[int, _Cpt] = {}
+        for a in self.actions:
+            key = a if a in node else "default"
+            if key not in node:
+                raise self.fail("observations", f"no observation table for action {a} and no 'default' table", parent,
+                                "observations")
+            spec = node[key]
+            if id(spec) in cache and key == "default":
+                out.append(cache[id(spec)])
+                continue
+            cpt = self.build_obs_table(spec, f"observations.{key}", node, key)
+            cache[id(spec)] = cpt
+            out.append(cpt)
+        return out
+
+    def build_obs_table(self, spec: Any, where: str, container: Any, key: Any) -> _Cpt:
+        spec = self.need_map(spec, where, container, key)
+        if "mix" in spec:
+            return self.build_obs_mixture(spec, where)
+        for k in spec:
+            if k not in ("parents", "table", "why"):
+                raise self.fail(f"{where}.{k}", "unknown key; expected parents, table or why", spec, k)
+        if "table" not in spec:
+            raise self.fail(where, "missing 'table'", container, key)
+        parents_node = spec.get("parents", [])
+        if isinstance(parents_node, str):
+            parents_node = [parents_node]
+        parents_node = self.need_list(parents_node, f"{where}.parents", spec, "parents")
+        parents = []
+        for i, p in enumerate(parents_node):
+            pi = self.feature_ref(p, f"{where}.parents[{i}]", parents_node, i)
+            if pi in parents:
+                raise self.fail(f"{where}.parents[{i}]", f"parent {p!r} listed twice", parents_node, i)
+            parents.append(pi)
+        table = self.need_map(spec["table"], f"{where}.table", spec, "table")
+        Z = len(self.symbols)
+        shape = tuple(len(self.features[p]) for p in parents) + (Z,)
+        out = np.full(shape, np.nan)
+        assigned = self.fill_rows(table, parents, where, spec, "table", None)
+        rows_cache: Dict[int, np.ndarray] = {}
+        for combo, (row_node, rwhere, cont, rkey) in assigned.items():
+            if id(row_node) not in rows_cache:
+                rows_cache[id(row_node)] = self.dist_row(row_node, self.symbols, rwhere, cont, rkey, allow_keep=False,
+                                                         noun="observation symbol")
+            out[combo] = rows_cache[id(row_node)]
+        return _Cpt(tuple(parents), out, str(spec.get("why", "")))
+
+    def build_obs_mixture(self, spec: dict, where: str) -> _Cpt:
+        """``mix: [{weight: w, parents: [...], table: {...}}, …]`` → ``Σ_k w_k P_k(o | parents_k)``.
+
+        Each component is one source of the step's single message (the scheduler, the
+        user, the laser…); ``weight`` is the chance that this source speaks first.
+        """
+        for k in spec:
+            if k not in ("mix", "why"):
+                raise self.fail(f"{where}.{k}", "unexpected beside 'mix'", spec, k)
+        comps = self.need_list(spec["mix"], f"{where}.mix", spec, "mix")
+        if not comps:
+            raise self.fail(f"{where}.mix", "an empty mixture", spec, "mix")
+        parts: List[Tuple[float, _Cpt]] = []
+        for i, comp in enumerate(comps):
+            cwhere = f"{where}.mix[{i}]"
+            comp = self.need_map(comp, cwhere, comps, i)
+            if "weight" not in comp:
+                raise self.fail(cwhere, "missing 'weight' (the chance that this source closes the step)", comps, i)
+            w = self.prob(comp["weight"], f"{cwhere}.weight", comp, "weight")
+            rest = _Map({k: v for k, v in comp.items() if k != "weight"})
+            rest.lines = {k: v for k, v in comp.lines.items() if k != "weight"} if isinstance(comp, _Map) else {}
+            rest.line = _line_of(comp)
+            if "mix" in rest:
+                raise self.fail(cwhere, "mixtures do not nest", comps, i)
+            parts.append((w, self.build_obs_table(rest, cwhere, comps, i)))
+        total = sum(w for w, _ in parts)
+        if abs(total - 1.0) > ROW_TOLERANCE:
+            raise self.fail(f"{where}.mix", f"weights sum to {total:.6g}, expected 1", spec, "mix")
+        union: List[int] = []
+        for _, cpt in parts:
+            union.extend(p for p in cpt.parents if p not in union)
+        shape = tuple(len(self.features[p]) for p in union)
+        grid = np.indices(shape) if union else np.zeros((0,), dtype=np.int64)
+        out = np.zeros(shape + (len(self.symbols),))
+        for w, cpt in parts:
+            if cpt.parents:
+                out += w * cpt.table[tuple(grid[union.index(p)] for p in cpt.parents)]
+            else:
+                out += w * cpt.table
+        return _Cpt(tuple(union), out, str(spec.get("why", "")))
+
+    # ------------------------------------------------------------ rewards
+    def build_rewards(self, node: Any, parent: Any) -> List[RewardRule]:
+        node = self.need_list(node, "rewards", parent, "rewards")
+        rules = []
+        for i, rule in enumerate(node):
+            where = f"rewards[{i}]"
+            rule = self.need_map(rule, where, node, i)
+            for k in rule:
+                if k not in ("action", "actions", "when", "reward", "why"):
+                    raise self.fail(f"{where}.{k}", "unknown key; expected action, when, reward, why", rule, k)
+            act = rule.get("action", rule.get("actions"))
+            if act is None:
+                raise self.fail(where, "missing 'action' (an action name, a list of names, or '*')", node, i)
+            if act == "*":
+                acts = list(self.actions)
+            else:
+                names = [act] if isinstance(act, str) else act
+                if not isinstance(names, list):
+                    raise self.fail(f"{where}.action", f"expected an action name or a list, got {_kind(act)}", rule, "action")
+                for a in names:
+                    if a not in self.actions:
+                        raise self.fail(f"{where}.action", f"unknown action {a!r}; actions: {', '.join(self.actions)}",
+                                        rule, "action" if "action" in rule else "actions")
+                acts = list(names)
+            if "reward" not in rule:
+                raise self.fail(where, "missing 'reward'", node, i)
+            r = _number(rule["reward"])
+            if r is None or not math.isfinite(r):
+                raise self.fail(f"{where}.reward", f"{rule['reward']!r} is not a finite number", rule, "reward")
+            why = rule.get("why")
+            if not isinstance(why, str) or not why.strip():
+                raise self.fail(where, "missing 'why': every reward number carries a one-line reason", node, i)
+            when_node = rule.get("when") or {}
+            when_node = self.need_map(when_node, f"{where}.when", rule, "when")
+            when: Dict[str, Tuple[int, ...]] = {}
+            for fname, vals in when_node.items():
+                wwhere = f"{where}.when.{fname}"
+                f = self.feature_ref(fname, wwhere, when_node, fname)
+                vals_list = vals if isinstance(vals, list) else [vals]
+                idx = []
+                for v in vals_list:
+                    v_s = str(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+                    if v_s not in self.features[f].values:
+                        raise self.fail(wwhere, f"unknown value {v_s!r} of {fname}; values: {', '.join(self.features[f].values)}",
+                                        when_node, fname)
+                    idx.append(self.features[f].values.index(v_s))
+                when[str(fname)] = tuple(sorted(set(idx)))
+            rules.append(RewardRule(tuple(acts), when, float(r), why.strip(), where))
+        return rules
+
+    # ------------------------------------------------------------ start, keywords
+    def build_start(self, node: Any, parent: Any) -> List[np.ndarray]:
+        dists = [np.full(len(f), 1.0 / len(f)) for f in self.features]
+        if node is None:
+            return dists
+        node = self.need_map(node, "start", parent, "start")
+        for fname, spec in node.items():
+            where = f"start.{fname}"
+            f = self.feature_ref(fname, where, node, fname)
+            if spec == "uniform":
+                continue
+            dists[f] = self.dist_row(spec, self.features[f].values, where, node, fname, allow_keep=False,
+                                     noun=f"value of {fname}")
+        return dists
+
+    def build_keywords(self, node: Any, parent: Any) -> Dict[str, List[str]]:
+        if node is None:
+            return {}
+        node = self.need_map(node, "keywords", parent, "keywords")
+        out = {}
+        for sym, words in node.items():
+            where = f"keywords.{sym}"
+            if sym not in self.symbols:
+                raise self.fail(where, f"unknown observation symbol {sym!r}; symbols: {', '.join(self.symbols)}", node, sym)
+            words = self.need_list(words, where, node, sym)
+            clean = []
+            for i, w in enumerate(words):
+                if not isinstance(w, str) or not w.strip():
+                    raise self.fail(f"{where}[{i}]", f"keyword {w!r} is not a non-empty string", words, i)
+                clean.append(w.strip().lower())
+            out[str(sym)] = clean
+        return out
+
+
+# ====================================================================== helpers
+_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
+
+
+def _persist(f: int, n: int) -> _Cpt:
+    return _Cpt((f,), np.eye(n), "persists")
+
+
+def _product(lists: Sequence[Iterable[int]]) -> Iterable[tuple]:
+    import itertools
+
+    return itertools.product(*lists)
+
+
+def _kind(value: Any) -> str:
+    if value is None:
+        return "nothing"
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, bool):
+        return f"the boolean {value}"
+    if isinstance(value, str):
+        return f"the string {value!r}"
+    return f"{type(value).__name__} {value!r}"
+
+
+def _number(value: Any) -> Optional[float]:
+    """A float from a number or a string such as ``"0.25"`` / ``"1/3"`` (None if not a number)."""
+    if isinstance(value, bool) or value is None:
+        return None
+    if isinstance(value, (int, float)):
+        return float(value)
+    if isinstance(value, str):
+        text = value.strip()
+        try:
+            return float(Fraction(text)) if "/" in text else float(text)
+        except (ValueError, ZeroDivisionError):
+            return None
+    return None
