@@ -1,0 +1,146 @@
+"""The action executor node: primitive actions → speech, screen and navigation goals.
+
+What each action does is configuration (``config/pearl_nodes.yaml``), not code: per action a
+sentence to say, a text to display and a named navigation goal; the named locations are
+poses in the map frame.
+"""
+from __future__ import annotations
+
+import datetime
+import sys
+from typing import Dict, List, Optional
+
+from rclpy.parameter import Parameter
+
+from pearl_pomdp.nodes import conversions as cv
+from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS, NodeSetupError, Param, PearlNode, run_node
+
+__all__ = ["ActionExecutorNode", "PEARL_ACTIONS", "main"]
+
+#: The 19 primitive actions of the Pearl domain (DESIGN.md §5), the default ``action_names``.
+PEARL_ACTIONS = [
+    "RemindPhysioAppt", "RemindVitamin", "UpdateChecklist", "CheckUserPresent", "TerminateGuidance",
+    "TellTime", "TellWeather", "ConfirmGuideToPhysio", "VerifyInfoRequest", "ConfirmWantTime",
+    "ConfirmWantWeather", "ConfirmGoHome", "ConfirmDone", "GotoPatientRoom", "GuideToPhysio", "GoHome",
+    "DoNothing", "RingDoorBell", "RechargeBattery",
+]
+
+
+class _Template(dict):
+    def __missing__(self, key):  # an unknown {field} stays as written rather than failing
+        return "{" + key + "}"
+
+
+class ActionExecutorNode(PearlNode):
+    """Executes primitive actions by publishing what the robot says, shows and where it drives.
+
+    Parameters (read-only):
+        * ``action_names`` (str[]): the actions to configure (default: the 19 Pearl actions).
+        * ``actions.<Action>.say`` (str): sentence for speech synthesis; ``{time}`` is replaced
+          by the node clock's time (HH:MM, UTC), ``{action}`` by the action name; empty: silent.
+        * ``actions.<Action>.display`` (str): text for the touchscreen (same fields); empty: none.
+        * ``actions.<Action>.goal`` (str): a name from ``location_names``; empty: no motion.
+        * ``location_names`` (str[]): named places; ``locations.<name>`` (double[3]) is x, y (m),
+          yaw (rad) in ``frame_id``.
+        * ``frame_id`` (str): frame of the goals (``map``).
+        * ``action_topic``, ``say_topic``, ``display_topic``, ``nav_goal_topic`` (str): topic names.
+        * ``use_sim_time`` (bool): follow /clock (stamps of goals, ``{time}``).
+
+    Subscribers:
+        * ``/pearl/action`` (std_msgs/String, volatile — a restarted executor does not repeat an
+          old action).
+
+    Publishers:
+        * ``/pearl/say``, ``/pearl/display`` (std_msgs/String).
+        * ``/pearl/nav_goal`` (geometry_msgs/PoseStamped, TRANSIENT_LOCAL depth 1: navigation
+          started late still gets the current goal).
+        * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): executed and unknown actions.
+
+    In-process use: ``ActionExecutorNode(context=ctx, parameter_overrides={"action_names": [...],
+    "actions.Go.goal": "home", ...})``. :attr:`executed` counts actions per name.
+
+    Raises:
+        NodeSetupError: a goal names an unknown location, or a location is not [x, y, yaw].
+    """
+
+    DEFAULT_NAME = "action_executor"
+    PARAMETERS = (
+        Param("action_names", list(PEARL_ACTIONS), "Primitive actions this executor is configured for"),
+        Param("location_names", ["home", "room", "physio"], "Named navigation goals (see locations.<name>)"),
+        Param("frame_id", "map", "Frame of the navigation goals"),
+        Param("action_topic", "/pearl/action", "Primitive action input (std_msgs/String)"),
+        Param("say_topic", "/pearl/say", "Sentences to speak (std_msgs/String)"),
+        Param("display_topic", "/pearl/display", "Touchscreen text (std_msgs/String)"),
+        Param("nav_goal_topic", "/pearl/nav_goal", "Navigation goals (geometry_msgs/PoseStamped)"),
+        Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.params = p = self.declare_table(self.PARAMETERS)
+        self.locations: Dict[str, List[float]] = {}
+        for name in p["location_names"]:
+            pose = self.declare_table([Param(f"locations.{name}", [0.0, 0.0, 0.0],
+                                             f"Pose of {name}: x, y (m), yaw (rad) in frame_id")])[f"locations.{name}"]
+            if len(pose) != 3:
+                raise NodeSetupError(f"parameter locations.{name}: expected [x, y, yaw], got {list(pose)}")
+            self.locations[name] = [float(v) for v in pose]
+        self.behaviour: Dict[str, Dict[str, str]] = {}
+        for action in p["action_names"]:
+            table = [Param(f"actions.{action}.say", "", f"What the robot says for {action}"),
+                     Param(f"actions.{action}.display", "", f"What the screen shows for {action}"),
+                     Param(f"actions.{action}.goal", "", f"Location the robot drives to for {action}")]
+            values = self.declare_table(table)
+            goal = values[f"actions.{action}.goal"]
+            if goal and goal not in self.locations:
+                raise NodeSetupError(f"parameter actions.{action}.goal: unknown location {goal!r} "
+                                     f"(location_names: {', '.join(self.locations) or 'none'})")
+            self.behaviour[action] = {k: values[f"actions.{action}.{k}"] for k in ("say", "display", "goal")}
+        self.executed: Dict[str, int] = {}
+        self.unknown = 0
+        self.say_pub = self.create_publisher(cv.TextMsg, p["say_topic"], EVENT_QOS)
+        self.display_pub = self.create_publisher(cv.TextMsg, p["display_topic"], EVENT_QOS)
+        self.goal_pub = self.create_publisher(cv.PoseMsg, p["nav_goal_topic"], LATCHED_QOS)
+        self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
+        self.create_subscription(cv.TextMsg, p["action_topic"], self._on_action, EVENT_QOS)
+        self.create_timer(p["diagnostics_period"], self.publish_diagnostics)
+
+    def _fields(self, action: str) -> _Template:
+        now = datetime.datetime.fromtimestamp(self.now_s(), tz=datetime.timezone.utc)
+        return _Template(time=now.strftime("%H:%M"), action=action)
+
+    def _on_action(self, msg) -> None:
+        action = cv.msg_to_action(msg)
+        spec = self.behaviour.get(action)
+        if spec is None:
+            self.unknown += 1
+            self.get_logger().warning(f"unknown action {action!r}: not in action_names; nothing executed "
+                                      f"(unknown actions: {self.unknown})")
+            self.publish_diagnostics()
+            return
+        self.executed[action] = self.executed.get(action, 0) + 1
+        fields = self._fields(action)
+        if spec["say"]:
+            self.say_pub.publish(cv.text_to_msg(spec["say"].format_map(fields)))
+        if spec["display"]:
+            self.display_pub.publish(cv.text_to_msg(spec["display"].format_map(fields)))
+        if spec["goal"]:
+            x, y, yaw = self.locations[spec["goal"]]
+            self.goal_pub.publish(cv.pose_to_msg(x, y, yaw, self.params["frame_id"], self.now_s()))
+
+    def publish_diagnostics(self) -> None:
+        """Publish executed/unknown action counts on /diagnostics."""
+        values = {"executed": sum(self.executed.values()), "unknown_actions": self.unknown,
+                  **{f"executed_{k}": v for k, v in sorted(self.executed.items())}}
+        level = cv.DIAG_WARN if self.unknown else cv.DIAG_OK
+        self.diag_pub.publish(cv.diagnostics_to_msg(f"pearl: {self.get_name()}", "pearl", level,
+                                                    f"{values['executed']} actions executed", values, self.now_s()))
+
+
+def main(args: Optional[List[str]] = None) -> int:
+    """Console script ``action_executor``: exit 0 on SIGINT/SIGTERM, 2 on a start-up error."""
+    return run_node(ActionExecutorNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

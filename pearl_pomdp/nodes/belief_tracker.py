@@ -1,0 +1,276 @@
+"""The belief tracker node: observations in, beliefs out (DESIGN.md §6).
+
+Maps each input message to an observation symbol, runs the step protocol of
+:mod:`pearl_pomdp.nodes.step_protocol` (what closes a step, queueing, timeouts, stale
+input — documented there) and publishes the belief after every closed step.
+
+Run it with ``belief_tracker --ros-args -p domain:=config/pearl.domain.yaml`` (console
+script), ``pearl run belief_tracker …``, ``ros2 run pearl_pomdp belief_tracker`` or from a
+launch file; build it in a Python process with :class:`BeliefTrackerNode`.
+"""
+from __future__ import annotations
+
+import sys
+from typing import Callable, Dict, List, Mapping, Optional
+
+import numpy as np
+from rclpy.parameter import Parameter
+
+from pearl_pomdp.nodes import conversions as cv
+from pearl_pomdp.nodes.common import (EVENT_QOS, INPUT_QOS, LATCHED_QOS, NodeSetupError, Param, PearlNode,
+                                      load_domain_and_model, resolve_path, run_node)
+from pearl_pomdp.nodes.step_protocol import COUNTERS, StepProtocol, StepResult
+
+__all__ = ["BeliefTrackerNode", "ObservationMapper", "main", "SYMBOL_INPUTS"]
+
+#: Symbol inputs: parameter suffix → the domain modality whose symbols the topic carries.
+SYMBOL_INPUTS = {"touchscreen": "touchscreen", "laser": "laser", "reminder": "reminder"}
+
+
+class ObservationMapper:
+    """Turns input strings into observation symbols of the model (ROS-free).
+
+    * Speech text goes through the domain's keyword filter
+      (:class:`pearl_pomdp.speech.KeywordFilter`): text with no keyword becomes the
+      ``unknown`` symbol (still an observation — the robot heard something it did not
+      understand) and the filter counts the unknown words.
+    * Touchscreen / laser / reminder strings must be symbols of their modality
+      (``t_yes``, ``atRoom``, ``g_physio`` …; blanks around them are ignored). Anything
+      else is *invalid*: counted per input and reported, and no observation is made.
+
+    For a flat model without modalities every observation symbol is valid on every input,
+    and speech text must itself be a symbol (there are no keywords).
+
+    Args:
+        model: the compiled :class:`~pearl_pomdp.model.pomdp.Pomdp`.
+        domain: the :class:`FactoredDomain` (modalities, keywords), or ``None``.
+        keyword_filter: a ready keyword filter (default: built from ``domain.keywords``).
+    """
+
+    def __init__(self, model, domain=None, keyword_filter=None):
+        self.model = model
+        symbols = set(model.observations)
+        self.allowed: Dict[str, frozenset] = {}
+        modalities = {m.lower(): list(v) for m, v in (getattr(domain, "modalities", None) or {}).items()}
+        for key, modality in SYMBOL_INPUTS.items():
+            self.allowed[key] = frozenset(modalities.get(modality, symbols))
+        self.invalid: Dict[str, int] = {key: 0 for key in ("speech", *SYMBOL_INPUTS)}
+        self.keyword_filter = keyword_filter
+        if keyword_filter is None and domain is not None and getattr(domain, "keywords", None):
+            from pearl_pomdp.speech import KeywordFilter
+
+            self.keyword_filter = KeywordFilter(domain.keywords)
+        self.speech_symbols = frozenset(modalities.get("speech", symbols))
+
+    @property
+    def unknown_words(self) -> int:
+        """Words the keyword filter did not know (0 without a filter)."""
+        return int(getattr(self.keyword_filter, "unknown_count", 0))
+
+    def speech(self, text: str) -> Optional[str]:
+        """The symbol of recognised text, or ``None`` (counted) when it maps to no symbol."""
+        if self.keyword_filter is not None:
+            symbol = self.keyword_filter.classify(text)
+        else:
+            symbol = text.strip()
+        if symbol not in self.speech_symbols or symbol not in self.model.observations:
+            self.invalid["speech"] += 1
+            return None
+        return symbol
+
+    def symbol(self, key: str, text: str) -> Optional[str]:
+        """The symbol of a touchscreen/laser/reminder string, or ``None`` (counted) if invalid."""
+        symbol = text.strip()
+        if symbol not in self.allowed[key]:
+            self.invalid[key] += 1
+            return None
+        return symbol
+
+
+class BeliefTrackerNode(PearlNode):
+    """Tracks the belief over the domain's states from the robot's inputs.
+
+    Parameters (all read-only, declared with descriptions and ranges):
+        * ``domain`` (str): factored domain ``.yaml`` or flat ``.pomdp``; relative paths are
+          tried in the working directory, then in the package share directory.
+        * ``step_timeout`` (double, s, ≥ 0): close an open step with ``timeout_observation``
+          after this long without input; 0 waits forever.
+        * ``timeout_observation`` (str): the symbol used on timeout (default ``unknown``).
+        * ``max_pending`` (int, 0–1000): observations that may wait for the next action.
+        * ``stale_after`` (double, s, ≥ 0): drop a waiting observation older than this; 0 never.
+        * ``diagnostics_period`` (double, s, > 0): period of the /diagnostics summary.
+        * ``speech_topic``, ``touchscreen_topic``, ``laser_topic``, ``reminder_topic``,
+          ``action_topic``, ``belief_topic``, ``marginals_topic`` (str): topic names.
+        * ``use_sim_time`` (bool): follow /clock (rclpy's own parameter).
+
+    Subscribers:
+        * ``/pearl/speech`` (std_msgs/String): recognised text → keyword filter → Speech symbol.
+        * ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder`` (std_msgs/String): symbols.
+        * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL): the action that opens a step.
+
+    Publishers:
+        * ``/pearl/belief`` (std_msgs/Float64MultiArray, TRANSIENT_LOCAL depth 1): ``b`` after each
+          step; ``b0`` once at start so a late policy still gets it.
+        * ``/pearl/belief_marginals`` (std_msgs/String JSON, TRANSIENT_LOCAL depth 1): step, action,
+          observation and per-feature marginals (see :mod:`pearl_pomdp.nodes.conversions`).
+        * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): counters (updates, timeouts,
+          queued/dropped observations, unknown words, invalid inputs, zero-likelihood
+          recoveries); WARN level once anything was dropped, invalid or recovered. Sent
+          every ``diagnostics_period`` and at once when a warning counter grows.
+
+    In-process use (tests, replay): ``BeliefTrackerNode(context=ctx,
+    parameter_overrides={"domain": path, "use_sim_time": True}, domain=dom, model=model)``;
+    ``domain``/``model`` are optional preloaded objects that skip loading the file
+    (``model`` alone for a flat model). After construction, :attr:`protocol` is the
+    :class:`StepProtocol` (belief, counters) and :attr:`mapper` the :class:`ObservationMapper`.
+
+    Raises:
+        NodeSetupError: missing domain file or invalid parameter combination (one line).
+        rclpy.exceptions.ParameterException: an override of the wrong type or out of range.
+    """
+
+    DEFAULT_NAME = "belief_tracker"
+    PARAMETERS = (
+        Param("domain", "config/pearl.domain.yaml", "Factored domain (.yaml) or flat model (.pomdp) file"),
+        Param("step_timeout", 10.0, "Seconds without input after an action before the step is closed "
+                                    "with timeout_observation (0: wait forever)", range=(0.0, 3600.0)),
+        Param("timeout_observation", "unknown", "Observation symbol that closes a step on timeout"),
+        Param("max_pending", 8, "Observations that may wait for the next action (FIFO)", range=(0, 1000)),
+        Param("stale_after", 0.0, "Drop a waiting observation older than this many seconds (0: never)",
+              range=(0.0, 3600.0)),
+        Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
+        Param("speech_topic", "/pearl/speech", "Recognised speech text (std_msgs/String)"),
+        Param("touchscreen_topic", "/pearl/touchscreen", "Touchscreen symbols (std_msgs/String)"),
+        Param("laser_topic", "/pearl/laser", "Landmark symbols from navigation (std_msgs/String)"),
+        Param("reminder_topic", "/pearl/reminder", "Reminder goal symbols (std_msgs/String)"),
+        Param("action_topic", "/pearl/action", "Primitive actions, which open steps (std_msgs/String)"),
+        Param("belief_topic", "/pearl/belief", "Belief output (std_msgs/Float64MultiArray)"),
+        Param("marginals_topic", "/pearl/belief_marginals", "Per-feature marginals output (JSON String)"),
+    )
+
+    def __init__(self, *, domain=None, model=None, keyword_filter=None, **kwargs):
+        super().__init__(**kwargs)
+        self.params = p = self.declare_table(self.PARAMETERS)
+        if model is None:
+            path = resolve_path(p["domain"], "domain")
+            domain, model = load_domain_and_model(path)
+        self.domain, self.model = domain, model
+        try:
+            self.protocol = StepProtocol(model, step_timeout=p["step_timeout"],
+                                         timeout_observation=p["timeout_observation"],
+                                         max_pending=p["max_pending"], stale_after=p["stale_after"])
+        except ValueError as err:
+            raise NodeSetupError(f"parameter {str(err)}") from None
+        self.mapper = ObservationMapper(model, domain, keyword_filter)
+        self._reported_warnings = 0
+        self._last_unknown_words = 0
+
+        self.belief_pub = self.create_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
+        self.marginals_pub = self.create_publisher(cv.TextMsg, p["marginals_topic"], LATCHED_QOS)
+        self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
+        self.create_subscription(cv.TextMsg, p["speech_topic"], self._on_speech, INPUT_QOS)
+        for key in SYMBOL_INPUTS:
+            self.create_subscription(cv.TextMsg, p[f"{key}_topic"], self._symbol_callback(key), INPUT_QOS)
+        self.create_subscription(cv.TextMsg, p["action_topic"], self._on_action, LATCHED_QOS)
+        if p["step_timeout"] > 0:
+            # Poll at a tenth of the timeout: the step closes at most 10 % late, in node-clock time.
+            self.create_timer(max(p["step_timeout"] / 10.0, 0.005), self._on_tick)
+        self.create_timer(p["diagnostics_period"], self.publish_diagnostics)
+        self._publish_belief(None)
+        self.get_logger().info(f"tracking {model.name}: {model.num_states} states, {model.num_observations} "
+                               f"observations; step_timeout {p['step_timeout']} s → {p['timeout_observation']!r}")
+
+    # ----------------------------------------------------------- callbacks
+    def _on_action(self, msg) -> None:
+        self._handle(self.protocol.on_action(cv.msg_to_action(msg), self.now_s()))
+
+    def _on_speech(self, msg) -> None:
+        text = cv.msg_to_text(msg)
+        before = self.mapper.unknown_words
+        symbol = cv.msg_to_observation(msg, self.mapper.speech)
+        if self.mapper.unknown_words > before:
+            self.get_logger().info(f"speech {text!r}: {self.mapper.unknown_words - before} unknown word(s) "
+                                   f"(total {self.mapper.unknown_words})")
+        if symbol is None:
+            self.get_logger().warning(f"speech {text!r} maps to no observation symbol of {self.model.name}; "
+                                      f"ignored (invalid speech inputs: {self.mapper.invalid['speech']})")
+            self.publish_diagnostics()
+            return
+        self._handle(self.protocol.on_observation(symbol, "speech", self.now_s()))
+
+    def _symbol_callback(self, key: str) -> Callable:
+        def callback(msg) -> None:
+            symbol = cv.msg_to_observation(msg, lambda text: self.mapper.symbol(key, text))
+            if symbol is None:
+                valid = ", ".join(sorted(self.mapper.allowed[key]))
+                self.get_logger().warning(f"{key} input {cv.msg_to_text(msg)!r} is not a {key} symbol "
+                                          f"(valid: {valid}); ignored (invalid {key} inputs: "
+                                          f"{self.mapper.invalid[key]})")
+                self.publish_diagnostics()
+                return
+            self._handle(self.protocol.on_observation(symbol, key, self.now_s()))
+
+        return callback
+
+    def _on_tick(self) -> None:
+        self._handle(self.protocol.on_tick(self.now_s()))
+
+    # -------------------------------------------------------------- output
+    def _handle(self, result: Optional[StepResult]) -> None:
+        logger = self.get_logger()
+        for event in self.protocol.take_events():
+            (logger.warning if event.level == "warn" else logger.info)(event.text)
+        if result is not None:
+            self._publish_belief(result)
+        if self._warning_total() > self._reported_warnings:
+            self.publish_diagnostics()
+
+    def _publish_belief(self, result: Optional[StepResult]) -> None:
+        belief = self.protocol.belief
+        self.belief_pub.publish(cv.belief_to_msg(belief))
+        self.marginals_pub.publish(cv.marginals_to_msg(self.marginals(belief), self.protocol.step,
+                                                       result.action if result else None,
+                                                       result.observation if result else None))
+
+    def marginals(self, belief: np.ndarray) -> Dict[str, Dict[str, float]]:
+        """``{feature: {value: P}}``; a flat model reports the pseudo-feature ``"state"``."""
+        if self.domain is not None and hasattr(self.domain, "feature_marginals"):
+            out = {}
+            values = {f.name: list(f.values) for f in self.domain.features}
+            for name, marg in self.domain.feature_marginals(belief).items():
+                out[name] = {str(v): float(pv) for v, pv in zip(values[name], marg)}
+            return out
+        return {"state": {s: float(pv) for s, pv in zip(self.model.states, belief)}}
+
+    def counters(self) -> Dict[str, int]:
+        """Every counter reported on /diagnostics."""
+        out = dict(self.protocol.counters)
+        out["unknown_words"] = self.mapper.unknown_words
+        for key, n in self.mapper.invalid.items():
+            out[f"invalid_{key}"] = n
+        return out
+
+    def _warning_total(self) -> int:
+        c = self.counters()
+        return (c["dropped_stale"] + c["dropped_overflow"] + c["replaced_actions"] + c["unknown_actions"]
+                + c["zero_likelihood"] + c["unknown_words"] + sum(c[f"invalid_{k}"] for k in self.mapper.invalid))
+
+    def publish_diagnostics(self) -> None:
+        """Publish the counters on /diagnostics (WARN once any input was dropped/invalid/recovered)."""
+        warnings = self._warning_total()
+        self._reported_warnings = warnings
+        step, open_action, pending = self.protocol.snapshot()
+        values = {"step": step, "open_action": open_action or "", "pending": pending, **self.counters()}
+        level = cv.DIAG_WARN if warnings else cv.DIAG_OK
+        text = f"{warnings} input(s) dropped, invalid or recovered" if warnings else "tracking"
+        self.diag_pub.publish(cv.diagnostics_to_msg(f"pearl: {self.get_name()}", self.model.name, level, text,
+                                                    values, self.now_s()))
+
+
+def main(args: Optional[List[str]] = None) -> int:
+    """Console script ``belief_tracker``: exit 0 on SIGINT/SIGTERM, 2 on a start-up error."""
+    return run_node(BeliefTrackerNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,229 @@
+"""Conversions between the core's Python values and ROS 2 messages.
+
+This is the only module of the project that builds or reads ROS message objects; the
+nodes call the pairs below (``belief_to_msg`` / ``msg_to_belief``, …) so that message
+types stay at the edge (py_trees_ros ``conversions.py`` style). The message classes the
+nodes create publishers and subscriptions with are exported here too.
+
+Wire formats (all message types come from common_interfaces):
+
+* **belief** — ``std_msgs/Float64MultiArray``, one dimension: ``layout.dim[0].label`` is
+  :data:`BELIEF_LABEL` (``"state"``), ``size = stride = S``, ``data_offset = 0``; ``data[s]``
+  is ``b(s)`` in the model's state order (for a factored domain: mixed radix, first
+  feature most significant).
+* **belief marginals** — ``std_msgs/String`` holding one JSON object
+  ``{"step": int, "action": str|null, "observation": str|null,
+  "marginals": {feature: {value: probability}}}``. JSON (not a Float64MultiArray) because
+  the features have different numbers of values and a viewer wants the value names.
+  A flat model without features reports one pseudo-feature ``"state"``.
+* **action** / **speech** / **touchscreen** / **laser** / **reminder** / **say** / **display** —
+  ``std_msgs/String``; the action is the primitive action's name.
+* **decision** — ``std_msgs/String`` JSON ``{"step", "action", "trace": [{"subtask",
+  "choice", "value"}], "latency_s"}``; the trace runs root → … → primitive.
+* **nav goal** — ``geometry_msgs/PoseStamped`` (position x, y; orientation from yaw).
+* **diagnostics** — ``diagnostic_msgs/DiagnosticArray`` with one ``DiagnosticStatus``
+  whose ``values`` are the node's counters.
+"""
+from __future__ import annotations
+
+import json
+import math
+from typing import Callable, Dict, Mapping, Optional, Sequence
+
+import numpy as np
+from builtin_interfaces.msg import Time as TimeMsg
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
+
+from pearl_pomdp.errors import BeliefError
+
+__all__ = [
+    "BELIEF_LABEL", "BeliefMsg", "TextMsg", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
+    "belief_to_msg", "msg_to_belief", "marginals_to_msg", "msg_to_marginals",
+    "text_to_msg", "msg_to_text", "msg_to_observation", "action_to_msg", "msg_to_action",
+    "decision_to_msg", "msg_to_decision", "pose_to_msg", "msg_to_pose",
+    "diagnostics_to_msg", "msg_to_diagnostics", "seconds_to_time", "time_to_seconds",
+    "clock_to_msg", "DIAG_OK", "DIAG_WARN", "DIAG_ERROR",
+]
+
+#: Message classes used by the nodes (import them from here, not from the message packages).
+BeliefMsg = Float64MultiArray
+TextMsg = String
+PoseMsg = PoseStamped
+DiagnosticsMsg = DiagnosticArray
+ClockMsg = Clock
+
+#: ``layout.dim[0].label`` of a belief message: the one dimension indexes states.
+BELIEF_LABEL = "state"
+
+#: ``DiagnosticStatus`` levels as ints (the message field is one byte).
+DIAG_OK, DIAG_WARN, DIAG_ERROR = (DiagnosticStatus.OK[0], DiagnosticStatus.WARN[0], DiagnosticStatus.ERROR[0])
+
+
+# ------------------------------------------------------------------------ time
+def seconds_to_time(seconds: float) -> TimeMsg:
+    """``builtin_interfaces/Time`` for a time in seconds (≥ 0), rounded to the nanosecond."""
+    total = int(round(float(seconds) * 1e9))
+    if total < 0:
+        raise ValueError(f"time must be >= 0 s, got {seconds}")
+    return TimeMsg(sec=total // 1_000_000_000, nanosec=total % 1_000_000_000)
+
+
+def time_to_seconds(stamp: TimeMsg) -> float:
+    """Seconds of a ``builtin_interfaces/Time``."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def clock_to_msg(seconds: float) -> Clock:
+    """``rosgraph_msgs/Clock`` for sim time ``seconds`` (what a sim-time driver publishes on /clock)."""
+    return Clock(clock=seconds_to_time(seconds))
+
+
+# ---------------------------------------------------------------------- belief
+def belief_to_msg(belief: np.ndarray) -> Float64MultiArray:
+    """A ``[S]`` belief as a one-dimensional Float64MultiArray labelled :data:`BELIEF_LABEL`."""
+    b = np.asarray(belief, dtype=float)
+    if b.ndim != 1:
+        raise BeliefError(f"belief must be one-dimensional [S], got shape {b.shape}")
+    msg = Float64MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label=BELIEF_LABEL, size=b.size, stride=b.size)]
+    msg.layout.data_offset = 0
+    msg.data = b.tolist()
+    return msg
+
+
+def msg_to_belief(msg: Float64MultiArray, num_states: Optional[int] = None) -> np.ndarray:
+    """The ``[S]`` belief of a message written by :func:`belief_to_msg`.
+
+    Raises:
+        BeliefError: the layout is not one dimension labelled ``"state"``, its size disagrees
+            with the data or with ``num_states``, or the data is not a distribution.
+    """
+    dims = list(msg.layout.dim)
+    if len(dims) != 1 or dims[0].label != BELIEF_LABEL:
+        labels = [d.label for d in dims]
+        raise BeliefError(f"belief message layout must be one dimension labelled {BELIEF_LABEL!r}, got {labels}")
+    b = np.asarray(msg.data, dtype=float)[msg.layout.data_offset:]
+    if dims[0].size != b.size:
+        raise BeliefError(f"belief message says size {dims[0].size} but carries {b.size} values")
+    if num_states is not None and b.size != num_states:
+        raise BeliefError(f"belief has {b.size} states, the model has {num_states}")
+    if not np.isfinite(b).all() or (b < -1e-12).any() or abs(b.sum() - 1.0) > 1e-6:
+        raise BeliefError(f"belief message is not a distribution (sum {b.sum():.9g}, min {b.min(initial=0):.3g})")
+    return b
+
+
+def marginals_to_msg(marginals: Mapping[str, Mapping[str, float]], step: int,
+                     action: Optional[str] = None, observation: Optional[str] = None) -> String:
+    """Per-feature marginals ``{feature: {value: p}}`` as a JSON String (see the module doc)."""
+    body = {
+        "step": int(step),
+        "action": action,
+        "observation": observation,
+        "marginals": {f: {v: float(p) for v, p in vals.items()} for f, vals in marginals.items()},
+    }
+    return String(data=json.dumps(body, separators=(",", ":")))
+
+
+def msg_to_marginals(msg: String) -> dict:
+    """The JSON object of a marginals message (keys ``step, action, observation, marginals``)."""
+    return json.loads(msg.data)
+
+
+# ---------------------------------------------------------------------- strings
+def text_to_msg(text: str) -> String:
+    """A ``std_msgs/String``."""
+    return String(data=str(text))
+
+
+def msg_to_text(msg: String) -> str:
+    """The text of a ``std_msgs/String``."""
+    return msg.data
+
+
+def msg_to_observation(msg: String, classify: Callable[[str], str]) -> str:
+    """The observation symbol a ``std_msgs/String`` input stands for.
+
+    Args:
+        msg: the input (recognised speech text, or a symbol such as ``t_yes``).
+        classify: maps the text to a symbol (the speech keyword filter, or the symbol
+            validator of a modality); it decides what an unknown input becomes.
+    """
+    return classify(msg.data)
+
+
+def action_to_msg(action_name: str) -> String:
+    """The primitive action's name as a ``std_msgs/String``."""
+    return String(data=action_name)
+
+
+def msg_to_action(msg: String) -> str:
+    """The action name of an ``/pearl/action`` message (surrounding blanks removed)."""
+    return msg.data.strip()
+
+
+def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: float) -> String:
+    """The EXECUTE trace as JSON on a String (root → … → primitive).
+
+    Args:
+        trace: items with ``subtask``, ``choice`` and ``value`` attributes (``TraceStep``) or dicts.
+    """
+    steps = []
+    for t in trace:
+        get = (lambda k: t[k]) if isinstance(t, Mapping) else (lambda k: getattr(t, k))
+        value = float(get("value"))
+        steps.append({"subtask": str(get("subtask")), "choice": str(get("choice")),
+                      "value": value if math.isfinite(value) else None})
+    body = {"step": int(step), "action": action_name, "trace": steps, "latency_s": float(latency_s)}
+    return String(data=json.dumps(body, separators=(",", ":")))
+
+
+def msg_to_decision(msg: String) -> dict:
+    """The JSON object of a ``/pearl/decision`` message."""
+    return json.loads(msg.data)
+
+
+# ------------------------------------------------------------------------ poses
+def pose_to_msg(x: float, y: float, yaw: float, frame_id: str, stamp_s: float) -> PoseStamped:
+    """A planar goal (x, y in metres, yaw in radians about z) as a ``PoseStamped``."""
+    msg = PoseStamped()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = seconds_to_time(stamp_s)
+    msg.pose.position.x = float(x)
+    msg.pose.position.y = float(y)
+    msg.pose.orientation.z = math.sin(yaw / 2.0)
+    msg.pose.orientation.w = math.cos(yaw / 2.0)
+    return msg
+
+
+def msg_to_pose(msg: PoseStamped) -> Dict[str, float]:
+    """``{"x", "y", "yaw", "frame_id", "stamp"}`` of a planar ``PoseStamped``."""
+    q = msg.pose.orientation
+    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    return {"x": msg.pose.position.x, "y": msg.pose.position.y, "yaw": yaw,
+            "frame_id": msg.header.frame_id, "stamp": time_to_seconds(msg.header.stamp)}
+
+
+# ------------------------------------------------------------------ diagnostics
+def diagnostics_to_msg(name: str, hardware_id: str, level: int, message: str,
+                       values: Mapping[str, object], stamp_s: float) -> DiagnosticArray:
+    """One ``DiagnosticStatus`` (counters as key/value strings) in a ``DiagnosticArray``."""
+    status = DiagnosticStatus(name=name, hardware_id=hardware_id, message=message)
+    status.level = bytes([level])
+    status.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
+    arr = DiagnosticArray()
+    arr.header.stamp = seconds_to_time(stamp_s)
+    arr.status = [status]
+    return arr
+
+
+def msg_to_diagnostics(msg: DiagnosticArray) -> Dict[str, dict]:
+    """``{status name: {"level": int, "message": str, "values": {key: value}}}``."""
+    out = {}
+    for st in msg.status:
+        level = st.level[0] if isinstance(st.level, (bytes, bytearray)) else int(st.level)
+        out[st.name] = {"level": level, "message": st.message,
+                        "values": {kv.key: kv.value for kv in st.values}}
+    return out

@@ -1,0 +1,170 @@
+"""Helpers for tests that run real ROS 2 nodes (what launch_testing would do, in pytest).
+
+* :func:`allocate_domain_id` — a ``ROS_DOMAIN_ID`` per test in 1..101 (above 101 DDS ports reach
+  Linux's ephemeral range), spread by process id, pytest-xdist worker and a counter, so parallel
+  runs and tests do not see each other.
+* :func:`ros_env` — the environment for a node process: the domain, discovery on localhost only,
+  the fast-discovery Fast DDS profile (``config/fastdds_profile.xml``), logs in a temporary dir.
+* :class:`Proc` — a started process, stopped with SIGINT, then SIGTERM, then SIGKILL after
+  timeouts (Fast DDS can hang at exit: eProsima/Fast-DDS#6502), its output kept in files.
+* :class:`Probe` — a node in the test process that publishes inputs and records outputs;
+  :func:`wait_for` spins until a condition holds. No fixed sleeps anywhere: wait for matching.
+* fixture ``ros_context`` — an rclpy ``Context`` on its own domain (yields ``(context, domain_id)``).
+"""
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Callable, Dict, List, Optional
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PROFILE = REPO / "config" / "fastdds_profile.xml"
+PYTHON = sys.executable
+
+#: Discovery between processes: allow this long (2-core machine under load).
+DISCOVERY_TIMEOUT = 20.0
+
+_counter = itertools.count()
+
+
+def allocate_domain_id() -> int:
+    """A ROS domain id in 1..101, different for each call in a process and likely across processes."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+    w = int(worker[2:]) if worker[2:].isdigit() else 0
+    return 1 + (os.getpid() * 7 + w * 37 + next(_counter) * 13) % 101
+
+
+def configure_test_process(log_dir: Path) -> None:
+    """Set the DDS/log variables in this (pytest) process before its first participant exists."""
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(PROFILE))
+    os.environ.setdefault("ROS_LOG_DIR", str(log_dir))
+    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+
+
+def ros_env(domain_id: int, log_dir: Path) -> Dict[str, str]:
+    """Environment for a node process on ``domain_id`` (see the module doc)."""
+    env = dict(os.environ)
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    env.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(PROFILE), ROS_LOG_DIR=str(log_dir),
+               PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
+    return env
+
+
+class Proc:
+    """A process started for a test; output goes to ``<log_dir>/<name>.out|.err``."""
+
+    def __init__(self, cmd: List[str], env: Dict[str, str], log_dir: Path, name: str, cwd: Optional[Path] = None):
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.name = name
+        self.out_path = log_dir / f"{name}.out"
+        self.err_path = log_dir / f"{name}.err"
+        self._out = open(self.out_path, "wb")
+        self._err = open(self.err_path, "wb")
+        self.popen = subprocess.Popen(cmd, env=env, cwd=str(cwd or REPO), stdout=self._out, stderr=self._err,
+                                      stdin=subprocess.DEVNULL)
+
+    @property
+    def returncode(self) -> Optional[int]:
+        return self.popen.poll()
+
+    def wait(self, timeout: float) -> Optional[int]:
+        """Exit code, or ``None`` if still running after ``timeout`` s."""
+        try:
+            return self.popen.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def stop(self, timeout: float = 10.0) -> int:
+        """SIGINT; after ``timeout`` s SIGTERM; after ``timeout`` s more SIGKILL. Returns the exit code."""
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            if self.popen.poll() is not None:
+                break
+            self.popen.send_signal(sig)
+            if self.wait(timeout) is not None:
+                break
+        if self.popen.poll() is None:
+            self.popen.kill()
+            self.popen.wait(timeout=10)
+        self._out.close()
+        self._err.close()
+        return self.popen.returncode
+
+    def stdout(self) -> str:
+        self._out.flush()
+        return self.out_path.read_text(errors="replace")
+
+    def stderr(self) -> str:
+        self._err.flush()
+        return self.err_path.read_text(errors="replace")
+
+
+def wait_for(predicate: Callable[[], bool], timeout: float, executor=None, poll: float = 0.02) -> bool:
+    """Spin ``executor`` (if given) until ``predicate()`` holds or ``timeout`` s passed; returns it."""
+    deadline = time.monotonic() + timeout
+    while True:
+        if predicate():
+            return True
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            return False
+        if executor is not None:
+            executor.spin_once(timeout_sec=min(poll, remaining))
+        else:
+            time.sleep(min(poll, remaining))
+
+
+class Probe:
+    """A test-side node: publishers for inputs, recorders for outputs.
+
+    Args:
+        node: an rclpy node (created by the test in its context).
+    """
+
+    def __init__(self, node):
+        self.node = node
+        self.received: Dict[str, list] = {}
+        self.arrival: Dict[str, List[float]] = {}
+        self.publishers: Dict[str, object] = {}
+
+    def listen(self, topic: str, msg_type, qos) -> list:
+        """Record every message on ``topic`` (the list fills while the executor spins)."""
+        store = self.received.setdefault(topic, [])
+        stamps = self.arrival.setdefault(topic, [])
+
+        def callback(msg):
+            stamps.append(time.perf_counter())
+            store.append(msg)
+
+        self.node.create_subscription(msg_type, topic, callback, qos)
+        return store
+
+    def publisher(self, topic: str, msg_type, qos):
+        pub = self.node.create_publisher(msg_type, topic, qos)
+        self.publishers[topic] = pub
+        return pub
+
+
+@pytest.fixture
+def ros_context(tmp_path):
+    """An initialised rclpy ``Context`` on a fresh domain: yields ``(context, domain_id)``."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    configure_test_process(tmp_path)
+    domain_id = allocate_domain_id()
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        yield context, domain_id
+    finally:
+        rclpy.try_shutdown(context=context)

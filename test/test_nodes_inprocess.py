@@ -1,0 +1,207 @@
+"""The three nodes in one process on one executor under sim time (/clock published by the test).
+
+The tiger problem (Kaelbling, Littman & Cassandra 1998) gives hand-computed beliefs: listening
+from uniform and hearing the tiger on the left gives [0.85, 0.15]; twice gives
+[0.7225, 0.0225] / 0.745 = [0.969799, 0.030201]. A test-local threshold policy (listen until
+one side is above 0.9, then open the other door) is the decider, so every action is known.
+The Pearl tests at the end run the real domain and hierarchical policy.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import List
+
+import numpy as np
+import pytest
+
+from ros_helpers import Probe, ros_context, wait_for  # noqa: F401  (fixture)
+
+pytestmark = pytest.mark.ros
+
+rclpy = pytest.importorskip("rclpy")
+
+from pearl_pomdp.model.pomdp import Pomdp  # noqa: E402
+from pearl_pomdp.nodes import conversions as cv  # noqa: E402
+from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS  # noqa: E402
+from pearl_pomdp.nodes.graph import PearlGraph  # noqa: E402
+
+
+def tiger() -> Pomdp:
+    S, A, Z = ["tiger-left", "tiger-right"], ["listen", "open-left", "open-right"], ["hear-left", "hear-right"]
+    T = [np.eye(2), np.full((2, 2), 0.5), np.full((2, 2), 0.5)]
+    O = np.array([[[0.85, 0.15], [0.15, 0.85]], [[0.5, 0.5], [0.5, 0.5]], [[0.5, 0.5], [0.5, 0.5]]])
+    R = np.array([[-1.0, -100.0, 10.0], [-1.0, 10.0, -100.0]])
+    return Pomdp.create(S, A, Z, T, O, R, discount=0.95, name="tiger")
+
+
+@dataclass
+class _Step:
+    subtask: str
+    choice: str
+    value: float
+
+
+@dataclass
+class _Decision:
+    action: int
+    action_name: str
+    trace: List[_Step] = field(default_factory=list)
+
+
+class ThresholdDecider:
+    """Listen until P(one side) > 0.9, then open the other door."""
+
+    def __init__(self, model: Pomdp):
+        self.model = model
+        self.seen: List[np.ndarray] = []
+
+    def execute(self, belief):
+        self.seen.append(np.array(belief))
+        if belief[0] > 0.9:
+            name = "open-right"
+        elif belief[1] > 0.9:
+            name = "open-left"
+        else:
+            name = "listen"
+        return _Decision(self.model.actions.index(name), name, [_Step("root", name, float(belief.max()))])
+
+
+def _graph(context, model, decider, tracker=None, executor_params=None):
+    executor = {"location_names": ["left", "right"], "locations.left": [1.0, 2.0, 0.0],
+                "locations.right": [3.0, -1.0, 1.5707963267948966],
+                "actions.open-right.say": "opening the right door at {time}",
+                "actions.open-right.goal": "right", "actions.listen.display": "listening"}
+    executor.update(executor_params or {})
+    return PearlGraph(context=context, model=model, decider=decider, shared={"use_sim_time": True},
+                      overrides={"belief_tracker": {"step_timeout": 0.0, **(tracker or {})},
+                                 "action_executor": executor})
+
+
+def _probe(graph):
+    node = graph.add_node(rclpy.create_node("probe", context=graph.context))
+    probe = Probe(node)
+    probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
+    probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
+    probe.listen("/pearl/belief_marginals", cv.TextMsg, LATCHED_QOS)
+    probe.listen("/pearl/decision", cv.TextMsg, EVENT_QOS)
+    probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
+    probe.listen("/pearl/display", cv.TextMsg, EVENT_QOS)
+    probe.listen("/pearl/nav_goal", cv.PoseMsg, LATCHED_QOS)
+    probe.listen("/diagnostics", cv.DiagnosticsMsg, EVENT_QOS)
+    probe.publisher("/clock", cv.ClockMsg, 10)
+    for topic in ("speech", "touchscreen", "laser", "reminder"):
+        probe.publisher(f"/pearl/{topic}", cv.TextMsg, EVENT_QOS)
+    return probe
+
+
+def _set_clock(graph, probe, t):
+    probe.publishers["/clock"].publish(cv.clock_to_msg(t))
+    assert graph.spin_until(lambda: abs(graph.tracker.now_s() - t) < 1e-9 and abs(graph.executor_node.now_s() - t) < 1e-9,
+                            10.0), f"nodes did not reach sim time {t}"
+
+
+def _say(probe, topic, text):
+    probe.publishers[f"/pearl/{topic}"].publish(cv.text_to_msg(text))
+
+
+def _actions(probe):
+    return [cv.msg_to_action(m) for m in probe.received["/pearl/action"]]
+
+
+def test_tiger_dialogue_in_one_process(ros_context):
+    context, _ = ros_context
+    model = tiger()
+    decider = ThresholdDecider(model)
+    with _graph(context, model, decider) as g:
+        probe = _probe(g)
+        _set_clock(g, probe, 100.0)
+        # b0 is published at start; the policy answers it.
+        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 1, 10.0)
+        assert _actions(probe) == ["listen"]
+        np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][0]), [0.5, 0.5])
+        assert g.spin_until(lambda: probe.received["/pearl/display"], 10.0)
+        assert probe.received["/pearl/display"][0].data == "listening"
+
+        _say(probe, "speech", "hear-left")
+        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 2, 10.0)
+        np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][-1]), [0.85, 0.15])
+        assert _actions(probe) == ["listen", "listen"]
+
+        _set_clock(g, probe, 130.0)
+        _say(probe, "touchscreen", "hear-left")
+        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 3, 10.0)
+        np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][-1]),
+                                   [0.7225 / 0.745, 0.0225 / 0.745], rtol=1e-12)
+        assert _actions(probe) == ["listen", "listen", "open-right"]
+        # The executor: sentence with the sim time (130 s after the epoch is 00:02 UTC), goal pose.
+        assert g.spin_until(lambda: probe.received["/pearl/say"] and probe.received["/pearl/nav_goal"], 10.0)
+        assert probe.received["/pearl/say"][-1].data == "opening the right door at 00:02"
+        pose = cv.msg_to_pose(probe.received["/pearl/nav_goal"][-1])
+        assert pose["x"] == 3.0 and pose["y"] == -1.0 and pose["frame_id"] == "map"
+        assert pose["yaw"] == pytest.approx(np.pi / 2) and pose["stamp"] == pytest.approx(130.0)
+
+        # Marginals: one pseudo-feature for a flat model, with the step's action and observation.
+        assert g.spin_until(lambda: cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])["step"] == 2, 5)
+        last = cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])
+        assert last["action"] == "listen" and last["observation"] == "hear-left"
+        assert last["marginals"]["state"]["tiger-left"] == pytest.approx(0.7225 / 0.745)
+        # The decision trace and the decider saw exactly the published beliefs.
+        assert g.spin_until(lambda: len(probe.received["/pearl/decision"]) >= 3, 5)
+        decision = cv.msg_to_decision(probe.received["/pearl/decision"][2])
+        assert decision["step"] == 2 and decision["action"] == "open-right"
+        assert decision["trace"] == [{"subtask": "root", "choice": "open-right",
+                                      "value": pytest.approx(0.7225 / 0.745)}]
+        assert decision["latency_s"] > 0
+        assert len(decider.seen) == 3
+        assert g.tracker.protocol.counters["updates"] == 2
+
+
+def test_invalid_and_early_inputs_are_counted_not_lost(ros_context):
+    context, _ = ros_context
+    model = tiger()
+    with _graph(context, model, ThresholdDecider(model)) as g:
+        probe = _probe(g)
+        _set_clock(g, probe, 5.0)
+        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 1, 10.0)
+        _say(probe, "touchscreen", "bogus")  # not a symbol: counted, reported, no step closed
+        _say(probe, "speech", "the tiger is somewhere")  # flat model: speech must be a symbol
+        assert g.spin_until(lambda: g.tracker.mapper.invalid["touchscreen"] == 1
+                            and g.tracker.mapper.invalid["speech"] == 1, 10.0)
+        assert g.spin_until(lambda: any(
+            cv.msg_to_diagnostics(m).get("pearl: belief_tracker", {}).get("values", {}).get("invalid_touchscreen") == "1"
+            for m in probe.received["/diagnostics"]), 10.0)
+        diag = [cv.msg_to_diagnostics(m)["pearl: belief_tracker"] for m in probe.received["/diagnostics"]
+                if "pearl: belief_tracker" in cv.msg_to_diagnostics(m)][-1]
+        assert diag["level"] == cv.DIAG_WARN and diag["values"]["updates"] == "0"
+        # Two observations in one step: the first closes it, the second waits for the next action.
+        _say(probe, "laser", "hear-right")
+        _say(probe, "laser", "hear-right")
+        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 3, 10.0)
+        assert g.tracker.protocol.counters["queued"] == 1
+        assert g.tracker.protocol.counters["updates"] == 2
+        np.testing.assert_allclose(g.tracker.protocol.belief, [0.0225 / 0.745, 0.7225 / 0.745], rtol=1e-12)
+        assert _actions(probe) == ["listen", "listen", "open-left"]
+
+
+def test_step_timeout_follows_sim_time(ros_context):
+    context, _ = ros_context
+    model = tiger()
+    with _graph(context, model, ThresholdDecider(model),
+                tracker={"step_timeout": 2.0, "timeout_observation": "hear-right"}) as g:
+        probe = _probe(g)
+        _set_clock(g, probe, 10.0)
+        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 1, 10.0)
+        opened = g.tracker.protocol.opened_at
+        assert opened == pytest.approx(10.0)
+        # Wall time passing does nothing while /clock stands still ...
+        assert not g.spin_until(lambda: g.tracker.protocol.counters["timeouts"] > 0, 0.5)
+        # ... 1.5 s of sim time is not enough, 2.5 s is.
+        _set_clock(g, probe, 11.5)
+        assert not g.spin_until(lambda: g.tracker.protocol.counters["timeouts"] > 0, 0.3)
+        _set_clock(g, probe, 12.5)
+        assert g.spin_until(lambda: g.tracker.protocol.counters["timeouts"] == 1, 10.0)
+        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 2, 10.0)
+        np.testing.assert_allclose(g.tracker.protocol.belief, [0.15, 0.85])
+        last = cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])
+        assert last["observation"] == "hear-right" and last["step"] == 1
