@@ -1,0 +1,427 @@
+"""The simulated nursing home: a robot, one resident, a scheduler (DESIGN.md §7).
+
+:class:`World` is the ground truth that the POMDP only observes through noisy
+messages. It is richer than the Pearl model on purpose: positions in metres,
+walking speeds from 5 cm/s, rests, a resident who loses a robot that drives on
+without her, a recogniser with a word error rate. Its interface is the step
+protocol of DESIGN.md §6: the robot takes an action; the world answers with *one*
+message (any modality) that closes the step, or ``None`` when nothing is heard
+before ``step_timeout`` (the tracker maps that to Speech ``unknown``).
+
+Guidance and walking pace (the paper's open problem). With
+``pace_adaptation: false`` the robot drives to physiotherapy at its cruise speed,
+as Pearl did in the paper's trials; a slow resident falls behind and, past
+``lose_distance``, gives up and walks back to her room. With
+``pace_adaptation: true`` the navigation estimates her pace from the measured
+distance to her (an exponential average of her progress per second, as a people
+tracker on the laser would give) and drives no faster than that, stopping when she
+is more than ``FOLLOW_GAP`` metres behind.
+
+The world counts what an experimenter scores: reminders delivered, guidances
+completed and their duration, clarification questions, and *wrong actions*
+(reminding with nothing due, answering a question nobody asked, guiding a
+resident who did not want to go, ending a guidance before the department).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from pearl_sim.asr import SpeechRecogniser
+from pearl_sim.scenario import Scenario
+
+#: Metres the adaptive robot lets the resident fall behind before it waits.
+FOLLOW_GAP = 2.0
+#: Metres within which the resident hears the robot and answers it.
+EARSHOT = 3.0
+#: Seconds a spoken action (say + display) takes before the answer.
+SPEAK_SECONDS = 3.0
+#: Seconds the resident takes to answer.
+ANSWER_SECONDS = 2.0
+#: The scheduler re-announces an outstanding reminder this often (s).
+REANNOUNCE_SECONDS = 60.0
+#: Battery fraction below which the battery counts as low.
+LOW_BATTERY = 0.2
+
+CLARIFICATIONS = {
+    "ConfirmGuideToPhysio", "VerifyInfoRequest", "ConfirmWantTime", "ConfirmWantWeather",
+    "ConfirmGoHome", "ConfirmDone", "CheckUserPresent",
+}
+MOVES = {"GotoPatientRoom": "room", "GuideToPhysio": "physio", "GoHome": "home"}
+
+#: What the resident says for each intent (chosen at random, then passed through the recogniser).
+UTTERANCES: Dict[str, List[str]] = {
+    "yes": ["yes", "yes please", "sure", "yeah all right", "ok"],
+    "no": ["no", "no thank you", "not now"],
+    "time": ["what time is it", "can you tell me the time", "what is the time please"],
+    "weather": ["what is the weather like", "give me the weather forecast for tomorrow", "will it rain today"],
+    "go": ["let's go", "take me to physio please", "let's go to my appointment"],
+    "chatter": ["hello pearl", "thank you", "that is nice", "hmm", "what did you say"],
+}
+TOUCH = {"yes": "t_yes", "no": "t_no", "time": "t_time", "weather": "t_weather", "go": "t_go"}
+
+
+@dataclass
+class Message:
+    """One input message: ``modality`` (Speech/Touchscreen/Laser/Reminder) and its text.
+
+    For Speech, ``text`` is the recogniser's output and ``said`` what the resident said.
+    """
+
+    time: float
+    modality: str
+    text: str
+    said: str = ""
+
+
+@dataclass
+class StepResult:
+    """What one action did: its time span, the closing message and notable events."""
+
+    action: str
+    start: float
+    end: float
+    message: Optional[Message]
+    events: List[str] = field(default_factory=list)
+    wrong: Optional[str] = None
+
+
+@dataclass
+class Metrics:
+    """Scores of an episode."""
+
+    steps: int = 0
+    reminders_delivered: int = 0
+    guidances_started: int = 0
+    guidances_completed: int = 0
+    residents_lost: int = 0
+    questions_answered: int = 0
+    clarifications: int = 0
+    wrong_actions: int = 0
+    time_to_goal: List[float] = field(default_factory=list)
+    wrong: List[str] = field(default_factory=list)
+
+
+class World:
+    """Ground-truth simulation of one scenario episode.
+
+    Args:
+        scenario: the episode.
+        seed: overrides ``scenario.seed`` (every stochastic piece is seeded from it).
+        pace_adaptation: overrides ``scenario.pace_adaptation`` when not ``None``.
+    """
+
+    def __init__(self, scenario: Scenario, seed: Optional[int] = None, pace_adaptation: Optional[bool] = None):
+        self.scenario = scenario
+        self.seed = scenario.seed if seed is None else int(seed)
+        self.rng = np.random.default_rng(self.seed)
+        self.pace_adaptation = scenario.pace_adaptation if pace_adaptation is None else bool(pace_adaptation)
+        resident = scenario.resident
+        wer = scenario.word_error_rate if resident.word_error_rate is None else resident.word_error_rate
+        self.asr = SpeechRecogniser(word_error_rate=wer, seed=self.seed + 7919)
+        self.time = 0.0
+        self.robot_at = "home"
+        self.battery = 1.0
+        self.resident_at = "room"        # room | physio | corridor
+        self.engaged = False             # UserPresent: with the robot and attending to it
+        self.wants_guidance = False
+        self.info_goal: Optional[str] = None
+        self.due: List[str] = []         # reminders due and not yet delivered
+        self._appointments = sorted(scenario.appointments, key=lambda a: a.at)
+        self._questions = [q for q in scenario.questions if q.when == "at_time"]
+        self._physio_questions = [q for q in scenario.questions if q.when == "at_physio"]
+        self._scheduler_queue: List[Message] = []
+        self._last_announce: Dict[str, float] = {}
+        self._guidance_due_at: Optional[float] = None
+        self._follower: Optional[dict] = None   # a resident walking behind/after the robot
+        self._return_at: Optional[float] = None  # a lost resident gets back to her room then
+        self.metrics = Metrics()
+        self._advance(0.0, [])
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def done(self) -> bool:
+        """True when the step budget is used up."""
+        return self.metrics.steps >= self.scenario.max_steps
+
+    def truth(self) -> Dict[str, str]:
+        """The true state in the Pearl domain's feature terms (for transcripts and scoring)."""
+        reminder = self.due[0] if self.due else "none"
+        return {
+            "RobotLocation": self.robot_at,
+            "UserLocation": "physio" if self.resident_at == "physio" else "room",
+            "UserPresent": "yes" if self.engaged else "no",
+            "ReminderGoal": reminder,
+            "UserMotionGoal": "toPhysioWithRobot" if self.wants_guidance else "none",
+            "UserInfoGoal": {"time": "wantTime", "weather": "wantWeather"}.get(self.info_goal or "", "none"),
+            "Battery": "low" if self.battery < LOW_BATTERY else "ok",
+        }
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, action: str) -> StepResult:
+        """Carry out ``action`` and return the message that closes the step (or ``None``)."""
+        start = self.time
+        events: List[str] = []
+        wrong: Optional[str] = None
+        reply: Optional[str] = None       # the resident's intent, if she answers
+        self.metrics.steps += 1
+        if action in CLARIFICATIONS:
+            self.metrics.clarifications += 1
+        if action in MOVES:
+            message = self._move(MOVES[action], action, events)
+            if action == "GuideToPhysio" and not self._follower_started:
+                wrong = "guided a resident who did not want to go" if not self._was_willing else None
+            self._finish(action, wrong, events)
+            return StepResult(action, start, self.time, message, events, wrong)
+        self._advance(SPEAK_SECONDS, events)
+        listening = self.engaged and self._near()
+        handler = getattr(self, f"_act_{action}", None)
+        if handler is None:
+            raise ValueError(f"the simulated world does not know action {action!r}")
+        reply, wrong = handler(listening, events)
+        message: Optional[Message] = None
+        if reply is not None:
+            self._advance(ANSWER_SECONDS, events)
+            message = self._say(reply)
+        else:
+            # Wait for the scheduler (or anything queued during a drive) until the timeout.
+            waited = 0.0
+            while not self._scheduler_queue and waited < self.scenario.step_timeout:
+                step = min(1.0, self.scenario.step_timeout - waited)
+                self._advance(step, events)
+                waited += step
+            if self._scheduler_queue:
+                queued = self._scheduler_queue.pop(0)
+                message = Message(self.time, queued.modality, queued.text, queued.said)
+        self._finish(action, wrong, events)
+        return StepResult(action, start, self.time, message, events, wrong)
+
+    # ------------------------------------------------------------ action effects
+    def _act_DoNothing(self, listening, events):
+        return self._spontaneous(listening), None
+
+    def _act_RechargeBattery(self, listening, events):
+        if self.robot_at == "home":
+            self.battery = 1.0
+            events.append("battery recharged")
+        return self._spontaneous(listening), None
+
+    def _act_RingDoorBell(self, listening, events):
+        if self.engaged:
+            return "yes", "rang the bell at a resident already talking to the robot"
+        if self.robot_at == self.resident_at and self.rng.random() < self.scenario.resident.answers_door:
+            self.engaged = True
+            events.append(f"{self.scenario.resident.name} comes to the door")
+            return "yes", None
+        return None, None
+
+    def _act_CheckUserPresent(self, listening, events):
+        return ("yes" if listening else None), None
+
+    def _remind(self, kind: str, listening: bool, events):
+        if kind not in self.due:
+            return ("chatter" if listening else None), f"reminded of {kind} with no such reminder due"
+        if not listening:
+            return None, None
+        self.due.remove(kind)
+        self._last_announce.pop(kind, None)
+        self.metrics.reminders_delivered += 1
+        events.append(f"{kind} reminder delivered")
+        if kind == "physio":
+            self._guidance_due_at = self.time
+            if self.rng.random() < self.scenario.resident.willingness:
+                self.wants_guidance = True
+                events.append(f"{self.scenario.resident.name} wants to be walked to physiotherapy")
+                return "go" if self.rng.random() < 0.5 else "yes", None
+            return "no", None
+        return "yes", None
+
+    def _act_RemindPhysioAppt(self, listening, events):
+        return self._remind("physio", listening, events)
+
+    def _act_RemindVitamin(self, listening, events):
+        return self._remind("vitamin", listening, events)
+
+    def _act_UpdateChecklist(self, listening, events):
+        return self._remind("checklist", listening, events)
+
+    def _act_TerminateGuidance(self, listening, events):
+        if not self.wants_guidance:
+            return ("chatter" if listening else None), "ended a guidance that was not happening"
+        self.wants_guidance = False
+        if self.resident_at != "physio":
+            self._follower = None
+            return ("no" if listening else None), "ended the guidance before the department"
+        events.append("guidance ended at the physiotherapy department")
+        return ("chatter" if listening else None), None
+
+    def _tell(self, kind: str, listening: bool, events):
+        if self.info_goal != kind:
+            wrong = f"told the {kind} nobody asked for"
+            return (self.info_goal if (listening and self.info_goal) else ("chatter" if listening else None)), wrong
+        if not listening:
+            return None, None
+        self.info_goal = None
+        self.metrics.questions_answered += 1
+        events.append(f"{kind} question answered")
+        return "chatter", None
+
+    def _act_TellTime(self, listening, events):
+        return self._tell("time", listening, events)
+
+    def _act_TellWeather(self, listening, events):
+        return self._tell("weather", listening, events)
+
+    def _act_ConfirmGuideToPhysio(self, listening, events):
+        return (("yes" if self.wants_guidance else "no") if listening else None), None
+
+    def _act_VerifyInfoRequest(self, listening, events):
+        return ((self.info_goal or "no") if listening else None), None
+
+    def _act_ConfirmWantTime(self, listening, events):
+        return (("yes" if self.info_goal == "time" else "no") if listening else None), None
+
+    def _act_ConfirmWantWeather(self, listening, events):
+        return (("yes" if self.info_goal == "weather" else "no") if listening else None), None
+
+    def _act_ConfirmGoHome(self, listening, events):
+        return (("no" if self.wants_guidance else "yes") if listening else None), None
+
+    def _act_ConfirmDone(self, listening, events):
+        return ((self.info_goal or "yes") if listening else None), None
+
+    def _spontaneous(self, listening: bool) -> Optional[str]:
+        """What an attending resident says when the robot just waits."""
+        if not listening:
+            return None
+        if self.info_goal:
+            return self.info_goal
+        if self.wants_guidance and self.resident_at == "room":
+            return "go"
+        return "chatter" if self.rng.random() < 0.2 else None
+
+    # -------------------------------------------------------------------- moving
+    def _move(self, goal: str, action: str, events: List[str]) -> Message:
+        origin = self.robot_at
+        distance = self.scenario.distance(origin, goal)
+        together = self.engaged and self._near() and self.resident_at == origin
+        self._was_willing = self.wants_guidance
+        self._follower_started = False
+        if action == "GuideToPhysio" and together and self.wants_guidance and goal != origin:
+            self._follower_started = True
+            self.metrics.guidances_started += 1
+            self._follower = {"pos": 0.0, "length": distance, "rest_until": -1.0, "origin": origin}
+            self.resident_at = "corridor"
+            events.append(f"guiding {self.scenario.resident.name} to physiotherapy")
+            self._drive_guided(distance, events)
+        else:
+            if self.engaged and goal != origin:
+                self.engaged = False
+                if self.wants_guidance and action == "GuideToPhysio":
+                    events.append("the robot drives off without the resident")
+            self._advance(distance / self.scenario.robot_speed, events, moving=True)
+        self.robot_at = goal
+        return Message(self.time, "Laser", {"home": "atHome", "room": "atRoom", "physio": "atPhysio"}[goal])
+
+    def _drive_guided(self, distance: float, events: List[str]) -> None:
+        """Drive ``distance`` metres with the resident following, one second at a time."""
+        robot_pos, estimate = 0.0, self.scenario.robot_speed
+        follower = self._follower
+        vmax = self.scenario.robot_speed
+        seconds = 0
+        while robot_pos < distance - 1e-9 and seconds < 100_000:
+            previous = follower["pos"] if follower is not None else None
+            if self.pace_adaptation and follower is not None:
+                gap = robot_pos - follower["pos"]
+                speed = 0.0 if gap > FOLLOW_GAP else min(vmax, max(estimate, 0.02))
+            else:
+                speed = vmax
+            robot_pos = min(distance, robot_pos + speed)
+            self._advance(1.0, events, moving=True, robot_pos=robot_pos)
+            follower = self._follower
+            if follower is not None and previous is not None:
+                estimate = 0.8 * estimate + 0.2 * max(follower["pos"] - previous, 0.0)
+            seconds += 1
+
+    def _walk_follower(self, dt: float, robot_pos: Optional[float], events: List[str]) -> None:
+        f = self._follower
+        resident = self.scenario.resident
+        if robot_pos is None:       # robot waiting at the destination
+            robot_pos = f["length"]
+        if self.time < f["rest_until"]:
+            return
+        if resident.rest_probability and self.rng.random() < resident.rest_probability * dt:
+            f["rest_until"] = self.time + resident.rest_seconds
+            return
+        f["pos"] = min(robot_pos, f["pos"] + resident.walking_speed * dt, f["length"])
+        if robot_pos - f["pos"] > resident.lose_distance:
+            self._follower = None
+            self.engaged = False
+            self.resident_at = "corridor"
+            self._return_at = self.time + f["pos"] / resident.walking_speed
+            self.metrics.residents_lost += 1
+            events.append(f"{resident.name} falls {robot_pos - f['pos']:.0f} m behind, loses the robot and walks back")
+            return
+        if f["pos"] >= f["length"] - 1e-9:
+            self._follower = None
+            self.resident_at = "physio"
+            self.metrics.guidances_completed += 1
+            if self._guidance_due_at is not None:
+                self.metrics.time_to_goal.append(self.time - self._guidance_due_at)
+            events.append(f"{resident.name} arrives at physiotherapy")
+            for q in self._physio_questions:
+                self.info_goal = q.ask
+            self._physio_questions = []
+
+    def _near(self) -> bool:
+        if self._follower is not None:
+            return False
+        return self.resident_at == self.robot_at
+
+    # ---------------------------------------------------------------- time flow
+    def _advance(self, seconds: float, events: List[str], moving: bool = False, robot_pos: Optional[float] = None) -> None:
+        """Let ``seconds`` pass: walkers walk, reminders fall due, questions arise, the battery drains."""
+        end = self.time + seconds
+        while True:
+            dt = min(1.0, end - self.time)
+            if dt <= 1e-12:
+                break
+            self.time += dt
+            if moving:
+                self.battery = max(0.0, self.battery - dt / self.scenario.battery_seconds)
+            if self._follower is not None:
+                self._walk_follower(dt, robot_pos, events)
+            if self._return_at is not None and self.time >= self._return_at:
+                self.resident_at, self._return_at = "room", None
+                events.append(f"{self.scenario.resident.name} is back in her room")
+        self._raise_due(events)
+
+    def _raise_due(self, events: List[str]) -> None:
+        while self._appointments and self._appointments[0].at <= self.time:
+            kind = self._appointments.pop(0).kind
+            if kind not in self.due:
+                self.due.append(kind)
+                events.append(f"{kind} reminder falls due")
+        for kind in self.due:
+            last = self._last_announce.get(kind)
+            if last is None or self.time - last >= REANNOUNCE_SECONDS:
+                self._last_announce[kind] = self.time
+                self._scheduler_queue.append(Message(self.time, "Reminder", f"g_{kind}"))
+        while self._questions and self._questions[0].at <= self.time:
+            self.info_goal = self._questions.pop(0).ask
+            events.append(f"{self.scenario.resident.name} wants to know the {self.info_goal}")
+
+    def _say(self, intent: str) -> Message:
+        options = UTTERANCES[intent]
+        said = options[self.rng.integers(len(options))]
+        if intent in TOUCH and self.rng.random() < self.scenario.resident.touchscreen:
+            return Message(self.time, "Touchscreen", TOUCH[intent], said=f"(touches '{TOUCH[intent]}')")
+        return Message(self.time, "Speech", self.asr.recognise(said), said=said)
+
+    def _finish(self, action: str, wrong: Optional[str], events: List[str]) -> None:
+        if wrong:
+            self.metrics.wrong_actions += 1
+            self.metrics.wrong.append(f"{action}: {wrong}")
+            events.append(f"wrong action: {wrong}")
