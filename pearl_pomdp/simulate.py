@@ -5,8 +5,9 @@ from the tracked belief, the reward ``R[s, a]`` is collected with weight ``γ^t`
 state is drawn from ``T[a][s, :]``, an observation from ``O[a, s', :]``, and the belief is
 updated with :class:`~pearl_pomdp.belief.BeliefFilter` (eq. 5). All episodes advance
 together (one vectorised step for all of them); a policy is anything with
-``.action(belief) -> int``, and an α-vector policy (``alphas [K, S]``, ``actions [K]``) is
-evaluated for all episodes with one matrix product.
+``.action(belief) -> int``; an α-vector policy (``alphas [K, S]``, ``actions [K]``) is
+evaluated for all episodes with one matrix product, a most-likely-state policy
+(``state_actions [S]``) with one argmax.
 
 Results are deterministic for a given seed: the random draws do not depend on how the
 policy is evaluated.
@@ -69,6 +70,10 @@ def _batched_actions(policy):
     if isinstance(alphas, np.ndarray) and isinstance(labels, np.ndarray) and alphas.ndim == 2:
         # Same rule as AlphaVectorPolicy.action: the first maximising vector.
         return lambda B: labels[np.argmax(B @ alphas.T, axis=1)]
+    state_actions = getattr(policy, "state_actions", None)
+    if isinstance(state_actions, np.ndarray) and state_actions.ndim == 1:
+        # MostLikelyStatePolicy's rule: the action of the most probable state (ties: lowest index).
+        return lambda B: state_actions[np.argmax(B, axis=1)]
     return lambda B: np.fromiter((policy.action(b) for b in B), dtype=np.int64, count=B.shape[0])
 
 

@@ -74,3 +74,14 @@ def test_default_steps_and_errors():
 
     with pytest.raises(PearlError, match=r"policy Bad returned action \[7\], the model has actions 0..2"):
         simulate(tiger(), Bad(), episodes=3, steps=3)
+
+
+def test_most_likely_state_policy_batched_like_its_action():
+    mdp = pytest.importorskip("pearl_pomdp.solvers.mdp")
+    # Open the door opposite to the likelier tiger; at the uniform belief the tie goes to
+    # state 0 (tiger-left), so the first action is open-right: +10 or −100, −45 on average.
+    policy = mdp.MostLikelyStatePolicy([2, 1])
+    fast = simulate(tiger(), policy, episodes=4000, steps=1, seed=5)
+    slow = simulate(tiger(), ActionOnly(policy), episodes=4000, steps=1, seed=5)
+    np.testing.assert_array_equal(fast["returns"], slow["returns"])
+    assert abs(fast["mean"] - (-45.0)) < 2 * fast["ci95"]
