@@ -91,6 +91,16 @@ class _Backup:
         self.tol = tol
         self.stats = stats
         self.deadline = deadline
+        # Witness beliefs of each prune in the previous epoch, by (a, o): the
+        # value functions of successive epochs differ little, so last epoch's
+        # witnesses find most of this epoch's useful vectors without an LP.
+        self.memory: dict = {}
+
+    def _seeds(self, key, *fresh: np.ndarray) -> Optional[np.ndarray]:
+        parts = [f for f in fresh if f is not None and len(f)]
+        if key in self.memory:
+            parts.append(self.memory[key])
+        return np.vstack(parts) if parts else None
 
     def _prune(self, vectors: np.ndarray, points: Optional[np.ndarray]) -> Tuple[np.ndarray, np.ndarray]:
         kept, wit = prune(vectors, tol=self.tol, points=points, return_witnesses=True,
@@ -112,14 +122,21 @@ class _Backup:
             projected = []
             for o in range(self.Z):
                 vecs = self.project(gamma_prev, a, o)
-                projected.append(self._prune(vecs, None))
+                projected.append(self._prune(vecs, self._seeds(("proj", a, o))))
+                self.memory[("proj", a, o)] = projected[-1][1]
             # Step 2: cross-sum pairwise, pruning after each sum. The witnesses of
             # both operands are beliefs where some sum wins: they seed the prune.
             acc, acc_w = projected[0]
             for o in range(1, self.Z):
                 nxt, nxt_w = projected[o]
+                if len(nxt) == 1 or len(acc) == 1:
+                    # Adding one vector translates the other set: what was useful
+                    # stays useful with the same witnesses, and nothing else is.
+                    acc, acc_w = (acc + nxt, acc_w) if len(nxt) == 1 else (acc + nxt, nxt_w)
+                    continue
                 summed = (acc[:, None, :] + nxt[None, :, :]).reshape(-1, self.S)
-                acc, acc_w = self._prune(summed, np.vstack([acc_w, nxt_w]))
+                acc, acc_w = self._prune(summed, self._seeds(("sum", a, o), acc_w, nxt_w))
+                self.memory[("sum", a, o)] = acc_w
             per_action.append(acc)
             per_action_witness.append(acc_w)
         # Step 3: union over actions, prune again.

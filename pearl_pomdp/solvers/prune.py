@@ -163,11 +163,12 @@ class _WitnessLP:
 
 
 # --------------------------------------------------------------- helpers
-def pointwise_dominated(candidates: np.ndarray, by: np.ndarray, chunk_elems: int = 4_000_000) -> np.ndarray:
-    """Boolean mask over ``candidates [N, S]``: True where some row of ``by [M, S]`` is ``≥`` it in every state.
+def pointwise_dominated(candidates: np.ndarray, by: np.ndarray, slack: float = 0.0,
+                        chunk_elems: int = 4_000_000) -> np.ndarray:
+    """Boolean mask over ``candidates [N, S]``: True where some row ``β`` of ``by [M, S]``
+    has ``c(s) ≤ β(s)`` in every state (with ``slack > 0``: ``c(s) < β(s) + slack``).
 
-    Rows of ``by`` equal to a candidate also count (callers remove exact
-    duplicates of kept vectors this way). Chunked so memory stays bounded.
+    Rows of ``by`` equal to a candidate also count. Chunked so memory stays bounded.
     """
     N, S = candidates.shape
     out = np.zeros(N, dtype=bool)
@@ -176,7 +177,10 @@ def pointwise_dominated(candidates: np.ndarray, by: np.ndarray, chunk_elems: int
     step = max(1, chunk_elems // max(1, by.shape[0] * S))
     for i in range(0, N, step):
         blk = candidates[i:i + step]
-        out[i:i + step] = (by[None, :, :] >= blk[:, None, :]).all(axis=2).any(axis=1)
+        if slack > 0.0:
+            out[i:i + step] = (by[None, :, :] + slack > blk[:, None, :]).all(axis=2).any(axis=1)
+        else:
+            out[i:i + step] = (by[None, :, :] >= blk[:, None, :]).all(axis=2).any(axis=1)
     return out
 
 
@@ -209,6 +213,7 @@ def prune(
     stats: Optional[PruneStats] = None,
     deadline: Optional[float] = None,
     use_lp_core: Optional[bool] = None,
+    random_budget: int = 4_000_000,
 ):
     """Indices of the useful vectors of ``alphas`` (sorted, into the input).
 
@@ -228,6 +233,8 @@ def prune(
             :class:`PruneTimeout` is raised (checked between LPs).
         use_lp_core: force the incremental HiGHS model (True) or plain
             ``linprog`` (False); default: incremental when available.
+        random_budget: about how many (vector, random belief) values to try
+            before the LPs (0: none). Changes only the work, not the result.
 
     Returns:
         ``kept`` (int array), or ``(kept, witnesses)`` with ``return_witnesses``.
@@ -278,8 +285,14 @@ def prune(
         i, _ = _best_index(A, cand, eye[s], tol)
         if not is_kept[i]:
             keep(i, eye[s])
-    if points is not None and len(points):
-        P = np.asarray(points, dtype=float)
+    # Random beliefs too (seeded, so results are reproducible): a vector that
+    # wins clearly at one needs no LP. Their number keeps C·P bounded.
+    n_random = int(min(max(4 * S, 64), max(0, random_budget // max(1, cand.size))))
+    P_parts = [] if points is None or not len(points) else [np.asarray(points, dtype=float)]
+    if n_random > 0 and cand.size > S:
+        P_parts.append(np.random.default_rng(cand.size).dirichlet(np.ones(S), n_random))
+    if P_parts:
+        P = np.vstack(P_parts)
         vals = A[cand] @ P.T  # [C, P]
         if cand.size >= 2:
             top2 = np.partition(vals, vals.shape[0] - 2, axis=0)[-2:]
@@ -295,18 +308,21 @@ def prune(
     # 4. Lark's filter over the rest, one LP per candidate.
     remaining = [int(i) for i in cand if not is_kept[i]]
     if remaining:
-        kept_arr = A[kept_order]
-        # Cheap pass first: anything pointwise dominated by a kept vector needs no LP.
+        # The kept vectors, in a growing buffer (a row per kept vector).
+        KA = np.empty((len(kept_order) + len(remaining), S))
+        nk = len(kept_order)
+        KA[:nk] = A[kept_order]
+        # Cheap pass first: a candidate within tol of a kept vector in every state
+        # has δ* < tol, so the LP would drop it too.
         rem = np.array(remaining)
-        rem = rem[~pointwise_dominated(A[rem], kept_arr)]
+        rem = rem[~pointwise_dominated(A[rem], KA[:nk], slack=tol)]
         lp = _WitnessLP(S, use_core=use_lp_core)
         for i in kept_order:
             lp.add(A[i])
         queue = list(rem)
         alive = np.zeros(K, dtype=bool)
         alive[rem] = True
-        n_alive = int(alive.sum())
-        new_since_filter: List[int] = []
+        filtered_upto = nk  # kept rows already used by the pointwise filter
         pos = 0
         while pos < len(queue):
             c = queue[pos]
@@ -315,14 +331,12 @@ def prune(
                 continue
             if deadline is not None and time.perf_counter() > deadline:
                 raise PruneTimeout()
-            # Re-filter by pointwise dominance against newly kept vectors before an LP.
-            if new_since_filter:
-                newk = A[new_since_filter]
-                new_since_filter = []
+            # Re-filter against the vectors kept since the last pass, in batches.
+            if nk - filtered_upto >= max(1, nk // 8):
                 live = np.flatnonzero(alive)
-                dom = pointwise_dominated(A[live], newk)
+                dom = pointwise_dominated(A[live], KA[filtered_upto:nk], slack=tol)
                 alive[live[dom]] = False
-                n_alive -= int(dom.sum())
+                filtered_upto = nk
                 if not alive[c]:
                     continue
             delta, b = lp.solve(A[c])
@@ -330,24 +344,21 @@ def prune(
                 stats.lps += 1
             if delta < tol:
                 alive[c] = False
-                n_alive -= 1
                 continue
             b = np.clip(b, 0.0, None)
             b = b / b.sum()
-            live = np.flatnonzero(alive)
-            j, vbest = _best_index(A, live, b, tol)
+            j, vbest = _best_index(A, np.flatnonzero(alive), b, tol)
             # The LP's witness must hold up in plain arithmetic; otherwise no witness.
-            if vbest - float(np.max(A[kept_order] @ b)) <= 0.0:
+            if vbest - float(np.max(KA[:nk] @ b)) <= 0.0:
                 alive[c] = False
-                n_alive -= 1
                 continue
             if stats is not None:
                 stats.lp_witnesses += 1
             alive[j] = False
-            n_alive -= 1
             keep(j, b)
+            KA[nk] = A[j]
+            nk += 1
             lp.add(A[j])
-            new_since_filter.append(j)
             if j != c:
                 queue.append(c)  # c still waits for its own verdict
 
@@ -367,7 +378,7 @@ def _dominated_within(B: np.ndarray, chunk_elems: int = 4_000_000) -> np.ndarray
     left to the kept-set filter and the LPs).
     """
     N, S = B.shape
-    if N * N * S <= 50_000_000:
+    if N * N * S <= 10_000_000:
         by = B
     else:
         by = B[np.unique(np.argmax(B, axis=0))]
