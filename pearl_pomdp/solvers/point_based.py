@@ -1,0 +1,530 @@
+"""Anytime point-based POMDP solver with a lower and an upper bound.
+
+References:
+    * J. Pineau, G. Gordon, S. Thrun. "Point-based value iteration: an anytime
+      algorithm for POMDPs", IJCAI 2003 (PBVI: backups at a set of beliefs).
+    * T. Smith, R. Simmons. "Point-based POMDP algorithms: improved analysis and
+      implementation", UAI 2005 (HSVI2: bound-guided forward search, sawtooth
+      upper bound, excess-uncertainty depth rule).
+    * H. Kurniawati, D. Hsu, W. S. Lee. "SARSOP: efficient point-based POMDP
+      planning by approximating optimally reachable belief spaces", RSS 2008.
+
+Conventions (DESIGN.md §2): ``T[a][s, s'] = P(s'|s,a)`` (dense or scipy CSR),
+``O[a, s', o] = P(o|s',a)``, ``R[s, a]``, ``b0[s]``, discount ``γ < 1``.
+
+The solver keeps
+
+* a **lower bound** Γ of α-vectors (each the value of a concrete policy, so
+  ``max_k Γ_k·b ≤ V*(b)``), initialised with the blind policies "always do a";
+* an **upper bound**: the fast informed bound (FIB) vectors ``max_a b·Q_FIB(:,a)``
+  together with a point set ``{(b_i, v_i)}`` over corner values
+  ``V_c(s) = max_a Q_FIB(s, a)`` read by sawtooth interpolation (HSVI2):
+  ``UB(b) = min(max_a b·Q_FIB(:,a), b·V_c + min_i min_{s∈supp b_i} (b(s)/b_i(s)) (v_i − b_i·V_c))``.
+
+Each *trial* walks forward from ``b0``: at belief ``b`` (depth ``d``) it takes
+the action with the best upper bound and the observation with the largest
+weighted excess uncertainty ``P(o|b,a)·(UB − LB − ε_t γ^{-(d+1)})``, and stops
+when the width at ``b`` is within ``ε_t γ^{-d}``. On the way back it backs up
+the lower bound at every visited belief (one new α-vector when it improves the
+bound there) and lowers the upper-bound point there. All per-belief work is
+vectorised over (action, observation) pairs and restricted to the states the
+belief can reach, with T stored as one sparse ``S × (A·S)`` block, so models
+with ten thousand states (RockSample[7,8]) stay cheap. Vectors that are not
+maximal at any backed-up belief are pruned periodically.
+
+The search is deterministic; ``seed`` only fixes the order in which exactly
+tied observations are considered.
+"""
+from __future__ import annotations
+
+import time
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..model.pomdp import Pomdp
+from .base import AlphaVectorPolicy, SolveResult
+from .mdp import blind_lower_bound, fib_q
+
+__all__ = ["solve_point_based", "PointBasedSolver"]
+
+#: Keep T dense (as one S × A·S array) up to this many entries (40 MB).
+_DENSE_ENTRIES = 5_000_000
+
+
+class _Node:
+    """A belief in the search graph, with cached upper bounds at its successors.
+
+    Upper bounds only ever decrease, so a cached successor bound is always a
+    valid (possibly loose) upper bound; it is refreshed when that successor is
+    itself updated (SARSOP keeps its belief tree the same way). Lower bounds are
+    recomputed at every visit because they are cheap (one product with Γ).
+    """
+
+    __slots__ = ("idx", "val", "key", "p", "Rb", "ub_c", "ub", "children")
+
+    def __init__(self, idx, val, key):
+        self.idx = idx        # support of b (state indices)
+        self.val = val        # b on that support
+        self.key = key
+        self.p = None         # [A, Z] P(o | b, a), set on first expansion
+        self.Rb = None        # [A] expected immediate reward
+        self.ub_c = None      # [A, Z] cached upper bounds at the successors
+        self.ub = np.inf      # upper bound at b
+        self.children = {}    # flat (a*Z + o) -> _Node, created when the search goes there
+
+
+class PointBasedSolver:
+    """The state of an anytime point-based solve (see the module docstring).
+
+    Use :func:`solve_point_based` unless you want to continue a solve
+    (``run`` may be called repeatedly with more time).
+    """
+
+    def __init__(self, model: Pomdp, seed: int = 0, fib_time: float = 5.0) -> None:
+        if not model.discount < 1.0:
+            raise ValueError("the point-based solver needs a discount below 1 (got %g)" % model.discount)
+        self.model = model
+        self.S, self.A, self.Z = model.num_states, model.num_actions, model.num_observations
+        self.g = float(model.discount)
+        self.R = np.ascontiguousarray(model.R, dtype=float)
+        self.O = np.ascontiguousarray(model.O, dtype=float)
+        self.rng = np.random.default_rng(seed)
+        # Tie-break order for observations (the only use of the seed).
+        self.z_jitter = self.rng.permutation(self.Z) * 1e-15
+        S, A = self.S, self.A
+        # T as one S × (A·S) block: the successors of a belief under all actions are one product.
+        # Dense rows are much cheaper to slice than CSR rows; go sparse only when A·S² is big.
+        dense = not model.is_sparse and A * S * S <= _DENSE_ENTRIES
+        if dense:
+            self.Tall = np.hstack([np.asarray(t) for t in model.T])
+            self.Tmats = [np.asarray(t) for t in model.T]
+        else:
+            mats = [sp.csr_matrix(t) for t in model.T]
+            self.Tall = sp.hstack(mats, format="csr")
+            self.Tmats = mats
+        self.dense = dense
+        self.b0 = np.asarray(model.b0, dtype=float)
+        self.r_span = float(self.R.max() - self.R.min())
+
+        # ---- upper bound: FIB vectors + sawtooth points over corner values.
+        t0 = time.perf_counter()
+        Q, self.fib_iterations, self.fib_converged = fib_q(model, epsilon=1e-6, time_limit=fib_time)
+        self.fib_seconds = time.perf_counter() - t0
+        self.Qfib = Q                        # [S, A]
+        self.Vc = Q.max(axis=1).copy()       # corner values
+        self.pt_cap = 1024
+        self.pt_n = 0
+        self.pt_start = np.zeros(self.pt_cap, dtype=np.int64)
+        self.pt_len = np.zeros(self.pt_cap, dtype=np.int64)
+        self.pt_key = np.zeros(self.pt_cap, dtype=np.int64)
+        self.pt_v = np.zeros(self.pt_cap)
+        self.pt_delta = np.zeros(self.pt_cap)
+        self.ent_cap = 1 << 14
+        self.ent_n = 0
+        self.ent_idx = np.zeros(self.ent_cap, dtype=np.int64)
+        self.ent_val = np.zeros(self.ent_cap)
+        self.pt_index: Dict[bytes, int] = {}
+        self.pos = np.full(S, -1, dtype=np.int64)
+
+        # ---- lower bound: Γ stored transposed ([S, cap]) so gathering the rows of a support is contiguous.
+        blind = blind_lower_bound(model)
+        self.backups = 0
+        self.cap = 256
+        self.GT = np.zeros((S, self.cap))
+        self.K = 0
+        self.gact = np.zeros(self.cap, dtype=np.int64)
+        self.gbirth = np.zeros(self.cap, dtype=np.int64)
+        for a in range(A):
+            self._add_alpha(blind[a], a)
+        self.beliefs: Dict[bytes, Tuple[np.ndarray, np.ndarray]] = {}
+        self.nodes: Dict[bytes, _Node] = {}
+        self.expansions = 0
+        idx0 = np.flatnonzero(self.b0 > 0)
+        self.root = self._node(idx0, self.b0[idx0])
+        self.trials = 0
+        self.prunes = 0
+        self.pruned = 0
+        self._last_prune_K = self.K
+        self.seconds = 0.0
+
+    # ------------------------------------------------------------ lower bound
+    def _add_alpha(self, alpha: np.ndarray, action: int) -> None:
+        if self.K == self.cap:
+            self.cap *= 2
+            GT = np.zeros((self.S, self.cap))
+            GT[:, : self.K] = self.GT[:, : self.K]
+            self.GT = GT
+            self.gact = np.resize(self.gact, self.cap)
+            self.gbirth = np.resize(self.gbirth, self.cap)
+        self.GT[:, self.K] = alpha
+        self.gact[self.K] = action
+        self.gbirth[self.K] = self.backups
+        self.K += 1
+
+    def lower(self, idx: np.ndarray, val: np.ndarray) -> float:
+        """Lower bound at the belief ``val`` on states ``idx``."""
+        return float((val @ self.GT[idx, : self.K]).max())
+
+    def _lower_batch(self, U: np.ndarray, C: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        vals = C @ self.GT[U, : self.K]          # [M, K]
+        best = vals.argmax(axis=1)
+        return vals[np.arange(C.shape[0]), best], best
+
+    # ------------------------------------------------------------ upper bound
+    def _refresh_deltas(self) -> None:
+        n = self.pt_n
+        if n == 0:
+            return
+        seg = np.repeat(np.arange(n), self.pt_len[:n])
+        ent = self._entries(np.arange(n))
+        dots = np.bincount(seg, weights=self.ent_val[ent] * self.Vc[self.ent_idx[ent]], minlength=n)
+        self.pt_delta[:n] = self.pt_v[:n] - dots
+
+    def _entries(self, pts: np.ndarray) -> np.ndarray:
+        lens = self.pt_len[pts]
+        total = int(lens.sum())
+        if total == 0:
+            return np.zeros(0, dtype=np.int64)
+        offs = np.cumsum(lens) - lens
+        return np.repeat(self.pt_start[pts] - offs, lens) + np.arange(total)
+
+    def _upper_batch(self, U: np.ndarray, C: np.ndarray) -> np.ndarray:
+        """Upper bound at each row of ``C`` ([M, |U|], beliefs on states ``U``)."""
+        base = C @ self.Vc[U]
+        ub = np.minimum(base, (C @ self.Qfib[U]).max(axis=1))
+        n = self.pt_n
+        if n == 0:
+            return ub
+        pos = self.pos
+        pos[U] = np.arange(U.shape[0])
+        try:
+            cand = np.flatnonzero(pos[self.pt_key[:n]] >= 0)
+            if cand.size == 0:
+                return ub
+            ent = self._entries(cand)
+            loc = pos[self.ent_idx[ent]]
+            bv = self.ent_val[ent]
+        finally:
+            pos[U] = -1
+        lens = self.pt_len[cand]
+        offs = np.cumsum(lens) - lens
+        # A point binds at c only if its support lies inside supp(c) (else its ratio is 0).
+        outside = np.add.reduceat((loc < 0).astype(np.int64), offs)
+        ok = outside == 0
+        if not ok.all():
+            keep_e = np.repeat(ok, lens)
+            cand, lens, loc, bv = cand[ok], lens[ok], loc[keep_e], bv[keep_e]
+            if cand.size == 0:
+                return ub
+            offs = np.cumsum(lens) - lens
+        n_c = cand.size
+        # W[i, s] = 1/b_i(s) on supp(b_i), +inf elsewhere (on U's coordinates).
+        rows = np.repeat(np.arange(n_c), lens)
+        W = np.full((n_c, U.shape[0]), np.inf)
+        W[rows, loc] = 1.0 / bv
+        # A point binds at c only if supp(b_i) ⊆ supp(c): test every (child, point) pair at once
+        # (misses = #{s ∈ supp(b_i): c(s) = 0}) and keep the points that bind somewhere.
+        misses = (C == 0.0).astype(float) @ np.isfinite(W).T.astype(float)    # [M, n_c]
+        useful = np.flatnonzero((misses < 0.5).any(axis=0))
+        if useful.size == 0:
+            return ub
+        W = W[useful]
+        delta = self.pt_delta[cand[useful]]
+        # λ_i(c) = min_s c(s)/b_i(s); zeros of c are lifted to 1e-300 so that 0·inf never
+        # occurs (a non-binding pair then gets λ ≈ 0, i.e. no correction).
+        Cp = np.maximum(C, 1e-300)
+        M = C.shape[0]
+        corr = np.zeros(M)
+        step = max(1, int(2_000_000 // max(1, useful.size * U.shape[0])))
+        for m0 in range(0, M, step):
+            lam = (Cp[m0: m0 + step, None, :] * W[None, :, :]).min(axis=2)    # [m, n_u]
+            corr[m0: m0 + step] = np.minimum((lam * delta).min(axis=1), 0.0)
+        return np.minimum(ub, base + corr)
+
+    def upper(self, idx: np.ndarray, val: np.ndarray) -> float:
+        """Upper bound at the belief ``val`` on states ``idx``."""
+        return float(self._upper_batch(idx, val[None, :])[0])
+
+    def _set_upper(self, idx: np.ndarray, val: np.ndarray, v: float, key: bytes) -> None:
+        if idx.shape[0] == 1:
+            s = int(idx[0])
+            if v < self.Vc[s] - 1e-12:
+                self.Vc[s] = v
+                self._refresh_deltas()
+            return
+        delta = v - float(val @ self.Vc[idx])
+        i = self.pt_index.get(key)
+        if i is not None:
+            if v < self.pt_v[i]:
+                self.pt_v[i] = v
+                self.pt_delta[i] = delta
+            return
+        if delta >= 0.0:
+            return  # no better than the corners: the point would never bind
+        if self.pt_n == self.pt_cap:
+            self.pt_cap *= 2
+            for name in ("pt_start", "pt_len", "pt_key", "pt_v", "pt_delta"):
+                setattr(self, name, np.resize(getattr(self, name), self.pt_cap))
+        m = idx.shape[0]
+        while self.ent_n + m > self.ent_cap:
+            self.ent_cap *= 2
+            self.ent_idx = np.resize(self.ent_idx, self.ent_cap)
+            self.ent_val = np.resize(self.ent_val, self.ent_cap)
+        i = self.pt_n
+        self.ent_idx[self.ent_n: self.ent_n + m] = idx
+        self.ent_val[self.ent_n: self.ent_n + m] = val
+        self.pt_start[i], self.pt_len[i], self.pt_key[i] = self.ent_n, m, idx[0]
+        self.pt_v[i], self.pt_delta[i] = v, delta
+        self.ent_n += m
+        self.pt_n += 1
+        self.pt_index[key] = i
+
+    # ------------------------------------------------------------ expansion
+    def _successors(self, node: _Node) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(U, C, live)``: states reachable in one step, successor beliefs ``[A*Z, |U|]`` on U
+        (rows with ``P(o|b,a) = 0`` left unnormalised zeros) and the flat indices of the live rows.
+        Fills ``node.p`` and ``node.Rb`` on the first call."""
+        A, Z, S = self.A, self.Z, self.S
+        idx, val = node.idx, node.val
+        if self.dense:
+            bT = (val @ self.Tall[idx]).reshape(A, S)
+        else:
+            bT = np.asarray(self.Tall[idx].T @ val).reshape(A, S)
+        U = np.flatnonzero((bT > 0.0).any(axis=0))
+        joint = bT[:, U][:, :, None] * self.O[:, U, :]       # [A, |U|, Z]
+        p = joint.sum(axis=1)                               # [A, Z]
+        C = np.transpose(joint, (0, 2, 1)).reshape(A * Z, U.shape[0])
+        pf = p.reshape(-1)
+        live = np.flatnonzero(pf > 1e-300)
+        C[live] /= pf[live, None]
+        if node.p is None:
+            node.p = p
+            node.Rb = val @ self.R[idx]
+            # Cheap bounds first (corners and FIB vectors); the sawtooth is read lazily, only
+            # for the successors of actions that become greedy (see _refresh_upper).
+            Cl = C[live]
+            ub = np.zeros(A * Z)
+            ub[live] = np.minimum(Cl @ self.Vc[U], (Cl @ self.Qfib[U]).max(axis=1))
+            node.ub_c = ub.reshape(A, Z)
+            self.expansions += 1
+            self._refresh_upper(node, U, C, live, set())
+        return U, C, live
+
+    def _refresh_upper(self, node: _Node, U, C, live, done: set) -> np.ndarray:
+        """Re-read the sawtooth at the successors of the greedy action until the greedy action
+        is one already refreshed (``done``); returns ``Q^U(b, ·)``."""
+        Z = self.Z
+        ub_c = node.ub_c.reshape(-1)
+        while True:
+            Qu = node.Rb + self.g * (node.p * node.ub_c).sum(axis=1)
+            a = int(np.argmax(Qu))
+            if a in done:
+                return Qu
+            done.add(a)
+            rows = live[(live >= a * Z) & (live < (a + 1) * Z)]
+            if rows.size:
+                ub_c[rows] = np.minimum(ub_c[rows], self._upper_batch(U, C[rows]))
+
+    def _lower_children(self, U, C, live) -> Tuple[np.ndarray, np.ndarray]:
+        AZ = self.A * self.Z
+        lb = np.zeros(AZ)
+        best = np.zeros(AZ, dtype=np.int64)
+        lb[live], best[live] = self._lower_batch(U, C[live])
+        return lb.reshape(self.A, self.Z), best.reshape(self.A, self.Z)
+
+    @staticmethod
+    def _key(idx: np.ndarray, val: np.ndarray) -> bytes:
+        return idx.tobytes() + np.round(val, 12).tobytes()
+
+    def _node(self, idx: np.ndarray, val: np.ndarray) -> _Node:
+        key = self._key(idx, val)
+        node = self.nodes.get(key)
+        if node is None:
+            node = _Node(idx, val, key)
+            self.nodes[key] = node
+        return node
+
+    def _update(self, node: _Node, U, C, live) -> Tuple[float, float]:
+        """Back up the lower bound and lower the upper bound at ``node``; returns (LB, UB) there."""
+        g = self.g
+        lb, best = self._lower_children(U, C, live)
+        Ql = node.Rb + g * (node.p * lb).sum(axis=1)
+        a = int(np.argmax(Ql))
+        cur = self.lower(node.idx, node.val)
+        self.backups += 1
+        if Ql[a] > cur + 1e-10 * max(1.0, abs(cur)):
+            # α = R(:,a) + γ T[a] Σ_o O[a,:,o] ∘ Γ_{best(a,o)}  (the o-sum moves inside T[a]).
+            inner = (self.O[a] * self.GT[:, best[a]]).sum(axis=1)
+            alpha = self.R[:, a] + g * np.asarray(self.Tmats[a] @ inner).ravel()
+            self._add_alpha(alpha, a)
+            cur = max(cur, float(node.val @ alpha[node.idx]))
+        self.beliefs.setdefault(node.key, (node.idx, node.val))
+        # Refresh the cached successor bounds: from successors updated elsewhere, then by
+        # re-reading the sawtooth for the successors of the greedy action (the one that sets
+        # UB(b)) until that action stops changing.
+        ub_c = node.ub_c.reshape(-1)
+        for ao, child in node.children.items():
+            if child.ub < ub_c[ao]:
+                ub_c[ao] = child.ub
+        Qu = self._refresh_upper(node, U, C, live, set())
+        u = float(Qu.max())
+        if u < node.ub:
+            node.ub = u
+            self._set_upper(node.idx, node.val, u, node.key)
+        return cur, node.ub
+
+    # ------------------------------------------------------------ pruning
+    def prune(self) -> int:
+        """Drop α-vectors that are maximal at none of the backed-up beliefs (and not just added)."""
+        K = self.K
+        if not self.beliefs or K <= self.A:
+            return 0
+        used = np.zeros(K, dtype=bool)
+        items = list(self.beliefs.values())
+        chunk = max(1, int(4_000_000 // max(K, 1)))
+        for i in range(0, len(items), chunk):
+            part = items[i: i + chunk]
+            rows = np.concatenate([np.full(len(ix), j) for j, (ix, _) in enumerate(part)])
+            cols = np.concatenate([ix for ix, _ in part])
+            data = np.concatenate([v for _, v in part])
+            B = sp.csr_matrix((data, (rows, cols)), shape=(len(part), self.S))
+            vals = np.asarray(B @ self.GT[:, :K])
+            used[vals.argmax(axis=1)] = True
+        keep = np.flatnonzero(used)
+        removed = K - keep.size
+        if removed:
+            self.GT[:, : keep.size] = self.GT[:, keep]
+            self.gact[: keep.size] = self.gact[keep]
+            self.gbirth[: keep.size] = self.gbirth[keep]
+            self.K = keep.size
+        self.prunes += 1
+        self.pruned += removed
+        self._last_prune_K = self.K
+        return removed
+
+    # ------------------------------------------------------------ search
+    def bounds_at_start(self) -> Tuple[float, float]:
+        """(LB, UB) at ``b0``."""
+        r = self.root
+        return self.lower(r.idx, r.val), min(r.ub, self.upper(r.idx, r.val))
+
+    def _max_depth(self, eps_t: float) -> int:
+        if self.r_span <= 0:
+            return 1
+        d = np.log(eps_t * (1 - self.g) / self.r_span) / np.log(self.g)
+        return int(min(max(d, 1), 1000))
+
+    def trial(self, eps_t: float) -> None:
+        g, Z = self.g, self.Z
+        node = self.root
+        path: List[Tuple[_Node, int]] = []
+        d = 0
+        max_d = self._max_depth(eps_t)
+        while True:
+            U, C, live = self._successors(node)
+            lb, _ = self._lower_children(U, C, live)
+            Qu = node.Rb + g * (node.p * node.ub_c).sum(axis=1)
+            Ql = node.Rb + g * (node.p * lb).sum(axis=1)
+            u = min(node.ub, float(Qu.max()))
+            l = max(float(Ql.max()), self.lower(node.idx, node.val))
+            if u - l <= eps_t * g ** (-d) or d >= max_d:
+                path.append((node, -1))
+                break
+            a = int(np.argmax(Qu))
+            thr = eps_t * g ** (-(d + 1))
+            score = node.p[a] * (node.ub_c[a] - lb[a] - thr) + self.z_jitter
+            o = int(np.argmax(score))
+            if node.p[a, o] <= 0.0:
+                path.append((node, -1))
+                break
+            path.append((node, a * Z + o))
+            child = node.children.get(a * Z + o)
+            if child is None:
+                c = C[a * Z + o]
+                nz = np.flatnonzero(c > 0.0)
+                child = self._node(U[nz], c[nz])
+                child.ub = min(child.ub, float(node.ub_c[a, o]))
+                node.children[a * Z + o] = child
+            node = child
+            d += 1
+        # Back up along the path, deepest first, refreshing each parent's cached successor bound.
+        for i in range(len(path) - 1, -1, -1):
+            node, ao = path[i]
+            if ao >= 0:
+                child = node.children[ao]
+                a, o = divmod(ao, Z)
+                node.ub_c[a, o] = min(node.ub_c[a, o], child.ub)
+            U, C, live = self._successors(node)
+            self._update(node, U, C, live)
+        self.trials += 1
+
+    def run(self, time_limit: float = 60.0, epsilon: float = 1e-3, progress: bool = False,
+            max_trials: Optional[int] = None) -> SolveResult:
+        """Search until ``UB(b0) − LB(b0) ≤ epsilon`` or ``time_limit`` seconds (wall clock)."""
+        t0 = time.perf_counter()
+        bar = None
+        if progress:
+            from tqdm import tqdm
+            bar = tqdm(total=round(time_limit, 1), unit="s", desc=f"pointbased {self.model.name}", leave=False,
+                       bar_format="{desc}: {n:.1f}/{total}s {postfix}")
+        lo, hi = self.bounds_at_start()
+        last_report = t0
+        converged = hi - lo <= epsilon
+        while not converged:
+            now = time.perf_counter()
+            if now - t0 >= time_limit or (max_trials is not None and self.trials >= max_trials):
+                break
+            gap = hi - lo
+            eps_t = max(epsilon, 0.5 * gap) if gap > 10 * epsilon else epsilon * 0.5
+            self.trial(eps_t)
+            if self.K > 2 * self._last_prune_K + 50:
+                self.prune()
+            lo, hi = self.bounds_at_start()
+            converged = hi - lo <= epsilon
+            if bar is not None and (now - last_report > 0.25 or converged):
+                bar.n = round(min(now - t0, time_limit), 1)
+                bar.set_postfix_str(f"LB={lo:.6g} UB={hi:.6g} gap={hi - lo:.3g} |Γ|={self.K}")
+                last_report = now
+        if bar is not None:
+            bar.close()
+        self.prune()
+        lo, hi = self.bounds_at_start()
+        self.seconds += time.perf_counter() - t0
+        policy = AlphaVectorPolicy(self.GT[:, : self.K].T.copy(), self.gact[: self.K].copy())
+        return SolveResult(
+            policy=policy, method="pointbased", value_at_start=lo, upper_bound=hi,
+            iterations=self.trials, seconds=self.seconds, converged=bool(hi - lo <= epsilon),
+            extra={
+                "gap": hi - lo, "backups": self.backups, "vectors": self.K, "ub_points": self.pt_n,
+                "beliefs": len(self.beliefs), "pruned": self.pruned, "fib_iterations": self.fib_iterations, "nodes": len(self.nodes),
+                "fib_seconds": self.fib_seconds,
+            },
+        )
+
+
+def solve_point_based(model: Pomdp, time_limit: float = 60.0, epsilon: float = 1e-3, seed: int = 0,
+                      progress: bool = False) -> SolveResult:
+    """Anytime point-based solve with bounds (HSVI2/SARSOP style; see the module docstring).
+
+    Args:
+        model: the POMDP (``γ < 1``).
+        time_limit: wall-clock seconds for the search (FIB initialisation included).
+        epsilon: stop when ``UB(b0) − LB(b0) ≤ epsilon``.
+        seed: fixes tie-breaking among observations (the search is otherwise deterministic).
+        progress: show LB/UB/gap on a tqdm line (stderr).
+
+    Returns:
+        :class:`SolveResult` with method ``"pointbased"``: the lower-bound α-vectors as the
+        policy, ``value_at_start`` = LB(b0), ``upper_bound`` = UB(b0), ``iterations`` = trials,
+        ``converged`` when the gap reached ``epsilon``; ``extra`` has ``gap``, ``backups``,
+        ``vectors``, ``ub_points``, ``beliefs``, ``pruned``.
+    """
+    t0 = time.perf_counter()
+    solver = PointBasedSolver(model, seed=seed, fib_time=max(0.5, 0.1 * time_limit))
+    setup = time.perf_counter() - t0
+    res = solver.run(time_limit=max(0.0, time_limit - setup), epsilon=epsilon, progress=progress)
+    res.seconds = time.perf_counter() - t0
+    res.extra["setup_seconds"] = setup
+    return res
