@@ -103,25 +103,63 @@ class LaunchNode:
         """The name shown in ``pearl launch`` output (node name, else executable)."""
         return self.name or self.executable
 
-    def ros_args(self) -> List[str]:
-        """``--ros-args …`` as ``ros2 launch`` would pass them (rename, namespace, params, remaps)."""
+    @property
+    def fully_qualified_name(self) -> Optional[str]:
+        """``/namespace/name`` when the file names the node, else ``None``."""
+        if not self.name:
+            return None
+        ns = (self.namespace or "").rstrip("/")
+        return f"{ns}/{self.name}"
+
+    def ros_args(self, params_dir: Optional[PathLike] = None) -> List[str]:
+        """``--ros-args …`` as ``ros2 launch`` would pass them (rename, namespace, params, remaps).
+
+        Like launch_ros, each run of ``<param name value>`` entries is written to a params
+        file in ``params_dir`` under the node's fully qualified name (``/**`` if unnamed),
+        and all params files are passed in file order, so a later entry wins and a
+        ``<param name value>`` beats the same name in an earlier ``<param from>`` file. (A
+        plain ``-p`` would not: rcl lets node-specific file entries beat ``-p``.) Without
+        ``params_dir`` the values are passed as ``-p name:=value`` (for display only).
+        """
         out = ["--ros-args"]
         if self.name:
             out += ["-r", f"__node:={self.name}"]
         if self.namespace:
             out += ["-r", f"__ns:={self.namespace}"]
+        groups: List[tuple] = []
         for entry in self.parameters:
             if entry[0] == "file":
-                out += ["--params-file", entry[1]]
+                groups.append(entry)
+            elif groups and groups[-1][0] == "values":
+                groups[-1][1].append(entry[1:])
             else:
-                out += ["-p", f"{entry[1]}:={entry[2]}"]
+                groups.append(("values", [entry[1:]]))
+        for index, group in enumerate(groups):
+            if group[0] == "file":
+                out += ["--params-file", group[1]]
+            elif params_dir is None:
+                # An empty value is the empty string (rcl rejects a bare ``name:=``).
+                out += [a for name, value in group[1] for a in ("-p", f"{name}:={value if value != '' else chr(39) * 2}")]
+            else:
+                out += ["--params-file", str(self._write_params(Path(params_dir), index, group[1]))]
         for src, dst in self.remappings:
             out += ["-r", f"{src}:={dst}"]
         return out + list(self.extra_ros_args)
 
-    def argv(self) -> List[str]:
+    def _write_params(self, params_dir: Path, index: int, values: List[Tuple[str, str]]) -> Path:
+        import yaml
+
+        key = self.fully_qualified_name or "/**"
+        params = {name: (yaml.safe_load(value) if value.strip() else "") for name, value in values}
+        params_dir.mkdir(parents=True, exist_ok=True)
+        label = (self.fully_qualified_name or self.executable).strip("/").replace("/", "_")
+        path = params_dir / f"{label}_{self.line}_{index}.params.yaml"
+        path.write_text(yaml.safe_dump({key: {"ros__parameters": params}}, sort_keys=False), encoding="utf-8")
+        return path
+
+    def argv(self, params_dir: Optional[PathLike] = None) -> List[str]:
         """Everything after the executable: ``args`` then :meth:`ros_args`."""
-        return list(self.arguments) + self.ros_args()
+        return list(self.arguments) + self.ros_args(params_dir)
 
 
 @dataclass

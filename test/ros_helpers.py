@@ -99,11 +99,13 @@ class Proc:
         return self.popen.returncode
 
     def stdout(self) -> str:
-        self._out.flush()
+        if not self._out.closed:
+            self._out.flush()
         return self.out_path.read_text(errors="replace")
 
     def stderr(self) -> str:
-        self._err.flush()
+        if not self._err.closed:
+            self._err.flush()
         return self.err_path.read_text(errors="replace")
 
 
@@ -168,3 +170,51 @@ def ros_context(tmp_path):
         yield context, domain_id
     finally:
         rclpy.try_shutdown(context=context)
+
+
+# ------------------------------------------------------------------ the Pearl policy
+DOMAIN = REPO / "config" / "pearl.domain.yaml"
+HIERARCHY = REPO / "config" / "pearl.hierarchy.yaml"
+#: Where a committed, planned Pearl policy may live (first match that fits the domain wins).
+POLICY_CANDIDATES = (REPO / "config" / "pearl.policy", REPO / "plans" / "pearl", REPO / "policies" / "pearl")
+
+
+def _policy_fits(directory: Path, domain) -> bool:
+    from pearl_pomdp.errors import PolicyError
+    from pearl_pomdp.hierarchy import load_hierarchical_policy
+
+    try:
+        load_hierarchical_policy(directory, domain)
+        return True
+    except (PolicyError, OSError, KeyError, ValueError):
+        return False
+
+
+@pytest.fixture(scope="session")
+def pearl_policy(request) -> Path:
+    """A planned Pearl policy directory that matches ``config/pearl.domain.yaml``.
+
+    ``$PEARL_POLICY_DIR``, then a committed one (:data:`POLICY_CANDIDATES`), else planned once
+    and kept in pytest's cache under a key of the domain, hierarchy and planner sources (so
+    only the first run after a change pays for PLAN).
+    """
+    import hashlib
+
+    from pearl_pomdp.model.factored import load_domain
+
+    domain = load_domain(DOMAIN)
+    env_dir = os.environ.get("PEARL_POLICY_DIR")
+    for candidate in ([Path(env_dir)] if env_dir else []) + list(POLICY_CANDIDATES):
+        if (candidate / "hierarchy.json").is_file() and _policy_fits(candidate, domain):
+            return candidate
+    h = hashlib.sha256()
+    sources = [DOMAIN, HIERARCHY] + sorted((REPO / "pearl_pomdp" / "hierarchy").glob("*.py")) \
+        + sorted((REPO / "pearl_pomdp" / "solvers").glob("*.py"))
+    for path in sources:
+        h.update(path.name.encode() + path.read_bytes())
+    cache = Path(request.config.cache.mkdir("pearl_policy")) / h.hexdigest()[:16]
+    if not ((cache / "hierarchy.json").is_file() and _policy_fits(cache, domain)):
+        from pearl_pomdp.hierarchy import load_hierarchy, plan
+
+        plan(domain, load_hierarchy(HIERARCHY, domain)).save(cache)
+    return cache

@@ -104,6 +104,7 @@ class ActionExecutorNode(PearlNode):
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self.create_subscription(cv.TextMsg, p["action_topic"], self._on_action, EVENT_QOS)
         self.create_timer(p["diagnostics_period"], self.publish_diagnostics)
+        self.get_logger().info(f"executing {len(self.behaviour)} actions; locations: {', '.join(self.locations)}")
 
     def _fields(self, action: str) -> _Template:
         now = datetime.datetime.fromtimestamp(self.now_s(), tz=datetime.timezone.utc)

@@ -219,7 +219,11 @@ class BeliefTrackerNode(PearlNode):
     def _handle(self, result: Optional[StepResult]) -> None:
         logger = self.get_logger()
         for event in self.protocol.take_events():
-            (logger.warning if event.level == "warn" else logger.info)(event.text)
+            # One call site per severity: rclpy refuses a second severity at the same line.
+            if event.level == "warn":
+                logger.warning(event.text)
+            else:
+                logger.info(event.text)
         if result is not None:
             self._publish_belief(result)
         if self._warning_total() > self._reported_warnings:

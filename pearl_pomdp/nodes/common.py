@@ -156,7 +156,7 @@ def resolve_path(value: str, parameter: str, must_exist: bool = True, kind: str 
     if candidate is not None and candidate.exists():
         return candidate
     if must_exist:
-        where = f" (nor {candidate})" if candidate is not None else ""
+        where = f" (nor {candidate})" if candidate is not None and candidate != path.resolve() else ""
         raise NodeSetupError(f"parameter {parameter}: no such {kind}: {path.resolve()}{where}")
     return path
 

@@ -1,0 +1,222 @@
+"""Start the ``<node>`` entries of a ROS 2 XML launch file as processes (``ros2 launch`` stand-in).
+
+``pearl launch FILE [name:=value …]`` reads the file with :mod:`pearl_pomdp.launch_xml`,
+starts every node in file order as its own process with the same ``--ros-args`` that
+``ros2 launch`` would give it (node name, namespace, ``<param>``, ``<param from>``,
+``<remap>``), prefixes each output line with ``[node]`` and waits.
+
+Shutdown: on SIGINT or SIGTERM, or when a node exits by itself, every node still running
+gets SIGINT; after ``--shutdown-timeout`` seconds the ones left get SIGTERM, then SIGKILL
+(Fast DDS can hang at exit, eProsima/Fast-DDS#6502). Exit code 0 when the launch was asked
+to stop and every node exited cleanly; otherwise the first failing node's exit code
+(or 1), with one line naming it.
+
+Children get ``FASTRTPS_DEFAULT_PROFILES_FILE`` = the package's ``config/fastdds_profile.xml``
+(fast discovery) unless it is already set, and die with the launcher (``PR_SET_PDEATHSIG``).
+``--print`` shows the commands as JSON instead of running them.
+"""
+from __future__ import annotations
+
+import argparse
+import ctypes
+import importlib.util
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import IO, List, Optional
+
+from pearl_pomdp.errors import PearlError
+from pearl_pomdp.launch_xml import LaunchNode, package_share_dir, parse_cli_arguments, parse_launch_file
+
+COMMAND = "launch"
+HELP = "start the nodes of a ROS 2 XML launch file as processes (where `ros2 launch` is absent)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", help="launch file (ROS 2 XML format), e.g. launch/pearl.launch.xml")
+    parser.add_argument("arguments", nargs="*", metavar="name:=value", help="launch arguments")
+    parser.add_argument("--shutdown-timeout", type=float, default=10.0, metavar="S",
+                        help="seconds to wait after SIGINT (then SIGTERM, then SIGKILL); default 10")
+    parser.add_argument("--print", action="store_true", dest="print_only",
+                        help="print the node commands as JSON and exit")
+
+
+def node_command(node: LaunchNode, params_dir: Optional[Path] = None) -> List[str]:
+    """The command that runs ``node`` (executable + ``args`` + ``--ros-args …``).
+
+    The executable is found like ``ros2 run`` does (``<prefix>/lib/<pkg>/<exec>`` in
+    ``AMENT_PREFIX_PATH``); this package's nodes and Python packages without an ament
+    install run as ``python -m <pkg>.<exec>`` or ``<pkg>.nodes.<exec>``; last, ``exec`` on
+    the venv's ``bin``/``PATH``.
+
+    Raises:
+        PearlError: nothing runs ``exec`` of ``pkg`` (the message names the launch line).
+    """
+    from pearl_pomdp.cli.run import NODES
+
+    if node.package == "pearl_pomdp" and node.executable in NODES:
+        return [sys.executable, "-m", NODES[node.executable], *node.argv(params_dir)]
+    for prefix in filter(None, os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)):
+        candidate = Path(prefix) / "lib" / node.package / node.executable
+        if candidate.is_file() and os.access(candidate, os.X_OK):
+            return [str(candidate), *node.argv(params_dir)]
+    for module in (f"{node.package}.{node.executable}", f"{node.package}.nodes.{node.executable}"):
+        try:
+            found = importlib.util.find_spec(module)
+        except (ImportError, ValueError):
+            found = None
+        if found is not None:
+            return [sys.executable, "-m", module, *node.argv(params_dir)]
+    path = shutil.which(node.executable, path=os.pathsep.join([str(Path(sys.executable).parent),
+                                                               os.environ.get("PATH", "")]))
+    if path:
+        return [path, *node.argv(params_dir)]
+    raise PearlError(f"line {node.line}: no executable {node.executable!r} in package {node.package!r} "
+                     f"(looked in AMENT_PREFIX_PATH lib/{node.package}/, Python modules, PATH)")
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+class _Child:
+    def __init__(self, node: LaunchNode, cmd: List[str], env: dict, log_dir: Path):
+        self.node, self.label = node, node.label
+        self.log_path = log_dir / f"{node.label}.log"
+        self.log = open(self.log_path, "w", encoding="utf-8")
+        self.last_err = ""
+        self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     stdin=subprocess.DEVNULL, start_new_session=True,
+                                     preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None)
+        screen = node.output in ("screen", "both")
+        self.threads = [threading.Thread(target=self._pump, args=(self.proc.stdout, sys.stdout if screen else None,
+                                                                  False), daemon=True),
+                        threading.Thread(target=self._pump, args=(self.proc.stderr, sys.stderr if screen else None,
+                                                                  True), daemon=True)]
+        for t in self.threads:
+            t.start()
+
+    def _pump(self, stream: IO[bytes], out: Optional[IO[str]], is_err: bool) -> None:
+        for raw in iter(stream.readline, b""):
+            line = raw.decode("utf-8", errors="replace").rstrip("\n")
+            if is_err and line.strip():
+                self.last_err = line.strip()
+            self.log.write(line + "\n")
+            self.log.flush()
+            if out is not None:
+                out.write(f"[{self.label}] {line}\n")
+                out.flush()
+        stream.close()
+
+    def finish(self) -> None:
+        for t in self.threads:
+            t.join(timeout=2.0)
+        self.log.close()
+
+
+def _log_dir() -> Path:
+    base = Path(os.environ.get("ROS_LOG_DIR") or Path.home() / ".ros" / "log")
+    path = base / f"pearl_launch_{time.strftime('%Y-%m-%d-%H-%M-%S')}_{os.getpid()}"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _say(text: str) -> None:
+    print(f"[launch] {text}", file=sys.stderr, flush=True)
+
+
+def run(args: argparse.Namespace) -> int:
+    description = parse_launch_file(args.file, parse_cli_arguments(args.arguments))
+    log_dir = _log_dir()
+    commands = [node_command(node, log_dir / "params") for node in description.nodes]
+    if args.print_only:
+        from pearl_pomdp.cli import print_json
+
+        print_json({"file": str(description.source), "arguments": description.values,
+                    "nodes": [{"name": n.label, "package": n.package, "executable": n.executable,
+                               "namespace": n.namespace, "command": cmd}
+                              for n, cmd in zip(description.nodes, commands)]})
+        return 0
+    if not commands:
+        raise PearlError(f"{description.source}: no <node> to start")
+    env = dict(os.environ)
+    share = package_share_dir("pearl_pomdp")
+    profile = share / "config" / "fastdds_profile.xml" if share else None
+    if "FASTRTPS_DEFAULT_PROFILES_FILE" not in env and profile is not None and profile.is_file():
+        env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
+    env.setdefault("PYTHONUNBUFFERED", "1")
+
+    stop = threading.Event()
+    requested: List[int] = []
+
+    def on_signal(signum, _frame):
+        requested.append(signum)
+        stop.set()
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    children: List[_Child] = []
+    try:
+        for node, cmd in zip(description.nodes, commands):
+            if stop.is_set():
+                break
+            children.append(_Child(node, cmd, env, log_dir))
+            _say(f"started {node.label} (pid {children[-1].proc.pid})")
+        _say(f"{len(children)} node(s) running; logs in {log_dir}")
+        failed: Optional[_Child] = None
+        while not stop.wait(0.1):
+            for child in children:
+                if child.proc.poll() is not None:
+                    failed = child
+                    break
+            if failed is not None:
+                code = failed.proc.returncode
+                why = f": {failed.last_err}" if failed.last_err else ""
+                _say(f"{failed.label} exited with code {code}{why}; stopping the others")
+                break
+        codes = _stop_all(children, args.shutdown_timeout)
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+    for child in children:
+        child.finish()
+    bad = [(c.label, code) for c, code in zip(children, codes) if code != 0]
+    if failed is not None and failed.proc.returncode != 0:
+        code = failed.proc.returncode
+        return code if code > 0 else 1
+    if bad:
+        _say("not clean: " + ", ".join(f"{label} exited with {code}" for label, code in bad))
+        return 1
+    return 0
+
+
+def _stop_all(children: List[_Child], timeout: float) -> List[int]:
+    """SIGINT every running child; SIGTERM after ``timeout``; SIGKILL after ``timeout`` more."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        running = [c for c in children if c.proc.poll() is None]
+        if not running:
+            break
+        for c in running:
+            try:
+                c.proc.send_signal(sig)
+            except ProcessLookupError:
+                pass
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and any(c.proc.poll() is None for c in running):
+            time.sleep(0.05)
+        if sig == signal.SIGINT and any(c.proc.poll() is None for c in running):
+            _say("still running after SIGINT: " + ", ".join(c.label for c in running if c.proc.poll() is None)
+                 + "; sending SIGTERM")
+    for c in children:
+        if c.proc.poll() is None:
+            _say(f"{c.label} did not stop; SIGKILL")
+            c.proc.kill()
+            c.proc.wait()
+    return [c.proc.returncode for c in children]
