@@ -1,0 +1,286 @@
+"""EXECUTE: the hierarchical policy, polled top-down at every step (Pineau & Thrun, Table 1).
+
+``EXECUTE(h, b)``: ``a = π_h(b)``; if ``a`` is primitive return it, else
+``EXECUTE(h_a, b)``. The full trace root → … → primitive is repeated at *every* time
+step (polling, as in Dietterich's MAXQ): terminal states of a subtask are not
+observable, so a subtask is never "run to termination".
+
+Each subtask's local policy is a set of α-vectors over its abstract model's states
+(:mod:`pearl_pomdp.hierarchy.abstraction`). The full belief ``b [S]`` projects onto a
+subtask by its X+ marginal, ``b_h = P_hᵀ b``, so ``α·b_h = (P_h α)·b``: the vectors are
+stored *expanded* to the full state space once (``alphas_full [K, S]``) and a decision
+is a few ``K×S`` mat-vecs.
+
+Persistence (``save`` / :func:`load_hierarchical_policy`): a directory with
+``policy.npz`` (arrays only, loaded with ``allow_pickle=False``) and ``hierarchy.json``
+(structure, sizes, the model fingerprint and the npz's SHA-256), each written to a
+temporary file and renamed into place, the JSON last.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Union
+
+import numpy as np
+
+from pearl_pomdp.errors import PolicyError
+
+__all__ = ["Decision", "TraceStep", "SubtaskPolicy", "HierarchicalPolicy", "load_hierarchical_policy",
+           "FORMAT_VERSION"]
+
+FORMAT_VERSION = 1
+NPZ_NAME = "policy.npz"
+JSON_NAME = "hierarchy.json"
+
+
+@dataclass(frozen=True)
+class TraceStep:
+    """One level of an EXECUTE trace: in ``subtask`` the local policy chose ``choice``, whose
+    α-vector gives the subtask value ``value`` at the current belief."""
+
+    subtask: str
+    choice: str
+    value: float
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The primitive action to take now (index into the full model's actions and its name),
+    with the trace root → … → primitive."""
+
+    action: int
+    action_name: str
+    trace: List[TraceStep] = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        """JSON-ready form (``value`` NaN becomes ``None``)."""
+        return {"action": self.action, "action_name": self.action_name,
+                "trace": [{"subtask": t.subtask, "choice": t.choice,
+                           "value": None if math.isnan(t.value) else t.value} for t in self.trace]}
+
+
+@dataclass
+class SubtaskPolicy:
+    """The solved local policy of one subtask.
+
+    Attributes:
+        name: the subtask.
+        actions: its action names (children).
+        abstract: per action, whether it is a subtask.
+        alphas: ``[K, S_h]`` α-vectors over the abstract model's states.
+        alpha_actions: ``[K]`` index into ``actions`` of each vector.
+        state_to_model: ``[S]`` full state → abstract model state.
+        effective: ``[S]`` π_h(s): the primitive (full-model action index) EXECUTE(h) reaches
+            at the belief concentrated on s (eq. 15–17's input for h's parent).
+        info: the planning report of this subtask (sizes, solver, seconds...).
+    """
+
+    name: str
+    actions: List[str]
+    abstract: List[bool]
+    alphas: np.ndarray
+    alpha_actions: np.ndarray
+    state_to_model: np.ndarray
+    effective: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.alphas = np.atleast_2d(np.asarray(self.alphas, dtype=float))
+        self.alpha_actions = np.asarray(self.alpha_actions, dtype=np.int64)
+        self.state_to_model = np.asarray(self.state_to_model, dtype=np.int64)
+        self.effective = np.asarray(self.effective, dtype=np.int64)
+        # α expanded to the full state space: α_full[k, s] = α[k, state_to_model[s]].
+        self.alphas_full = np.ascontiguousarray(self.alphas[:, self.state_to_model])
+
+    def choose(self, belief: np.ndarray):
+        """``(action index in self.actions, value)`` at a full belief ``[S]``."""
+        values = self.alphas_full @ belief
+        k = int(np.argmax(values))
+        return int(self.alpha_actions[k]), float(values[k])
+
+    def value(self, belief: np.ndarray) -> float:
+        """The subtask's value ``V_h(b) = max_k α_k·P_hᵀ b`` at a full belief."""
+        return float(np.max(self.alphas_full @ belief))
+
+
+class HierarchicalPolicy:
+    """The collection of local policies, with EXECUTE.
+
+    Args:
+        root: the top subtask.
+        subtasks: subtask name → :class:`SubtaskPolicy`.
+        action_names: the full model's primitive action names (``Decision.action`` indexes them).
+        fingerprint: the full model's :meth:`~pearl_pomdp.model.pomdp.Pomdp.fingerprint`.
+        report: the PLAN report (``pearl plan --json``'s object).
+    """
+
+    def __init__(self, root: str, subtasks: Dict[str, SubtaskPolicy], action_names: List[str],
+                 fingerprint: str = "", report: Optional[dict] = None, hierarchy_name: str = "",
+                 model_name: str = ""):
+        self.root = root
+        self.subtasks = subtasks
+        self.action_names = list(action_names)
+        self.fingerprint = fingerprint
+        self.report = report or {}
+        self.hierarchy_name = hierarchy_name
+        self.model_name = model_name
+        self._index = {name: i for i, name in enumerate(self.action_names)}
+        self.num_states = int(next(iter(subtasks.values())).state_to_model.shape[0])
+
+    # ------------------------------------------------------------- EXECUTE
+    def execute(self, belief) -> Decision:
+        """EXECUTE(root, b): walk the hierarchy top-down and return the primitive action.
+
+        Args:
+            belief: the full belief ``[S]`` (a distribution over the full model's states).
+
+        Returns:
+            :class:`Decision` with the trace root → … → primitive and each subtask's value.
+        """
+        b = np.asarray(belief, dtype=float)
+        if b.shape != (self.num_states,):
+            raise ValueError(f"belief has shape {b.shape}, expected ({self.num_states},)")
+        trace = []
+        node = self.root
+        for _ in range(len(self.subtasks) + 1):
+            sub = self.subtasks[node]
+            k, value = sub.choose(b)
+            choice = sub.actions[k]
+            trace.append(TraceStep(node, choice, value))
+            if not sub.abstract[k]:
+                return Decision(self._index[choice], choice, trace)
+            node = choice
+        raise PolicyError(f"the hierarchy below {self.root!r} has a cycle")  # pragma: no cover - validated at load
+
+    def action(self, belief) -> int:
+        """The primitive action index EXECUTE picks at ``belief`` (the flat-policy protocol)."""
+        return self.execute(belief).action
+
+    def actions_batch(self, beliefs: np.ndarray) -> np.ndarray:
+        """EXECUTE for ``N`` beliefs ``[N, S]`` at once → ``[N]`` primitive indices (used by simulation)."""
+        B = np.asarray(beliefs, dtype=float)
+        out = np.full(B.shape[0], -1, dtype=np.int64)
+        pending = [(self.root, np.arange(B.shape[0]))]
+        while pending:
+            node, rows = pending.pop()
+            sub = self.subtasks[node]
+            k = sub.alpha_actions[np.argmax(B[rows] @ sub.alphas_full.T, axis=1)]
+            for j in np.unique(k):
+                chosen = rows[k == j]
+                name = sub.actions[j]
+                if sub.abstract[j]:
+                    pending.append((name, chosen))
+                else:
+                    out[chosen] = self._index[name]
+        return out
+
+    def values(self, belief) -> Dict[str, float]:
+        """Every subtask's value at ``belief`` (not only those on the trace)."""
+        b = np.asarray(belief, dtype=float)
+        return {name: sub.value(b) for name, sub in self.subtasks.items()}
+
+    # ---------------------------------------------------------- persistence
+    def save(self, directory: Union[str, Path]) -> Path:
+        """Write ``policy.npz`` + ``hierarchy.json`` into ``directory`` (created), atomically per file.
+
+        Returns:
+            The directory.
+        """
+        d = Path(directory)
+        d.mkdir(parents=True, exist_ok=True)
+        arrays = {}
+        subtasks = []
+        for i, (name, sub) in enumerate(self.subtasks.items()):
+            key = f"s{i}"
+            arrays[f"{key}_alphas"] = sub.alphas
+            arrays[f"{key}_alpha_actions"] = sub.alpha_actions
+            arrays[f"{key}_state_to_model"] = sub.state_to_model
+            arrays[f"{key}_effective"] = sub.effective
+            subtasks.append({"name": name, "key": key, "actions": sub.actions, "abstract": sub.abstract,
+                             "info": sub.info})
+        npz_tmp = d / f".{NPZ_NAME}.tmp{os.getpid()}"
+        with open(npz_tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+            fh.flush()
+            os.fsync(fh.fileno())
+        digest = hashlib.sha256(npz_tmp.read_bytes()).hexdigest()
+        header = {
+            "format": "pearl-hierarchical-policy", "version": FORMAT_VERSION,
+            "model_fingerprint": self.fingerprint, "model_name": self.model_name,
+            "hierarchy": self.hierarchy_name, "root": self.root, "actions": self.action_names,
+            "num_states": self.num_states, "npz_sha256": digest, "subtasks": subtasks, "report": self.report,
+        }
+        os.replace(npz_tmp, d / NPZ_NAME)
+        json_tmp = d / f".{JSON_NAME}.tmp{os.getpid()}"
+        json_tmp.write_text(json.dumps(header, indent=1, default=_json_default) + "\n")
+        os.replace(json_tmp, d / JSON_NAME)
+        return d
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def load_hierarchical_policy(directory: Union[str, Path], domain) -> HierarchicalPolicy:
+    """Load a policy saved by :meth:`HierarchicalPolicy.save` and check it belongs to ``domain``.
+
+    Args:
+        directory: the policy directory (``pearl plan --out DIR``).
+        domain: the FactoredDomain (compiled here) or flat Pomdp the policy must match.
+
+    Raises:
+        PolicyError: missing/corrupt files, a checksum mismatch, or a model-fingerprint
+            mismatch (the message names the file and what differs).
+    """
+    d = Path(directory)
+    jpath, npath = d / JSON_NAME, d / NPZ_NAME
+    if not jpath.is_file() or not npath.is_file():
+        raise PolicyError(f"{d}: not a hierarchical policy directory (expected {JSON_NAME} and {NPZ_NAME})")
+    try:
+        header = json.loads(jpath.read_text())
+    except (OSError, ValueError) as err:
+        raise PolicyError(f"{jpath}: unreadable JSON header: {err}") from None
+    if header.get("format") != "pearl-hierarchical-policy":
+        raise PolicyError(f"{jpath}: format is {header.get('format')!r}, expected 'pearl-hierarchical-policy'")
+    if header.get("version") != FORMAT_VERSION:
+        raise PolicyError(f"{jpath}: version {header.get('version')!r} is not supported (expected {FORMAT_VERSION})")
+    raw = npath.read_bytes()
+    if hashlib.sha256(raw).hexdigest() != header.get("npz_sha256"):
+        raise PolicyError(f"{npath}: SHA-256 does not match {jpath.name} (the pair was not written together)")
+    model = domain.compile() if hasattr(domain, "compile") else domain
+    fp = model.fingerprint()
+    if fp != header.get("model_fingerprint"):
+        raise PolicyError(f"{jpath}: the policy was planned for model {header.get('model_name')!r} with fingerprint "
+                          f"{str(header.get('model_fingerprint'))[:12]}…, but the given model {model.name!r} has "
+                          f"{fp[:12]}… (re-run `pearl plan`)")
+    if list(header.get("actions", [])) != list(model.actions):
+        raise PolicyError(f"{jpath}: the policy's actions differ from the model's")
+    try:
+        with np.load(npath, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError) as err:
+        raise PolicyError(f"{npath}: unreadable arrays: {err}") from None
+    subtasks = {}
+    for entry in header["subtasks"]:
+        key = entry["key"]
+        try:
+            subtasks[entry["name"]] = SubtaskPolicy(
+                name=entry["name"], actions=list(entry["actions"]), abstract=[bool(x) for x in entry["abstract"]],
+                alphas=arrays[f"{key}_alphas"], alpha_actions=arrays[f"{key}_alpha_actions"],
+                state_to_model=arrays[f"{key}_state_to_model"], effective=arrays[f"{key}_effective"],
+                info=entry.get("info", {}))
+        except KeyError as err:
+            raise PolicyError(f"{npath}: missing array {err} for subtask {entry['name']!r}") from None
+    if header["root"] not in subtasks:
+        raise PolicyError(f"{jpath}: root {header['root']!r} is not among the subtasks")
+    return HierarchicalPolicy(header["root"], subtasks, list(model.actions), fp, header.get("report"),
+                              header.get("hierarchy", ""), header.get("model_name", ""))
