@@ -31,14 +31,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--use-sim-time", action="store_true", help="stamp messages with /clock time")
     parser.add_argument("--chunk-size", type=int, metavar="BYTES",
                         help="write MCAP chunks of this size (default: unchunked, every message on disk at once)")
+    parser.add_argument("--custom-data", nargs="+", metavar="KEY=VALUE", default=[],
+                        help="store KEY=VALUE pairs in metadata.yaml custom_data (as ros2 bag record does)")
     parser.add_argument("--json", action="store_true", help="print a JSON summary on stdout at the end")
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.duration is not None and args.duration <= 0:
-        from pearl_pomdp.errors import PearlError
+    from pearl_pomdp.errors import PearlError
 
+    if args.duration is not None and args.duration <= 0:
         raise PearlError(f"--duration: must be > 0, got {args.duration}")
+    custom = {}
+    for item in args.custom_data:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise PearlError(f"--custom-data: {item!r} is not KEY=VALUE")
+        custom[key] = value
     import rclpy
     from rclpy.parameter import Parameter
     from rclpy.signals import SignalHandlerOptions
@@ -47,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.bags.writer import BagWriter
     from pearl_pomdp.cli import print_json
 
-    writer = BagWriter(args.out, chunk_size=args.chunk_size)
+    writer = BagWriter(args.out, chunk_size=args.chunk_size, custom_data=custom)
     stop = {"why": None}
 
     def on_signal(signum, _frame):

@@ -1,0 +1,316 @@
+"""Replay a bag's recorded inputs through the belief tracker and hierarchical policy.
+
+One process, one executor, simulated time (DESIGN.md §6 "In one process", §8): the real
+node classes of :mod:`pearl_pomdp.nodes` (built by :class:`~pearl_pomdp.nodes.graph.PearlGraph`)
+receive, in file order,
+
+* every ``/clock`` message of the bag (``rosgraph_msgs/Clock``), and
+* every message of the input topics ``/pearl/speech``, ``/pearl/touchscreen``,
+  ``/pearl/laser``, ``/pearl/reminder`` (``std_msgs/String``),
+
+published as the recorded bytes (``publish`` of raw CDR: nothing is re-serialised). The
+actions the policy publishes on ``/pearl/action`` are collected and compared with the
+``/pearl/action`` messages recorded in the bag.
+
+Lock-step, not wall-clock pacing: after each ``/clock`` the replay waits until the nodes'
+clocks show the new time and every timer that became due has run; after each input it
+waits until the tracker has consumed it (one of its counters moved) and, when that closed
+a step, until the policy's answer has been published and has reached the tracker again.
+So the result does not depend on machine speed; a missing answer ends the wait after
+``step_timeout_s`` wall seconds and shows up as a mismatch, never as a hang.
+
+Clock coalescing (default; ``coalesce_clock=False`` turns it off): of a run of ``/clock``
+messages with no input between them, only those that cross the next node-timer deadline
+(read from the nodes' own timers) and the last one before an input are fed. Node
+callbacks only run on messages and timers, so the nodes see the same clock at every input
+and every timer fires at the same sim time as with every /clock fed — but
+a bag with /clock at a simulator's rate replays several times faster. ``clock_skipped``
+counts the /clock messages not fed.
+
+The nodes' ``diagnostics_period`` is set to an hour during a replay: /diagnostics is not
+compared, and its timers would only add stops to the lock-step.
+
+The graph's configuration comes from the bag's ``custom_data`` (written by the recording
+script): ``pearl.domain``, ``pearl.policy`` (paths relative to the bag directory) and
+``pearl.tracker_params`` (JSON of belief-tracker parameter overrides).
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Union
+
+from pearl_pomdp.bags import well_known as wk
+from pearl_pomdp.bags.reader import BagError, BagReader
+from pearl_pomdp.errors import PearlError
+
+INPUT_TOPICS = ("/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder")
+ACTION_TOPIC = "/pearl/action"
+#: custom_data keys of a replayable bag.
+KEY_DOMAIN, KEY_POLICY, KEY_TRACKER = "pearl.domain", "pearl.policy", "pearl.tracker_params"
+
+
+@dataclass
+class ReplayResult:
+    """What a replay produced.
+
+    Attributes:
+        actions: actions the policy published during the replay, in order.
+        expected_actions: the ``/pearl/action`` messages recorded in the bag.
+        match: ``actions == expected_actions``.
+        messages: bag messages replayed (inputs and /clock fed, recorded outputs compared).
+        fed: messages published into the graph (inputs + /clock).
+        clock_skipped: /clock messages not fed because a later one made them unobservable.
+        seconds: wall time of the replay loop (graph start-up and planning excluded).
+        messages_per_second: ``messages / seconds``.
+        first_mismatch: index of the first differing action, or ``None``.
+        counters: the tracker's counters at the end (updates, timeouts, unknown words, …).
+    """
+
+    bag: str
+    actions: List[str]
+    expected_actions: List[str]
+    match: bool
+    messages: int
+    fed: int
+    seconds: float
+    messages_per_second: float
+    first_mismatch: Optional[int] = None
+    counters: Dict[str, int] = field(default_factory=dict)
+    clock_skipped: int = 0
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {"bag": self.bag, "match": self.match, "actions": self.actions,
+                "expected_actions": self.expected_actions, "first_mismatch": self.first_mismatch,
+                "messages": self.messages, "fed": self.fed, "seconds": round(self.seconds, 6),
+                "messages_per_second": round(self.messages_per_second, 1), "clock_skipped": self.clock_skipped,
+                "counters": self.counters}
+
+
+def _string_data(data: bytes) -> str:
+    """The ``data`` field of a CDR-encoded std_msgs/String (no ROS import needed)."""
+    import struct
+
+    if len(data) < 8:
+        raise ValueError("shorter than a CDR String")
+    (n,) = struct.unpack_from("<I" if data[1] == 1 else ">I", data, 4)
+    if n == 0 or 8 + n > len(data):
+        raise ValueError(f"string length {n} does not fit in {len(data)} bytes")
+    return data[8:8 + n - 1].decode("utf-8")
+
+
+def _clock_ns(data: bytes) -> int:
+    """The time in a CDR-encoded rosgraph_msgs/Clock, in ns."""
+    import struct
+
+    fmt = "<iI" if data[1] == 1 else ">iI"
+    sec, nsec = struct.unpack_from(fmt, data, 4)
+    return sec * 1_000_000_000 + nsec
+
+
+def expected_actions(reader: BagReader) -> List[str]:
+    """The recorded ``/pearl/action`` strings (BagError naming the offending message)."""
+    out = []
+    for i, m in enumerate(reader.read_messages([ACTION_TOPIC])):
+        try:
+            out.append(_string_data(m.data))
+        except (ValueError, UnicodeDecodeError) as err:
+            raise BagError(f"{reader.path}: topic {ACTION_TOPIC}: message {i} (log time {m.log_time}) "
+                           f"is not a std_msgs/String: {err}") from None
+    return out
+
+
+def _check_topics(reader: BagReader) -> None:
+    want = {t: wk.STRING_TYPE for t in (*INPUT_TOPICS, ACTION_TOPIC)}
+    want[wk.CLOCK_TOPIC] = wk.CLOCK_TYPE
+    for name, info in reader.topics.items():
+        if name in want and info.type != want[name]:
+            raise BagError(f"{reader.path}: topic {name}: recorded as {info.type}, replay needs {want[name]}")
+    if ACTION_TOPIC not in reader.topics:
+        raise BagError(f"{reader.path}: topic {ACTION_TOPIC} was not recorded: nothing to compare the replay with")
+
+
+def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optional[str] = None) -> Dict[str, Any]:
+    """Domain, policy and tracker parameters for replaying ``reader``'s bag (PearlError if missing)."""
+    custom = (reader.metadata or {}).get("custom_data") or {}
+    base = reader.path if reader.path.is_dir() else reader.path.parent
+
+    def path_of(key: str, given: Optional[str]) -> str:
+        value = given if given is not None else custom.get(key)
+        if not value:
+            raise PearlError(f"{reader.path}: custom_data has no {key!r}: pass --{key.split('.')[1]} to replay it")
+        p = Path(value)
+        if given is None and not p.is_absolute():
+            p = base / p
+        if not p.exists():
+            raise PearlError(f"{reader.path}: custom_data {key}: {p} does not exist")
+        return str(p)
+
+    tracker = custom.get(KEY_TRACKER) or "{}"
+    try:
+        tracker_params = json.loads(tracker)
+        if not isinstance(tracker_params, dict):
+            raise ValueError("not a JSON object")
+    except ValueError as err:
+        raise PearlError(f"{reader.path}: custom_data {KEY_TRACKER}: {err}") from None
+    return {"domain": path_of(KEY_DOMAIN, domain), "policy": path_of(KEY_POLICY, policy),
+            "tracker_params": tracker_params}
+
+
+def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: Optional[str] = None,
+               domain_id: Optional[int] = None, step_timeout_s: float = 10.0, progress: bool = False,
+               coalesce_clock: bool = True) -> ReplayResult:
+    """Replay ``path`` (bag directory or .mcap) and compare the actions; see the module doc.
+
+    Args:
+        domain, policy: override the bag's ``custom_data`` paths.
+        domain_id: ROS domain of the private context (default: ``ROS_DOMAIN_ID`` / 0).
+        step_timeout_s: wall seconds to wait for the graph's reaction to one message.
+        progress: tqdm bar on stderr.
+        coalesce_clock: skip a /clock that is followed by another /clock before any input
+            and before the next node timer falls due (see the module doc); ``False`` feeds
+            every /clock.
+
+    Raises:
+        BagError / PearlError: unreadable, truncated or wrong-typed bag; missing configuration.
+    """
+    reader = BagReader(path, salvage=False)
+    _check_topics(reader)
+    expected = expected_actions(reader)
+    cfg = replay_config(reader, domain, policy)
+
+    import rclpy
+    from rclpy.executors import TimeoutException
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import String
+
+    from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS
+    from pearl_pomdp.nodes.graph import PearlGraph
+
+    # Diagnostics are not compared; slowing their timers keeps them out of the lock-step
+    # (fewer timer deadlines to stop at). Nothing else about the nodes changes.
+    quiet = {"diagnostics_period": 3600.0}
+    overrides = {"belief_tracker": {**quiet, **dict(cfg["tracker_params"])}, "hierarchical_policy": quiet}
+    graph = PearlGraph(domain_id=domain_id, use_sim_time=True, executor=False,
+                       args=["--ros-args", "--disable-external-lib-logs", "--disable-rosout-logs", "--log-level", "warn"],
+                       shared={"domain": cfg["domain"], "policy": cfg["policy"]}, overrides=overrides)
+    try:
+        node = graph.add_node(rclpy.create_node("pearl_replay", context=graph.context))
+        actions: List[str] = []
+        node.create_subscription(String, ACTION_TOPIC, lambda m: actions.append(m.data), LATCHED_QOS)
+        pubs = {t: node.create_publisher(String, t, EVENT_QOS) for t in INPUT_TOPICS if t in reader.topics}
+        clock_pub = node.create_publisher(Clock, wk.CLOCK_TOPIC, 10)
+        tracker, policy_node = graph.tracker, graph.policy
+        clocks = [n.get_clock() for n in graph.nodes if n is not node]
+        executor = graph.executor
+
+        def drain() -> None:
+            """Run every callback that is ready now (timers due after a clock jump)."""
+            while True:
+                try:
+                    handler, _entity, _node = executor.wait_for_ready_callbacks(timeout_sec=0.0)
+                except TimeoutException:
+                    return
+                handler()
+                if handler.exception() is not None:
+                    raise handler.exception()
+
+        def wait(pred, what: str) -> bool:
+            if graph.spin_until(pred, timeout_sec=step_timeout_s):
+                return True
+            node.get_logger().warning(f"replay: gave up waiting for {what} after {step_timeout_s} s")
+            return False
+
+        def await_answer(decisions_before: int) -> None:
+            # The step closed: the policy answers, and the tracker must see that action
+            # (opening the next step) before the next input, as in the recorded run.
+            if wait(lambda: policy_node.decisions > decisions_before and len(actions) >= policy_node.decisions
+                    and tracker.protocol.step_open, "the policy's answer"):
+                drain()
+
+        # Matching before feeding: our publishers must reach the tracker, the first action us.
+        wait(lambda: all(p.get_subscription_count() > 0 for p in pubs.values())
+             and clock_pub.get_subscription_count() > 0, "subscriptions to match")
+        wait(lambda: len(actions) >= 1 and tracker.protocol.step_open, "the first action")
+
+        graph_nodes = [n for n in graph.nodes if n is not node]
+
+        def next_deadline() -> Optional[int]:
+            """Sim time (ns) at which the next node timer falls due, or None."""
+            best = None
+            for n in graph_nodes:
+                now = n.get_clock().now().nanoseconds
+                for tm in n.timers:
+                    if tm.clock is not n.get_clock() or tm.is_canceled():
+                        continue  # steady/system-clock timers do not follow /clock
+                    left = tm.time_until_next_call()
+                    if left is not None:
+                        best = now + left if best is None else min(best, now + left)
+            return best
+
+        def feed_clock(data: bytes, t: int) -> None:
+            nonlocal fed
+            updates, decisions = tracker.protocol.counters["updates"], policy_node.decisions
+            clock_pub.publish(data)
+            fed += 1
+            wait(lambda: all(c.now().nanoseconds >= t for c in clocks), f"/clock {t} ns")
+            drain()
+            if tracker.protocol.counters["updates"] > updates:  # a step timed out
+                await_answer(decisions)
+
+        messages = fed = skipped = 0
+        pending = None  # (bytes, t) of a /clock not yet fed: see coalesce_clock
+        deadline = next_deadline()
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=reader.message_count, unit="msg", desc="replay", file=__import__("sys").stderr)
+        start = time.perf_counter()
+        for m in reader.messages:
+            messages += 1
+            if bar is not None:
+                bar.update(1)
+            if m.topic == wk.CLOCK_TOPIC:
+                t = _clock_ns(m.data)
+                if coalesce_clock:
+                    if pending is not None:
+                        skipped += 1  # superseded: no callback can run between the two
+                        pending = None
+                    if deadline is None or t < deadline:
+                        # No node timer falls due by t: only the latest such /clock can
+                        # matter, before the next input or the next due timer.
+                        pending = (m.data, t)
+                        continue
+                feed_clock(m.data, t)
+                deadline = next_deadline()
+            elif m.topic in pubs:
+                if pending is not None:
+                    feed_clock(*pending)
+                    pending = None
+                    deadline = next_deadline()
+                before = tracker.counters()
+                updates, decisions = tracker.protocol.counters["updates"], policy_node.decisions
+                pubs[m.topic].publish(m.data)
+                fed += 1
+                wait(lambda: tracker.counters() != before, f"the tracker to take {m.topic}")
+                if tracker.protocol.counters["updates"] > updates:
+                    await_answer(decisions)
+                deadline = next_deadline()
+        if pending is not None:
+            feed_clock(*pending)
+        seconds = time.perf_counter() - start
+        if bar is not None:
+            bar.close()
+        counters = dict(tracker.counters())
+    finally:
+        graph.shutdown()
+    mismatch = next((i for i, (a, b) in enumerate(zip(actions, expected)) if a != b), None)
+    if mismatch is None and len(actions) != len(expected):
+        mismatch = min(len(actions), len(expected))
+    return ReplayResult(bag=str(path), actions=actions, expected_actions=expected, match=actions == expected,
+                        messages=messages, fed=fed, seconds=seconds,
+                        messages_per_second=messages / seconds if seconds > 0 else 0.0,
+                        first_mismatch=mismatch, counters=counters, clock_skipped=skipped)
