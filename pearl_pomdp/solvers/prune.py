@@ -129,8 +129,11 @@ class _WitnessLP:
         if self.use_core:
             self._h.addCol(0.0, 0.0, self._inf, self.S + 1, self._col_index, np.append(alpha, 1.0))
 
-    def solve(self, c: np.ndarray) -> Tuple[float, np.ndarray]:
-        """Return ``(δ*, b*)``: the largest advantage of ``c`` over the kept set and where it is."""
+    def solve(self, c: np.ndarray, need_below: Optional[float] = None) -> Tuple[float, Optional[np.ndarray]]:
+        """Return ``(δ*, b*)``: the largest advantage of ``c`` over the kept set and where it is.
+
+        With ``need_below``, ``b*`` is not fetched (``None``) when ``δ* < need_below``.
+        """
         if self.use_core:
             h = self._h
             inf = self._inf
@@ -138,8 +141,10 @@ class _WitnessLP:
                 h.changeRowBounds(s, float(c[s]), inf)
             h.run()
             if h.getModelStatus() == self._optimal:
-                b = np.asarray(h.getSolution().row_dual[:self.S])
-                return float(h.getObjectiveValue()), b
+                delta = float(h.getObjectiveValue())
+                if need_below is not None and delta < need_below:
+                    return delta, None  # fetching the solution costs O(K): skip it
+                return delta, np.asarray(h.getSolution().row_dual[:self.S])
             # A numerically troubled warm start: fall back to a cold linprog solve.
         return self._solve_linprog(c)
 
@@ -339,7 +344,7 @@ def prune(
                 filtered_upto = nk
                 if not alive[c]:
                     continue
-            delta, b = lp.solve(A[c])
+            delta, b = lp.solve(A[c], need_below=tol)
             if stats is not None:
                 stats.lps += 1
             if delta < tol:
