@@ -39,7 +39,8 @@ HELP = "start the nodes of a ROS 2 XML launch file as processes (where `ros2 lau
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="launch file (ROS 2 XML format), e.g. launch/pearl.launch.xml")
-    parser.add_argument("arguments", nargs="*", metavar="name:=value", help="launch arguments")
+    # REMAINDER so that options may also follow the arguments (``FILE a:=1 --print``); see _split.
+    parser.add_argument("arguments", nargs=argparse.REMAINDER, metavar="name:=value", help="launch arguments")
     parser.add_argument("--shutdown-timeout", type=float, default=10.0, metavar="S",
                         help="seconds to wait after SIGINT (then SIGTERM, then SIGKILL); default 10")
     parser.add_argument("--print", action="store_true", dest="print_only",
@@ -133,7 +134,26 @@ def _say(text: str) -> None:
     print(f"[launch] {text}", file=sys.stderr, flush=True)
 
 
+def _split(args: argparse.Namespace) -> None:
+    """Take ``--print`` / ``--shutdown-timeout S`` out of the launch arguments, wherever they are."""
+    rest, items = [], list(args.arguments)
+    while items:
+        item = items.pop(0)
+        if item == "--print":
+            args.print_only = True
+        elif item == "--shutdown-timeout" or item.startswith("--shutdown-timeout="):
+            value = item.partition("=")[2] or (items.pop(0) if items else "")
+            try:
+                args.shutdown_timeout = float(value)
+            except ValueError:
+                raise PearlError(f"--shutdown-timeout needs seconds, got {value!r}") from None
+        else:
+            rest.append(item)
+    args.arguments = rest
+
+
 def run(args: argparse.Namespace) -> int:
+    _split(args)
     description = parse_launch_file(args.file, parse_cli_arguments(args.arguments))
     log_dir = _log_dir()
     commands = [node_command(node, log_dir / "params") for node in description.nodes]

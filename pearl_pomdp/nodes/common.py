@@ -24,7 +24,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Type
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -193,14 +193,25 @@ def run_node(node_class: Type[PearlNode], args: Optional[List[str]] = None) -> i
         return 2
     node = None
     try:
+        # The executor exists before the node, so a signal during a long start-up (planning)
+        # meets a complete setup; rclpy's handlers shut the context down and spin() returns.
+        executor = SingleThreadedExecutor()
         try:
             node = node_class()
         except (PearlError, rclpy.exceptions.ParameterException, ValueError, OSError) as err:
+            if not rclpy.ok():
+                return 0  # stopped while starting; the error is a consequence
             print(f"{prog}: error: {_one_line(err)}", file=sys.stderr)
             return 2
-        rclpy.spin(node)
+        executor.add_node(node)
+        executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if rclpy.ok():
+            raise
+        # SIGINT/SIGTERM arrived between two start-up steps and invalidated the context:
+        # a normal stop, not an error.
     finally:
         if node is not None:
             node.destroy_node()

@@ -1,0 +1,102 @@
+"""Message conversions: each pair round-trips, with the wire layout written down in the module doc."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy")
+
+from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
+
+from pearl_pomdp.errors import BeliefError  # noqa: E402
+from pearl_pomdp.nodes import conversions as cv  # noqa: E402
+
+
+def test_belief_layout_and_round_trip_through_cdr():
+    b = np.array([0.1, 0.2, 0.3, 0.4])
+    msg = cv.belief_to_msg(b)
+    assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == [("state", 4, 4)]
+    assert msg.layout.data_offset == 0
+    wire = deserialize_message(serialize_message(msg), cv.BeliefMsg)
+    np.testing.assert_array_equal(cv.msg_to_belief(wire, num_states=4), b)  # float64 on the wire: exact
+
+
+@pytest.mark.parametrize("mutate, problem", [
+    (lambda m: setattr(m.layout.dim[0], "label", "states"), "labelled 'state'"),
+    (lambda m: setattr(m.layout.dim[0], "size", 3), "says size 3 but carries 4"),
+    (lambda m: setattr(m, "data", [0.5, 0.5, 0.5, 0.5]), "not a distribution"),
+    (lambda m: setattr(m, "data", [1.5, -0.5, 0.0, 0.0]), "not a distribution"),
+    (lambda m: setattr(m, "data", [math.nan, 0.5, 0.5, 0.0]), "not a distribution"),
+])
+def test_bad_belief_messages_are_rejected_with_the_reason(mutate, problem):
+    msg = cv.belief_to_msg([0.25] * 4)
+    mutate(msg)
+    with pytest.raises(BeliefError, match=problem):
+        cv.msg_to_belief(msg)
+
+
+def test_belief_size_must_match_the_model():
+    with pytest.raises(BeliefError, match="has 4 states, the model has 576"):
+        cv.msg_to_belief(cv.belief_to_msg([0.25] * 4), num_states=576)
+    with pytest.raises(BeliefError, match="one-dimensional"):
+        cv.belief_to_msg(np.eye(2) / 2)
+
+
+def test_marginals_json():
+    msg = cv.marginals_to_msg({"Battery": {"ok": 0.9, "low": np.float64(0.1)}}, step=3, action="TellTime",
+                              observation="yes")
+    body = json.loads(msg.data)
+    assert body == {"step": 3, "action": "TellTime", "observation": "yes",
+                    "marginals": {"Battery": {"ok": 0.9, "low": 0.1}}}
+    assert cv.msg_to_marginals(msg) == body
+
+
+def test_decision_trace_from_objects_and_dicts():
+    class Step:
+        def __init__(self, subtask, choice, value):
+            self.subtask, self.choice, self.value = subtask, choice, value
+
+    msg = cv.decision_to_msg(7, "TellTime", [Step("Act", "Assist", 12.5), {"subtask": "Inform", "choice": "TellTime",
+                                                                          "value": float("nan")}], 0.00025)
+    assert cv.msg_to_decision(msg) == {"step": 7, "action": "TellTime", "latency_s": 0.00025, "trace": [
+        {"subtask": "Act", "choice": "Assist", "value": 12.5},
+        {"subtask": "Inform", "choice": "TellTime", "value": None}]}  # NaN is not JSON: null
+
+
+def test_pose_quaternion_and_stamp():
+    msg = cv.pose_to_msg(8.0, 3.5, math.pi / 2, "map", 12.25)
+    assert msg.pose.orientation.z == pytest.approx(math.sqrt(0.5))
+    assert msg.pose.orientation.w == pytest.approx(math.sqrt(0.5))
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (12, 250_000_000)
+    for yaw in (0.0, 1.0, -2.5, math.pi - 1e-9):
+        assert cv.msg_to_pose(cv.pose_to_msg(0, 0, yaw, "map", 0))["yaw"] == pytest.approx(yaw)
+    wire = deserialize_message(serialize_message(msg), cv.PoseMsg)
+    assert cv.msg_to_pose(wire) == {"x": 8.0, "y": 3.5, "yaw": pytest.approx(math.pi / 2), "frame_id": "map",
+                                    "stamp": 12.25}
+
+
+def test_time_and_clock():
+    t = cv.seconds_to_time(1.5)
+    assert (t.sec, t.nanosec) == (1, 500_000_000)
+    assert cv.time_to_seconds(cv.seconds_to_time(1795465705.871285522)) == pytest.approx(1795465705.871285522)
+    assert cv.clock_to_msg(2.000000001).clock.nanosec == 1
+    with pytest.raises(ValueError, match=">= 0"):
+        cv.seconds_to_time(-1.0)
+
+
+def test_diagnostics_round_trip():
+    msg = cv.diagnostics_to_msg("pearl: belief_tracker", "pearl", cv.DIAG_WARN, "2 inputs dropped",
+                                {"updates": 5, "invalid_touchscreen": 2}, 3.0)
+    wire = deserialize_message(serialize_message(msg), cv.DiagnosticsMsg)
+    assert cv.msg_to_diagnostics(wire) == {"pearl: belief_tracker": {
+        "level": 1, "message": "2 inputs dropped", "values": {"updates": "5", "invalid_touchscreen": "2"}}}
+    assert (cv.DIAG_OK, cv.DIAG_WARN, cv.DIAG_ERROR) == (0, 1, 2)
+
+
+def test_strings_and_observations():
+    assert cv.msg_to_action(cv.action_to_msg(" TellTime \n")) == "TellTime"
+    assert cv.msg_to_text(cv.text_to_msg("what time is it")) == "what time is it"
+    assert cv.msg_to_observation(cv.text_to_msg("t_yes"), str.upper) == "T_YES"
