@@ -217,6 +217,9 @@ class BeliefTrackerNode(PearlNode):
 
     # -------------------------------------------------------------- output
     def _handle(self, result: Optional[StepResult]) -> None:
+        # The belief goes out first: logging and diagnostics must not delay the policy.
+        if result is not None:
+            self._publish_belief(result)
         logger = self.get_logger()
         for event in self.protocol.take_events():
             # One call site per severity: rclpy refuses a second severity at the same line.
@@ -224,8 +227,6 @@ class BeliefTrackerNode(PearlNode):
                 logger.warning(event.text)
             else:
                 logger.info(event.text)
-        if result is not None:
-            self._publish_belief(result)
         if self._warning_total() > self._reported_warnings:
             self.publish_diagnostics()
 

@@ -1,0 +1,181 @@
+"""Observation → action latency of the Pearl graph, in one process and across processes.
+
+One step: the bench publishes an input (speech text or a symbol) on its topic and waits for
+the next message on /pearl/action; the latency is publish → action received (wall clock,
+``time.perf_counter``), which covers tracker update, belief message, EXECUTE and the action
+message. Steps run back to back, each after the previous action arrived.
+
+* ``inprocess``: the three nodes (:class:`pearl_pomdp.nodes.graph.PearlGraph`) and the bench's
+  probe node on one executor in this process.
+* ``multiprocess``: ``pearl launch launch/pearl.launch.xml`` (three node processes over Fast DDS
+  on a private ROS_DOMAIN_ID, localhost discovery), the probe in this process.
+
+Prints one JSON object: per mode p50/p90/p99/max/mean in ms over ``--steps`` steps (after
+``--warmup``), plus the machine load. Target (issue 5): multi-process p99 < 10 ms.
+
+    .venv/bin/python bench/latency.py --policy DIR [--steps 1000] [--mode both]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+SPIN_TIMEOUT = float(os.environ.get("SPIN_TIMEOUT", "0.01"))
+sys.path.insert(0, str(REPO))
+
+#: Inputs cycled through: (topic, text). Speech goes through the keyword filter.
+INPUTS = [("speech", "what time is it"), ("speech", "yes"), ("touchscreen", "t_time"), ("speech", "no thanks"),
+          ("reminder", "g_physio"), ("speech", "let's go"), ("laser", "atRoom"), ("touchscreen", "t_yes"),
+          ("speech", "what's the weather like"), ("reminder", "g_none")]
+
+
+def _find_policy(arg):
+    if arg:
+        return Path(arg)
+    env = os.environ.get("PEARL_POLICY_DIR")
+    if env:
+        return Path(env)
+    for c in (REPO / "config" / "pearl.policy", REPO / "plans" / "pearl"):
+        if (c / "hierarchy.json").is_file():
+            return c
+    cache = sorted((REPO / ".pytest_cache" / "d" / "pearl_policy").glob("*/hierarchy.json"),
+                   key=lambda p: p.stat().st_mtime)
+    if cache:
+        return cache[-1].parent
+    sys.exit("bench/latency.py: no planned policy: pass --policy DIR (from `pearl plan --out DIR`)")
+
+
+def _stats(lat):
+    a = np.asarray(lat) * 1e3
+    return {"steps": int(a.size), "p50_ms": round(float(np.percentile(a, 50)), 3),
+            "p90_ms": round(float(np.percentile(a, 90)), 3), "p99_ms": round(float(np.percentile(a, 99)), 3),
+            "max_ms": round(float(a.max()), 3), "mean_ms": round(float(a.mean()), 3)}
+
+
+def _drive(probe_node, executor, steps, warmup, timeout=10.0):
+    """Publish inputs one at a time; return the latencies (s) of the measured steps."""
+    from pearl_pomdp.nodes import conversions as cv
+    from pearl_pomdp.nodes.common import INPUT_QOS, LATCHED_QOS
+
+    actions = []
+    arrivals = []
+
+    def on_action(msg):
+        arrivals.append(time.perf_counter())
+        actions.append(msg.data)
+
+    probe_node.create_subscription(cv.TextMsg, "/pearl/action", on_action, LATCHED_QOS)
+    pubs = {t: probe_node.create_publisher(cv.TextMsg, f"/pearl/{t}", INPUT_QOS)
+            for t in ("speech", "touchscreen", "laser", "reminder")}
+    deadline = time.monotonic() + 60.0
+    while not (actions and all(p.get_subscription_count() >= 1 for p in pubs.values())):
+        if time.monotonic() > deadline:
+            raise RuntimeError("graph not ready within 60 s")
+        executor.spin_once(timeout_sec=0.05)
+    latencies = []
+    for i in range(steps + warmup):
+        topic, text = INPUTS[i % len(INPUTS)]
+        n = len(actions)
+        start = time.perf_counter()
+        pubs[topic].publish(cv.text_to_msg(text))
+        step_deadline = time.monotonic() + timeout
+        while len(actions) == n:
+            if time.monotonic() > step_deadline:
+                raise RuntimeError(f"no action within {timeout} s at step {i}")
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT)
+        if i >= warmup:
+            latencies.append(arrivals[n] - start)
+    return latencies
+
+
+def run_inprocess(policy_dir, steps, warmup):
+    import rclpy
+
+    from pearl_pomdp.hierarchy import load_hierarchical_policy
+    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.nodes.graph import PearlGraph
+
+    domain = load_domain(REPO / "config" / "pearl.domain.yaml")
+    model = domain.compile()
+    decider = load_hierarchical_policy(policy_dir, domain)
+    with PearlGraph(domain_id=_domain_id(1), domain=domain, model=model, decider=decider, use_sim_time=False,
+                    args=["--ros-args", "--log-level", "error"],
+                    overrides={"belief_tracker": {"step_timeout": 0.0}}) as g:
+        node = g.add_node(rclpy.create_node("latency_probe", context=g.context))
+        return _drive(node, g.executor, steps, warmup)
+
+
+def _domain_id(offset):
+    return 1 + (os.getpid() * 7 + offset * 13) % 101
+
+
+def run_multiprocess(policy_dir, steps, warmup):
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    domain_id = _domain_id(2)
+    log_dir = Path(tempfile.mkdtemp(prefix="pearl_latency_"))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_profile.xml"), ROS_LOG_DIR=str(log_dir))
+    pearl = str(Path(sys.executable).parent / "pearl")
+    err = open(log_dir / "launch.err", "wb")
+    launch = subprocess.Popen([pearl, "launch", "launch/pearl.launch.xml", f"policy:={policy_dir}",
+                               "step_timeout:=0.0"], cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=err)
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node("latency_probe", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        return _drive(node, executor, steps, warmup)
+    finally:
+        launch.send_signal(signal.SIGINT)
+        try:
+            launch.wait(20)
+        except subprocess.TimeoutExpired:
+            launch.kill()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        err.close()
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--policy", help="planned Pearl policy directory (pearl plan --out DIR)")
+    parser.add_argument("--steps", type=int, default=1000)
+    parser.add_argument("--warmup", type=int, default=50)
+    parser.add_argument("--mode", choices=["inprocess", "multiprocess", "both"], default="both")
+    args = parser.parse_args(argv)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO / "config" / "fastdds_profile.xml"))
+    policy = _find_policy(args.policy)
+    out = {"benchmark": "observation -> action latency", "policy": str(policy), "cpus": os.cpu_count(),
+           "load_before": [round(x, 2) for x in os.getloadavg()]}
+    if args.mode in ("inprocess", "both"):
+        print("in-process ...", file=sys.stderr)
+        out["inprocess"] = _stats(run_inprocess(policy, args.steps, args.warmup))
+    if args.mode in ("multiprocess", "both"):
+        print("multi-process ...", file=sys.stderr)
+        out["multiprocess"] = _stats(run_multiprocess(policy, args.steps, args.warmup))
+        out["target_multiprocess_p99_ms"] = 10.0
+        out["target_met"] = out["multiprocess"]["p99_ms"] < 10.0
+    out["load_after"] = [round(x, 2) for x in os.getloadavg()]
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
