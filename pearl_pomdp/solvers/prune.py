@@ -189,23 +189,43 @@ def pointwise_dominated(candidates: np.ndarray, by: np.ndarray, slack: float = 0
     return out
 
 
-def _best_index(alphas: np.ndarray, idx: np.ndarray, b: np.ndarray, tol: float) -> Tuple[int, float]:
+def _best_index(alphas: np.ndarray, idx: np.ndarray, b: np.ndarray, tol: float,
+                lexrank: Optional[np.ndarray] = None) -> Tuple[int, float]:
     """Best of ``alphas[idx]`` at ``b``; values within ``tol`` of the best tie and the
-    lexicographically largest vector wins (pomdp-solve's tie-break). Returns (index, value)."""
+    lexicographically largest vector wins (pomdp-solve's tie-break). Returns (index, value).
+
+    ``lexrank[i]`` (optional) is the lexicographic rank of row ``i`` of ``alphas``.
+    """
     vals = alphas[idx] @ b
     m = vals.max()
     tied = idx[vals >= m - tol]
     if tied.size == 1:
         return int(tied[0]), float(m)
+    if lexrank is not None:
+        return int(tied[np.argmax(lexrank[tied])]), float(m)
     rows = alphas[tied]
     order = np.lexsort(rows.T[::-1])  # primary key: state 0
     return int(tied[order[-1]]), float(m)
 
 
-def _unique_rows_first(alphas: np.ndarray) -> np.ndarray:
-    """Indices of the first occurrence of each distinct row, in input order."""
-    _, first = np.unique(alphas, axis=0, return_index=True)
-    return np.sort(first)
+def _lex_order(alphas: np.ndarray) -> np.ndarray:
+    """Row indices in lexicographic order (state 0 first); stable, so equal rows keep input order."""
+    return np.lexsort(alphas.T[::-1])
+
+
+def _unique_rows_first(alphas: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """Indices of the first occurrence of each distinct row, in input order (``order`` from :func:`_lex_order`)."""
+    srt = alphas[order]
+    new_group = np.ones(len(order), dtype=bool)
+    new_group[1:] = (srt[1:] != srt[:-1]).any(axis=1)
+    return np.sort(order[new_group])
+
+
+def _best_at_corners(alphas: np.ndarray, idx: np.ndarray, tol: float, lexrank: np.ndarray) -> np.ndarray:
+    """:func:`_best_index` at every corner of the simplex at once."""
+    vals = alphas[idx]  # the value at corner s is component s
+    tied = vals >= vals.max(axis=0) - tol
+    return idx[np.argmax(np.where(tied, lexrank[idx][:, None], -1), axis=0)]
 
 
 # ----------------------------------------------------------------- prune
@@ -271,7 +291,10 @@ def prune(
         return kept
 
     # 1. duplicates; 2. (weak) pointwise dominance among what is left.
-    cand = _unique_rows_first(A)
+    order = _lex_order(A)
+    lexrank = np.empty(K, dtype=np.int64)
+    lexrank[order] = np.arange(K)
+    cand = _unique_rows_first(A, order)
     if cand.size > 1:
         cand = cand[~_dominated_within(A[cand])]
 
@@ -286,10 +309,9 @@ def prune(
         witness[i] = b
 
     eye = np.eye(S)
-    for s in range(S):
-        i, _ = _best_index(A, cand, eye[s], tol)
+    for s, i in enumerate(_best_at_corners(A, cand, tol, lexrank)):
         if not is_kept[i]:
-            keep(i, eye[s])
+            keep(int(i), eye[s])
     # Random beliefs too (seeded, so results are reproducible): a vector that
     # wins clearly at one needs no LP. Their number keeps C·P bounded.
     n_random = int(min(max(4 * S, 64), max(0, random_budget // max(1, cand.size))))
@@ -352,7 +374,7 @@ def prune(
                 continue
             b = np.clip(b, 0.0, None)
             b = b / b.sum()
-            j, vbest = _best_index(A, np.flatnonzero(alive), b, tol)
+            j, vbest = _best_index(A, np.flatnonzero(alive), b, tol, lexrank)
             # The LP's witness must hold up in plain arithmetic; otherwise no witness.
             if vbest - float(np.max(KA[:nk] @ b)) <= 0.0:
                 alive[c] = False
