@@ -210,7 +210,7 @@ class World:
 
     def _act_RingDoorBell(self, listening, events):
         if self.engaged:
-            return "yes", "rang the bell at a resident already talking to the robot"
+            return "yes", None   # rude (the domain charges -5) but not a wrong task action
         if self.robot_at == self.resident_at and self.rng.random() < self.scenario.resident.answers_door:
             self.engaged = True
             events.append(f"{self.scenario.resident.name} comes to the door")
@@ -343,6 +343,10 @@ class World:
             follower = self._follower
             if follower is not None and previous is not None:
                 estimate = 0.8 * estimate + 0.2 * max(follower["pos"] - previous, 0.0)
+            seconds += 1
+        # An adaptive guide waits at the door until she is in; a fixed-pace robot reports arrival at once.
+        while self.pace_adaptation and self._follower is not None and seconds < 100_000:
+            self._advance(1.0, events, moving=False, robot_pos=distance)
             seconds += 1
 
     def _walk_follower(self, dt: float, robot_pos: Optional[float], events: List[str]) -> None:
