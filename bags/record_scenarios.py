@@ -72,7 +72,7 @@ WORLD = {
 
 SCENARIOS: Dict[str, Dict] = {
     "table4_clarification": {
-        "doc": "Table 4-style dialog: garbled requests, clarification questions answered",
+        "doc": "Table 4-style dialog: garbled requests, clarification questions answered, one silence",
         "answers": {"ConfirmWantTime": ("speech", "yes that is right"),
                     "ConfirmWantWeather": ("speech", "yes please"),
                     "VerifyInfoRequest": ("speech", "the time what time is it"),
@@ -81,6 +81,7 @@ SCENARIOS: Dict[str, Dict] = {
         "script": [("speech", "pearl hello"),
                    ("speech", "pearl what is like start meds"),
                    ("speech", "pearl what time is it for will the"),
+                   SILENCE,
                    ("speech", "pearl was on abc"),
                    ("speech", "pearl what is the whether like"),
                    ("speech", "pearl go to the that pretty good what"),
