@@ -316,7 +316,7 @@ def prune(
     # wins clearly at one needs no LP. Their number keeps C·P bounded.
     n_random = int(min(max(4 * S, 64), max(0, random_budget // max(1, cand.size))))
     P_parts = [] if points is None or not len(points) else [np.asarray(points, dtype=float)]
-    if n_random > 0 and cand.size > S:
+    if n_random > 0 and cand.size > max(S, len(kept_order) + sum(len(p) for p in P_parts)):
         P_parts.append(np.random.default_rng(cand.size).dirichlet(np.ones(S), n_random))
     if P_parts:
         P = np.vstack(P_parts)
@@ -327,8 +327,9 @@ def prune(
         else:
             clear = np.ones(P.shape[0], dtype=bool)
         best = cand[np.argmax(vals, axis=0)]
-        for p in np.flatnonzero(clear):
-            i = int(best[p])
+        pts = np.flatnonzero(clear)
+        winners, first = np.unique(best[pts], return_index=True)  # one point per new winner
+        for i, p in zip(winners.tolist(), pts[first].tolist()):
             if not is_kept[i]:
                 keep(i, P[p])
 
