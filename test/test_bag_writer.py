@@ -306,3 +306,35 @@ def test_cli_bag_info_text_and_json(tmp_path, capsys):
     assert {t["name"]: t["count"] for t in info["topics"]} == {"/pearl/speech": 4, "/pearl/nav_goal": 3}
     assert main(["bag-info", str(tmp_path / "missing")]) == 2
     assert "missing: no such bag" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("version", [8, 9])
+def test_reads_rosbag2_bag_from_another_writer(tmp_path, version):
+    """A rosbag2 bag written by rosbags (chunked MCAP, its own metadata.yaml; QoS as integers
+    in v8 and as names in v9) reads back with topics, QoS, times and bytes."""
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    inf = QosTime(sec=9223372036, nsec=854775807)
+    qos = Qos(QosHistory.KEEP_LAST, 7, QosReliability.BEST_EFFORT, QosDurability.TRANSIENT_LOCAL, inf, inf,
+              QosLiveliness.AUTOMATIC, inf, False)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    path = tmp_path / f"other_v{version}"
+    payloads = [rclpy_serialization.serialize_message(String(data=t)) for t in TEXTS]
+    with Writer(path, version=version, storage_plugin=StoragePlugin.MCAP) as w:
+        conn = w.add_connection("/pearl/speech", "std_msgs/msg/String", typestore=store, offered_qos_profiles=[qos])
+        for i, data in enumerate(payloads):
+            w.write(conn, 5_000 + i, data)
+    bag = BagReader(path, salvage=False)
+    assert [m.data for m in bag.messages] == payloads
+    assert [m.log_time for m in bag.messages] == [5_000, 5_001, 5_002, 5_003]
+    info = bag.topics["/pearl/speech"]
+    assert info.type == "std_msgs/msg/String" and info.message_count == 4
+    (q,) = info.offered_qos_profiles
+    assert (q.history, q.depth, q.reliability, q.durability) == ("keep_last", 7, "best_effort", "transient_local")
+    assert bag.metadata["version"] == version and bag.library.startswith("rosbags")
+    from pearl_pomdp.bags.info import bag_info
+
+    summary = bag_info(bag)
+    assert summary["metadata_mismatch"] == [] and summary["message_count"] == 4 and not summary["salvaged"]

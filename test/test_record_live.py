@@ -4,11 +4,12 @@ The publisher waits until the recorder has matched, publishes 40 Strings and 8 P
 with known contents (TRANSIENT_LOCAL, so nothing falls into the discovery window), and
 stays up; the recorder is stopped with SIGINT once the messages are on disk, and must
 leave a complete bag: metadata.yaml, every message byte-identical to rclpy's serializer
-(plus the wire's alignment padding), the publisher's QoS and type hash — readable by rosbags.
+(plus the wire's alignment padding), the publisher's QoS and type hash — readable by rosbags. SIGTERM closes as cleanly as SIGINT.
 """
 from __future__ import annotations
 
 import json
+import signal
 import sys
 import textwrap
 import time
@@ -61,7 +62,8 @@ def _messages_on_disk(bag) -> int:
         return 0
 
 
-def test_record_live_publisher_and_read_back(tmp_path):
+@pytest.mark.parametrize("stop_signal", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_record_live_publisher_and_read_back(tmp_path, stop_signal):
     from geometry_msgs.msg import PoseStamped
     from rclpy.serialization import serialize_message
     from std_msgs.msg import String
@@ -76,13 +78,14 @@ def test_record_live_publisher_and_read_back(tmp_path):
     try:
         assert wait_for(lambda: "published" in publisher.stdout(), 60), publisher.stderr() + recorder.stderr()
         assert wait_for(lambda: _messages_on_disk(bag) >= N_TEXT + N_POSE, 30), recorder.stderr()
-        code = recorder.stop(timeout=15)
+        recorder.popen.send_signal(stop_signal)
+        code = recorder.wait(15)
     finally:
         recorder.stop()
         publisher.stop()
     assert code == 0, recorder.stderr()
     summary = json.loads(recorder.stdout())
-    assert summary["stopped_by"] == "SIGINT" and summary["messages"] == N_TEXT + N_POSE
+    assert summary["stopped_by"] == stop_signal.name and summary["messages"] == N_TEXT + N_POSE
 
     assert (bag / "metadata.yaml").is_file()
     reader = BagReader(bag, salvage=False)  # closed cleanly: footer, summary, metadata

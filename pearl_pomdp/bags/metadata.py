@@ -8,6 +8,7 @@ metadata record and in each channel's ``offered_qos_profiles``.
 """
 from __future__ import annotations
 
+import functools
 import json
 import re
 from dataclasses import dataclass, field
@@ -121,7 +122,7 @@ def parse_qos_list(text_or_list: Any, where: str) -> List[QosProfile]:
         if not str(value).strip():
             return []
         try:
-            value = yaml.safe_load(value)
+            value = _cached_yaml(value)  # channels of one bag mostly share the same text
         except yaml.YAMLError as err:
             raise PearlError(f"{where}: offered_qos_profiles is not YAML ({err})") from None
     if value is None:
@@ -135,6 +136,18 @@ def parse_qos_list(text_or_list: Any, where: str) -> List[QosProfile]:
         except ValueError as err:
             raise PearlError(f"{where}: offered_qos_profiles[{i}]: {err}") from None
     return out
+
+
+@functools.lru_cache(maxsize=256)
+def _cached_yaml(text):
+    return load_yaml(text)
+
+
+def load_yaml(text):
+    """``yaml.safe_load`` with libyaml's C loader when available (bags hold many small documents)."""
+    import yaml
+
+    return yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
 
 
 # --- yaml-cpp-style emitter ----------------------------------------------------------------

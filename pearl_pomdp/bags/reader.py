@@ -190,7 +190,7 @@ class BagReader:
         import yaml
 
         try:
-            doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+            doc = md.load_yaml(path.read_text(encoding="utf-8"))
         except (yaml.YAMLError, UnicodeDecodeError) as err:
             line = getattr(getattr(err, "problem_mark", None), "line", None)
             where = f"{path}:{line + 1}" if line is not None else str(path)
@@ -325,7 +325,7 @@ class BagReader:
                 import yaml
 
                 try:
-                    doc = yaml.safe_load(text)
+                    doc = md.load_yaml(text)
                 except yaml.YAMLError as err:
                     raise self._fail(path, offset, f"rosbag2 metadata record is not YAML ({err})") from None
                 if isinstance(doc, dict):
