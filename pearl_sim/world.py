@@ -186,12 +186,11 @@ class World:
             self._advance(ANSWER_SECONDS, events)
             message = self._say(reply)
         else:
-            # Wait for the scheduler (or anything queued during a drive) until the timeout.
-            waited = 0.0
-            while not self._scheduler_queue and waited < self.scenario.step_timeout:
-                step = min(1.0, self.scenario.step_timeout - waited)
-                self._advance(step, events)
-                waited += step
+            # Wait for the scheduler (or anything queued during a drive) until the tracker's
+            # timeout, counted like the tracker does: from the moment the action was given.
+            deadline = start + self.scenario.step_timeout
+            while not self._scheduler_queue and self.time < deadline - 1e-9:
+                self._advance(min(1.0, deadline - self.time), events)
             if self._scheduler_queue:
                 queued = self._scheduler_queue.pop(0)
                 message = Message(self.time, queued.modality, queued.text, queued.said)

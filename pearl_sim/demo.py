@@ -1,0 +1,286 @@
+"""``pearl demo``: a whole scenario through the full ROS 2 graph, in one process.
+
+The Pearl nodes (belief tracker, hierarchical policy, action executor) and the
+simulated hardware (:mod:`pearl_sim.nodes`) run on one executor under simulated
+time, so the run is deterministic for a seed and goes as fast as the CPU allows.
+Every topic is recorded to a rosbag2 MCAP bag. The demo prints a transcript (time,
+what the resident said, what was recognised, the belief's top features, the action
+and its EXECUTE trace), writes it with a PNG of the belief over time into the output
+folder, and ends with a one-line outcome.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Dict, List, Optional
+
+from pearl_pomdp.errors import PearlError
+from pearl_sim.scenario import Scenario, load_scenarios
+from pearl_sim.world import CLARIFICATIONS, StepResult, World
+
+#: Features shown in the transcript and the plot (the ones a reader of Figure 4 follows).
+SHOWN_FEATURES = ("ReminderGoal", "UserPresent", "UserMotionGoal", "UserInfoGoal", "UserLocation")
+RECORDED_TOPICS = ["/clock", "/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder",
+                   "/pearl/action", "/pearl/belief", "/pearl/belief_marginals", "/pearl/decision",
+                   "/pearl/say", "/pearl/display", "/pearl/nav_goal", "/pearl/pose", "/pearl/sim/said",
+                   "/pearl/sim/truth"]
+
+
+@dataclass
+class DemoStep:
+    """One line of the transcript."""
+
+    index: int
+    time: float
+    action: str
+    trace: List[dict]
+    modality: Optional[str]
+    said: str
+    heard: str
+    observation: Optional[str]
+    marginals: Dict[str, Dict[str, float]]
+    events: List[str]
+    wrong: Optional[str]
+
+
+@dataclass
+class DemoResult:
+    """What ``pearl demo`` produced."""
+
+    scenario: str
+    out_dir: Path
+    steps: List[DemoStep] = field(default_factory=list)
+    metrics: dict = field(default_factory=dict)
+    bag: Optional[Path] = None
+    plot: Optional[Path] = None
+    transcript: Optional[Path] = None
+    bag_messages: int = 0
+    seconds: float = 0.0
+
+    @property
+    def clarifications(self) -> int:
+        return sum(1 for s in self.steps if s.action in CLARIFICATIONS)
+
+    def outcome(self) -> str:
+        m = self.metrics
+        guided = "guidance completed" if m["guidances_completed"] else "guidance NOT completed"
+        ttg = f" in {m['time_to_goal'][0]:.0f} s" if m["time_to_goal"] else ""
+        return (f"outcome: {guided}{ttg}; {m['reminders_delivered']} reminder(s) delivered, "
+                f"{m['questions_answered']} question(s) answered, {self.clarifications} clarification question(s), "
+                f"{m['wrong_actions']} wrong action(s); bag {self.bag} ({self.bag_messages} messages)")
+
+
+def _top(marginals: Dict[str, Dict[str, float]]) -> str:
+    parts = []
+    for f in SHOWN_FEATURES:
+        vals = marginals.get(f)
+        if vals:
+            v, p = max(vals.items(), key=lambda kv: kv[1])
+            parts.append(f"{f}={v} {p:.2f}")
+    return " | ".join(parts)
+
+
+def format_step(step: DemoStep, resident: str) -> str:
+    """The transcript lines of one step."""
+    trace = " → ".join([step.trace[0]["subtask"]] + [t["choice"] for t in step.trace]) if step.trace else step.action
+    lines = [f"[{step.time:7.1f} s] action {step.action:<22} trace {trace}"]
+    if step.modality == "Speech":
+        lines.append(f"           {resident} said \"{step.said}\" → recognised \"{step.heard}\" → {step.observation}")
+    elif step.modality is not None:
+        who = f"{resident} " if step.modality == "Touchscreen" else ""
+        lines.append(f"           {who}{step.modality.lower()}: {step.heard} → {step.observation}")
+    else:
+        lines.append(f"           (nothing heard: timeout → {step.observation})")
+    for e in step.events:
+        lines.append(f"           * {e}")
+    if step.marginals:
+        lines.append(f"           belief: {_top(step.marginals)}")
+    return "\n".join(lines)
+
+
+def plot_belief(steps: List[DemoStep], path: Path, title: str) -> Path:
+    """A PNG of P(feature = its most interesting value) over sim time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    series = {
+        "P(ReminderGoal=physio)": ("ReminderGoal", "physio"),
+        "P(UserPresent=yes)": ("UserPresent", "yes"),
+        "P(UserMotionGoal=toPhysioWithRobot)": ("UserMotionGoal", "toPhysioWithRobot"),
+        "P(UserLocation=physio)": ("UserLocation", "physio"),
+        "P(UserInfoGoal=wantWeather)": ("UserInfoGoal", "wantWeather"),
+        "P(UserInfoGoal=wantTime)": ("UserInfoGoal", "wantTime"),
+    }
+    fig, ax = plt.subplots(figsize=(11, 5))
+    times = [s.time for s in steps if s.marginals]
+    for label, (f, v) in series.items():
+        ax.step(times, [s.marginals.get(f, {}).get(v, 0.0) for s in steps if s.marginals], where="post", label=label)
+    for s in steps:
+        if s.action in CLARIFICATIONS:
+            ax.axvline(s.time, color="grey", lw=0.6, ls=":")
+    ax.set_xlabel("simulated time (s)   (dotted: clarification questions)")
+    ax.set_ylabel("belief")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_title(title)
+    ax.legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy_path: Path,
+             policy: str = "", seed: Optional[int] = None, domain_id: Optional[int] = None,
+             echo: Optional[Callable[[str], None]] = None, wall_timeout: float = 30.0) -> DemoResult:
+    """Run the scenario's first episode through the Pearl graph and the simulated hardware.
+
+    Args:
+        scenario_path: a scenario file (its first episode is used).
+        out_dir: folder for ``transcript.txt``, ``belief.png``, ``summary.json`` and the bag
+            (``bag/``); created, and must not already hold a bag.
+        policy: a planned policy folder (``pearl plan --out``); empty plans at start-up.
+        domain_id: ROS domain of the in-process graph (default: ``ROS_DOMAIN_ID`` or 0).
+        echo: called with each transcript block as it happens (e.g. ``print``).
+        wall_timeout: wall seconds to wait for the graph's answer in one step before failing.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    from pearl_pomdp.bags.recorder import Recorder
+    from pearl_pomdp.bags.writer import BagWriter
+    from pearl_pomdp.nodes.graph import PearlGraph
+    from std_msgs.msg import String
+
+    started = time.monotonic()
+    scenario: Scenario = load_scenarios(scenario_path)[0]
+    out_dir = Path(out_dir).resolve()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    bag_dir = out_dir / "bag"
+    if bag_dir.exists() and any(bag_dir.iterdir()):
+        raise PearlError(f"{bag_dir}: already holds a bag; choose another --out folder")
+    world = World(scenario, seed=seed)
+    # The bag must be replayable on its own: keep the domain and the planned policy beside it.
+    import shutil
+
+    from pearl_pomdp.hierarchy import load_hierarchical_policy
+    from pearl_pomdp.hierarchy.plan import plan
+    from pearl_pomdp.hierarchy.spec import load_hierarchy
+    from pearl_pomdp.model.factored import load_domain
+
+    shutil.copyfile(domain_path, out_dir / "domain.yaml")
+    domain = load_domain(out_dir / "domain.yaml")
+    if policy:
+        decider = load_hierarchical_policy(policy, domain)
+        policy_dir = Path(policy).resolve()
+    else:
+        decider = plan(domain, load_hierarchy(hierarchy_path, domain))
+        policy_dir = decider.save(out_dir / "policy")
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    context = Context()
+    rclpy.init(args=["--ros-args", "--log-level", "warn"], context=context, domain_id=domain_id,
+               signal_handler_options=SignalHandlerOptions.NO)
+    result = DemoResult(scenario.name, out_dir)
+    graph = None
+    sim = None
+    writer = None
+    try:
+        tracker_params = {"step_timeout": float(scenario.step_timeout)}
+        graph = PearlGraph(context=context, shared={"domain": str(out_dir / "domain.yaml")},
+                           domain=domain, model=domain.compile(), decider=decider,
+                           overrides={"belief_tracker": {**tracker_params, "diagnostics_period": 60.0},
+                                      "hierarchical_policy": {"policy": str(policy_dir), "diagnostics_period": 60.0}})
+        from pearl_sim.nodes import SimulatedHardware
+
+        sim = SimulatedHardware(context, world)
+        for node in sim.nodes:
+            graph.add_node(node)
+        decisions: List[dict] = []
+        marginals: List[dict] = []
+        listener = graph.add_node(rclpy.create_node("demo_listener", context=context))
+        listener.create_subscription(String, "/pearl/decision", lambda m: decisions.append(json.loads(m.data)), 50)
+        from rclpy.qos import DurabilityPolicy, QoSProfile
+
+        latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        listener.create_subscription(String, "/pearl/belief_marginals",
+                                     lambda m: marginals.append(json.loads(m.data)), latched)
+        rec_node = graph.add_node(rclpy.create_node("demo_recorder", context=context,
+                                                    parameter_overrides=[rclpy.parameter.Parameter(
+                                                        "use_sim_time", rclpy.parameter.Parameter.Type.BOOL, True)]))
+        writer = BagWriter(bag_dir, custom_data={
+            "scenario": str(scenario_path), "seed": str(world.seed),
+            "pearl.domain": os.path.relpath(out_dir / "domain.yaml", bag_dir),
+            "pearl.policy": os.path.relpath(policy_dir, bag_dir.resolve()) if not policy else str(policy_dir),
+            "pearl.tracker_params": json.dumps(tracker_params)})
+        recorder = Recorder(rec_node, writer, topics=RECORDED_TOPICS)
+        graph.spin_until(lambda: len(recorder.subscriptions) >= 10, timeout_sec=5.0)
+
+        for index in range(1, scenario.max_steps + 1):
+            if not graph.spin_until(lambda: bool(sim.actions), timeout_sec=wall_timeout):
+                raise PearlError(f"step {index}: no action on /pearl/action within {wall_timeout} s "
+                                 "(is the policy node running?)")
+            action = sim.actions.pop(0)
+            graph.spin_until(lambda: len(decisions) >= index, timeout_sec=wall_timeout)
+            decision = decisions[index - 1] if len(decisions) >= index else {"trace": []}
+            seen = len(marginals)
+            step_result: StepResult = sim.apply(action)
+            if step_result.message is None:
+                # Nothing heard: let sim time run until the tracker's timeout closes the step.
+                deadline = time.monotonic() + wall_timeout
+                while len(marginals) <= seen and time.monotonic() < deadline:
+                    sim.clock.advance_to(sim.clock.now + 0.25)
+                    for _ in range(4):
+                        graph.spin_once(0.0)
+            graph.spin_until(lambda: len(marginals) > seen, timeout_sec=wall_timeout)
+            latest = marginals[-1] if len(marginals) > seen else {}
+            msg = step_result.message
+            step = DemoStep(index=index, time=step_result.start, action=action, trace=decision.get("trace", []),
+                            modality=msg.modality if msg else None, said=msg.said if msg else "",
+                            heard=msg.text if msg else "", observation=latest.get("observation"),
+                            marginals=latest.get("marginals", {}), events=step_result.events,
+                            wrong=step_result.wrong)
+            result.steps.append(step)
+            if echo is not None:
+                echo(format_step(step, scenario.resident.name))
+        graph.spin_until(lambda: bool(sim.actions), timeout_sec=2.0)   # let the last belief/decision land
+        recorder.stop()
+        result.bag_messages = sum(recorder.counts.values())
+    finally:
+        if writer is not None:
+            writer.close()
+        if sim is not None:
+            sim.destroy()
+        if graph is not None:
+            graph.shutdown()
+        rclpy.try_shutdown(context=context)
+    m = world.metrics
+    result.metrics = {"steps": m.steps, "reminders_delivered": m.reminders_delivered,
+                      "guidances_started": m.guidances_started, "guidances_completed": m.guidances_completed,
+                      "residents_lost": m.residents_lost, "questions_answered": m.questions_answered,
+                      "clarifications": m.clarifications, "wrong_actions": m.wrong_actions,
+                      "time_to_goal": m.time_to_goal, "wrong": m.wrong}
+    result.bag = bag_dir
+    result.transcript = out_dir / "transcript.txt"
+    result.transcript.write_text("\n".join(format_step(s, scenario.resident.name) for s in result.steps)
+                                 + "\n" + result.outcome() + "\n", encoding="utf-8")
+    result.plot = plot_belief(result.steps, out_dir / "belief.png", f"{scenario.name}: {scenario.description}")
+    result.seconds = time.monotonic() - started
+    (out_dir / "summary.json").write_text(json.dumps(summary_dict(result), indent=1), encoding="utf-8")
+    return result
+
+
+def summary_dict(result: DemoResult) -> dict:
+    """The ``--json`` object of ``pearl demo``."""
+    return {
+        "scenario": result.scenario, "out_dir": str(result.out_dir), "bag": str(result.bag),
+        "bag_messages": result.bag_messages, "plot": str(result.plot), "transcript": str(result.transcript),
+        "steps": len(result.steps), "actions": [s.action for s in result.steps],
+        "clarification_questions": result.clarifications, "seconds": round(result.seconds, 2),
+        **{k: v for k, v in result.metrics.items() if k != "steps"},
+        "outcome": result.outcome(),
+    }
