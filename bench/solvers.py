@@ -13,6 +13,10 @@ For every model in ``../shared/benchmarks/pomdp/`` (or those picked with ``--pro
   wall time; only a target where SARSOP stopped on precision).
 * **qmdp** as a baseline (its value at b0 is an upper bound of the optimum).
 
+With a peer on PATH, ``time_ratio_vs_peer_here`` compares against the peer's wall time in
+this same run (same machine load); ``time_ratio_vs_pomdp_solve`` / ``time_ratio_vs_sarsop``
+compare against the RESULTS.md times.
+
 The reference tables are parsed from RESULTS.md (not retyped). If ``pomdpsol`` or
 ``pomdp-solve`` is on PATH they are run in the same run, with the same caps, for time
 ratios on equal terms (``peers`` in the output).
@@ -280,7 +284,11 @@ def main() -> None:
                 except Exception as err:  # noqa: BLE001
                     run = {"horizon": horizon_text, "error": f"{type(err).__name__}: {err}"}
                 if "pomdp-solve" in peers:
-                    run["peer_pomdp_solve"] = run_pomdp_solve(path, horizon, args.incprune_time_limit, model.b0)
+                    peer = run_pomdp_solve(path, horizon, args.incprune_time_limit, model.b0)
+                    run["peer_pomdp_solve"] = peer
+                    if run.get("complete") and peer.get("finished"):
+                        run["time_ratio_vs_peer_here"] = _ratio(run["ours"]["seconds"], peer["wall_seconds"])
+                        run["value_diff_vs_peer_here"] = float(run["ours"]["value_at_start"] - peer["value_at_start"])
                 runs.append(run)
             if runs:
                 entry["incprune"] = runs
@@ -294,7 +302,14 @@ def main() -> None:
             except Exception as err:  # noqa: BLE001
                 entry["pointbased"] = {"error": f"{type(err).__name__}: {err}"}
             if "pomdpsol" in peers:
-                entry["pointbased"]["peer_pomdpsol"] = run_pomdpsol(path, args.time_limit)
+                peer = run_pomdpsol(path, args.time_limit)
+                entry["pointbased"]["peer_pomdpsol"] = peer
+                if "ours" in entry["pointbased"] and peer.get("lower_bound") is not None:
+                    ours = entry["pointbased"]["ours"]
+                    entry["pointbased"]["time_ratio_vs_peer_here"] = _ratio(ours["seconds"], peer["wall_seconds"])
+                    lb = peer["lower_bound"]
+                    entry["pointbased"]["lower_bound_shortfall_pct_vs_peer_here"] = (
+                        _round((lb - ours["lower_bound"]) / abs(lb) * 100, 4) if lb else None)
 
         if "qmdp" in methods:
             try:
