@@ -84,8 +84,12 @@ def naive_update(T, O, b, a, o):
     return out / out.sum()
 
 
-def test_large_sparse_model_matches_naive_loop():
-    """S ≥ 64 takes the CSR path; it must agree with eq. 5 written as loops."""
+@pytest.mark.parametrize("fused", [True, False])
+def test_large_sparse_model_matches_naive_loop(fused, monkeypatch):
+    """S ≥ 64 takes the CSR path (with and without the fused diag(O)·Tᵀ operators); it must
+    agree with eq. 5 written as loops."""
+    if not fused:
+        monkeypatch.setattr("pearl_pomdp.belief.FUSED_LIMIT", 0)
     rng = np.random.default_rng(3)
     S, A, Z = 80, 3, 4
     T = []
@@ -96,7 +100,7 @@ def test_large_sparse_model_matches_naive_loop():
     model = Pomdp.create([f"s{i}" for i in range(S)], ["a", "b", "c"], list("wxyz"), T, O,
                          np.zeros((S, A)), sparse=True)
     f = BeliefFilter(model)
-    assert sp.issparse(f._TT[0])
+    assert sp.issparse(f._TT[0]) and f._fused_ok == fused
     b = rng.dirichlet(np.ones(S))
     for a in range(A):
         for o in range(Z):
