@@ -296,6 +296,8 @@ class _Parser:
             self.i += 1
             return None
         v = self.index[kind].get(t)
+        if v is None and t.isdigit() and int(t) < self.counts[kind]:
+            v = int(t)  # a numbered reference to a named entity
         if v is None:
             noun = kind[:-1]
             if t.isdigit():
