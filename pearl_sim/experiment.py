@@ -121,3 +121,98 @@ def summarise(results: Iterable[EpisodeResult]) -> Dict[str, dict]:
 def with_word_error_rate(scenario: Scenario, wer: float) -> Scenario:
     """A copy of ``scenario`` whose recogniser has word error rate ``wer`` (resident override cleared)."""
     return replace(scenario, word_error_rate=float(wer), resident=replace(scenario.resident, word_error_rate=None))
+
+
+# --------------------------------------------------------------------- the study
+POLICY_NAMES = ("hierarchical", "flat_pointbased", "qmdp", "most_likely_state", "scripted")
+
+
+def build_agents(domain, hierarchy_path, flat_time_limit: float = 30.0, policies: Sequence[str] = POLICY_NAMES,
+                 seed: int = 0, log: Optional[Callable[[str], None]] = None) -> Dict[str, object]:
+    """Plan every compared controller once; returns name → agent.
+
+    Args:
+        domain: the Pearl FactoredDomain.
+        hierarchy_path: the action hierarchy for the hierarchical POMDP.
+        flat_time_limit: seconds for the flat point-based solve.
+        policies: which of :data:`POLICY_NAMES` to build.
+    """
+    import time as _time
+
+    from pearl_pomdp.executive import Executive, FlatPolicyDecider
+    from pearl_sim.agents import PomdpAgent, ScriptedAgent
+
+    unknown = sorted(set(policies) - set(POLICY_NAMES))
+    if unknown:
+        raise ValueError(f"unknown policy {unknown[0]!r}; known: {', '.join(POLICY_NAMES)}")
+    model = domain.compile()
+    agents: Dict[str, object] = {}
+    timings: Dict[str, float] = {}
+    for name in policies:
+        t0 = _time.perf_counter()
+        if name == "hierarchical":
+            from pearl_pomdp.hierarchy import load_hierarchy, plan
+
+            decider = plan(domain, load_hierarchy(hierarchy_path, domain), seed=seed)
+        elif name == "flat_pointbased":
+            from pearl_pomdp.solvers.point_based import solve_point_based
+
+            decider = FlatPolicyDecider(solve_point_based(model, time_limit=flat_time_limit, seed=seed).policy, model)
+        elif name == "qmdp":
+            from pearl_pomdp.solvers.mdp import solve_qmdp
+
+            decider = FlatPolicyDecider(solve_qmdp(model).policy, model)
+        elif name == "most_likely_state":
+            from pearl_pomdp.solvers.mdp import most_likely_state_policy
+
+            decider = FlatPolicyDecider(most_likely_state_policy(model), model)
+        else:
+            agents[name] = ScriptedAgent(name)
+            timings[name] = 0.0
+            continue
+        agents[name] = PomdpAgent(name, Executive(model, decider, domain=domain))
+        timings[name] = _time.perf_counter() - t0
+        if log:
+            log(f"planned {name} in {timings[name]:.1f} s")
+    build_agents.timings = timings  # type: ignore[attr-defined]
+    return agents
+
+
+def run_study(domain, agents: Dict[str, object], scenarios: Sequence[Scenario], keyword_filter, episodes: int = 1,
+              pace_adaptation: Optional[bool] = None, wer: Optional[float] = None,
+              progress: bool = False, desc: str = "episodes") -> List[EpisodeResult]:
+    """Every agent on every scenario, ``episodes`` seeds each (seed = scenario seed + 1000·k)."""
+    from tqdm import tqdm
+
+    jobs = [(name, sc, k) for name in agents for sc in scenarios for k in range(episodes)]
+    results = []
+    for name, sc, k in tqdm(jobs, desc=desc, disable=not progress, leave=False):
+        if wer is not None:
+            sc = with_word_error_rate(sc, wer)
+        results.append(run_episode(sc, agents[name], domain, keyword_filter, seed=sc.seed + 1000 * k,
+                                   pace_adaptation=pace_adaptation))
+    return results
+
+
+def plot_sweep(sweep: Dict[str, Dict[str, List[float]]], wers: Sequence[float], path) -> None:
+    """PNG: guidance success and wrong actions per episode vs word error rate, one line per policy."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.5))
+    for name, series in sweep.items():
+        left.plot(wers, series["success"], marker="o", label=name)
+        right.plot(wers, series["wrong"], marker="o", label=name)
+    left.set_xlabel("word error rate")
+    left.set_ylabel("guidance success rate")
+    left.set_ylim(-0.02, 1.02)
+    right.set_xlabel("word error rate")
+    right.set_ylabel("wrong actions per episode")
+    left.set_title("Guidances completed")
+    right.set_title("Wrong actions (unnecessary reminders, unasked answers, …)")
+    right.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
