@@ -50,6 +50,7 @@ def test_tiger95_epoch_one_is_the_reward_vectors():
     assert listen == 0
 
 
+@pytest.mark.slow
 def test_tiger95_infinite_horizon_converges_like_pomdp_solve():
     res = solve_incremental_pruning(tiger(0.95))
     assert res.converged
@@ -150,9 +151,11 @@ def test_benchmark_files_match_pomdp_solve(benchmarks_dir, name, horizon, vector
     model = load(benchmarks_dir, name)
     res = solve_incremental_pruning(model, horizon=horizon)
     assert res.policy.num_vectors == vectors
-    # RESULTS.md prints 10 significant digits; infinite-horizon values also carry
-    # the stop tolerance.
-    assert res.value_at_start == pytest.approx(value, abs=5e-9 if horizon else 1e-7)
+    # RESULTS.md prints 10 significant digits. 1d.POMDP has rows of 0.333333 that
+    # our reader renormalises (pomdp-solve uses them as written): its values move
+    # by ~9e-7, which is the model, not the solver.
+    tol = 2e-6 if name == "1d.POMDP" else 1e-9 * abs(value) + 1e-9
+    assert res.value_at_start == pytest.approx(value, abs=tol)
     assert res.converged
 
 
