@@ -45,7 +45,7 @@ log = logging.getLogger(__name__)
 
 #: Below this, ``P(o | b, a)`` counts as zero (the smallest normal double): the recovery applies.
 MIN_LIKELIHOOD = float(np.finfo(float).tiny)
-#: How far an input belief may be from summing to 1 (it is renormalised within this).
+#: How far an input belief may be from summing to 1 (used as given; the output is normalised).
 SUM_TOLERANCE = 1e-6
 #: How negative an input entry may be (rounding noise), before it is an error.
 NEGATIVE_TOLERANCE = 1e-12
@@ -91,6 +91,7 @@ def _check_direct_matvec() -> bool:
         return bool(np.array_equal(y, M @ x))
     except Exception:  # noqa: BLE001 - any failure means: use the public operator
         return False
+
 
 Index = Union[int, np.integer, str]
 
