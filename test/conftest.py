@@ -14,3 +14,8 @@ def benchmarks_dir() -> Path:
     if not BENCHMARKS.is_dir():
         pytest.fail(f"benchmark models not found at {BENCHMARKS}; clone with ../shared beside the repo")
     return BENCHMARKS
+
+
+# ROS fixtures (ros_context, pearl_policy) live in test/ros_helpers.py; registered here once so
+# the session-scoped planned Pearl policy is shared by every test module.
+from ros_helpers import pearl_policy, ros_context  # noqa: E402,F401

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from ros_helpers import DISCOVERY_TIMEOUT, REPO, Proc, allocate_domain_id, pearl_policy, ros_env, wait_for  # noqa: F401
+from ros_helpers import DISCOVERY_TIMEOUT, REPO, Proc, allocate_domain_id, ros_env, wait_for
 
 pytestmark = pytest.mark.ros
 

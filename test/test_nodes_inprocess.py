@@ -15,7 +15,7 @@ from typing import List
 import numpy as np
 import pytest
 
-from ros_helpers import Probe, ros_context, wait_for  # noqa: F401  (fixture)
+from ros_helpers import Probe
 
 pytestmark = pytest.mark.ros
 
@@ -105,6 +105,12 @@ def _say(probe, topic, text):
     probe.publishers[f"/pearl/{topic}"].publish(cv.text_to_msg(text))
 
 
+def _steps(g, probe, n):
+    """Spin until the probe holds n actions, beliefs and marginals (topics arrive in any order)."""
+    return g.spin_until(lambda: all(len(probe.received[t]) >= n for t in
+                                    ("/pearl/action", "/pearl/belief", "/pearl/belief_marginals")), 10.0)
+
+
 def _actions(probe):
     return [cv.msg_to_action(m) for m in probe.received["/pearl/action"]]
 
@@ -117,20 +123,21 @@ def test_tiger_dialogue_in_one_process(ros_context):
         probe = _probe(g)
         _set_clock(g, probe, 100.0)
         # b0 is published at start; the policy answers it.
-        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 1, 10.0)
+        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 1
+                            and len(probe.received["/pearl/belief"]) >= 1, 10.0)
         assert _actions(probe) == ["listen"]
         np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][0]), [0.5, 0.5])
         assert g.spin_until(lambda: probe.received["/pearl/display"], 10.0)
         assert probe.received["/pearl/display"][0].data == "listening"
 
         _say(probe, "speech", "hear-left")
-        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 2, 10.0)
+        assert _steps(g, probe, 2)
         np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][-1]), [0.85, 0.15])
         assert _actions(probe) == ["listen", "listen"]
 
         _set_clock(g, probe, 130.0)
         _say(probe, "touchscreen", "hear-left")
-        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 3, 10.0)
+        assert _steps(g, probe, 3)
         np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][-1]),
                                    [0.7225 / 0.745, 0.0225 / 0.745], rtol=1e-12)
         assert _actions(probe) == ["listen", "listen", "open-right"]
@@ -163,7 +170,7 @@ def test_invalid_and_early_inputs_are_counted_not_lost(ros_context):
     with _graph(context, model, ThresholdDecider(model)) as g:
         probe = _probe(g)
         _set_clock(g, probe, 5.0)
-        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 1, 10.0)
+        assert _steps(g, probe, 1)
         _say(probe, "touchscreen", "bogus")  # not a symbol: counted, reported, no step closed
         _say(probe, "speech", "the tiger is somewhere")  # flat model: speech must be a symbol
         assert g.spin_until(lambda: g.tracker.mapper.invalid["touchscreen"] == 1
@@ -177,7 +184,7 @@ def test_invalid_and_early_inputs_are_counted_not_lost(ros_context):
         # Two observations in one step: the first closes it, the second waits for the next action.
         _say(probe, "laser", "hear-right")
         _say(probe, "laser", "hear-right")
-        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 3, 10.0)
+        assert _steps(g, probe, 3)
         assert g.tracker.protocol.counters["queued"] == 1
         assert g.tracker.protocol.counters["updates"] == 2
         np.testing.assert_allclose(g.tracker.protocol.belief, [0.0225 / 0.745, 0.7225 / 0.745], rtol=1e-12)
@@ -191,7 +198,7 @@ def test_step_timeout_follows_sim_time(ros_context):
                 tracker={"step_timeout": 2.0, "timeout_observation": "hear-right"}) as g:
         probe = _probe(g)
         _set_clock(g, probe, 10.0)
-        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 1, 10.0)
+        assert _steps(g, probe, 1)
         opened = g.tracker.protocol.opened_at
         assert opened == pytest.approx(10.0)
         # Wall time passing does nothing while /clock stands still ...
@@ -201,7 +208,7 @@ def test_step_timeout_follows_sim_time(ros_context):
         assert not g.spin_until(lambda: g.tracker.protocol.counters["timeouts"] > 0, 0.3)
         _set_clock(g, probe, 12.5)
         assert g.spin_until(lambda: g.tracker.protocol.counters["timeouts"] == 1, 10.0)
-        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 2, 10.0)
+        assert _steps(g, probe, 2)
         np.testing.assert_allclose(g.tracker.protocol.belief, [0.15, 0.85])
         last = cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])
         assert last["observation"] == "hear-right" and last["step"] == 1
