@@ -29,9 +29,17 @@ order:
    default 1e-9). The returned value function is Γ' of the last epoch.
 
 What an epoch costs depends on the LP pruning in :mod:`.prune` (pointwise
-dominance first, then one HiGHS LP per remaining vector). Witness beliefs
-found by one prune seed the next: a belief where α wins in A and β wins in B
-is one where α+β wins in A ⊕ B, so many useful sums are found without an LP.
+dominance first, then one HiGHS LP per remaining vector), so the work goes
+into needing fewer LPs, never into changing the result:
+
+* witness beliefs seed the prunes: a belief where α wins in A and β wins in
+  B is one where α+β wins in A ⊕ B, so the operands' witnesses find useful
+  sums without an LP; and each prune also gets the witnesses of the *same*
+  prune (same a, o) in the previous epoch, since successive value functions
+  differ little (near convergence almost every useful vector is found so);
+* a cross-sum with a one-vector operand (e.g. an observation that action a
+  can never produce, whose projection is the reward share alone) is a
+  translation of the other set: it is already parsimonious, no prune needed.
 
 Pruning tolerance: a vector is kept only if it wins by at least ``prune_tol``
 somewhere (default 5.01e-7, pomdp-solve's effective threshold; see
