@@ -10,7 +10,7 @@ __all__ = ["Pomdp", "load_model"]
 
 
 def load_model(path: Union[str, Path]) -> Pomdp:
-    """Load a flat model from a ``.pomdp`` file or a factored domain ``.yaml``.
+    """Load a flat model from a ``.pomdp`` / flat ``.pomdpx`` file or a factored domain ``.yaml``.
 
     Raises:
         pearl_pomdp.errors.SpecError: the file is invalid (the message names file and line/field).
@@ -23,6 +23,10 @@ def load_model(path: Union[str, Path]) -> Pomdp:
         from pearl_pomdp.model.factored import load_domain
 
         return load_domain(path).compile()
+    if path.suffix.lower() == ".pomdpx":
+        from pearl_pomdp.model.pomdpx import read_pomdpx
+
+        return read_pomdpx(path)
     from pearl_pomdp.model.pomdp_format import read_pomdp
 
     return read_pomdp(path)
