@@ -51,6 +51,8 @@ __all__ = ["solve_point_based", "PointBasedSolver"]
 
 #: Keep T dense (as one S × A·S array) up to this many entries (40 MB).
 _DENSE_ENTRIES = 5_000_000
+#: ... and when at least this fraction of T's entries is non-zero.
+_DENSE_FRACTION = 0.3
 
 
 class _Node:
@@ -94,15 +96,21 @@ class PointBasedSolver:
         # Tie-break order for observations (the only use of the seed).
         self.z_jitter = self.rng.permutation(self.Z) * 1e-15
         S, A = self.S, self.A
-        # T as one S × (A·S) block: the successors of a belief under all actions are one product.
-        # Dense rows are much cheaper to slice than CSR rows; go sparse only when A·S² is big.
-        dense = not model.is_sparse and A * S * S <= _DENSE_ENTRIES
+        # T as one S × (A·S) block: the successors of a belief under all actions are one
+        # gather over the rows of its support. Dense only when T really is dense and small;
+        # otherwise raw CSR arrays (scipy's row slicing costs more than the work here).
+        nnz = sum((t.nnz if sp.issparse(t) else np.count_nonzero(t)) for t in model.T)
+        dense = not model.is_sparse and A * S * S <= _DENSE_ENTRIES and nnz > _DENSE_FRACTION * A * S * S
         if dense:
             self.Tall = np.hstack([np.asarray(t) for t in model.T])
             self.Tmats = [np.asarray(t) for t in model.T]
         else:
             mats = [sp.csr_matrix(t) for t in model.T]
-            self.Tall = sp.hstack(mats, format="csr")
+            Tall = sp.hstack(mats, format="csr")
+            Tall.sum_duplicates()
+            self.t_ptr = Tall.indptr.astype(np.int64)
+            self.t_ind = Tall.indices.astype(np.int64)
+            self.t_dat = Tall.data
             self.Tmats = mats
         self.dense = dense
         self.b0 = np.asarray(model.b0, dtype=float)
@@ -148,6 +156,19 @@ class PointBasedSolver:
         self.pruned = 0
         self._last_prune_K = self.K
         self.seconds = 0.0
+        #: Trials stop at width ε_t γ^{-d} with ε_t = max(ε, κ · gap(b0)). Shallow trials
+        #: (large κ) refine the bounds near b0 (hallway2 gains most), deep ones carry distant
+        #: rewards back (TagAvoid's chase needs them), so κ is picked per trial by a small
+        #: bandit: the arm with the best recent gap reduction per backup, every
+        #: ``explore_every``-th trial the other arm (deterministic: costs are counted in backups).
+        self.trial_kappa = (0.5, 0.2)
+        self.explore_every = 4
+        self._arm_gain = np.zeros(len(self.trial_kappa))
+        self._arm_cost = np.zeros(len(self.trial_kappa))
+        #: (seconds since the solver was built, LB(b0), UB(b0)) about every 0.5 s.
+        self.history: List[Tuple[float, float, float]] = []
+        self.setup_seconds = 0.0
+        self._clock = time.perf_counter
 
     # ------------------------------------------------------------ lower bound
     def _add_alpha(self, alpha: np.ndarray, action: int) -> None:
@@ -192,6 +213,9 @@ class PointBasedSolver:
 
     def _upper_batch(self, U: np.ndarray, C: np.ndarray) -> np.ndarray:
         """Upper bound at each row of ``C`` ([M, |U|], beliefs on states ``U``)."""
+        cols = np.flatnonzero(C.any(axis=0))
+        if cols.size < U.shape[0]:
+            U, C = U[cols], C[:, cols]
         base = C @ self.Vc[U]
         ub = np.minimum(base, (C @ self.Qfib[U]).max(axis=1))
         n = self.pt_n
@@ -219,28 +243,39 @@ class PointBasedSolver:
             if cand.size == 0:
                 return ub
             offs = np.cumsum(lens) - lens
-        n_c = cand.size
-        # W[i, s] = 1/b_i(s) on supp(b_i), +inf elsewhere (on U's coordinates).
+        n_c, nU, M = cand.size, U.shape[0], C.shape[0]
         rows = np.repeat(np.arange(n_c), lens)
-        W = np.full((n_c, U.shape[0]), np.inf)
-        W[rows, loc] = 1.0 / bv
-        # A point binds at c only if supp(b_i) ⊆ supp(c): test every (child, point) pair at once
-        # (misses = #{s ∈ supp(b_i): c(s) = 0}) and keep the points that bind somewhere.
-        misses = (C == 0.0).astype(float) @ np.isfinite(W).T.astype(float)    # [M, n_c]
-        useful = np.flatnonzero((misses < 0.5).any(axis=0))
-        if useful.size == 0:
+        ind = np.zeros((n_c, nU))
+        ind[rows, loc] = 1.0
+        # supp(b_i) ⊆ supp(c) for every (child, point) pair at once:
+        # misses[m, i] = #{s ∈ supp(b_i) : c_m(s) = 0}.
+        misses = (C == 0.0).astype(float) @ ind.T                            # [M, n_c]
+        pm, pi = np.nonzero(misses < 0.5)
+        if pi.size == 0:
             return ub
-        W = W[useful]
-        delta = self.pt_delta[cand[useful]]
-        # λ_i(c) = min_s c(s)/b_i(s); zeros of c are lifted to 1e-300 so that 0·inf never
-        # occurs (a non-binding pair then gets λ ≈ 0, i.e. no correction).
-        Cp = np.maximum(C, 1e-300)
-        M = C.shape[0]
         corr = np.zeros(M)
-        step = max(1, int(2_000_000 // max(1, useful.size * U.shape[0])))
-        for m0 in range(0, M, step):
-            lam = (Cp[m0: m0 + step, None, :] * W[None, :, :]).min(axis=2)    # [m, n_u]
-            corr[m0: m0 + step] = np.minimum((lam * delta).min(axis=1), 0.0)
+        useful = np.unique(pi)
+        pair_cost = int(lens[pi].sum())
+        if 3 * pair_cost < M * useful.size * nU:
+            # Few binding pairs: λ = min_s c(s)/b_i(s) over each pair's entries only.
+            plen = lens[pi]
+            poff = np.cumsum(plen) - plen
+            ent = np.repeat(offs[pi] - poff, plen) + np.arange(pair_cost)
+            lam = np.minimum.reduceat(C[np.repeat(pm, plen), loc[ent]] / bv[ent], poff)
+            np.minimum.at(corr, pm, lam * self.pt_delta[cand[pi]])
+        else:
+            # Many: dense [M, points, |U|] blocks with W = 1/b_i on supp(b_i), +inf elsewhere;
+            # zeros of c are lifted to 1e-300 so 0·inf never occurs (a non-binding pair then
+            # gets λ ≈ 0, i.e. no correction).
+            W = np.full((n_c, nU), np.inf)
+            W[rows, loc] = 1.0 / bv
+            W = W[useful]
+            delta = self.pt_delta[cand[useful]]
+            Cp = np.maximum(C, 1e-300)
+            step = max(1, int(2_000_000 // max(1, useful.size * nU)))
+            for m0 in range(0, M, step):
+                lam = (Cp[m0: m0 + step, None, :] * W[None, :, :]).min(axis=2)    # [m, n_u]
+                corr[m0: m0 + step] = np.minimum((lam * delta).min(axis=1), 0.0)
         return np.minimum(ub, base + corr)
 
     def upper(self, idx: np.ndarray, val: np.ndarray) -> float:
@@ -291,7 +326,12 @@ class PointBasedSolver:
         if self.dense:
             bT = (val @ self.Tall[idx]).reshape(A, S)
         else:
-            bT = np.asarray(self.Tall[idx].T @ val).reshape(A, S)
+            starts = self.t_ptr[idx]
+            lens = self.t_ptr[idx + 1] - starts
+            offs = np.cumsum(lens) - lens
+            ent = np.repeat(starts - offs, lens) + np.arange(int(lens.sum()))
+            bT = np.bincount(self.t_ind[ent], weights=self.t_dat[ent] * np.repeat(val, lens),
+                             minlength=A * S).reshape(A, S)
         U = np.flatnonzero((bT > 0.0).any(axis=0))
         joint = bT[:, U][:, :, None] * self.O[:, U, :]       # [A, |U|, Z]
         p = joint.sum(axis=1)                               # [A, Z]
@@ -416,6 +456,17 @@ class PointBasedSolver:
         d = np.log(eps_t * (1 - self.g) / self.r_span) / np.log(self.g)
         return int(min(max(d, 1), 1000))
 
+    def _pick_arm(self) -> int:
+        n = len(self.trial_kappa)
+        untried = np.flatnonzero(self._arm_cost == 0)
+        if untried.size:
+            return int(untried[0])
+        rate = self._arm_gain / self._arm_cost
+        best = int(np.argmax(rate))
+        if n > 1 and self.trials % self.explore_every == self.explore_every - 1:
+            return (best + 1 + (self.trials // self.explore_every) % (n - 1)) % n
+        return best
+
     def trial(self, eps_t: float) -> None:
         g, Z = self.g, self.Z
         node = self.root
@@ -463,7 +514,7 @@ class PointBasedSolver:
     def run(self, time_limit: float = 60.0, epsilon: float = 1e-3, progress: bool = False,
             max_trials: Optional[int] = None) -> SolveResult:
         """Search until ``UB(b0) − LB(b0) ≤ epsilon`` or ``time_limit`` seconds (wall clock)."""
-        t0 = time.perf_counter()
+        t0 = self._clock()
         bar = None
         if progress:
             from tqdm import tqdm
@@ -471,18 +522,29 @@ class PointBasedSolver:
                        bar_format="{desc}: {n:.1f}/{total}s {postfix}")
         lo, hi = self.bounds_at_start()
         last_report = t0
+        last_hist = -np.inf
+        history = self.history
+        offset = self.seconds + self.setup_seconds
         converged = hi - lo <= epsilon
         while not converged:
-            now = time.perf_counter()
+            now = self._clock()
             if now - t0 >= time_limit or (max_trials is not None and self.trials >= max_trials):
                 break
             gap = hi - lo
-            eps_t = max(epsilon, 0.5 * gap) if gap > 10 * epsilon else epsilon * 0.5
+            arm = self._pick_arm()
+            eps_t = max(epsilon, self.trial_kappa[arm] * gap) if gap > 10 * epsilon else epsilon * 0.5
+            b_before = self.backups
             self.trial(eps_t)
             if self.K > 2 * self._last_prune_K + 50:
                 self.prune()
             lo, hi = self.bounds_at_start()
             converged = hi - lo <= epsilon
+            # Discounted totals: an arm's rate follows the recent phase of the search.
+            self._arm_gain[arm] = 0.95 * self._arm_gain[arm] + max(gap - (hi - lo), 0.0)
+            self._arm_cost[arm] = 0.95 * self._arm_cost[arm] + (self.backups - b_before)
+            if now - last_hist >= 0.5 or converged:
+                history.append((round(offset + self._clock() - t0, 3), lo, hi))
+                last_hist = now
             if bar is not None and (now - last_report > 0.25 or converged):
                 bar.n = round(min(now - t0, time_limit), 1)
                 bar.set_postfix_str(f"LB={lo:.6g} UB={hi:.6g} gap={hi - lo:.3g} |Γ|={self.K}")
@@ -491,7 +553,8 @@ class PointBasedSolver:
             bar.close()
         self.prune()
         lo, hi = self.bounds_at_start()
-        self.seconds += time.perf_counter() - t0
+        self.seconds += self._clock() - t0
+        history.append((round(self.setup_seconds + self.seconds, 3), lo, hi))
         policy = AlphaVectorPolicy(self.GT[:, : self.K].T.copy(), self.gact[: self.K].copy())
         return SolveResult(
             policy=policy, method="pointbased", value_at_start=lo, upper_bound=hi,
@@ -499,7 +562,7 @@ class PointBasedSolver:
             extra={
                 "gap": hi - lo, "backups": self.backups, "vectors": self.K, "ub_points": self.pt_n,
                 "beliefs": len(self.beliefs), "pruned": self.pruned, "fib_iterations": self.fib_iterations, "nodes": len(self.nodes),
-                "fib_seconds": self.fib_seconds,
+                "fib_seconds": self.fib_seconds, "history": list(history),
             },
         )
 
@@ -524,6 +587,7 @@ def solve_point_based(model: Pomdp, time_limit: float = 60.0, epsilon: float = 1
     t0 = time.perf_counter()
     solver = PointBasedSolver(model, seed=seed, fib_time=max(0.5, 0.1 * time_limit))
     setup = time.perf_counter() - t0
+    solver.setup_seconds = setup
     res = solver.run(time_limit=max(0.0, time_limit - setup), epsilon=epsilon, progress=progress)
     res.seconds = time.perf_counter() - t0
     res.extra["setup_seconds"] = setup
