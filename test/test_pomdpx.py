@@ -152,3 +152,21 @@ def test_unsafe_names_are_rewritten_to_tokens():
     assert root.find("Variable/ObsVar").findtext("ValueEnum").split() == ["onull", "z"]
     m2 = parse_pomdpx(format_pomdpx(m))
     assert m2.states == ["a_b", "s-"] and np.array_equal(m2.O, m.O)
+
+
+def test_pearl_convert_both_ways(benchmarks_dir, tmp_path, capsys):
+    import json
+
+    from pearl_pomdp.cli import main
+
+    src = benchmarks_dir / "hallway.POMDP"
+    m = read_pomdp(src)
+    x = tmp_path / "h.pomdpx"
+    assert main(["convert", str(src), str(x), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["fingerprint"] == m.fingerprint() and out["states"] == 60 and out["format"] == "pomdpx"
+    back = tmp_path / "h.pomdp"
+    assert main(["convert", str(x), str(back)]) == 0
+    _same(m, read_pomdp(back))
+    assert main(["convert", str(back), str(tmp_path / "h.txt")]) == 2
+    assert "unknown output format" in capsys.readouterr().err

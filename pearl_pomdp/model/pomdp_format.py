@@ -193,8 +193,8 @@ class _Parser:
                 total += len(line.split())
                 ends.append(total)
             self._line_ends = ends
-        if k >= self.n:
-            return len(self._line_ends)
+        if k >= self.n:  # end of file: the line of the last token
+            k = max(self.n - 1, 0)
         return bisect.bisect_right(self._line_ends, k) + 1
 
     def fail(self, k: Optional[int], where: str, problem: str):
@@ -451,9 +451,9 @@ class _Parser:
             return
         missing = [f"'{k}:'" for k in ("discount",) if self.discount is None]
         missing += [f"'{k}:'" for k in _KINDS if k not in self.index]
-        what = self.toks[k0] if k0 < self.n else "end of file"
+        what = repr(self.toks[k0]) if k0 < self.n else "the end of the file"
         extra = " (a file without observations is an MDP; pearl reads POMDPs)" if "'observations:'" in missing else ""
-        self.fail(k0, "", f"missing {', '.join(missing)} before {what!r}{extra}")
+        self.fail(k0, "", f"missing {', '.join(missing)} before {what}{extra}")
 
     def preamble(self, k0: int, kw: str):
         if kw in self.seen:
