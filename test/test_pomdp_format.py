@@ -329,7 +329,7 @@ BAD = [
     (TIGER + "R: listen : * : * : * 1 # caf\u00e9\nR: listen : * : * : * \u00e91\n", N + 2, ["illegal character"]),
     (TIGER + "R: listen : tiger-left : * : nothing 3\n", N + 1, ["unknown observation 'nothing'"]),
     (TIGER.replace("discount: 0.95", "discount: 1.5"), 1, ["discount 1.5 is not in (0, 1]"]),
-    (TIGER + "T: listen : tiger-left\n", N + 2, ["row of T", "has 0 numbers, expected 2"]),
+    (TIGER + "T: listen : tiger-left\n", N + 1, ["row of T", "has 0 numbers, expected 2"]),
     (TIGER + "start: uniform\n", N + 1, ["start belief given twice"]),
     (TIGER + "O: open-left : tiger-left : tiger-left 0.0\n", N + 1, ["O: open-left : tiger-left", "sums to 0.5"]),
     (TIGER.replace("states: tiger-left tiger-right", "states: tiger-left tiger/right"), 3, ["bad state name 'tiger/right'"]),
