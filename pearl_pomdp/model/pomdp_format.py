@@ -88,6 +88,10 @@ _COMMENT = re.compile(r"#[^\n]*")
 _EOF = "\x00<end of file>"
 _DIGITS = frozenset("0123456789.")
 _INF = float("inf")
+#: Largest count in ``states: N`` (and actions, observations).
+_MAX_COUNT = 10_000_000
+#: Largest dense observation table A×S×Z (O is always dense).
+_MAX_O_ENTRIES = 200_000_000
 #: Largest number of entries the wildcard/uniform expansions of one file may produce.
 _EXPANSION_BUDGET = 30_000_000
 
@@ -479,8 +483,8 @@ class _Parser:
             noun = kw[:-1]
             if t.isdigit():
                 count = int(t)
-                if count < 1:
-                    self.fail(self.i, kw, f"number of {kw} must be at least 1, got {count}")
+                if not 1 <= count <= _MAX_COUNT:
+                    self.fail(self.i, kw, f"number of {kw} must be between 1 and {_MAX_COUNT:,}, got {count}")
                 self.i += 1
                 names = [str(j) for j in range(count)]
             else:
@@ -506,9 +510,16 @@ class _Parser:
             self.index[kw] = {nm: j for j, nm in enumerate(names)}
             self.counts[kw] = len(names)
 
+    def check_size(self, k0: int) -> None:
+        S, A, Z = self.counts["states"], self.counts["actions"], self.counts["observations"]
+        if A * S * Z > _MAX_O_ENTRIES:
+            self.fail(k0, "", f"model too large: O would hold {A}×{S}×{Z} = {A * S * Z:,} entries "
+                      f"(limit {_MAX_O_ENTRIES:,})")
+
     def next_event(self, k0: int) -> int:
         if not self.seq:
             self.need_preamble(k0)
+            self.check_size(k0)
         s = self.seq
         self.seq += 1
         self.ev_tok.append(k0)
@@ -808,6 +819,7 @@ class _Parser:
 
     def assemble(self, name: str) -> Pomdp:
         self.need_preamble(self.n)
+        self.check_size(self.n)
         S, A, Z = self.counts["states"], self.counts["actions"], self.counts["observations"]
         start_form = "default"
         if self.start is None:
@@ -981,13 +993,19 @@ def _file_names(names: Sequence[str], prefix: str) -> Tuple[Optional[List[str]],
 
 
 def _r(x: float) -> str:
-    """Lossless float text (shortest repr); integers-valued floats keep a short form."""
+    """Lossless float text (shortest repr; ``-0`` keeps the sign of a negative zero)."""
     x = float(x)
     if x == 0.0:
-        return "0"
+        return "-0" if np.signbit(x) else "0"
     if x == 1.0:
         return "1"
     return repr(x)
+
+
+def _p(x: float) -> str:
+    """A probability: as :func:`_r`, but any zero is ``0`` (a probability has no sign)."""
+    x = float(x)
+    return "0" if x == 0.0 else _r(x)
 
 
 def format_pomdp(model: Pomdp) -> str:
@@ -1029,7 +1047,7 @@ def format_pomdp(model: Pomdp) -> str:
     elif k and np.array_equal(b0, support.astype(float) / float(k)):
         w("start include: " + " ".join(st[j] for j in np.flatnonzero(support)))
     else:
-        w("start: " + " ".join(_r(x) for x in b0))
+        w("start: " + " ".join(_p(x) for x in b0))
     w("")
 
     for a in range(A):
@@ -1055,7 +1073,7 @@ def format_pomdp(model: Pomdp) -> str:
             continue
         if dense is not None and S <= 100 and nnz >= 0.25 * S * S:
             for s in range(S):
-                w(f"T: {ac[a]} : {st[s]} " + " ".join(_r(x) for x in dense[s]))
+                w(f"T: {ac[a]} : {st[s]} " + " ".join(_p(x) for x in dense[s]))
             continue
         if Tc is None:
             Tc = sp.csr_matrix(dense)
@@ -1065,7 +1083,7 @@ def format_pomdp(model: Pomdp) -> str:
             lo, hi = indptr[s], indptr[s + 1]
             pre = f"T: {ac[a]} : {st[s]} : "
             for j in range(lo, hi):
-                w(f"{pre}{st[indices[j]]} {_r(data[j])}")
+                w(f"{pre}{st[indices[j]]} {_p(data[j])}")
     w("")
 
     O = np.asarray(model.O, dtype=float)
@@ -1075,15 +1093,15 @@ def format_pomdp(model: Pomdp) -> str:
             if (Oa[0] == 1.0 / Z).all():
                 w(f"O: {ac[a]} uniform")
             else:
-                w(f"O: {ac[a]} : * " + " ".join(_r(x) for x in Oa[0]))
+                w(f"O: {ac[a]} : * " + " ".join(_p(x) for x in Oa[0]))
             continue
         dense_rows = Z <= 16 or np.count_nonzero(Oa) >= 0.25 * S * Z
         for s in range(S):
             if dense_rows:
-                w(f"O: {ac[a]} : {st[s]} " + " ".join(_r(x) for x in Oa[s]))
+                w(f"O: {ac[a]} : {st[s]} " + " ".join(_p(x) for x in Oa[s]))
             else:
                 for o in np.flatnonzero(Oa[s]):
-                    w(f"O: {ac[a]} : {st[s]} : {ob[o]} {_r(Oa[s, o])}")
+                    w(f"O: {ac[a]} : {st[s]} : {ob[o]} {_p(Oa[s, o])}")
     w("")
 
     R = np.asarray(model.R, dtype=float)
@@ -1093,11 +1111,12 @@ def format_pomdp(model: Pomdp) -> str:
         col = R[:, a]
         vals, counts = np.unique(col, return_counts=True)
         c = float(vals[np.argmax(counts)])
-        if counts.max() * 2 <= S:
-            c = 0.0
+        if counts.max() * 2 <= S or c == 0.0:
+            c = 0.0  # (+0: a file's unset cells are +0; negative zeros are written explicitly)
         if c != 0.0:
             w(f"R: {ac[a]} : * : * : * {_r(c)}")
-        for s in np.flatnonzero(col != c):
+        # a cell differs from the default if its value or the sign of a zero differs
+        for s in np.flatnonzero((col != c) | (np.signbit(col) != np.signbit(c))):
             w(f"R: {ac[a]} : {st[s]} : * : * {_r(col[s])}")
     w("")
     return "\n".join(out)

@@ -39,7 +39,7 @@ import scipy.sparse as sp
 
 from pearl_pomdp.errors import ModelFormatError
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.model.pomdp_format import RENORMALISE_ABOVE, SUM_TOLERANCE, _atomic_write, _r
+from pearl_pomdp.model.pomdp_format import RENORMALISE_ABOVE, SUM_TOLERANCE, _atomic_write, _p, _r
 
 __all__ = ["write_pomdpx", "format_pomdpx", "read_pomdpx", "parse_pomdpx"]
 
@@ -102,7 +102,7 @@ def format_pomdpx(model: Pomdp) -> str:
 
     w("<InitialStateBelief>")
     w(f"<CondProb><Var>{STATE_PREV}</Var><Parent>null</Parent><Parameter type=\"TBL\">")
-    entry("-", " ".join(_r(x) for x in model.b0))
+    entry("-", " ".join(_p(x) for x in model.b0))
     w("</Parameter></CondProb>")
     w("</InitialStateBelief>")
 
@@ -120,11 +120,11 @@ def format_pomdpx(model: Pomdp) -> str:
         if S <= 100 and Tc.nnz >= 0.25 * S * S:
             dense = Tc.toarray()
             for s in range(S):
-                entry(f"{ac[a]} {st[s]} -", " ".join(_r(x) for x in dense[s]))
+                entry(f"{ac[a]} {st[s]} -", " ".join(_p(x) for x in dense[s]))
             continue
         for s in range(S):
             for j in range(Tc.indptr[s], Tc.indptr[s + 1]):
-                entry(f"{ac[a]} {st[s]} {st[Tc.indices[j]]}", _r(Tc.data[j]))
+                entry(f"{ac[a]} {st[s]} {st[Tc.indices[j]]}", _p(Tc.data[j]))
     w("</Parameter></CondProb>")
     w("</StateTransitionFunction>")
 
@@ -134,15 +134,15 @@ def format_pomdpx(model: Pomdp) -> str:
     for a in range(A):
         Oa = O[a]
         if (Oa == Oa[0]).all():
-            entry(f"{ac[a]} * -", " ".join(_r(x) for x in Oa[0]))
+            entry(f"{ac[a]} * -", " ".join(_p(x) for x in Oa[0]))
             continue
         rows = Z <= 16 or np.count_nonzero(Oa) >= 0.25 * S * Z
         for s in range(S):
             if rows:
-                entry(f"{ac[a]} {st[s]} -", " ".join(_r(x) for x in Oa[s]))
+                entry(f"{ac[a]} {st[s]} -", " ".join(_p(x) for x in Oa[s]))
             else:
                 for o in np.flatnonzero(Oa[s]):
-                    entry(f"{ac[a]} {st[s]} {ob[o]}", _r(Oa[s, o]))
+                    entry(f"{ac[a]} {st[s]} {ob[o]}", _p(Oa[s, o]))
     w("</Parameter></CondProb>")
     w("</ObsFunction>")
 
@@ -151,7 +151,7 @@ def format_pomdpx(model: Pomdp) -> str:
     R = np.asarray(model.R, dtype=float)
     written = 0
     for a in range(A):
-        for s in np.flatnonzero(R[:, a]):
+        for s in np.flatnonzero((R[:, a] != 0) | np.signbit(R[:, a])):
             entry(f"{ac[a]} {st[s]}", _r(R[s, a]), "ValueTable")
             written += 1
     if not written:
@@ -242,6 +242,12 @@ class _Reader:
         sv = svars[0]
         self.prev, self.curr = sv.get("vnamePrev"), sv.get("vnameCurr")
         self.oname, self.aname = ovars[0].get("vname"), avars[0].get("vname")
+        vnames = [self.prev, self.curr, self.oname, self.aname]
+        for label, vn in zip(("StateVar.vnamePrev", "StateVar.vnameCurr", "ObsVar.vname", "ActionVar.vname"), vnames):
+            if not vn or not vn.strip() or vn.split() != [vn] or vn in ("null", "-", "*"):
+                self.fail(f"Variable.{label}", f"missing or invalid variable name {vn!r}")
+        if len(set(vnames)) != 4:
+            self.fail("Variable", f"variable names must be distinct, got {' '.join(vnames)}")
         states = self.values(sv, "StateVar", "s")
         observations = self.values(ovars[0], "ObsVar", "o")
         actions = self.values(avars[0], "ActionVar", "a")
