@@ -30,7 +30,8 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-SPIN_TIMEOUT = float(os.environ.get("SPIN_TIMEOUT", "0.01"))
+SPIN_TIMEOUT = 0.01
+PARAMETER_SERVICES = True
 sys.path.insert(0, str(REPO))
 
 #: Inputs cycled through: (topic, text). Speech goes through the keyword filter.
@@ -109,6 +110,7 @@ def run_inprocess(policy_dir, steps, warmup):
     model = domain.compile()
     decider = load_hierarchical_policy(policy_dir, domain)
     with PearlGraph(domain_id=_domain_id(1), domain=domain, model=model, decider=decider, use_sim_time=False,
+                    parameter_services=PARAMETER_SERVICES,
                     args=["--ros-args", "--log-level", "error"],
                     overrides={"belief_tracker": {"step_timeout": 0.0}}) as g:
         node = g.add_node(rclpy.create_node("latency_probe", context=g.context))
@@ -158,11 +160,16 @@ def main(argv=None):
     parser.add_argument("--steps", type=int, default=1000)
     parser.add_argument("--warmup", type=int, default=50)
     parser.add_argument("--mode", choices=["inprocess", "multiprocess", "both"], default="both")
+    parser.add_argument("--no-parameter-services", action="store_true",
+                        help="in-process: build the nodes without parameter services (fewer entities per spin)")
     args = parser.parse_args(argv)
+    global PARAMETER_SERVICES
+    PARAMETER_SERVICES = not args.no_parameter_services
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO / "config" / "fastdds_profile.xml"))
     policy = _find_policy(args.policy)
     out = {"benchmark": "observation -> action latency", "policy": str(policy), "cpus": os.cpu_count(),
+           "inprocess_parameter_services": PARAMETER_SERVICES,
            "load_before": [round(x, 2) for x in os.getloadavg()]}
     if args.mode in ("inprocess", "both"):
         print("in-process ...", file=sys.stderr)

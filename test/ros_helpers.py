@@ -191,7 +191,7 @@ def _policy_fits(directory: Path, domain) -> bool:
 
 
 @pytest.fixture(scope="session")
-def pearl_policy(request) -> Path:
+def pearl_policy(request, tmp_path_factory) -> Path:
     """A planned Pearl policy directory that matches ``config/pearl.domain.yaml``.
 
     ``$PEARL_POLICY_DIR``, then a committed one (:data:`POLICY_CANDIDATES`), else planned once
@@ -212,7 +212,9 @@ def pearl_policy(request) -> Path:
         + sorted((REPO / "pearl_pomdp" / "solvers").glob("*.py"))
     for path in sources:
         h.update(path.name.encode() + path.read_bytes())
-    cache = Path(request.config.cache.mkdir("pearl_policy")) / h.hexdigest()[:16]
+    cache_provider = getattr(request.config, "cache", None)  # absent under -p no:cacheprovider
+    root = Path(cache_provider.mkdir("pearl_policy")) if cache_provider else tmp_path_factory.mktemp("pearl_policy")
+    cache = root / h.hexdigest()[:16]
     if not ((cache / "hierarchy.json").is_file() and _policy_fits(cache, domain)):
         from pearl_pomdp.hierarchy import load_hierarchy, plan
 

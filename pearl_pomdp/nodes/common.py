@@ -103,6 +103,9 @@ class PearlNode(Node):
         context: rclpy context (``None``: the default one).
         parameter_overrides: ``{name: value}`` applied as if given with ``-p`` (in-process use).
         cli_args: node-specific ``--ros-args`` list.
+        start_parameter_services: False leaves out the six ``~/get_parameters`` … services
+            (no ``ros2 param`` access; each executor iteration then has fewer entities to
+            wait on — for in-process replay and benchmarks).
     """
 
     DEFAULT_NAME = "pearl_node"
@@ -110,11 +113,12 @@ class PearlNode(Node):
 
     def __init__(self, *, node_name: Optional[str] = None, namespace: Optional[str] = None,
                  context=None, parameter_overrides: Optional[Mapping[str, Any]] = None,
-                 cli_args: Optional[List[str]] = None):
+                 cli_args: Optional[List[str]] = None, start_parameter_services: bool = True):
         defaults = {p.name: p.default for p in self.PARAMETERS}
         overrides = [Parameter(k, value=_coerce(v, defaults.get(k))) for k, v in (parameter_overrides or {}).items()]
         super().__init__(node_name or self.DEFAULT_NAME, namespace=namespace, context=context,
-                         cli_args=cli_args, parameter_overrides=overrides)
+                         cli_args=cli_args, parameter_overrides=overrides,
+                         start_parameter_services=start_parameter_services)
 
     def declare_table(self, params: Sequence[Param]) -> Dict[str, Any]:
         """Declare every :class:`Param` and return ``{name: value}`` after overrides.

@@ -49,6 +49,8 @@ class PearlGraph:
             parameter in ``shared``, or from the package's ``config/pearl.domain.yaml``).
         decider: preloaded policy for the policy node (skips loading/planning).
         executor: False to leave out the action executor.
+        parameter_services: False builds the nodes without parameter services (faster
+            executor iterations; no remote ``ros2 param`` access).
 
     Attributes:
         tracker, policy, executor_node: the nodes; ``executor`` is the rclpy executor.
@@ -58,7 +60,7 @@ class PearlGraph:
                  args: Optional[List[str]] = None, use_sim_time: bool = True,
                  shared: Optional[Mapping[str, Any]] = None,
                  overrides: Optional[Mapping[str, Mapping[str, Any]]] = None,
-                 domain=None, model=None, decider=None, executor: bool = True):
+                 domain=None, model=None, decider=None, executor: bool = True, parameter_services: bool = True):
         self._own_context = context is None
         if context is None:
             context = Context()
@@ -78,17 +80,18 @@ class PearlGraph:
             def params(name: str) -> Dict[str, Any]:
                 return {**shared, **dict(overrides.get(name, {}))}
 
-            self.tracker = BeliefTrackerNode(context=context, parameter_overrides=params("belief_tracker"),
-                                             domain=domain, model=model)
+            common = {"context": context, "start_parameter_services": parameter_services}
+            self.tracker = BeliefTrackerNode(parameter_overrides=params("belief_tracker"), domain=domain, model=model,
+                                             **common)
             self.nodes.append(self.tracker)
-            self.policy = HierarchicalPolicyNode(context=context, parameter_overrides=params("hierarchical_policy"),
-                                                 domain=domain, model=model, decider=decider)
+            self.policy = HierarchicalPolicyNode(parameter_overrides=params("hierarchical_policy"), domain=domain,
+                                                 model=model, decider=decider, **common)
             self.nodes.append(self.policy)
             self.executor_node = None
             if executor:
                 exec_params = {k: v for k, v in params("action_executor").items() if k != "domain"}
                 exec_params.setdefault("action_names", list(model.actions))
-                self.executor_node = ActionExecutorNode(context=context, parameter_overrides=exec_params)
+                self.executor_node = ActionExecutorNode(parameter_overrides=exec_params, **common)
                 self.nodes.append(self.executor_node)
             self.executor = SingleThreadedExecutor(context=context)
             for node in self.nodes:

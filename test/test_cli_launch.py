@@ -1,0 +1,89 @@
+"""``pearl launch`` process handling, with stand-in node executables (no ROS): output prefixing,
+SIGINT forwarding, and the SIGINT → SIGTERM → SIGKILL escalation for a node that will not stop."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+PEARL = str(Path(sys.executable).parent / "pearl")
+
+POLITE = """#!{python} -S
+import signal, sys, time
+def stop(signum, frame):
+    print("stopping on", signal.Signals(signum).name, flush=True)
+    sys.exit(0)
+signal.signal(signal.SIGINT, stop)
+print("args", sys.argv[1:], flush=True)
+while True:
+    time.sleep(0.05)
+"""
+
+STUBBORN = """#!{python} -S
+import signal, time
+signal.signal(signal.SIGINT, signal.SIG_IGN)
+signal.signal(signal.SIGTERM, signal.SIG_IGN)
+print("ignoring signals", flush=True)
+while True:
+    time.sleep(0.05)
+"""
+
+LAUNCH = """<launch>
+  <node pkg="fake" exec="polite_node" name="polite" output="screen"><param name="rate" value="2.0"/></node>
+  <node pkg="fake" exec="{second}" name="second" output="screen"/>
+</launch>"""
+
+
+def _setup(tmp_path, second):
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    for name, body in (("polite_node", POLITE), ("stubborn_node", STUBBORN)):
+        path = bin_dir / name
+        path.write_text(body.format(python=sys.executable))
+        path.chmod(0o755)
+    launch = tmp_path / "fake.launch.xml"
+    launch.write_text(LAUNCH.format(second=second))
+    env = dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}", ROS_LOG_DIR=str(tmp_path))
+    return launch, env
+
+
+def _start_and_wait(launch, env, *extra):
+    proc = subprocess.Popen([PEARL, "launch", str(launch), *extra], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    # Wait until both stand-ins printed their first line (the launch prefixes it with [name]).
+    seen = []
+    while time.monotonic() < deadline and len(seen) < 2:
+        line = proc.stdout.readline()
+        if line.startswith("[polite] args") or line.startswith("[second] "):
+            seen.append(line)
+    return proc, seen
+
+
+def test_sigint_is_forwarded_and_the_exit_is_clean(tmp_path):
+    launch, env = _setup(tmp_path, "polite_node")
+    proc, seen = _start_and_wait(launch, env)
+    assert len(seen) == 2, seen
+    assert any("'--ros-args', '-r', '__node:=polite', '--params-file'" in line for line in seen)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    assert "[polite] stopping on SIGINT" in out and "[second] stopping on SIGINT" in out
+
+
+def test_a_node_that_ignores_signals_is_killed(tmp_path):
+    launch, env = _setup(tmp_path, "stubborn_node")
+    proc, seen = _start_and_wait(launch, env, "--shutdown-timeout", "0.5")
+    assert len(seen) == 2, seen
+    start = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=30)
+    assert time.monotonic() - start < 10
+    assert proc.returncode == 1
+    assert "[launch] still running after SIGINT: second; sending SIGTERM" in err
+    assert "[launch] second did not stop; SIGKILL" in err
+    assert "[launch] not clean: second exited with -9" in err
+    assert "[polite] stopping on SIGINT" in out
