@@ -360,3 +360,19 @@ def test_valid_variants_of_the_error_table_load():
     # later statements win: O: * : * uniform replaces the listen matrix, then one row comes back
     assert parse_pomdp(TIGER).O[0].tolist() == [[0.85, 0.15], [0.85, 0.15]]
     assert parse_pomdp(OK_O).O[0].tolist() == [[0.5, 0.5], [0.5, 0.5]]
+
+
+def test_reward_matrix_zeros_do_not_override_but_row_zeros_do():
+    """pomdp-solve keeps an R matrix sparse (zeros absent); a row over o is a full vector."""
+    m = _model("""T: * identity
+O: * uniform
+R: * : * : * : * 7
+R: x : a
+0 0
+0 0
+0 0
+R: y : a : a 0 0
+""")
+    assert m.R[0, 0] == 7.0  # the all-zero matrix left the earlier 7 in place
+    assert m.R[0, 1] == 0.0  # the row for s' = a (the only successor) set both observations to 0
+    assert m.R[1, 0] == 7.0 and m.R[1, 1] == 7.0

@@ -27,6 +27,8 @@ Semantics taken from pomdp-solve:
   (the common ``R: a : s : * : * c``), ``R[s, a] = c`` exactly. We take the expectation with the
   renormalised ``T`` and ``O`` (pomdp-solve uses the rows as written; the two differ by at most
   the row-sum deviation, ≤ 1e-5 relative).
+* An ``R: a : s`` matrix is stored sparsely by pomdp-solve: its zero entries (``|v| < 1e-10``)
+  do not override earlier statements (the row form ``R: a : s : s'`` does override with zeros).
 * ``values: cost`` negates every reward after the reduction (the model always holds rewards;
   ``metadata["values"]`` remembers ``"cost"`` and the writer writes costs back).
 * Probabilities are unsigned numbers in ``[0, 1]``. Each row of ``T`` and ``O`` and an explicit
@@ -941,6 +943,10 @@ class _Parser:
                     m &= sp_ == esp
                 if eo is not None:
                     m &= o_ == eo
+                if form == "matrix":
+                    # pomdp-solve stores an R matrix sparsely: its (near-)zero entries
+                    # (|v| < 1e-10, IS_ZERO) are absent and do not override earlier statements
+                    m &= np.abs(data[sp_, o_]) >= 1e-10
                 if not m.any():
                     continue
                 best_seq[m] = seq
