@@ -376,3 +376,11 @@ R: y : a : a 0 0
     assert m.R[0, 0] == 7.0  # the all-zero matrix left the earlier 7 in place
     assert m.R[0, 1] == 0.0  # the row for s' = a (the only successor) set both observations to 0
     assert m.R[1, 0] == 7.0 and m.R[1, 1] == 7.0
+
+
+def test_hallway_reduced_rewards_match_sarsops_conversion(benchmarks_dir):
+    """APPL's own examples/POMDPX/Hallway.pomdpx (converted from this file by SARSOP's tools) lists
+    exactly four rewards R(a1, s32) = 0.05, R(a1, s33) = 0.05, R(a1, s34) = 0.8, R(a1, s35) = 0.05."""
+    m = _load(benchmarks_dir, "hallway.POMDP")
+    nz = {(m.actions[a], m.states[s]): round(float(m.R[s, a]), 12) for s, a in zip(*np.nonzero(m.R))}
+    assert nz == {("1", "32"): 0.05, ("1", "33"): 0.05, ("1", "34"): 0.8, ("1", "35"): 0.05}
