@@ -2,7 +2,7 @@
 
 OUT is a new directory: OUT/OUT_0.mcap plus OUT/metadata.yaml, written when recording
 stops (Ctrl-C / SIGINT, SIGTERM, or --duration). Messages are recorded as raw bytes, never
-re-serialised. Each message is flushed to disk as it arrives, so even a recorder killed
+re-serialised. Each message is handed to the OS as it arrives, so even a recorder killed
 with SIGKILL leaves a bag that `pearl bag-info` reads (it salvages the messages).
 
 Progress lines go to stderr ("subscribed /topic [type]" for each topic as it is found).
