@@ -87,3 +87,30 @@ def test_a_node_that_ignores_signals_is_killed(tmp_path):
     assert "[launch] second did not stop; SIGKILL" in err
     assert "[launch] not clean: second exited with -9" in err
     assert "[polite] stopping on SIGINT" in out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    return "\nState:\tZ" not in state  # a zombie has exited
+
+
+def test_nodes_die_with_a_killed_launcher(tmp_path):
+    launch, env = _setup(tmp_path, "polite_node")
+    proc = subprocess.Popen([PEARL, "launch", str(launch)], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    pids = []
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and len(pids) < 2:
+        line = proc.stderr.readline()
+        if line.startswith("[launch] started"):
+            pids.append(int(line.rsplit("pid ", 1)[1].rstrip(")\n")))
+    assert len(pids) == 2
+    proc.kill()
+    proc.wait(10)
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline and any(_alive(p) for p in pids):
+        time.sleep(0.05)
+    assert not any(_alive(p) for p in pids)

@@ -81,11 +81,19 @@ def node_command(node: LaunchNode, params_dir: Optional[Path] = None) -> List[st
                      f"(looked in AMENT_PREFIX_PATH lib/{node.package}/, Python modules, PATH)")
 
 
-def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+def _libc():
     try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+        return ctypes.CDLL("libc.so.6", use_errno=True)
     except OSError:
-        pass
+        return None
+
+
+# Loaded in the parent: after fork (reader threads are running) the child must not dlopen.
+_LIBC = _libc() if sys.platform.startswith("linux") else None
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    _LIBC.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG: the node gets SIGTERM if the launcher dies
 
 
 class _Child:
@@ -96,7 +104,7 @@ class _Child:
         self.last_err = ""
         self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      stdin=subprocess.DEVNULL, start_new_session=True,
-                                     preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None)
+                                     preexec_fn=_die_with_parent if _LIBC is not None else None)
         screen = node.output in ("screen", "both")
         self.threads = [threading.Thread(target=self._pump, args=(self.proc.stdout, sys.stdout if screen else None,
                                                                   False), daemon=True),
