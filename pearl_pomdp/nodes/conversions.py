@@ -19,7 +19,9 @@ Wire formats (all message types come from common_interfaces):
 * **action** / **speech** / **touchscreen** / **laser** / **reminder** / **say** / **display** —
   ``std_msgs/String``; the action is the primitive action's name.
 * **decision** — ``std_msgs/String`` JSON ``{"step", "action", "trace": [{"subtask",
-  "choice", "value"}], "latency_s"}``; the trace runs root → … → primitive.
+  "choice", "value"}], "latency_s"}``; the trace runs root → … → primitive; ``step`` counts
+  the beliefs this policy node answered before (0 for ``b0``), ``latency_s`` is belief
+  received → action published (wall clock).
 * **nav goal** — ``geometry_msgs/PoseStamped`` (position x, y; orientation from yaw).
 * **diagnostics** — ``diagnostic_msgs/DiagnosticArray`` with one ``DiagnosticStatus``
   whose ``values`` are the node's counters.
