@@ -55,7 +55,8 @@ def test_sigkilled_recorder_leaves_salvageable_bag(tmp_path, capsys):
     env = ros_env(domain_id, tmp_path / "log")
     bag = tmp_path / "killed"
     pearl = str(Path(sys.executable).parent / "pearl")
-    recorder = Proc([pearl, "record", str(bag), "--topics", "/pearl/speech"], env, tmp_path / "log", "recorder")
+    recorder = Proc([pearl, "record", str(bag), "--topics", "/pearl/speech", "--custom-data", "run=killed"],
+                    env, tmp_path / "log", "recorder")
     publisher = Proc([sys.executable, "-c", PUBLISHER], env, tmp_path / "log", "publisher")
     try:
         # wait until messages are being written, then kill without warning
@@ -90,3 +91,20 @@ def test_sigkilled_recorder_leaves_salvageable_bag(tmp_path, capsys):
     # the strict reader (what replay uses) refuses the cut file, naming file and offset
     with pytest.raises(BagError, match=r"killed_0.mcap: truncated at offset \d+ of \d+"):
         BagReader(bag, salvage=False)
+
+    # --repair rewrites it into a complete bag that every reader opens
+    assert main(["bag-info", str(bag), "--repair", "--json"]) == 0
+    repaired = json.loads(capsys.readouterr().out)
+    assert repaired["salvaged"] is False and repaired["metadata_yaml"] is True
+    assert repaired["message_count"] == len(numbers)
+    assert (bag / "killed_0.mcap.broken").is_file() and (bag / "metadata.yaml").is_file()
+    assert BagReader(bag).metadata["custom_data"] == {"run": "killed"}  # kept from the record written at open
+    fixed = BagReader(bag, salvage=False)
+    assert [m.data for m in fixed.messages] == [m.data for m in reader.messages]
+    assert fixed.topics["/pearl/speech"].offered_qos_profiles == reader.topics["/pearl/speech"].offered_qos_profiles
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([bag]) as ar:
+        assert sum(1 for _ in ar.messages()) == len(numbers)
+    assert main(["bag-info", str(bag), "--repair"]) == 2
+    assert "complete; nothing to repair" in capsys.readouterr().err

@@ -168,8 +168,11 @@ def test_mcap_records_as_rosbag2_writes_them(tmp_path):
     assert set(ch["/pearl/speech"].metadata) == {"offered_qos_profiles", "topic_type_hash"}
     assert ch["/pearl/speech"].metadata["topic_type_hash"] == STRING_HASH
     assert ch["/pearl/nav_goal"].metadata["offered_qos_profiles"].startswith("- history: keep_last\n  depth: 5\n")
-    assert [m.name for m in meta] == ["rosbag2"]
-    inner = yaml.safe_load(meta[0].metadata["serialized_metadata"])
+    # one record at open (so a killed recording keeps custom_data), the final one at close
+    assert [m.name for m in meta] == ["rosbag2", "rosbag2"]
+    early = yaml.safe_load(meta[0].metadata["serialized_metadata"])
+    assert early["message_count"] == 0 and early["custom_data"] == {"scenario": "unit"}
+    inner = yaml.safe_load(meta[-1].metadata["serialized_metadata"])
     assert inner["message_count"] == 7 and inner["version"] == 9
     assert summary.statistics.message_count == 7
 

@@ -112,3 +112,53 @@ def format_info(info: Dict[str, Any]) -> str:
     for m in info["metadata_mismatch"]:
         lines.append(f"Mismatch:          {m}")
     return "\n".join(lines)
+
+
+def repair_bag(path) -> Dict[str, Any]:
+    """Rewrite a salvaged bag directory into a complete one (like ``ros2 bag reindex``).
+
+    Every complete message is copied, with its times, sequence number and topic metadata
+    (QoS, type hash, definition), into a fresh ``<name>_0.mcap`` with footer, summary and
+    ``metadata.yaml``; the damaged files are kept beside it as ``<file>.broken``. The
+    ``custom_data`` of the damaged bag (from its metadata) is kept.
+
+    Returns:
+        ``{"bag", "messages", "kept": [renamed damaged files]}``.
+
+    Raises:
+        PearlError: ``path`` is not a bag directory, or is complete already.
+    """
+    import os
+    import shutil
+    from pathlib import Path
+
+    from pearl_pomdp.bags.writer import BagWriter
+    from pearl_pomdp.errors import PearlError
+
+    path = Path(path)
+    if not path.is_dir():
+        raise PearlError(f"{path}: --repair needs a bag directory (it rewrites the bag in place)")
+    reader = BagReader(path, salvage=True)
+    if not reader.salvaged and reader.metadata_file is not None:
+        raise PearlError(f"{path}: the bag is complete; nothing to repair")
+    custom = dict((reader.metadata or {}).get("custom_data") or {})
+    staging = path.parent / f".{path.name}.repair{os.getpid()}"
+    if staging.exists():
+        shutil.rmtree(staging)
+    try:
+        with BagWriter(staging / path.name, custom_data=custom, flush_each=False) as out:
+            for t in reader.topics.values():
+                out.add_topic(t.name, t.type, qos=t.offered_qos_profiles, type_hash=t.type_description_hash,
+                              definition=t.definition, serialization_format=t.serialization_format)
+            for m in reader.messages:
+                out.write(m.topic, m.data, m.log_time, m.publish_time, m.sequence)
+        kept = []
+        for f in reader.files:
+            broken = f.with_name(f.name + ".broken")
+            f.rename(broken)
+            kept.append(broken.name)
+        for f in (staging / path.name).iterdir():
+            os.replace(f, path / f.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return {"bag": str(path), "messages": reader.message_count, "kept": kept}

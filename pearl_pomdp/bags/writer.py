@@ -128,6 +128,10 @@ class BagWriter:
         self._end: Optional[int] = None
         self.message_count = 0
         self.closed = False
+        # An early ``rosbag2`` metadata record: a bag whose recorder is killed keeps its
+        # custom_data and distro (rosbag2 readers take the last such record, i.e. the one
+        # written at close when there is one).
+        self._writer.add_metadata(wk.METADATA_RECORD_NAME, {wk.METADATA_RECORD_KEY: md.dump_yaml(self.metadata())})
         self._flush()
 
     # -- topics -----------------------------------------------------------------------------
