@@ -159,6 +159,16 @@ def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optio
             "tracker_params": tracker_params}
 
 
+def _graph_options() -> Dict[str, Any]:
+    """PearlGraph options for a replay: no parameter services (nobody calls them, and twelve
+    fewer services make every executor wait cheaper), where this PearlGraph supports it."""
+    import inspect
+
+    from pearl_pomdp.nodes.graph import PearlGraph
+
+    return {"parameter_services": False} if "parameter_services" in inspect.signature(PearlGraph).parameters else {}
+
+
 def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: Optional[str] = None,
                domain_id: Optional[int] = None, step_timeout_s: float = 10.0, progress: bool = False,
                coalesce_clock: bool = True) -> ReplayResult:
@@ -195,7 +205,8 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
     overrides = {"belief_tracker": {**quiet, **dict(cfg["tracker_params"])}, "hierarchical_policy": quiet}
     graph = PearlGraph(domain_id=domain_id, use_sim_time=True, executor=False,
                        args=["--ros-args", "--disable-external-lib-logs", "--disable-rosout-logs", "--log-level", "warn"],
-                       shared={"domain": cfg["domain"], "policy": cfg["policy"]}, overrides=overrides)
+                       shared={"domain": cfg["domain"], "policy": cfg["policy"]}, overrides=overrides,
+                       **_graph_options())
     try:
         node = graph.add_node(rclpy.create_node("pearl_replay", context=graph.context))
         actions: List[str] = []
