@@ -15,7 +15,9 @@ For every model in ``../shared/benchmarks/pomdp/`` (or those picked with ``--pro
 
 With a peer on PATH, ``time_ratio_vs_peer_here`` compares against the peer's wall time in
 this same run (same machine load); ``time_ratio_vs_pomdp_solve`` / ``time_ratio_vs_sarsop``
-compare against the RESULTS.md times.
+compare against the RESULTS.md times. On a loaded machine compare CPU seconds
+(``cpu_ratio_vs_peer_here``): our ``--time-limit`` is wall-clock, while ``pomdpsol
+--timeout`` counts its own solving time, so under load SARSOP gets more CPU in "60 s".
 
 The reference tables are parsed from RESULTS.md (not retyped). If ``pomdpsol`` or
 ``pomdp-solve`` is on PATH they are run in the same run, with the same caps, for time
@@ -34,6 +36,7 @@ import math
 import os
 import platform
 import re
+import resource
 import shutil
 import subprocess
 import sys
@@ -132,12 +135,12 @@ def _round(x, n=6):
 def run_incprune(model, horizon, time_limit, ref):
     from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
 
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     r = solve_incremental_pruning(model, horizon=horizon, time_limit=time_limit)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     ours = {"alpha_vectors": r.policy.num_vectors, "value_at_start": r.value_at_start, "epochs": r.iterations,
             "peak_vectors": max(r.vectors_per_epoch) if r.vectors_per_epoch else None,
-            "seconds": round(wall, 4), "converged": bool(r.converged)}
+            "seconds": round(wall, 4), "cpu_seconds": round(cpu, 4), "converged": bool(r.converged)}
     out = {"horizon": "inf" if horizon is None else horizon, "ours": ours, "reference": ref}
     complete = r.converged or (horizon is not None and r.iterations == horizon)
     out["complete"] = bool(complete)
@@ -151,12 +154,12 @@ def run_incprune(model, horizon, time_limit, ref):
 def run_pointbased(model, time_limit, ref):
     from pearl_pomdp.solvers.point_based import solve_point_based
 
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     r = solve_point_based(model, time_limit=time_limit, epsilon=1e-3, seed=0)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     ours = {"lower_bound": r.value_at_start, "upper_bound": r.upper_bound, "gap": r.gap,
             "alpha_vectors": r.policy.num_vectors, "iterations": r.iterations, "seconds": round(wall, 3),
-            "converged": bool(r.converged)}
+            "cpu_seconds": round(cpu, 3), "converged": bool(r.converged)}
     out = {"ours": ours, "reference": ref}
     lb = ref.get("lower_bound")
     if lb is not None:
@@ -180,20 +183,26 @@ def run_qmdp(model):
 # ------------------------------------------------------------------- peers
 
 
+def _children_cpu() -> float:
+    """User + system CPU seconds of finished child processes (to time a peer by CPU, not wall)."""
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
 def run_pomdpsol(path: Path, timeout: float) -> dict:
     """Run SARSOP's ``pomdpsol`` like RESULTS.md did; parse the last summary row for the bounds."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = ["pomdpsol", "--timeout", f"{timeout:g}", "--precision", "1e-3", "-o", str(Path(tmp) / "out.policy"),
                str(path)]
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), _children_cpu()
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout * 3 + 60)
         except subprocess.TimeoutExpired:
             return {"error": "did not exit", "wall_seconds": time.perf_counter() - t0}
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, _children_cpu() - c0
     # Summary rows: "time  #Trial  #Backup  LBound  UBound  Precision  #Alphas  #Beliefs"
     rows = [ln.split() for ln in proc.stdout.splitlines() if re.match(r"^\s*\d+(\.\d+)?\s+\d+\s+\d+\s+" + _NUM, ln)]
-    out = {"wall_seconds": round(wall, 3), "returncode": proc.returncode}
+    out = {"wall_seconds": round(wall, 3), "cpu_seconds": round(cpu, 3), "returncode": proc.returncode}
     if rows:
         last = rows[-1]
         out.update({"solve_seconds": float(last[0]), "lower_bound": float(last[3]), "upper_bound": float(last[4]),
@@ -208,19 +217,20 @@ def run_pomdp_solve(path: Path, horizon, timeout: float, b0: np.ndarray) -> dict
         cmd = ["pomdp-solve", "-pomdp", str(path), "-method", "incprune", "-o", prefix]
         if horizon is not None:
             cmd[5:5] = ["-horizon", str(horizon)]
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), _children_cpu()
         try:
             subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=tmp)
         except subprocess.TimeoutExpired:
             return {"finished": False, "wall_seconds": round(time.perf_counter() - t0, 3)}
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, _children_cpu() - c0
         alpha = Path(prefix + ".alpha")
         if not alpha.is_file():
             return {"finished": False, "wall_seconds": round(wall, 3), "error": "no .alpha file"}
         nums = alpha.read_text().split()
     S = b0.shape[0]
     vecs = np.array([float(x) for x in nums]).reshape(-1, S + 1)[:, 1:]
-    return {"finished": True, "wall_seconds": round(wall, 3), "alpha_vectors": int(vecs.shape[0]),
+    return {"finished": True, "wall_seconds": round(wall, 3), "cpu_seconds": round(cpu, 3),
+            "alpha_vectors": int(vecs.shape[0]),
             "value_at_start": float((vecs @ b0).max())}
 
 
@@ -288,6 +298,7 @@ def main() -> None:
                     run["peer_pomdp_solve"] = peer
                     if run.get("complete") and peer.get("finished"):
                         run["time_ratio_vs_peer_here"] = _ratio(run["ours"]["seconds"], peer["wall_seconds"])
+                        run["cpu_ratio_vs_peer_here"] = _ratio(run["ours"]["cpu_seconds"], peer["cpu_seconds"])
                         run["value_diff_vs_peer_here"] = float(run["ours"]["value_at_start"] - peer["value_at_start"])
                 runs.append(run)
             if runs:
@@ -307,6 +318,7 @@ def main() -> None:
                 if "ours" in entry["pointbased"] and peer.get("lower_bound") is not None:
                     ours = entry["pointbased"]["ours"]
                     entry["pointbased"]["time_ratio_vs_peer_here"] = _ratio(ours["seconds"], peer["wall_seconds"])
+                    entry["pointbased"]["cpu_ratio_vs_peer_here"] = _ratio(ours["cpu_seconds"], peer["cpu_seconds"])
                     lb = peer["lower_bound"]
                     entry["pointbased"]["lower_bound_shortfall_pct_vs_peer_here"] = (
                         _round((lb - ours["lower_bound"]) / abs(lb) * 100, 4) if lb else None)
@@ -335,6 +347,7 @@ def main() -> None:
     }
     print(json.dumps({
         "benchmark": "solvers",
+        "load_average_1min_at_end": round(os.getloadavg()[0], 2),
         "reference": str(bench / "RESULTS.md"),
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
         "options": {"problems": [p.name for p in files], "methods": methods, "pointbased_time_limit": args.time_limit,
