@@ -249,10 +249,12 @@ def parse_hierarchy(text: str, primitives: Sequence[str], features: Optional[Map
         defaults[key] = _setting(chk, f"defaults.{key}", key, value)
     prim_set = set(primitives)
     subtasks: Dict[str, SubtaskSpec] = {}
+    for name in raw_subtasks:
+        if name in prim_set:
+            raise chk.fail(f"subtasks.{name}", f"subtask name {name!r} is also a primitive action of the domain; "
+                                               "rename the subtask")
     for name, body in raw_subtasks.items():
         where = f"subtasks.{name}"
-        if name in prim_set:
-            raise chk.fail(where, f"subtask name {name!r} is also a primitive action of the domain; rename the subtask")
         if body is None or isinstance(body, list):
             body = {"actions": body}
         if not isinstance(body, dict):

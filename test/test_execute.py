@@ -1,0 +1,99 @@
+"""EXECUTE (Table 1): top-down trace with values, batch/flat agreement, save/load with model checks."""
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_parameterize import ACTIONS, HIERARCHY, meds_domain  # noqa: E402
+
+from pearl_pomdp.errors import PolicyError
+from pearl_pomdp.hierarchy import load_hierarchical_policy, parse_hierarchy, plan
+
+
+def expectimax(model, b, horizon):
+    """Finite-horizon optimal value of a standard-form model at b, by enumeration."""
+    if horizon == 0:
+        return 0.0
+    best = -np.inf
+    for a in range(model.num_actions):
+        v = float(b @ model.R[:, a])
+        pred = b @ np.asarray(model.T[a])
+        for o in range(model.num_observations):
+            joint = pred * model.O[a][:, o]
+            p = joint.sum()
+            if p > 1e-15:
+                v += model.discount * p * expectimax(model, joint / p, horizon - 1)
+        best = max(best, v)
+    return best
+
+
+@pytest.fixture(scope="module")
+def planned():
+    model = meds_domain()
+    return model, plan(model, parse_hierarchy(HIERARCHY, ACTIONS))
+
+
+@pytest.mark.parametrize("belief, expected", [
+    ([1.0, 0.0, 0.0], ["Help", "CheckMeds"]),
+    ([0.0, 1.0, 0.0], ["Help", "Move"]),
+    ([0.0, 0.0, 1.0], ["ClarifyTask"]),   # done: ClarifyTask costs -1/step, Help (CheckMeds there) -3
+])
+def test_execute_walks_top_down(planned, belief, expected):
+    model, hp = planned
+    d = hp.execute(np.array(belief))
+    assert [t.choice for t in d.trace] == expected
+    assert [t.subtask for t in d.trace] == ["Act", "Help"][: len(expected)]
+    assert d.action_name == expected[-1] and d.action == model.actions.index(expected[-1])
+
+
+def test_trace_values_are_subtask_values(planned):
+    """Each trace value is the subtask's horizon-4 optimal value at the projected belief."""
+    model, hp = planned
+    b = np.array([0.7, 0.2, 0.1])
+    d = hp.execute(b)
+    for step in d.trace:
+        ab = hp.abstract_models[step.subtask]
+        assert step.value == pytest.approx(expectimax(ab.model, ab.project(b), 4), abs=1e-6)
+        assert step.value == pytest.approx(hp.subtasks[step.subtask].value(b), abs=1e-12)
+
+
+def test_batch_agrees_with_execute(planned):
+    model, hp = planned
+    B = np.random.default_rng(1).dirichlet(np.ones(3), size=200)
+    assert list(hp.actions_batch(B)) == [hp.execute(b).action for b in B]
+
+
+def test_save_load_round_trip(planned, tmp_path):
+    model, hp = planned
+    hp.save(tmp_path / "pol")
+    assert sorted(p.name for p in (tmp_path / "pol").iterdir()) == ["hierarchy.json", "policy.npz"]
+    loaded = load_hierarchical_policy(tmp_path / "pol", model)
+    B = np.random.default_rng(2).dirichlet(np.ones(3), size=50)
+    for b in B:
+        assert loaded.execute(b) == hp.execute(b)
+    assert loaded.report["subtasks"][0]["name"] == "Help"
+    np.load(tmp_path / "pol" / "policy.npz", allow_pickle=False)  # no object arrays inside
+
+
+def test_load_rejects_other_model(planned, tmp_path):
+    model, hp = planned
+    hp.save(tmp_path / "pol")
+    other = meds_domain()
+    other.R[0, 1] = 11.0
+    with pytest.raises(PolicyError, match="fingerprint"):
+        load_hierarchical_policy(tmp_path / "pol", other)
+
+
+def test_load_rejects_mismatched_pair(planned, tmp_path):
+    model, hp = planned
+    hp.save(tmp_path / "pol")
+    header = json.loads((tmp_path / "pol" / "hierarchy.json").read_text())
+    header["npz_sha256"] = "0" * 64
+    (tmp_path / "pol" / "hierarchy.json").write_text(json.dumps(header))
+    with pytest.raises(PolicyError, match="SHA-256"):
+        load_hierarchical_policy(tmp_path / "pol", model)
+    with pytest.raises(PolicyError, match="not a hierarchical policy directory"):
+        load_hierarchical_policy(tmp_path / "nothing", model)
