@@ -153,7 +153,12 @@ def run(args: argparse.Namespace) -> int:
     gamma = f"γ = {model.discount:g}"
     print(f"{model.name}: {model.num_states} states, {model.num_actions} actions, "
           f"{model.num_observations} observations ({gamma})")
-    stop = "converged" if result.converged else "stopped at its horizon/time limit"
+    if result.converged:
+        stop = f"horizon {args.horizon} reached" if args.horizon is not None else "converged"
+    elif args.time_limit is not None or result.method == "pointbased":
+        stop = "stopped by the time limit before converging"
+    else:
+        stop = "not converged"
     what = "epochs" if result.method == "incprune" else "iterations"
     print(f"{result.method}: {info['alpha_vectors']} α-vectors after {info['iterations']} {what} "
           f"in {info['seconds']:.3f} s ({stop})")
