@@ -96,13 +96,18 @@ def _probe(graph):
 
 
 def _set_clock(graph, probe, t):
-    probe.publishers["/clock"].publish(cv.clock_to_msg(t))
+    clock = probe.publishers["/clock"]
+    # The three nodes subscribe /clock (use_sim_time); a message sent before matching is lost.
+    assert graph.spin_until(lambda: clock.get_subscription_count() >= 3, 10.0)
+    clock.publish(cv.clock_to_msg(t))
     assert graph.spin_until(lambda: abs(graph.tracker.now_s() - t) < 1e-9 and abs(graph.executor_node.now_s() - t) < 1e-9,
                             10.0), f"nodes did not reach sim time {t}"
 
 
-def _say(probe, topic, text):
-    probe.publishers[f"/pearl/{topic}"].publish(cv.text_to_msg(text))
+def _say(probe, topic, text, graph):
+    pub = probe.publishers[f"/pearl/{topic}"]
+    assert graph.spin_until(lambda: pub.get_subscription_count() >= 1, 10.0), f"/pearl/{topic} not matched"
+    pub.publish(cv.text_to_msg(text))
 
 
 def _steps(g, probe, n):
@@ -130,13 +135,13 @@ def test_tiger_dialogue_in_one_process(ros_context):
         assert g.spin_until(lambda: probe.received["/pearl/display"], 10.0)
         assert probe.received["/pearl/display"][0].data == "listening"
 
-        _say(probe, "speech", "hear-left")
+        _say(probe, "speech", "hear-left", g)
         assert _steps(g, probe, 2)
         np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][-1]), [0.85, 0.15])
         assert _actions(probe) == ["listen", "listen"]
 
         _set_clock(g, probe, 130.0)
-        _say(probe, "touchscreen", "hear-left")
+        _say(probe, "touchscreen", "hear-left", g)
         assert _steps(g, probe, 3)
         np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][-1]),
                                    [0.7225 / 0.745, 0.0225 / 0.745], rtol=1e-12)
@@ -171,8 +176,8 @@ def test_invalid_and_early_inputs_are_counted_not_lost(ros_context):
         probe = _probe(g)
         _set_clock(g, probe, 5.0)
         assert _steps(g, probe, 1)
-        _say(probe, "touchscreen", "bogus")  # not a symbol: counted, reported, no step closed
-        _say(probe, "speech", "the tiger is somewhere")  # flat model: speech must be a symbol
+        _say(probe, "touchscreen", "bogus", g)  # not a symbol: counted, reported, no step closed
+        _say(probe, "speech", "the tiger is somewhere", g)  # flat model: speech must be a symbol
         assert g.spin_until(lambda: g.tracker.mapper.invalid["touchscreen"] == 1
                             and g.tracker.mapper.invalid["speech"] == 1, 10.0)
         assert g.spin_until(lambda: any(
@@ -182,8 +187,9 @@ def test_invalid_and_early_inputs_are_counted_not_lost(ros_context):
                 if "pearl: belief_tracker" in cv.msg_to_diagnostics(m)][-1]
         assert diag["level"] == cv.DIAG_WARN and diag["values"]["updates"] == "0"
         # Two observations in one step: the first closes it, the second waits for the next action.
-        _say(probe, "laser", "hear-right")
-        _say(probe, "laser", "hear-right")
+        assert g.spin_until(lambda: g.tracker.protocol.step_open, 10.0)
+        _say(probe, "laser", "hear-right", g)
+        _say(probe, "laser", "hear-right", g)
         assert _steps(g, probe, 3)
         assert g.tracker.protocol.counters["queued"] == 1
         assert g.tracker.protocol.counters["updates"] == 2
@@ -199,6 +205,7 @@ def test_step_timeout_follows_sim_time(ros_context):
         probe = _probe(g)
         _set_clock(g, probe, 10.0)
         assert _steps(g, probe, 1)
+        assert g.spin_until(lambda: g.tracker.protocol.step_open, 10.0)  # the tracker got the action too
         opened = g.tracker.protocol.opened_at
         assert opened == pytest.approx(10.0)
         # Wall time passing does nothing while /clock stands still ...
