@@ -59,6 +59,7 @@ class DemoResult:
     transcript: Optional[Path] = None
     bag_messages: int = 0
     seconds: float = 0.0
+    tracker_counters: dict = field(default_factory=dict)
 
     @property
     def clarifications(self) -> int:
@@ -231,10 +232,12 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
             step_result: StepResult = sim.apply(action)
             if step_result.message is None:
                 # Nothing heard: let sim time run until the tracker's timeout closes the step.
+                # Small ticks, each fully processed (timers of every node, /clock callbacks), so the
+                # tracker's timeout fires at the same sim time live and in a replay of the bag.
                 deadline = time.monotonic() + wall_timeout
                 while len(marginals) <= seen and time.monotonic() < deadline:
-                    sim.clock.advance_to(sim.clock.now + 0.25)
-                    for _ in range(4):
+                    sim.clock.advance_to(sim.clock.now + 0.1)
+                    for _ in range(30):
                         graph.spin_once(0.0)
             graph.spin_until(lambda: len(marginals) > seen, timeout_sec=wall_timeout)
             latest = marginals[-1] if len(marginals) > seen else {}
@@ -250,6 +253,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
         graph.spin_until(lambda: bool(sim.actions), timeout_sec=2.0)   # let the last belief/decision land
         recorder.stop()
         result.bag_messages = sum(recorder.counts.values())
+        result.tracker_counters = dict(graph.tracker.counters())
     finally:
         if writer is not None:
             writer.close()
@@ -281,6 +285,7 @@ def summary_dict(result: DemoResult) -> dict:
         "bag_messages": result.bag_messages, "plot": str(result.plot), "transcript": str(result.transcript),
         "steps": len(result.steps), "actions": [s.action for s in result.steps],
         "clarification_questions": result.clarifications, "seconds": round(result.seconds, 2),
+        "tracker_counters": result.tracker_counters,
         **{k: v for k, v in result.metrics.items() if k != "steps"},
         "outcome": result.outcome(),
     }

@@ -89,3 +89,17 @@ def test_bad_settings_name_the_parameter():
         StepProtocol(tiger(), step_timeout=-1.0)
     with pytest.raises(ValueError, match="'roar' is not an observation of tiger"):
         StepProtocol(tiger()).on_observation("roar", "speech", 0.0)
+
+
+def test_no_timeout_actions_wait_for_an_input_however_long():
+    # A drive ends with a laser landmark, never with silence: the step stays open.
+    p = StepProtocol(tiger(), step_timeout=2.0, timeout_observation="hear-right", no_timeout_actions=["open-left"])
+    p.on_action("open-left", 0.0)
+    assert p.on_tick(500.0) is None and p.step_open and p.counters["timeouts"] == 0
+    r = p.on_observation("hear-left", "laser", 501.0)
+    assert (r.action, r.observation, r.source) == ("open-left", "hear-left", "laser")
+    p2 = StepProtocol(tiger(), step_timeout=2.0, timeout_observation="hear-right", no_timeout_actions=["open-left"])
+    p2.on_action("listen", 0.0)
+    assert p2.on_tick(2.0).source == "timeout"      # other actions still time out
+    with pytest.raises(ValueError, match="no_timeout_actions names 'fly'"):
+        StepProtocol(tiger(), step_timeout=2.0, timeout_observation="hear-right", no_timeout_actions=["fly"])

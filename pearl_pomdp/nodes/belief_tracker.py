@@ -96,6 +96,7 @@ class BeliefTrackerNode(PearlNode):
         * ``step_timeout`` (double, s, ≥ 0): close an open step with ``timeout_observation``
           after this long without input; 0 waits forever.
         * ``timeout_observation`` (str): the symbol used on timeout (default ``unknown``).
+        * ``no_timeout_actions`` (str[]): actions never timed out (default: the Pearl drives).
         * ``max_pending`` (int, 0–1000): observations that may wait for the next action.
         * ``stale_after`` (double, s, ≥ 0): drop a waiting observation older than this; 0 never.
         * ``diagnostics_period`` (double, s, > 0): period of the /diagnostics summary.
@@ -135,6 +136,9 @@ class BeliefTrackerNode(PearlNode):
         Param("step_timeout", 10.0, "Seconds without input after an action before the step is closed "
                                     "with timeout_observation (0: wait forever)", range=(0.0, 3600.0)),
         Param("timeout_observation", "unknown", "Observation symbol that closes a step on timeout"),
+        Param("no_timeout_actions", ["GotoPatientRoom", "GuideToPhysio", "GoHome"],
+              "Actions whose step only an input closes (drives end with a laser landmark); "
+              "names the model does not have are ignored"),
         Param("max_pending", 8, "Observations that may wait for the next action (FIFO)", range=(0, 1000)),
         Param("stale_after", 0.0, "Drop a waiting observation older than this many seconds (0: never)",
               range=(0.0, 3600.0)),
@@ -158,6 +162,8 @@ class BeliefTrackerNode(PearlNode):
         try:
             self.protocol = StepProtocol(model, step_timeout=p["step_timeout"],
                                          timeout_observation=p["timeout_observation"],
+                                         no_timeout_actions=[a for a in p["no_timeout_actions"]
+                                                             if a in model.actions],
                                          max_pending=p["max_pending"], stale_after=p["stale_after"])
         except ValueError as err:
             raise NodeSetupError(f"parameter {str(err)}") from None

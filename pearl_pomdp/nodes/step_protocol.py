@@ -10,7 +10,11 @@ The cases the paper leaves open are decided here, and each is counted:
   seconds (node clock, so sim time in replay) after its action arrived is closed with the
   observation ``timeout_observation`` (default ``unknown``, the Pearl speech symbol for
   "nothing understood": silence carries no more information than unrecognised speech).
-  Counter ``timeouts``. ``step_timeout = 0`` waits forever.
+  Counter ``timeouts``. ``step_timeout = 0`` waits forever. Actions listed in
+  ``no_timeout_actions`` (by default the Pearl domain's motions ``GotoPatientRoom``,
+  ``GuideToPhysio``, ``GoHome``) are never timed out: a drive takes as long as it takes
+  (a slow resident makes a guidance last minutes) and navigation always ends it with a
+  landmark on the laser topic, so silence during a drive is not an observation.
 * **Observation before any action / more than one observation in a step.** The inputs
   are ``std_msgs/String`` without a header, so arrival order is the only order there is.
   An observation that arrives while no step is open (before the first action, or after
@@ -35,7 +39,7 @@ from __future__ import annotations
 
 import collections
 from dataclasses import dataclass, field
-from typing import Deque, Dict, List, Optional, Tuple
+from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -104,6 +108,7 @@ class StepProtocol:
     """
 
     def __init__(self, model: Pomdp, *, step_timeout: float = 0.0, timeout_observation: str = "unknown",
+                 no_timeout_actions: Sequence[str] = (),
                  max_pending: int = 8, stale_after: float = 0.0, belief_filter: Optional[BeliefFilter] = None):
         if step_timeout < 0:
             raise ValueError(f"step_timeout must be >= 0 s, got {step_timeout}")
@@ -117,6 +122,10 @@ class StepProtocol:
         self.model = model
         self.filter = belief_filter or BeliefFilter(model)
         self.step_timeout = float(step_timeout)
+        unknown = sorted(set(no_timeout_actions) - set(model.actions))
+        if unknown:
+            raise ValueError(f"no_timeout_actions names {unknown[0]!r}, which is not an action of {model.name}")
+        self.no_timeout_actions = frozenset(no_timeout_actions)
         self.timeout_observation = timeout_observation
         self.max_pending = int(max_pending)
         self.stale_after = float(stale_after)
@@ -205,6 +214,7 @@ class StepProtocol:
     def on_tick(self, now: float) -> Optional[StepResult]:
         """Check the step timeout at time ``now`` (s); closes the step with the timeout observation."""
         if (self.step_open and self.step_timeout > 0 and self.opened_at is not None
+                and self.current_action not in self.no_timeout_actions
                 and now - self.opened_at >= self.step_timeout):
             self.counters["timeouts"] += 1
             self.events.append(Event("info", f"nothing heard {now - self.opened_at:.3f} s after "
