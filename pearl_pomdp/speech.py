@@ -1,0 +1,141 @@
+"""Keyword filter: the recogniser's text → one Speech observation symbol.
+
+The paper applies "a keyword filter to the output of the speech recognizer
+(e.g. 'Give me the weather forecast for tomorrow.' → SpeechKeyword=weather)".
+:class:`KeywordFilter` does exactly that, with a rule a designer can predict:
+
+1. The text is lower-cased, curly quotes are straightened and everything except
+   letters, digits and apostrophes becomes a word break: ``"What's the TIME?"``
+   → ``what's the time``.
+2. A keyword is a word or a phrase of several words; it matches when its words
+   occur *contiguously and whole* in the text (``"go"`` does not match ``"good"``,
+   ``"what time"`` does not match ``"what is the time"``).
+3. **Priority is the order of the symbols** in the keyword table: the first
+   symbol (in table order) with any matching keyword wins, wherever in the text
+   it occurs. Designers list specific symbols before generic ones, so "go to the
+   kitchen" is ``kitchen`` and not the generic ``go``, and "yes, what time is it"
+   is ``time``. (A longest-match rule would let the two-word "go to" beat the
+   one-word "kitchen".)
+4. No keyword at all → ``unknown_symbol``; the filter counts it
+   (:attr:`KeywordFilter.unknown_count`) and keeps the last few texts so that
+   nothing is silently dropped (DESIGN.md §9). Empty text is also unknown: that is
+   what a recogniser returns when the timeout closes a step.
+"""
+from __future__ import annotations
+
+import re
+from collections import deque
+from typing import Deque, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+
+__all__ = ["KeywordFilter", "normalise", "tokens"]
+
+_QUOTES = str.maketrans({"\u2019": "'", "\u2018": "'", "\u02bc": "'", "`": "'"})
+_BREAK = re.compile(r"[^0-9a-z']+")
+
+
+def normalise(text: str) -> str:
+    """Lower-case, straighten quotes, and turn every non-word character into one space."""
+    t = str(text).translate(_QUOTES).lower()
+    t = _BREAK.sub(" ", t)
+    # Apostrophes are part of a word only inside it ("let's"), not as quotes around it.
+    return " ".join(w.strip("'") for w in t.split() if w.strip("'"))
+
+
+def tokens(text: str) -> List[str]:
+    """The words of ``text`` after :func:`normalise`."""
+    return normalise(text).split()
+
+
+class KeywordFilter:
+    """Maps recognised text to a Speech symbol (see the module docstring for the rule).
+
+    Args:
+        keywords: symbol → list of keywords/phrases; the mapping's order is the priority.
+        unknown_symbol: returned when no keyword matches (must not be a key of ``keywords``).
+        keep_unknown: how many unmatched texts to remember in :attr:`unknown_texts`.
+
+    Attributes:
+        unknown_count: how many texts matched no keyword.
+        unknown_texts: the last ``keep_unknown`` of them (for logs and replay reports).
+        counts: symbol → how many texts were classified as it (unknown included).
+
+    Raises:
+        ValueError: an empty keyword, a keyword that normalises to nothing, the unknown
+            symbol used as a key, or the same phrase given for two symbols.
+    """
+
+    def __init__(self, keywords: Mapping[str, Sequence[str]], unknown_symbol: str = "unknown", keep_unknown: int = 20):
+        if unknown_symbol in keywords:
+            raise ValueError(f"the unknown symbol {unknown_symbol!r} cannot have keywords")
+        self.unknown_symbol = unknown_symbol
+        self._table: List[Tuple[str, List[Tuple[str, ...]]]] = []
+        owner: Dict[Tuple[str, ...], str] = {}
+        for symbol, words in keywords.items():
+            if isinstance(words, str):
+                raise ValueError(f"keywords of {symbol!r} must be a list of strings, got the string {words!r}")
+            phrases = []
+            for w in words:
+                phrase = tuple(tokens(w))
+                if not phrase:
+                    raise ValueError(f"keyword {w!r} of symbol {symbol!r} has no words")
+                if phrase in owner and owner[phrase] != symbol:
+                    raise ValueError(f"keyword {' '.join(phrase)!r} is given for both {owner[phrase]!r} and {symbol!r}")
+                owner[phrase] = symbol
+                phrases.append(phrase)
+            self._table.append((str(symbol), phrases))
+        self.unknown_count = 0
+        self.unknown_texts: Deque[str] = deque(maxlen=keep_unknown)
+        self.counts: Dict[str, int] = {}
+
+    @classmethod
+    def from_domain(cls, domain, unknown_symbol: Optional[str] = None) -> "KeywordFilter":
+        """The filter of a :class:`~pearl_pomdp.model.factored.FactoredDomain` (its ``keywords:`` section).
+
+        ``unknown_symbol`` defaults to ``"unknown"`` when the domain has that symbol.
+
+        Raises:
+            ValueError: the domain has no keywords, or no such unknown symbol.
+        """
+        if not domain.keywords:
+            raise ValueError(f"domain {domain.name!r} ({domain.source}) has no 'keywords' section")
+        symbol = unknown_symbol or "unknown"
+        if symbol not in domain.observations:
+            raise ValueError(f"domain {domain.name!r} has no observation symbol {symbol!r} for unmatched speech")
+        return cls(domain.keywords, unknown_symbol=symbol)
+
+    @property
+    def symbols(self) -> List[str]:
+        """Symbols in priority order (the unknown symbol last)."""
+        return [s for s, _ in self._table] + [self.unknown_symbol]
+
+    def matches(self, text: str) -> List[Tuple[str, str, int]]:
+        """Every ``(symbol, keyword, word position)`` found in ``text``, in priority order (for explanations)."""
+        words = tokens(text)
+        found = []
+        for symbol, phrases in self._table:
+            for phrase in phrases:
+                for pos in _find(words, phrase):
+                    found.append((symbol, " ".join(phrase), pos))
+        return found
+
+    def classify(self, text: str) -> str:
+        """The Speech symbol of ``text``: the highest-priority symbol with a matching keyword, else unknown."""
+        words = tokens(text)
+        for symbol, phrases in self._table:
+            if any(next(_find(words, p), None) is not None for p in phrases):
+                self.counts[symbol] = self.counts.get(symbol, 0) + 1
+                return symbol
+        self.unknown_count += 1
+        self.unknown_texts.append(str(text))
+        self.counts[self.unknown_symbol] = self.counts.get(self.unknown_symbol, 0) + 1
+        return self.unknown_symbol
+
+    def __call__(self, text: str) -> str:
+        return self.classify(text)
+
+
+def _find(words: Sequence[str], phrase: Tuple[str, ...]) -> Iterable[int]:
+    n = len(phrase)
+    for i in range(len(words) - n + 1):
+        if tuple(words[i:i + n]) == phrase:
+            yield i
