@@ -8,7 +8,6 @@ The Pearl tests at the end run the real domain and hierarchical policy.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from typing import List
 

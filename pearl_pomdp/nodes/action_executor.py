@@ -10,7 +10,6 @@ import datetime
 import sys
 from typing import Dict, List, Optional
 
-from rclpy.parameter import Parameter
 
 from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS, NodeSetupError, Param, PearlNode, run_node

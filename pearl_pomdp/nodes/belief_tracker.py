@@ -11,15 +11,14 @@ launch file; build it in a Python process with :class:`BeliefTrackerNode`.
 from __future__ import annotations
 
 import sys
-from typing import Callable, Dict, List, Mapping, Optional
+from typing import Callable, Dict, List, Optional
 
 import numpy as np
-from rclpy.parameter import Parameter
 
 from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import (EVENT_QOS, INPUT_QOS, LATCHED_QOS, NodeSetupError, Param, PearlNode,
                                       load_domain_and_model, resolve_path, run_node)
-from pearl_pomdp.nodes.step_protocol import COUNTERS, StepProtocol, StepResult
+from pearl_pomdp.nodes.step_protocol import StepProtocol, StepResult
 
 __all__ = ["BeliefTrackerNode", "ObservationMapper", "main", "SYMBOL_INPUTS"]
 
@@ -169,6 +168,7 @@ class BeliefTrackerNode(PearlNode):
             raise NodeSetupError(f"parameter {str(err)}") from None
         self.mapper = ObservationMapper(model, domain, keyword_filter)
         self._reported_warnings = 0
+        self._marginal_index = None
         self._last_unknown_words = 0
 
         self.belief_pub = self.create_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
@@ -245,13 +245,15 @@ class BeliefTrackerNode(PearlNode):
 
     def marginals(self, belief: np.ndarray) -> Dict[str, Dict[str, float]]:
         """``{feature: {value: P}}``; a flat model reports the pseudo-feature ``"state"``."""
-        if self.domain is not None and hasattr(self.domain, "feature_marginals"):
-            out = {}
-            values = {f.name: list(f.values) for f in self.domain.features}
-            for name, marg in self.domain.feature_marginals(belief).items():
-                out[name] = {str(v): float(pv) for v, pv in zip(values[name], marg)}
-            return out
-        return {"state": {s: float(pv) for s, pv in zip(self.model.states, belief)}}
+        if self.domain is None:
+            return {"state": {s: float(pv) for s, pv in zip(self.model.states, belief)}}
+        if self._marginal_index is None:
+            # state_values[s, f] = value index of feature f in state s: a marginal is one bincount.
+            values = np.asarray(self.domain.state_values)
+            self._marginal_index = [(f.name, [str(v) for v in f.values], values[:, i])
+                                    for i, f in enumerate(self.domain.features)]
+        return {name: dict(zip(names, np.bincount(col, weights=belief, minlength=len(names)).tolist()))
+                for name, names, col in self._marginal_index}
 
     def counters(self) -> Dict[str, int]:
         """Every counter reported on /diagnostics."""

@@ -28,6 +28,7 @@ Wire formats (all message types come from common_interfaces):
 """
 from __future__ import annotations
 
+import array
 import json
 import math
 from typing import Callable, Dict, Mapping, Optional, Sequence
@@ -92,7 +93,8 @@ def belief_to_msg(belief: np.ndarray) -> Float64MultiArray:
     msg = Float64MultiArray()
     msg.layout.dim = [MultiArrayDimension(label=BELIEF_LABEL, size=b.size, stride=b.size)]
     msg.layout.data_offset = 0
-    msg.data = b.tolist()
+    # array('d') is taken as is by the generated setter (a list is checked element by element).
+    msg.data = array.array("d", np.ascontiguousarray(b).tobytes())
     return msg
 
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 import collections
 import sys
 import time
-from pathlib import Path
 from typing import Deque, List, Optional
 
 import numpy as np
@@ -36,12 +35,10 @@ def load_decider(model, domain, policy: str, hierarchy: str, logger=None):
     if policy:
         path = resolve_path(policy, "policy", kind="policy file or directory")
         if path.is_dir():
-            if domain is None:
-                raise NodeSetupError(f"parameter policy: {path} is a hierarchical policy, which needs a factored "
-                                     f"domain (.yaml), not a flat model")
             from pearl_pomdp.hierarchy import load_hierarchical_policy
 
-            return load_hierarchical_policy(path, domain)
+            # A flat .pomdp model can have a (flat-featured) hierarchy too: pass the model then.
+            return load_hierarchical_policy(path, domain if domain is not None else model)
         from pearl_pomdp.executive import FlatPolicyDecider
         from pearl_pomdp.policy_io import load_policy
 
@@ -49,15 +46,14 @@ def load_decider(model, domain, policy: str, hierarchy: str, logger=None):
     if not hierarchy:
         raise NodeSetupError("parameters policy and hierarchy are both empty: give a planned policy "
                              "(policy:=DIR from `pearl plan --out DIR`) or a hierarchy to plan at start-up")
-    if domain is None:
-        raise NodeSetupError("parameter hierarchy: planning a hierarchy needs a factored domain (.yaml)")
     from pearl_pomdp.hierarchy import load_hierarchy, plan
 
     hpath = resolve_path(hierarchy, "hierarchy")
     if logger is not None:
         logger.info(f"planning {hpath} at start-up (pass policy:=DIR to skip)")
     start = time.perf_counter()
-    decider = plan(domain, load_hierarchy(hpath, domain))
+    target = domain if domain is not None else model
+    decider = plan(target, load_hierarchy(hpath, target))
     if logger is not None:
         logger.info(f"planned in {time.perf_counter() - start:.2f} s")
     return decider

@@ -38,7 +38,7 @@ and returns an :class:`Event` the node logs and reports on ``/diagnostics``.
 from __future__ import annotations
 
 import collections
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
