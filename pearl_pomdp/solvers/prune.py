@@ -101,9 +101,15 @@ class _WitnessLP:
 
     def __init__(self, num_states: int, use_core: Optional[bool] = None) -> None:
         self.S = num_states
+        # Two states: solve exactly at the envelope's breakpoints (see _breakpoints_2),
+        # unless plain linprog was asked for.
+        self.exact_2 = use_core is not False
+        self._bp: Optional[tuple] = None
         self.use_core = _HAVE_HIGHS_CORE if use_core is None else (use_core and _HAVE_HIGHS_CORE)
         self.rows: List[np.ndarray] = []
         self._col_index = np.arange(num_states + 1, dtype=np.int32)
+        if self.S == 2 and self.exact_2:
+            self.use_core = False  # solved in closed form, no LP model needed
         if self.use_core:
             h = _highs_core._Highs()
             h.setOptionValue("output_flag", False)
@@ -129,11 +135,37 @@ class _WitnessLP:
         if self.use_core:
             self._h.addCol(0.0, 0.0, self._inf, self.S + 1, self._col_index, np.append(alpha, 1.0))
 
+    def _breakpoints_2(self) -> Tuple[np.ndarray, np.ndarray]:
+        """Two states: candidate optima ``p`` (b = (1−p, p)) and ``V_K(p)`` there.
+
+        ``c·b − V_K(b)`` is linear minus convex piecewise-linear in ``p``, so its
+        maximum over [0, 1] lies at an end or where two kept lines cross: the
+        LP is solved exactly by checking those points (no simplex needed).
+        """
+        if self._bp is None or self._bp[2] != len(self.rows):
+            K = np.vstack(self.rows)[:, :2]
+            a0, slope = K[:, 0], K[:, 1] - K[:, 0]
+            i, j = np.triu_indices(K.shape[0], 1)
+            den = slope[i] - slope[j]
+            ok = den != 0.0
+            p = (a0[j][ok] - a0[i][ok]) / den[ok]
+            p = np.concatenate([[0.0, 1.0], p[(p > 0.0) & (p < 1.0)]])
+            V = (a0[None, :] + slope[None, :] * p[:, None]).max(axis=1)
+            # only points on the upper envelope matter (its breakpoints)
+            on = np.ones(p.size, dtype=bool)
+            self._bp = (p[on], V[on], len(self.rows))
+        return self._bp[0], self._bp[1]
+
     def solve(self, c: np.ndarray, need_below: Optional[float] = None) -> Tuple[float, Optional[np.ndarray]]:
         """Return ``(δ*, b*)``: the largest advantage of ``c`` over the kept set and where it is.
 
         With ``need_below``, ``b*`` is not fetched (``None``) when ``δ* < need_below``.
         """
+        if self.S == 2 and self.exact_2 and self.rows:
+            p, V = self._breakpoints_2()
+            g = c[0] + (c[1] - c[0]) * p - V
+            k = int(np.argmax(g))
+            return float(g[k]), np.array([1.0 - p[k], p[k]])
         if self.use_core:
             h = self._h
             inf = self._inf
@@ -406,7 +438,8 @@ def _dominated_within(B: np.ndarray, chunk_elems: int = 4_000_000) -> np.ndarray
     left to the kept-set filter and the LPs).
     """
     N, S = B.shape
-    if N * N * S <= 10_000_000:
+    # With two states the LP is solved in closed form, so a cheap dominator set is enough.
+    if N * N * S <= (200_000 if S == 2 else 10_000_000):
         by = B
     else:
         by = B[np.unique(np.argmax(B, axis=0))]
