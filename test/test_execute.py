@@ -97,3 +97,69 @@ def test_load_rejects_mismatched_pair(planned, tmp_path):
         load_hierarchical_policy(tmp_path / "pol", model)
     with pytest.raises(PolicyError, match="not a hierarchical policy directory"):
         load_hierarchical_policy(tmp_path / "nothing", model)
+
+
+PROBE_DOMAIN = """
+name: probe
+discount: 0.9
+features:
+  Goal: [a, b]
+start: {Goal: {a: 0.5, b: 0.5}}
+modalities:
+  Speech: [sa, sb]
+actions:
+  Ask: {}
+  DoA: {}
+  DoB: {}
+observations:
+  Ask:
+    parents: [Goal]
+    table:
+      a: {sa: 0.85, sb: 0.15}
+      b: {sa: 0.15, sb: 0.85}
+  default:
+    parents: [Goal]
+    table:
+      a: {sa: 0.5, sb: 0.5}
+      b: {sa: 0.5, sb: 0.5}
+rewards:
+  - {action: DoA, when: {Goal: a}, reward: 10, why: right}
+  - {action: DoA, when: {Goal: b}, reward: -100, why: wrong}
+  - {action: DoB, when: {Goal: b}, reward: 10, why: right}
+  - {action: DoB, when: {Goal: a}, reward: -100, why: wrong}
+  - {action: Ask, reward: -1, why: asking costs}
+"""
+PROBE_HIERARCHY = """
+root: Top
+defaults: {solver: incprune, horizon: 5}
+subtasks:
+  Top: {actions: [Ask, Do]}
+  Do: {actions: [DoA, DoB]}
+"""
+
+
+def test_cli_plan_json_save_and_explain(tmp_path, capsys):
+    from pearl_pomdp.cli import main
+
+    (tmp_path / "probe.domain.yaml").write_text(PROBE_DOMAIN)
+    (tmp_path / "probe.hierarchy.yaml").write_text(PROBE_HIERARCHY)  # found beside the domain
+    assert main(["plan", str(tmp_path / "probe.domain.yaml"), "--json", "--out", str(tmp_path / "pol")]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert [s["name"] for s in report["subtasks"]] == ["Do", "Top"]
+    top = report["subtasks"][1]
+    assert (top["states_full"], top["states_abstract"], top["observations_full"], top["actions"], top["solver"]) == \
+        (2, 2, 2, ["Ask", "Do"], "incprune")
+    assert top["exact"] and report["total_seconds"] > 0
+    # Eq. 15-17 model Do as "DoA in a, DoB in b" (the child's choice at each corner), so in Top
+    # Do earns +10 everywhere and Ask -1: Top's reward does not depend on the state, the local
+    # reward assumption fails, plan says so, and Top's policy is one vector (always Do).
+    assert any("no action's reward depends on the state" in w for w in top["warnings"])
+    assert top["alpha_vectors"] == 1
+    assert main(["explain", str(tmp_path / "probe.domain.yaml"), str(tmp_path / "pol"), "--belief", "Goal=b", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["action_name"] == "DoB" and [t["subtask"] for t in out["trace"]] == ["Top", "Do"]
+    assert main(["hierarchy", str(tmp_path / "probe.domain.yaml"), "--policy", str(tmp_path / "pol")]) == 0
+    dot = capsys.readouterr().out
+    assert 't_Top -> t_Do;' in dot and "S 2→2" in dot
+    assert main(["explain", str(tmp_path / "probe.domain.yaml"), str(tmp_path / "pol"), "--belief", "Goal=c"]) == 2
+    assert "unknown value 'c' of Goal" in capsys.readouterr().err
