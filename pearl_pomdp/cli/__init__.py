@@ -43,7 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"pearl {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module in _command_modules():
-        p = sub.add_parser(module.COMMAND, help=module.HELP, description=getattr(module, "__doc__", None),
+        # argparse %-formats help texts: a literal "95%" would break `pearl --help`.
+        p = sub.add_parser(module.COMMAND, help=module.HELP.replace("%", "%%"),
+                           description=(getattr(module, "__doc__", None) or "").replace("%", "%%"),
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         module.add_arguments(p)
         p.set_defaults(_run=module.run)
