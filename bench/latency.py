@@ -34,7 +34,16 @@ SPIN_TIMEOUT = 0.01
 PARAMETER_SERVICES = True
 sys.path.insert(0, str(REPO))
 
-#: Inputs cycled through: (topic, text). Speech goes through the keyword filter.
+#: ``--inputs resident`` (default): a resident who wants the time answers the robot's last
+#: action (contact, clarification) and otherwise asks again — inputs the model finds plausible,
+#: as in the multi-process acceptance test. Action → (topic, text).
+RESIDENT = {"GotoPatientRoom": ("laser", "atRoom"), "GuideToPhysio": ("laser", "atPhysio"),
+            "GoHome": ("laser", "atHome"), "RingDoorBell": ("speech", "yes, come in"),
+            "CheckUserPresent": ("speech", "yes I am here"), "ConfirmWantTime": ("speech", "yes please"),
+            "TellTime": ("touchscreen", "t_yes")}
+ASK = ("speech", "what time is it")
+#: ``--inputs cycle``: a fixed cycle of (topic, text), regardless of the robot's actions (many of
+#: these are implausible under the model: zero-likelihood recoveries, warnings and logging).
 INPUTS = [("speech", "what time is it"), ("speech", "yes"), ("touchscreen", "t_time"), ("speech", "no thanks"),
           ("reminder", "g_physio"), ("speech", "let's go"), ("laser", "atRoom"), ("touchscreen", "t_yes"),
           ("speech", "what's the weather like"), ("reminder", "g_none")]
@@ -63,6 +72,15 @@ def _stats(lat):
             "max_ms": round(float(a.max()), 3), "mean_ms": round(float(a.mean()), 3)}
 
 
+INPUT_MODE = "resident"
+
+
+def _next_input(i, last_action):
+    if INPUT_MODE == "cycle":
+        return INPUTS[i % len(INPUTS)]
+    return RESIDENT.get(last_action, ASK)
+
+
 def _drive(probe_node, executor, steps, warmup, timeout=10.0):
     """Publish inputs one at a time; return the latencies (s) of the measured steps."""
     from pearl_pomdp.nodes import conversions as cv
@@ -85,7 +103,7 @@ def _drive(probe_node, executor, steps, warmup, timeout=10.0):
         executor.spin_once(timeout_sec=0.05)
     latencies = []
     for i in range(steps + warmup):
-        topic, text = INPUTS[i % len(INPUTS)]
+        topic, text = _next_input(i, actions[-1])
         n = len(actions)
         start = time.perf_counter()
         pubs[topic].publish(cv.text_to_msg(text))
@@ -160,16 +178,19 @@ def main(argv=None):
     parser.add_argument("--steps", type=int, default=1000)
     parser.add_argument("--warmup", type=int, default=50)
     parser.add_argument("--mode", choices=["inprocess", "multiprocess", "both"], default="both")
+    parser.add_argument("--inputs", choices=["resident", "cycle"], default="resident",
+                        help="resident: answer the robot's actions plausibly (default); cycle: fixed input cycle")
     parser.add_argument("--no-parameter-services", action="store_true",
                         help="in-process: build the nodes without parameter services (fewer entities per spin)")
     args = parser.parse_args(argv)
-    global PARAMETER_SERVICES
+    global PARAMETER_SERVICES, INPUT_MODE
     PARAMETER_SERVICES = not args.no_parameter_services
+    INPUT_MODE = args.inputs
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO / "config" / "fastdds_profile.xml"))
     policy = _find_policy(args.policy)
     out = {"benchmark": "observation -> action latency", "policy": str(policy), "cpus": os.cpu_count(),
-           "inprocess_parameter_services": PARAMETER_SERVICES,
+           "inputs": INPUT_MODE, "inprocess_parameter_services": PARAMETER_SERVICES,
            "load_before": [round(x, 2) for x in os.getloadavg()]}
     if args.mode in ("inprocess", "both"):
         print("in-process ...", file=sys.stderr)
