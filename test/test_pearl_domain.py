@@ -1,0 +1,148 @@
+"""The Pearl domain file (DESIGN.md §5; paper Table 3): sizes, well-formed rows, reasons, hand-checked entries."""
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pearl_pomdp.model.factored import load_domain
+
+CONFIG = Path(__file__).resolve().parents[1] / "config"
+
+
+@pytest.fixture(scope="module")
+def pearl():
+    d = load_domain(CONFIG / "pearl.domain.yaml")
+    return d, d.compile()
+
+
+def test_sizes_features_and_symbols_as_in_the_paper(pearl):
+    d, m = pearl
+    assert (m.num_states, m.num_observations, m.num_actions) == (576, 18, 19)
+    assert {f.name: list(f.values) for f in d.features} == {
+        "RobotLocation": ["home", "room", "physio"], "UserLocation": ["room", "physio"], "UserPresent": ["yes", "no"],
+        "ReminderGoal": ["none", "physio", "vitamin", "checklist"], "UserMotionGoal": ["none", "toPhysioWithRobot"],
+        "UserInfoGoal": ["none", "wantTime", "wantWeather"], "Battery": ["ok", "low"]}
+    assert d.modalities == {
+        "Speech": ["yes", "no", "time", "weather", "go", "unknown"],
+        "Touchscreen": ["t_yes", "t_no", "t_time", "t_weather", "t_go"],
+        "Laser": ["atRoom", "atPhysio", "atHome"],
+        "Reminder": ["g_none", "g_physio", "g_vitamin", "g_checklist"]}
+    by_category = {}
+    for a in d.actions:
+        by_category.setdefault(d.categories[a], set()).add(a)
+    assert by_category == {
+        "Communicate": {"RemindPhysioAppt", "RemindVitamin", "UpdateChecklist", "CheckUserPresent", "TerminateGuidance",
+                        "TellTime", "TellWeather", "ConfirmGuideToPhysio", "VerifyInfoRequest", "ConfirmWantTime",
+                        "ConfirmWantWeather", "ConfirmGoHome", "ConfirmDone"},
+        "Move": {"GotoPatientRoom", "GuideToPhysio", "GoHome"},
+        "Other": {"DoNothing", "RingDoorBell", "RechargeBattery"}}
+
+
+def test_every_row_is_a_distribution(pearl):
+    _, m = pearl
+    T = m.T_dense()
+    assert np.abs(T.sum(axis=2) - 1).max() < 1e-12 and T.min() >= 0
+    assert np.abs(m.O.sum(axis=2) - 1).max() < 1e-12 and m.O.min() >= 0
+    assert abs(m.b0.sum() - 1) < 1e-12
+
+
+@pytest.mark.parametrize("name", ["pearl.domain.yaml", "table4.domain.yaml"])
+def test_every_number_has_a_reason(name):
+    d = load_domain(CONFIG / name)
+    assert all(rule.why for rule in d.rewards)
+    for i, line in enumerate((CONFIG / name).read_text().splitlines(), 1):
+        body = line.split("#")[0]
+        if re.search(r"\d", body) and not re.match(r"\s*(name|description):", body):
+            assert "#" in line or "why:" in line, f"{name}:{i}: a number without a reason: {line.strip()}"
+
+
+def test_user_present_implies_robot_with_user_is_kept_by_every_action(pearl):
+    d, m = pearl
+    with_user = (d.states_matching({"UserPresent": "yes"}) & ~(
+        d.states_matching({"RobotLocation": "room", "UserLocation": "room"}) |
+        d.states_matching({"RobotLocation": "physio", "UserLocation": "physio"})))
+    consistent = ~with_user  # UserPresent=yes only where the robot is at the user's location
+    assert m.b0[~consistent].sum() == 0
+    for a, Ta in enumerate(m.T_dense()):
+        leak = Ta[np.ix_(consistent, ~consistent)].sum(axis=1).max()
+        assert leak == 0, m.actions[a]
+
+
+def s(d, **kw):
+    base = dict(RobotLocation="home", UserLocation="room", UserPresent="no", ReminderGoal="none",
+                UserMotionGoal="none", UserInfoGoal="none", Battery="ok")
+    base.update(kw)
+    return d.state_index(base)
+
+
+def test_hand_checked_rewards(pearl):
+    d, m = pearl
+    R = lambda st, a: m.R[st, m.actions.index(a)]  # noqa: E731
+    assert R(s(d, RobotLocation="room", UserPresent="yes", ReminderGoal="physio"), "RemindPhysioAppt") == 50
+    assert R(s(d), "RemindPhysioAppt") == -210          # -200 unnecessary, -10 nobody there
+    assert R(s(d, RobotLocation="room", UserPresent="yes"), "RemindVitamin") == -200
+    assert R(s(d), "ConfirmGuideToPhysio") == -2
+    assert R(s(d), "GotoPatientRoom") == -5 and R(s(d, Battery="low"), "GotoPatientRoom") == -25
+    assert R(s(d), "DoNothing") == 0
+    assert R(s(d, RobotLocation="room", UserPresent="yes", UserMotionGoal="toPhysioWithRobot"), "GuideToPhysio") == 45
+    # motion costs more than any speech act that is not a mistake
+    speech = [a for a in d.actions if d.categories[a] == "Communicate"]
+    assert max(-m.R[:, m.actions.index(a)].min() for a in ("GotoPatientRoom", "GuideToPhysio", "GoHome")) > 0
+    assert all(m.R[:, m.actions.index(a)].max() >= -2 for a in speech)
+
+
+def test_hand_checked_transitions(pearl):
+    d, m = pearl
+    T = m.T_dense()
+    ring = m.actions.index("RingDoorBell")
+    at_door = s(d, RobotLocation="room")
+    # The resident opens (0.8); meanwhile no reminder (0.94), no question (0.94), battery holds (0.99).
+    assert T[ring, at_door, s(d, RobotLocation="room", UserPresent="yes")] == pytest.approx(0.8 * 0.94 * 0.94 * 0.99)
+    guide = m.actions.index("GuideToPhysio")
+    willing = s(d, RobotLocation="room", UserPresent="yes", UserMotionGoal="toPhysioWithRobot")
+    arrived = s(d, RobotLocation="physio", UserLocation="physio", UserPresent="yes", UserMotionGoal="toPhysioWithRobot")
+    # Both walk over; she stays engaged (0.98); no reminder, no question (0.94 each); battery drains while driving (0.95).
+    assert T[guide, willing, arrived] == pytest.approx(0.98 * 0.94 * 0.94 * 0.95)
+    remind = m.actions.index("RemindPhysioAppt")
+    due = s(d, RobotLocation="room", UserPresent="yes", ReminderGoal="physio")
+    accepted = s(d, RobotLocation="room", UserPresent="yes", UserMotionGoal="toPhysioWithRobot")
+    assert T[remind, due, accepted] == pytest.approx(0.98 * 0.8 * 0.94 * 0.99)
+
+
+def test_hand_checked_observations(pearl):
+    d, m = pearl
+    O = m.O
+    z = m.observations.index
+    wait = m.actions.index("DoNothing")
+    due_alone = s(d, ReminderGoal="physio")
+    assert O[wait, due_alone, z("g_physio")] == pytest.approx(0.3) and O[wait, due_alone, z("unknown")] == pytest.approx(0.7)
+    asks_time = s(d, RobotLocation="room", UserPresent="yes", UserInfoGoal="wantTime")
+    assert O[wait, asks_time, z("time")] == pytest.approx(0.7 * 0.55)
+    assert O[wait, asks_time, z("g_none")] == pytest.approx(0.3)
+    go = m.actions.index("GoHome")
+    assert O[go, s(d), z("atHome")] == pytest.approx(0.96)
+    # the touchscreen is reliable: a 't_time' is only ever produced by a user who wants the time
+    assert O[:, :, z("t_time")][:, d.states_matching({"UserInfoGoal": ["none", "wantWeather"]})].max() == 0
+    # 'go' is ambiguous: chatter produces it too
+    chat = s(d, RobotLocation="room", UserPresent="yes")
+    assert O[wait, chat, z("go")] > 0.05
+
+
+def test_start_marginals(pearl):
+    d, m = pearl
+    marg = d.feature_marginals(m.b0)
+    assert marg["RobotLocation"].tolist() == [1, 0, 0]
+    assert np.allclose(marg["Battery"], [0.9, 0.1])
+    assert marg["ReminderGoal"].tolist() == [1, 0, 0, 0]
+
+
+def test_structure_used_by_the_hierarchy(pearl):
+    d, _ = pearl
+    # Inform actions read only the user's question: what lets the Inform subtask drop every other feature.
+    for a in ("TellTime", "TellWeather", "ConfirmWantTime", "ConfirmWantWeather", "VerifyInfoRequest"):
+        assert d.reward_features(a) <= {"UserInfoGoal"}
+        assert d.observation_parents(a) == {"UserInfoGoal"}
+        assert d.transition_parents(a)["UserInfoGoal"] == ["UserInfoGoal"]
+    assert d.observation_parents("DoNothing") == {"ReminderGoal", "UserPresent", "UserInfoGoal", "UserMotionGoal"}
+    assert d.modality_of("t_go") == "Touchscreen"
