@@ -23,6 +23,7 @@ Compiled arrays follow the project conventions (DESIGN.md §2):
 """
 from __future__ import annotations
 
+import itertools
 import math
 import re
 from dataclasses import dataclass, field
@@ -678,11 +679,8 @@ class _Builder:
         shape = tuple(len(self.features[p]) for p in full_parents) + (n,)
         out = np.full(shape, np.nan)
 
-        def row_fn(row_node, rwhere, cont, rkey):
-            return ("row", row_node, rwhere, cont, rkey)
-
-        assigned = self.fill_rows(table, parents, where, spec, "table", row_fn)
-        # assigned: dict combo(tuple over `parents`) -> (row_node, rwhere, cont, rkey)
+        # combo (value indices of `parents`) -> (row node, its field path, container, key)
+        assigned = self.fill_rows(table, parents, where, spec, "table")
         for combo, (row_node, rwhere, cont, rkey) in assigned.items():
             if implicit_self:
                 for v in range(n):
@@ -694,7 +692,7 @@ class _Builder:
                                            current=cur, noun=f"value of {feat.name}")
         return _Cpt(tuple(full_parents), out, why)
 
-    def fill_rows(self, table: dict, parents: List[int], where: str, container: Any, key: Any, row_fn) -> Dict[tuple, tuple]:
+    def fill_rows(self, table: dict, parents: List[int], where: str, container: Any, key: Any) -> Dict[tuple, tuple]:
         """Match table rows (first match wins) to every parent-value combination; check coverage."""
         pvals = [self.features[p].values for p in parents]
         combos = {}
@@ -836,7 +834,7 @@ class _Builder:
         Z = len(self.symbols)
         shape = tuple(len(self.features[p]) for p in parents) + (Z,)
         out = np.full(shape, np.nan)
-        assigned = self.fill_rows(table, parents, where, spec, "table", None)
+        assigned = self.fill_rows(table, parents, where, spec, "table")
         rows_cache: Dict[int, np.ndarray] = {}
         for combo, (row_node, rwhere, cont, rkey) in assigned.items():
             if id(row_node) not in rows_cache:
@@ -979,8 +977,6 @@ def _persist(f: int, n: int) -> _Cpt:
 
 
 def _product(lists: Sequence[Iterable[int]]) -> Iterable[tuple]:
-    import itertools
-
     return itertools.product(*lists)
 
 
