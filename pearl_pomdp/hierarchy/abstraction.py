@@ -286,7 +286,8 @@ def abstract_subtask(sub: SubtaskModel, factors: StateFactors, domain=None, chil
     merge = sp.csr_matrix((np.ones(Z), (np.arange(Z), obs_to_model)), shape=(Z, C))
     cols_c = [(M @ merge).tocsr() for M in cols]  # [X·X', C]
     T_flat = [np.asarray(M.sum(axis=1)).ravel() for M in cols_c]  # [X·X'] = T_abs(x, a, x')
-    informative = [_informative([M[:, c] for M in cols_c], T_flat, tol) for c in range(C)]
+    T_cols = [_as_column(T) for T in T_flat]
+    informative = [_informative([M[:, c] for M in cols_c], T_cols, tol) for c in range(C)]
     class_names = [_class_name([model.observations[o] for o in members], informative[c])
                    for c, members in enumerate(classes)]
 
@@ -342,18 +343,19 @@ def _by_observation(Kx: sp.csr_matrix, X: int, Z: int) -> sp.csc_matrix:
     return sp.csc_matrix((coo.data, (coo.row * X + coo.col // Z, coo.col % Z)), shape=(X * X, Z))
 
 
-def _normalised(v) -> Optional[np.ndarray]:
-    """A non-negative vector (dense or sparse column) divided by its sum; ``None`` when it is zero."""
-    v = np.asarray(v.toarray() if sp.issparse(v) else v, dtype=float).ravel()
-    total = v.sum()
-    return None if total <= TOL else v / total
+def _as_column(v) -> sp.csc_matrix:
+    return v if sp.issparse(v) else sp.csc_matrix(np.asarray(v, dtype=float).reshape(-1, 1))
 
 
 def _proportional(u, v, tol: float) -> bool:
-    nu, nv = _normalised(u), _normalised(v)
-    if nu is None or nv is None:
-        return True  # a zero kernel: merging it changes no posterior
-    return bool(np.abs(nu - nv).max() <= tol * 100)
+    """True when two non-negative vectors (sparse columns or dense) are proportional (a zero one is
+    proportional to anything: merging it changes no posterior)."""
+    u, v = _as_column(u), _as_column(v)
+    su, sv = float(u.sum()), float(v.sum())
+    if su <= TOL or sv <= TOL:
+        return True
+    d = (u * (1.0 / su) - v * (1.0 / sv)).tocsc()
+    return d.nnz == 0 or bool(np.abs(d.data).max() <= tol * 100)
 
 
 def _merge_observations(cols: List[sp.csc_matrix], tol: float) -> List[List[int]]:
@@ -378,7 +380,6 @@ def _merge_observations(cols: List[sp.csc_matrix], tol: float) -> List[List[int]
         for c, cs in enumerate(class_sig):
             both = ~np.isnan(cs) & ~np.isnan(sigs[o])
             if np.all(np.abs(cs[both] - sigs[o][both]) <= 1e-9 * (1.0 + np.abs(cs[both]))):
-                rep = classes[c][0]
                 if all(_proportional(cols[a][:, o], _class_column(cols[a], classes[c]), tol) for a in range(A)):
                     classes[c].append(o)
                     class_sig[c] = np.where(np.isnan(cs), sigs[o], cs)
