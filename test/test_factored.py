@@ -247,3 +247,16 @@ def test_export_command_rejects_mismatched_extension(tmp_path, capsys):
     domain = Path(__file__).resolve().parents[1] / "config" / "table4.domain.yaml"
     assert main(["export", str(domain), "--format", "pomdp", "--out", str(tmp_path / "x.pomdpx")]) == 2
     assert "the extension says pomdpx but --format is pomdp" in capsys.readouterr().err
+
+
+def test_explicit_start():
+    text = edit("start:\n  Door: closed\n  Light: {off: 0.75, on: 0.25}\n",
+                "start:\n  states:\n    - {state: {Door: open, Light: on}, p: 0.6}\n"
+                "    - {state: {Door: closed, Light: off}, p: 0.4}\n")
+    assert np.allclose(parse_domain(text).compile().b0, [0.4, 0, 0, 0.6])
+    bad = text.replace("p: 0.4}", "p: 0.3}")
+    with pytest.raises(SpecError, match=r"start\.states: probabilities sum to 0\.9, expected 1"):
+        parse_domain(bad)
+    bad = text.replace("{Door: closed, Light: off}", "{Door: closed}")
+    with pytest.raises(SpecError, match=r"start\.states\[1\]\.state: missing feature Light"):
+        parse_domain(bad)

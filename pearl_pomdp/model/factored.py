@@ -212,6 +212,7 @@ class FactoredDomain:
     description: str = ""
     categories: Dict[str, str] = field(default_factory=dict)
     reward_shaping: Any = None
+    _start_explicit: Optional[np.ndarray] = field(default=None, repr=False)  # [S] when `start: {states: …}`
     _compiled: Optional[Pomdp] = field(default=None, repr=False)
     _state_values: Optional[np.ndarray] = field(default=None, repr=False)
 
@@ -399,7 +400,9 @@ class FactoredDomain:
         return R
 
     def start_belief(self) -> np.ndarray:
-        """``b0[S]``: the product of the per-feature start distributions."""
+        """``b0[S]``: the product of the per-feature start distributions (or the explicit one)."""
+        if self._start_explicit is not None:
+            return self._start_explicit.copy()
         b = np.ones(1)
         for dist in self._start:
             b = np.multiply.outer(b, dist).ravel()
@@ -538,12 +541,13 @@ class _Builder:
         observations = self.build_observations(d["observations"], d)
         rewards = self.build_rewards(d["rewards"], d)
         start = self.build_start(d.get("start"), d)
+        explicit = self.build_explicit_start(d.get("start"), d)
         keywords = self.build_keywords(d.get("keywords"), d)
         description = d.get("description", "")
         return FactoredDomain(
             name=name, source=self.source, features=self.features, actions=self.actions,
             modalities=self.modalities, discount=float(discount), keywords=keywords, rewards=rewards,
-            _transitions=transitions, _observations=observations, _start=start, horizon=horizon,
+            _transitions=transitions, _observations=observations, _start=start, _start_explicit=explicit, horizon=horizon,
             description=str(description or ""), categories=categories,
         )
 
@@ -940,6 +944,8 @@ class _Builder:
         if node is None:
             return dists
         node = self.need_map(node, "start", parent, "start")
+        if "states" in node:
+            return dists  # explicit start: see build_explicit_start
         for fname, spec in node.items():
             where = f"start.{fname}"
             f = self.feature_ref(fname, where, node, fname)
@@ -948,6 +954,51 @@ class _Builder:
             dists[f] = self.dist_row(spec, self.features[f].values, where, node, fname, allow_keep=False,
                                      noun=f"value of {fname}")
         return dists
+
+    def build_explicit_start(self, node: Any, parent: Any) -> Optional[np.ndarray]:
+        """``start: {states: [{state: {F: v, …every feature…}, p: prob}, …]}`` → ``b0[S]``."""
+        if not isinstance(node, dict) or "states" not in node:
+            return None
+        for key in node:
+            if key != "states":
+                raise self.fail(f"start.{key}", "an explicit start ('states') cannot be mixed with per-feature entries",
+                                node, key)
+        items = self.need_list(node["states"], "start.states", node, "states")
+        radix = [len(f) for f in self.features]
+        strides = np.concatenate([np.cumprod(radix[::-1])[::-1][1:], [1]]).astype(np.int64)
+        b0 = np.zeros(int(np.prod(radix)))
+        seen: Dict[int, int] = {}
+        for i, item in enumerate(items):
+            where = f"start.states[{i}]"
+            item = self.need_map(item, where, items, i)
+            for k in item:
+                if k not in ("state", "p", "why"):
+                    raise self.fail(f"{where}.{k}", "unknown key; expected state, p, why", item, k)
+            if "state" not in item or "p" not in item:
+                raise self.fail(where, "needs 'state' (a value for every feature) and 'p'", items, i)
+            assign = self.need_map(item["state"], f"{where}.state", item, "state")
+            digits = []
+            for f, feat in enumerate(self.features):
+                if feat.name not in assign:
+                    raise self.fail(f"{where}.state", f"missing feature {feat.name} (an explicit state names every "
+                                    "feature)", item, "state")
+                v = assign[feat.name]
+                v = str(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+                if v not in feat.values:
+                    raise self.fail(f"{where}.state.{feat.name}", f"unknown value {v!r} of {feat.name}; values: "
+                                    f"{', '.join(feat.values)}", assign, feat.name)
+                digits.append(feat.values.index(v))
+            for k in assign:
+                if k not in self.fnames:
+                    self.feature_ref(k, f"{where}.state.{k}", assign, k)
+            s = int(np.dot(digits, strides))
+            if s in seen:
+                raise self.fail(where, f"the same state as start.states[{seen[s]}]", items, i)
+            seen[s] = i
+            b0[s] = self.prob(item["p"], f"{where}.p", item, "p")
+        if abs(b0.sum() - 1.0) > ROW_TOLERANCE:
+            raise self.fail("start.states", f"probabilities sum to {b0.sum():.6g}, expected 1", node, "states")
+        return b0 / b0.sum()
 
     def build_keywords(self, node: Any, parent: Any) -> Dict[str, List[str]]:
         if node is None:
