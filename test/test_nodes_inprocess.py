@@ -218,3 +218,41 @@ def test_step_timeout_follows_sim_time(ros_context):
         np.testing.assert_allclose(g.tracker.protocol.belief, [0.15, 0.85])
         last = cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])
         assert last["observation"] == "hear-right" and last["step"] == 1
+
+
+def test_pearl_inputs_map_to_modality_symbols(ros_context, pearl_policy):
+    """The real Pearl domain: speech through the keyword filter, modality checks on symbol inputs."""
+    from pearl_pomdp.belief import BeliefFilter
+    from pearl_pomdp.hierarchy import load_hierarchical_policy
+    from pearl_pomdp.model.factored import load_domain
+    from ros_helpers import DOMAIN
+
+    context, _ = ros_context
+    domain = load_domain(DOMAIN)
+    model = domain.compile()
+    policy = load_hierarchical_policy(pearl_policy, domain)
+    with PearlGraph(context=context, domain=domain, model=model, decider=policy,
+                    overrides={"belief_tracker": {"step_timeout": 0.0}}) as g:
+        probe = _probe(g)
+        _set_clock(g, probe, 50.0)
+        assert _steps(g, probe, 1)
+        assert g.spin_until(lambda: g.tracker.protocol.step_open, 10.0)
+        a0 = _actions(probe)[0]
+        _say(probe, "touchscreen", "yes", g)  # a Speech symbol is not a Touchscreen symbol: invalid
+        _say(probe, "speech", "Could you tell me what TIME it is?", g)
+        assert _steps(g, probe, 2)
+        assert g.tracker.mapper.invalid["touchscreen"] == 1
+        last = cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])
+        assert (last["action"], last["observation"]) == (a0, "time")
+        expected = BeliefFilter(model).update(model.b0, model.actions.index(a0), model.observations.index("time"))
+        np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][-1]), expected, atol=1e-12)
+        for feature, marginal in domain.feature_marginals(expected).items():
+            values = [str(v) for v in next(f.values for f in domain.features if f.name == feature)]
+            assert [last["marginals"][feature][v] for v in values] == pytest.approx(marginal.tolist(), abs=1e-12)
+        assert _actions(probe)[1] == policy.execute(expected).action_name
+        # Speech with no keyword is the `unknown` observation, counted (not a warning, not dropped).
+        assert g.spin_until(lambda: g.tracker.protocol.step_open, 10.0)
+        _say(probe, "speech", "hmm", g)
+        assert _steps(g, probe, 3)
+        assert cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])["observation"] == "unknown"
+        assert g.tracker.counters()["unknown_speech"] == 1

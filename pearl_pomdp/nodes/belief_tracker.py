@@ -32,7 +32,7 @@ class ObservationMapper:
     * Speech text goes through the domain's keyword filter
       (:class:`pearl_pomdp.speech.KeywordFilter`): text with no keyword becomes the
       ``unknown`` symbol (still an observation — the robot heard something it did not
-      understand) and the filter counts the unknown words.
+      understand); such texts are counted (:attr:`unknown_speech`) and logged with their text.
     * Touchscreen / laser / reminder strings must be symbols of their modality
       (``t_yes``, ``atRoom``, ``g_physio`` …; blanks around them are ignored). Anything
       else is *invalid*: counted per input and reported, and no observation is made.
@@ -62,8 +62,8 @@ class ObservationMapper:
         self.speech_symbols = frozenset(modalities.get("speech", symbols))
 
     @property
-    def unknown_words(self) -> int:
-        """Words the keyword filter did not know (0 without a filter)."""
+    def unknown_speech(self) -> int:
+        """Speech texts with no keyword, classified as the unknown symbol (0 without a filter)."""
         return int(getattr(self.keyword_filter, "unknown_count", 0))
 
     def speech(self, text: str) -> Optional[str]:
@@ -114,7 +114,7 @@ class BeliefTrackerNode(PearlNode):
         * ``/pearl/belief_marginals`` (std_msgs/String JSON, TRANSIENT_LOCAL depth 1): step, action,
           observation and per-feature marginals (see :mod:`pearl_pomdp.nodes.conversions`).
         * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): counters (updates, timeouts,
-          queued/dropped observations, unknown words, invalid inputs, zero-likelihood
+          queued/dropped observations, speech without keywords, invalid inputs, zero-likelihood
           recoveries); WARN level once anything was dropped, invalid or recovered. Sent
           every ``diagnostics_period`` and at once when a warning counter grows.
 
@@ -169,7 +169,6 @@ class BeliefTrackerNode(PearlNode):
         self.mapper = ObservationMapper(model, domain, keyword_filter)
         self._reported_warnings = 0
         self._marginal_index = None
-        self._last_unknown_words = 0
 
         self.belief_pub = self.create_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
         self.marginals_pub = self.create_publisher(cv.TextMsg, p["marginals_topic"], LATCHED_QOS)
@@ -192,11 +191,11 @@ class BeliefTrackerNode(PearlNode):
 
     def _on_speech(self, msg) -> None:
         text = cv.msg_to_text(msg)
-        before = self.mapper.unknown_words
+        before = self.mapper.unknown_speech
         symbol = cv.msg_to_observation(msg, self.mapper.speech)
-        if self.mapper.unknown_words > before:
-            self.get_logger().info(f"speech {text!r}: {self.mapper.unknown_words - before} unknown word(s) "
-                                   f"(total {self.mapper.unknown_words})")
+        if self.mapper.unknown_speech > before:
+            self.get_logger().info(f"speech {text!r} has no keyword: observation {symbol!r} "
+                                   f"({self.mapper.unknown_speech} such texts so far)")
         if symbol is None:
             self.get_logger().warning(f"speech {text!r} maps to no observation symbol of {self.model.name}; "
                                       f"ignored (invalid speech inputs: {self.mapper.invalid['speech']})")
@@ -258,7 +257,7 @@ class BeliefTrackerNode(PearlNode):
     def counters(self) -> Dict[str, int]:
         """Every counter reported on /diagnostics."""
         out = dict(self.protocol.counters)
-        out["unknown_words"] = self.mapper.unknown_words
+        out["unknown_speech"] = self.mapper.unknown_speech
         for key, n in self.mapper.invalid.items():
             out[f"invalid_{key}"] = n
         return out
@@ -266,7 +265,7 @@ class BeliefTrackerNode(PearlNode):
     def _warning_total(self) -> int:
         c = self.counters()
         return (c["dropped_stale"] + c["dropped_overflow"] + c["replaced_actions"] + c["unknown_actions"]
-                + c["zero_likelihood"] + c["unknown_words"] + sum(c[f"invalid_{k}"] for k in self.mapper.invalid))
+                + c["zero_likelihood"] + sum(c[f"invalid_{k}"] for k in self.mapper.invalid))
 
     def publish_diagnostics(self) -> None:
         """Publish the counters on /diagnostics (WARN once any input was dropped/invalid/recovered)."""
