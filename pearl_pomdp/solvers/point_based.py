@@ -156,13 +156,31 @@ class PointBasedSolver:
         self.pruned = 0
         self._last_prune_K = self.K
         self.seconds = 0.0
+        #: Γ is pruned by usage only above this many entries (K·S; 40 M = 320 MB).
+        self.max_gamma_entries = 40_000_000
+        #: Skip the pointwise-dominance check when it would take more element comparisons.
+        self.max_dominance_work = 300_000_000
         #: Trials stop at width ε_t γ^{-d} with ε_t = max(ε, κ · gap(b0)). Shallow trials
         #: (large κ) refine the bounds near b0 (hallway2 gains most), deep ones carry distant
         #: rewards back (TagAvoid's chase needs them), so κ is picked per trial by a small
-        #: bandit: the arm with the best recent gap reduction per backup, every
+        #: bandit: the arm with the best recent LB(b0) gain per backup, every
         #: ``explore_every``-th trial the other arm (deterministic: costs are counted in backups).
         self.trial_kappa = (0.5, 0.2)
         self.explore_every = 4
+        #: Perseus rounds (Spaan & Vlassis 2005) over the beliefs the trials visited, to spread
+        #: lower-bound gains between trials: this many LB-only backups per trial backup.
+        self.perseus_share = 1.0
+        self.perseus_backups = 0
+        self._p_todo = None
+        #: Batched synchronous sweeps (PBVI) over all visited beliefs: one sweep after the
+        #: trials have done ``sweep_ratio`` backups per visited belief since the last one, when
+        #: the sweep's products are small enough (``sweep_max_flops``); else Perseus.
+        self.sweep_ratio = 0.5
+        self.sweep_max_flops = 4e8
+        self.sweeps = 0
+        self.sweep_backups = 0
+        self._trial_backups_at_sweep = 0
+        self._Tcsr = [sp.csr_matrix(t) for t in model.T]
         self._arm_gain = np.zeros(len(self.trial_kappa))
         self._arm_cost = np.zeros(len(self.trial_kappa))
         #: (seconds since the solver was built, LB(b0), UB(b0)) about every 0.5 s.
@@ -386,18 +404,33 @@ class PointBasedSolver:
             self.nodes[key] = node
         return node
 
-    def _update(self, node: _Node, U, C, live) -> Tuple[float, float]:
-        """Back up the lower bound and lower the upper bound at ``node``; returns (LB, UB) there."""
+    def _update(self, node: _Node, U, C, live, seen=None) -> Tuple[float, float]:
+        """Back up the lower bound and lower the upper bound at ``node``; returns (LB, UB) there.
+
+        ``seen = (lb [A,Z], best [A,Z], LB(b), K)`` are the lower bounds computed on the way
+        down against the first ``K`` vectors; only vectors added since are read again (Γ only
+        grows during a trial)."""
         g = self.g
-        lb, best = self._lower_children(U, C, live)
+        if seen is None:
+            lb, best = self._lower_children(U, C, live)
+            cur = self.lower(node.idx, node.val)
+        else:
+            lb, best, cur, K0 = seen
+            if self.K > K0:
+                lbf, bestf = lb.reshape(-1).copy(), best.reshape(-1).copy()
+                vals = C[live] @ self.GT[U, K0: self.K]                     # [L, new]
+                j = vals.argmax(axis=1)
+                v = vals[np.arange(live.size), j]
+                better = v > lbf[live]
+                lbf[live[better]] = v[better]
+                bestf[live[better]] = K0 + j[better]
+                lb, best = lbf.reshape(self.A, self.Z), bestf.reshape(self.A, self.Z)
+                cur = max(cur, float((node.val @ self.GT[node.idx, K0: self.K]).max()))
         Ql = node.Rb + g * (node.p * lb).sum(axis=1)
         a = int(np.argmax(Ql))
-        cur = self.lower(node.idx, node.val)
         self.backups += 1
         if Ql[a] > cur + 1e-10 * max(1.0, abs(cur)):
-            # α = R(:,a) + γ T[a] Σ_o O[a,:,o] ∘ Γ_{best(a,o)}  (the o-sum moves inside T[a]).
-            inner = (self.O[a] * self.GT[:, best[a]]).sum(axis=1)
-            alpha = self.R[:, a] + g * np.asarray(self.Tmats[a] @ inner).ravel()
+            alpha = self._alpha(a, best[a])
             self._add_alpha(alpha, a)
             cur = max(cur, float(node.val @ alpha[node.idx]))
         self.beliefs.setdefault(node.key, (node.idx, node.val))
@@ -416,8 +449,14 @@ class PointBasedSolver:
         return cur, node.ub
 
     # ------------------------------------------------------------ pruning
-    def prune(self) -> int:
-        """Drop α-vectors that are maximal at none of the backed-up beliefs (and not just added)."""
+    def prune(self, by_usage: bool = False) -> int:
+        """Drop pointwise-dominated α-vectors (never needed anywhere); with ``by_usage`` also
+        every vector that is maximal at none of the backed-up beliefs.
+
+        Usage pruning is kept for memory only (``K·S`` above ``max_gamma_entries``): the
+        vectors it drops still carry the lower bound at successor beliefs that were never
+        backed up themselves, and losing them slows the search down badly (TagAvoid).
+        Returns the number of vectors removed."""
         K = self.K
         if not self.beliefs or K <= self.A:
             return 0
@@ -432,7 +471,10 @@ class PointBasedSolver:
             B = sp.csr_matrix((data, (rows, cols)), shape=(len(part), self.S))
             vals = np.asarray(B @ self.GT[:, :K])
             used[vals.argmax(axis=1)] = True
-        keep = np.flatnonzero(used)
+        if by_usage:
+            keep = np.flatnonzero(used)
+        else:
+            keep = self._undominated(used)
         removed = K - keep.size
         if removed:
             self.GT[:, : keep.size] = self.GT[:, keep]
@@ -443,6 +485,22 @@ class PointBasedSolver:
         self.pruned += removed
         self._last_prune_K = self.K
         return removed
+
+    def _undominated(self, used: np.ndarray) -> np.ndarray:
+        """Indices of the vectors not pointwise dominated by a used one (when affordable)."""
+        K, S = self.K, self.S
+        w = np.flatnonzero(used)
+        rest = np.flatnonzero(~used)
+        if rest.size == 0 or w.size * rest.size * S > self.max_dominance_work:
+            return np.arange(K)
+        Gw = self.GT[:, w]                                             # [S, n_w]
+        dominated = np.zeros(rest.size, dtype=bool)
+        step = max(1, int(4_000_000 // max(1, S * w.size)))
+        for c0 in range(0, rest.size, step):
+            part = rest[c0: c0 + step]
+            ge = (Gw[:, :, None] >= self.GT[:, part][:, None, :] - 1e-12).all(axis=0)   # [n_w, n_p]
+            dominated[c0: c0 + step] = ge.any(axis=0)
+        return np.sort(np.concatenate([w, rest[~dominated]]))
 
     # ------------------------------------------------------------ search
     def bounds_at_start(self) -> Tuple[float, float]:
@@ -455,6 +513,116 @@ class PointBasedSolver:
             return 1
         d = np.log(eps_t * (1 - self.g) / self.r_span) / np.log(self.g)
         return int(min(max(d, 1), 1000))
+
+    def _alpha(self, a: int, best_a: np.ndarray) -> np.ndarray:
+        """α = R(:,a) + γ T[a] Σ_o O[a,:,o] ∘ Γ_{best_a[o]}  (the o-sum moves inside T[a])."""
+        inner = (self.O[a] * self.GT[:, best_a]).sum(axis=1)
+        return self.R[:, a] + self.g * np.asarray(self.Tmats[a] @ inner).ravel()
+
+    def _perseus_start(self) -> bool:
+        nodes = [n for n in self.nodes.values() if n.p is not None]
+        if len(nodes) < 2:
+            return False
+        rows = np.repeat(np.arange(len(nodes)), [n.idx.shape[0] for n in nodes])
+        cols = np.concatenate([n.idx for n in nodes])
+        data = np.concatenate([n.val for n in nodes])
+        self._p_B = sp.csr_matrix((data, (rows, cols)), shape=(len(nodes), self.S))
+        self._p_nodes = nodes
+        lb = np.full(len(nodes), -np.inf)
+        step = max(1, 2_000_000 // max(1, self.K))
+        for k0 in range(0, self.K, step):
+            lb = np.maximum(lb, np.asarray(self._p_B @ self.GT[:, k0: k0 + step]).max(axis=1))
+        self._p_lb = lb
+        self._p_todo = np.ones(len(nodes), dtype=bool)
+        return True
+
+    def _add_alphas(self, alphas: np.ndarray, action: int) -> None:
+        n = alphas.shape[0]
+        while self.K + n > self.cap:
+            self.cap *= 2
+            GT = np.zeros((self.S, self.cap))
+            GT[:, : self.K] = self.GT[:, : self.K]
+            self.GT = GT
+            self.gact = np.resize(self.gact, self.cap)
+            self.gbirth = np.resize(self.gbirth, self.cap)
+        self.GT[:, self.K: self.K + n] = alphas.T
+        self.gact[self.K: self.K + n] = action
+        self.gbirth[self.K: self.K + n] = self.backups
+        self.K += n
+
+    def sweep(self) -> bool:
+        """One synchronous point-based backup of every expanded belief, batched as sparse products
+        (PBVI, Pineau et al. 2003); adds the new vectors that improve their own belief.
+        Returns False (and does nothing) when the products would be too large."""
+        nodes = [n for n in self.nodes.values() if n.p is not None]
+        N, K, A, Z, S, g = len(nodes), self.K, self.A, self.Z, self.S, self.g
+        if N < 2:
+            return False
+        nnz = sum(n.idx.shape[0] for n in nodes)
+        if nnz * A * K * 4 > self.sweep_max_flops:
+            return False
+        rows = np.repeat(np.arange(N), [n.idx.shape[0] for n in nodes])
+        B = sp.csr_matrix((np.concatenate([n.val for n in nodes]), (rows, np.concatenate([n.idx for n in nodes]))),
+                          shape=(N, S))
+        G = self.GT[:, :K]
+        Ql = np.stack([n.Rb for n in nodes])                      # [N, A]
+        best = np.zeros((N, A, Z), dtype=np.int64)
+        for a in range(A):
+            Pa = (B @ self._Tcsr[a]).tocsr()                        # b·T[a], [N, S]
+            Pa.sum_duplicates()
+            for o in range(Z):
+                w = self.O[a, Pa.indices, o]
+                if not w.any():
+                    continue
+                Cao = sp.csr_matrix((Pa.data * w, Pa.indices, Pa.indptr), shape=(N, S))
+                V = np.asarray(Cao @ G)                               # [N, K], P(o|b,a)·Γ·b^{a,o}
+                j = V.argmax(axis=1)
+                best[:, a, o] = j
+                Ql[:, a] += g * V[np.arange(N), j]
+        cur = np.asarray(B @ G).max(axis=1)
+        an = Ql.argmax(axis=1)
+        qn = Ql[np.arange(N), an]
+        improve = qn > cur + 1e-10 * np.maximum(1.0, np.abs(cur))
+        chunk = max(1, int(2_000_000 // S))
+        for a in range(A):
+            sel = np.flatnonzero(improve & (an == a))
+            for c0 in range(0, sel.size, chunk):
+                part = sel[c0: c0 + chunk]
+                inner = np.zeros((part.size, S))
+                for o in range(Z):
+                    inner += self.GT[:, best[part, a, o]].T * self.O[a][:, o]
+                alphas = self.R[:, a][None, :] + g * np.asarray(self._Tcsr[a] @ inner.T).T
+                self._add_alphas(alphas, a)
+        self.sweeps += 1
+        self.sweep_backups += N
+        return True
+
+    def perseus(self, budget: int) -> None:
+        """Up to ``budget`` Perseus backups: a random belief of the round's to-do set is backed
+        up; every belief at which the new vector reaches its value from the start of the round
+        leaves the set; a new round starts (with the beliefs found since) when it is empty."""
+        done = 0
+        while done < budget:
+            if self._p_todo is None or not self._p_todo.any():
+                if not self._perseus_start():
+                    return
+            todo = np.flatnonzero(self._p_todo)
+            i = int(todo[self.rng.integers(todo.size)])
+            self._p_todo[i] = False
+            node = self._p_nodes[i]
+            U, C, live = self._successors(node)
+            lb, best = self._lower_children(U, C, live)
+            Ql = node.Rb + self.g * (node.p * lb).sum(axis=1)
+            a = int(np.argmax(Ql))
+            done += 1
+            self.perseus_backups += 1
+            if Ql[a] <= self._p_lb[i] + 1e-10 * max(1.0, abs(self._p_lb[i])):
+                continue
+            alpha = self._alpha(a, best[a])
+            if Ql[a] > self.lower(node.idx, node.val) + 1e-10 * max(1.0, abs(Ql[a])):
+                self._add_alpha(alpha, a)
+            covered = np.asarray(self._p_B @ alpha).ravel() >= self._p_lb
+            self._p_todo &= ~covered
 
     def _pick_arm(self) -> int:
         n = len(self.trial_kappa)
@@ -470,27 +638,29 @@ class PointBasedSolver:
     def trial(self, eps_t: float) -> None:
         g, Z = self.g, self.Z
         node = self.root
-        path: List[Tuple[_Node, int]] = []
+        path: list = []
         d = 0
         max_d = self._max_depth(eps_t)
         while True:
             U, C, live = self._successors(node)
-            lb, _ = self._lower_children(U, C, live)
+            lb, best = self._lower_children(U, C, live)
+            seen = (lb, best, self.lower(node.idx, node.val), self.K)
             Qu = node.Rb + g * (node.p * node.ub_c).sum(axis=1)
             Ql = node.Rb + g * (node.p * lb).sum(axis=1)
             u = min(node.ub, float(Qu.max()))
-            l = max(float(Ql.max()), self.lower(node.idx, node.val))
+            # One-step lookahead of the LB (≥ LB(b) for the uniformly improvable bounds kept here).
+            l = float(Ql.max())
             if u - l <= eps_t * g ** (-d) or d >= max_d:
-                path.append((node, -1))
+                path.append((node, -1, U, C, live, seen))
                 break
             a = int(np.argmax(Qu))
             thr = eps_t * g ** (-(d + 1))
             score = node.p[a] * (node.ub_c[a] - lb[a] - thr) + self.z_jitter
             o = int(np.argmax(score))
             if node.p[a, o] <= 0.0:
-                path.append((node, -1))
+                path.append((node, -1, U, C, live, seen))
                 break
-            path.append((node, a * Z + o))
+            path.append((node, a * Z + o, U, C, live, seen))
             child = node.children.get(a * Z + o)
             if child is None:
                 c = C[a * Z + o]
@@ -502,13 +672,12 @@ class PointBasedSolver:
             d += 1
         # Back up along the path, deepest first, refreshing each parent's cached successor bound.
         for i in range(len(path) - 1, -1, -1):
-            node, ao = path[i]
+            node, ao, U, C, live, seen = path[i]
             if ao >= 0:
                 child = node.children[ao]
                 a, o = divmod(ao, Z)
                 node.ub_c[a, o] = min(node.ub_c[a, o], child.ub)
-            U, C, live = self._successors(node)
-            self._update(node, U, C, live)
+            self._update(node, U, C, live, seen)
         self.trials += 1
 
     def run(self, time_limit: float = 60.0, epsilon: float = 1e-3, progress: bool = False,
@@ -533,15 +702,31 @@ class PointBasedSolver:
             gap = hi - lo
             arm = self._pick_arm()
             eps_t = max(epsilon, self.trial_kappa[arm] * gap) if gap > 10 * epsilon else epsilon * 0.5
-            b_before = self.backups
+            b_before, lo_before = self.backups, lo
             self.trial(eps_t)
-            if self.K > 2 * self._last_prune_K + 50:
+            if self.K * self.S > self.max_gamma_entries:
+                self.prune(by_usage=True)
+            elif self.K > 2 * self._last_prune_K + 50:
                 self.prune()
             lo, hi = self.bounds_at_start()
             converged = hi - lo <= epsilon
             # Discounted totals: an arm's rate follows the recent phase of the search.
-            self._arm_gain[arm] = 0.95 * self._arm_gain[arm] + max(gap - (hi - lo), 0.0)
+            # The lower bound is what the policy is worth, so arms are rated by LB gains.
+            self._arm_gain[arm] = 0.95 * self._arm_gain[arm] + max(lo - lo_before, 0.0)
             self._arm_cost[arm] = 0.95 * self._arm_cost[arm] + (self.backups - b_before)
+            if not converged:
+                swept = False
+                if self.sweep_ratio > 0 and \
+                        self.backups - self._trial_backups_at_sweep >= self.sweep_ratio * len(self.nodes):
+                    swept = self.sweep()
+                    if swept:
+                        self._trial_backups_at_sweep = self.backups
+                if not swept and self.perseus_share > 0:
+                    owed = int(self.perseus_share * self.backups) - self.perseus_backups
+                    if owed > 0:
+                        self.perseus(owed)
+                lo, hi = self.bounds_at_start()
+                converged = hi - lo <= epsilon
             if now - last_hist >= 0.5 or converged:
                 history.append((round(offset + self._clock() - t0, 3), lo, hi))
                 last_hist = now
@@ -562,7 +747,9 @@ class PointBasedSolver:
             extra={
                 "gap": hi - lo, "backups": self.backups, "vectors": self.K, "ub_points": self.pt_n,
                 "beliefs": len(self.beliefs), "pruned": self.pruned, "fib_iterations": self.fib_iterations, "nodes": len(self.nodes),
-                "fib_seconds": self.fib_seconds, "history": list(history),
+                "fib_seconds": self.fib_seconds, "perseus_backups": self.perseus_backups,
+                "sweeps": self.sweeps, "sweep_backups": self.sweep_backups,
+                "history": list(history),
             },
         )
 
