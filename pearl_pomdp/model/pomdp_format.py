@@ -1031,7 +1031,8 @@ def format_pomdp(model: Pomdp) -> str:
     st_names, st_ren = _file_names(model.states, "s")
     ac_names, ac_ren = _file_names(model.actions, "a")
     ob_names, ob_ren = _file_names(model.observations, "o")
-    w(f"# {model.name}: written by pearl_pomdp ({S} states, {A} actions, {Z} observations)")
+    title = " ".join(str(model.name).split()).encode("ascii", "replace").decode("ascii")
+    w(f"# {title}: written by pearl_pomdp ({S} states, {A} actions, {Z} observations)")
     if st_ren or ac_ren or ob_ren:
         w("# names that are not .pomdp identifiers were renamed (other characters became '_')")
     w("")
