@@ -13,7 +13,7 @@ from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.model.pomdp_format import RESERVED_WORDS, format_pomdp, parse_pomdp
 from pearl_pomdp.model.pomdpx import format_pomdpx, parse_pomdpx
 
-FUZZ = settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 TIGER = """discount: 0.95
 values: reward
@@ -167,19 +167,19 @@ def _identical(m: Pomdp, m2: Pomdp):
     assert m2.fingerprint() == m.fingerprint()
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(models())
 def test_random_models_round_trip_pomdp(m):
     _identical(m, parse_pomdp(format_pomdp(m)))
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(models())
 def test_random_models_round_trip_pomdpx(m):
     _identical(m, parse_pomdpx(format_pomdpx(m)))
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.data())
 def test_pomdpx_mutations(data):
     text = format_pomdpx(parse_pomdp(TIGER))
