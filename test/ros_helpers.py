@@ -218,5 +218,23 @@ def pearl_policy(request, tmp_path_factory) -> Path:
     if not ((cache / "hierarchy.json").is_file() and _policy_fits(cache, domain)):
         from pearl_pomdp.hierarchy import load_hierarchy, plan
 
-        plan(domain, load_hierarchy(HIERARCHY, domain)).save(cache)
+        # Plan into a private directory and rename it into place: parallel workers (xdist)
+        # never see a half-written policy; if another worker won the race, use its policy.
+        tmp = root / f"{cache.name}.tmp{os.getpid()}"
+        plan(domain, load_hierarchy(HIERARCHY, domain)).save(tmp)
+        try:
+            if cache.exists() and not _policy_fits(cache, domain):
+                import shutil
+
+                shutil.rmtree(cache)  # an unusable leftover
+            if not cache.exists():
+                os.rename(tmp, cache)
+        except OSError:
+            if not (cache / "hierarchy.json").is_file():
+                raise
+        finally:
+            if tmp.exists():
+                import shutil
+
+                shutil.rmtree(tmp, ignore_errors=True)
     return cache
