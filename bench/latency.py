@@ -10,6 +10,10 @@ message. Steps run back to back, each after the previous action arrived.
 * ``multiprocess``: ``pearl launch launch/pearl.launch.xml`` (three node processes over Fast DDS
   on a private ROS_DOMAIN_ID, localhost discovery), the probe in this process.
 
+* ``relay_baseline_3_hops`` (with multiprocess): the same three DDS hops through two plain
+  rclpy relay processes that only republish — the floor set by rclpy + Fast DDS + the machine's
+  load, to tell the nodes' own cost from the transport's.
+
 Prints one JSON object: per mode p50/p90/p99/max/mean in ms over ``--steps`` steps (after
 ``--warmup``), plus the machine load. Target (issue 5): multi-process p99 < 10 ms.
 
@@ -172,12 +176,90 @@ def run_multiprocess(policy_dir, steps, warmup):
         err.close()
 
 
+RELAY = """
+import sys, rclpy
+from rclpy.executors import ExternalShutdownException
+from std_msgs.msg import String
+from pearl_pomdp.nodes.common import INPUT_QOS
+rclpy.init(args=sys.argv)
+node = rclpy.create_node(sys.argv[1])
+pub = node.create_publisher(String, sys.argv[3], INPUT_QOS)
+node.create_subscription(String, sys.argv[2], pub.publish, INPUT_QOS)
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+"""
+
+
+def run_relay_baseline(steps, warmup, timeout=10.0):
+    """The same three DDS hops with no Pearl work: probe → relay1 → relay2 → probe (rclpy floor)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from pearl_pomdp.nodes import conversions as cv
+    from pearl_pomdp.nodes.common import INPUT_QOS
+
+    domain_id = _domain_id(3)
+    log_dir = Path(tempfile.mkdtemp(prefix="pearl_relay_"))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_profile.xml"), ROS_LOG_DIR=str(log_dir))
+    relays = [subprocess.Popen([sys.executable, "-c", RELAY, name, src, dst], cwd=REPO, env=env,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+              for name, src, dst in (("relay1", "/relay/a", "/relay/b"), ("relay2", "/relay/b", "/relay/c"))]
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node("relay_probe", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    got = []
+    node.create_subscription(cv.TextMsg, "/relay/c", lambda m: got.append(time.perf_counter()), INPUT_QOS)
+    pub = node.create_publisher(cv.TextMsg, "/relay/a", INPUT_QOS)
+    try:
+        deadline = time.monotonic() + 60.0
+        while not got:  # ping until the chain is matched end to end
+            if time.monotonic() > deadline:
+                raise RuntimeError("relay chain not ready within 60 s")
+            pub.publish(cv.text_to_msg("ping"))
+            executor.spin_once(timeout_sec=0.1)
+        time.sleep(0.2)
+        executor.spin_once(timeout_sec=0.0)
+        latencies = []
+        for i in range(steps + warmup):
+            n = len(got)
+            start = time.perf_counter()
+            pub.publish(cv.text_to_msg("what time is it"))
+            step_deadline = time.monotonic() + timeout
+            while len(got) == n:
+                if time.monotonic() > step_deadline:
+                    raise RuntimeError(f"relay: nothing back within {timeout} s at step {i}")
+                executor.spin_once(timeout_sec=SPIN_TIMEOUT)
+            if i >= warmup:
+                latencies.append(got[n] - start)
+        return latencies
+    finally:
+        for r in relays:
+            r.send_signal(signal.SIGINT)
+        for r in relays:
+            try:
+                r.wait(20)
+            except subprocess.TimeoutExpired:
+                r.kill()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--policy", help="planned Pearl policy directory (pearl plan --out DIR)")
     parser.add_argument("--steps", type=int, default=1000)
     parser.add_argument("--warmup", type=int, default=50)
     parser.add_argument("--mode", choices=["inprocess", "multiprocess", "both"], default="both")
+    parser.add_argument("--no-baseline", action="store_true",
+                        help="skip the rclpy relay baseline (same three hops, no Pearl work)")
     parser.add_argument("--inputs", choices=["resident", "cycle"], default="resident",
                         help="resident: answer the robot's actions plausibly (default); cycle: fixed input cycle")
     parser.add_argument("--no-parameter-services", action="store_true",
@@ -198,6 +280,9 @@ def main(argv=None):
     if args.mode in ("multiprocess", "both"):
         print("multi-process ...", file=sys.stderr)
         out["multiprocess"] = _stats(run_multiprocess(policy, args.steps, args.warmup))
+        if not args.no_baseline:
+            print("relay baseline ...", file=sys.stderr)
+            out["relay_baseline_3_hops"] = _stats(run_relay_baseline(args.steps, args.warmup))
         out["target_multiprocess_p99_ms"] = 10.0
         out["target_met"] = out["multiprocess"]["p99_ms"] < 10.0
     out["load_after"] = [round(x, 2) for x in os.getloadavg()]
