@@ -105,6 +105,8 @@ def _clock_ns(data: bytes) -> int:
     """The time in a CDR-encoded rosgraph_msgs/Clock, in ns."""
     import struct
 
+    if len(data) < 12:
+        raise ValueError(f"{len(data)} bytes is shorter than a CDR Clock (12)")
     fmt = "<iI" if data[1] == 1 else ">iI"
     sec, nsec = struct.unpack_from(fmt, data, 4)
     return sec * 1_000_000_000 + nsec
@@ -285,7 +287,11 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
             if bar is not None:
                 bar.update(1)
             if m.topic == wk.CLOCK_TOPIC:
-                t = _clock_ns(m.data)
+                try:
+                    t = _clock_ns(m.data)
+                except ValueError as err:
+                    raise BagError(f"{reader.path}: topic {wk.CLOCK_TOPIC}: message at log time {m.log_time} "
+                                   f"is not a rosgraph_msgs/Clock: {err}") from None
                 if coalesce_clock:
                     if pending is not None:
                         skipped += 1  # superseded: no callback can run between the two

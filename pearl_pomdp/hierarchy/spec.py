@@ -150,6 +150,10 @@ class Hierarchy:
 
 
 # --------------------------------------------------------------------- YAML with lines
+#: Most YAML nodes a hierarchy file may expand to (with its aliases expanded).
+_MAX_NODES = 100_000
+
+
 def _compose(text: str, source: str):
     """Parse YAML into plain Python objects plus ``{field.path: line}`` (1-based)."""
     try:
@@ -160,8 +164,16 @@ def _compose(text: str, source: str):
                         line=(mark.line + 1) if mark else None) from None
     lines: Dict[str, int] = {}
     constructor = yaml.SafeLoader("")
+    built = [0]
 
     def build(n, path: str):
+        # Aliases are expanded here (each path gets its own copy): a small file of nested
+        # aliases ("billion laughs") would otherwise take exponential time and memory.
+        built[0] += 1
+        if built[0] > _MAX_NODES:
+            raise SpecError(source, path, f"the document expands to more than {_MAX_NODES:,} YAML nodes "
+                                          f"(nested aliases?); hierarchy files are far smaller",
+                            line=n.start_mark.line + 1)
         lines.setdefault(path, n.start_mark.line + 1)
         if isinstance(n, yaml.MappingNode):
             out = {}
@@ -180,7 +192,13 @@ def _compose(text: str, source: str):
 
     if node is None:
         raise SpecError(source, "", "the file is empty; expected a mapping with 'root' and 'subtasks'")
-    return build(node, ""), lines
+    try:
+        return build(node, ""), lines
+    except (yaml.YAMLError, ValueError, TypeError) as err:
+        # A tag SafeLoader refuses (!!python/...) or cannot convert (!!int abc, unhashable key).
+        mark = getattr(err, "problem_mark", None)
+        raise SpecError(source, "", f"not valid YAML: {getattr(err, 'problem', None) or err}",
+                        line=(mark.line + 1) if mark else None) from None
 
 
 class _Checker:

@@ -98,6 +98,23 @@ _MAX_O_ENTRIES = 200_000_000
 _EXPANSION_BUDGET = 30_000_000
 
 PathLike = Union[str, Path]
+
+
+class _Numbered(Sequence):
+    """The names ``"0" .. "n-1"`` of numbered entities, without storing them."""
+
+    def __init__(self, n: int):
+        self.n = n
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, j):
+        if isinstance(j, slice):
+            return [str(k) for k in range(self.n)[j]]
+        if not -self.n <= j < self.n:
+            raise IndexError(j)
+        return str(j % self.n)
 _KINDS = ("states", "actions", "observations")
 
 
@@ -488,7 +505,13 @@ class _Parser:
                 if not 1 <= count <= _MAX_COUNT:
                     self.fail(self.i, kw, f"number of {kw} must be between 1 and {_MAX_COUNT:,}, got {count}")
                 self.i += 1
-                names = [str(j) for j in range(count)]
+                # Numbered entities: names are built only once the model's size is checked
+                # (a 40-byte "states: 9999999" must not allocate a name list first); `ref`
+                # resolves numbers without an index.
+                self.names[kw] = _Numbered(count)
+                self.index[kw] = {}
+                self.counts[kw] = count
+                return
             else:
                 names = []
                 while True:
@@ -855,7 +878,8 @@ class _Parser:
         if values == "cost":
             R = -R
         try:
-            model = Pomdp.create(self.names["states"], self.names["actions"], self.names["observations"],
+            model = Pomdp.create(list(self.names["states"]), list(self.names["actions"]),
+                                 list(self.names["observations"]),
                                  T, O, R, b0=b0, discount=self.discount, name=name, tolerance=1e-6)
         except ValueError as err:  # should not happen after our checks; keep the contract
             raise ModelFormatError(self.source, "", str(err)) from None
