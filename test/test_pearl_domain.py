@@ -83,7 +83,8 @@ def test_hand_checked_rewards(pearl):
     assert R(s(d), "RemindPhysioAppt") == -210          # -200 unnecessary, -10 nobody there
     assert R(s(d, RobotLocation="room", UserPresent="yes"), "RemindVitamin") == -200
     assert R(s(d), "ConfirmGuideToPhysio") == -2
-    assert R(s(d), "GotoPatientRoom") == -5 and R(s(d, Battery="low"), "GotoPatientRoom") == -25
+    assert R(s(d), "GotoPatientRoom") == -5
+    assert R(s(d, Battery="low"), "RechargeBattery") == 10 and R(s(d), "RechargeBattery") == -2
     assert R(s(d), "DoNothing") == 0
     assert R(s(d, RobotLocation="room", UserPresent="yes", UserMotionGoal="toPhysioWithRobot"), "GuideToPhysio") == 45
     # motion costs more than any speech act that is not a mistake
@@ -117,9 +118,9 @@ def test_hand_checked_observations(pearl):
     wait = m.actions.index("DoNothing")
     due_alone = s(d, ReminderGoal="physio")
     assert O[wait, due_alone, z("g_physio")] == pytest.approx(0.3) and O[wait, due_alone, z("unknown")] == pytest.approx(0.7)
-    asks_time = s(d, RobotLocation="room", UserPresent="yes", UserInfoGoal="wantTime")
-    assert O[wait, asks_time, z("time")] == pytest.approx(0.7 * 0.55)
-    assert O[wait, asks_time, z("g_none")] == pytest.approx(0.3)
+    wants_walk = s(d, RobotLocation="room", UserPresent="yes", UserMotionGoal="toPhysioWithRobot")
+    assert O[wait, wants_walk, z("go")] == pytest.approx(0.7 * 0.45)     # the user source speaks 70% of steps
+    assert O[wait, wants_walk, z("g_none")] == pytest.approx(0.3)
     go = m.actions.index("GoHome")
     assert O[go, s(d), z("atHome")] == pytest.approx(0.96)
     # the touchscreen is reliable: a 't_time' is only ever produced by a user who wants the time
