@@ -8,6 +8,8 @@ References:
       upper bound, excess-uncertainty depth rule).
     * H. Kurniawati, D. Hsu, W. S. Lee. "SARSOP: efficient point-based POMDP
       planning by approximating optimally reachable belief spaces", RSS 2008.
+    * M. Spaan, N. Vlassis. "Perseus: randomized point-based value iteration
+      for POMDPs", JAIR 24, 2005.
 
 Conventions (DESIGN.md §2): ``T[a][s, s'] = P(s'|s,a)`` (dense or scipy CSR),
 ``O[a, s', o] = P(o|s',a)``, ``R[s, a]``, ``b0[s]``, discount ``γ < 1``.
@@ -24,16 +26,28 @@ The solver keeps
 Each *trial* walks forward from ``b0``: at belief ``b`` (depth ``d``) it takes
 the action with the best upper bound and the observation with the largest
 weighted excess uncertainty ``P(o|b,a)·(UB − LB − ε_t γ^{-(d+1)})``, and stops
-when the width at ``b`` is within ``ε_t γ^{-d}``. On the way back it backs up
-the lower bound at every visited belief (one new α-vector when it improves the
-bound there) and lowers the upper-bound point there. All per-belief work is
-vectorised over (action, observation) pairs and restricted to the states the
-belief can reach, with T stored as one sparse ``S × (A·S)`` block, so models
-with ten thousand states (RockSample[7,8]) stay cheap. Vectors that are not
-maximal at any backed-up belief are pruned periodically.
+when the width at ``b`` is within ``ε_t γ^{-d}``, ``ε_t = max(ε, κ·gap(b0))``
+(κ ∈ {0.5, 0.2} picked per trial by a small deterministic bandit on LB gain per
+backup). On the way back it backs up the lower bound at every visited belief
+(one new α-vector when it improves the bound there) and lowers the upper bound
+there. Visited beliefs form a graph that caches successor upper bounds (valid
+because upper bounds only decrease), as SARSOP's belief tree does.
 
-The search is deterministic; ``seed`` only fixes the order in which exactly
-tied observations are considered.
+Between trials the lower bound is also spread over all visited beliefs: as
+many Perseus backups as trial backups (Spaan & Vlassis 2005: randomised
+backups; a belief leaves the round once a new vector reaches its old value),
+and, when its sparse products are small enough, a batched synchronous PBVI
+sweep over every visited belief each time the trials have done half as many
+backups as there are visited beliefs. All per-belief work is vectorised over (action, observation) pairs
+and restricted to the states the belief can reach, with T gathered from one
+CSR ``S × (A·S)`` block, so ten thousand states (RockSample[7,8]) stay cheap.
+Pruning keeps the vectors that are maximal at a visited belief or at one of
+its successors (vectors serving only successors matter: without them TagAvoid's
+search stalls); by visited beliefs alone when Γ grows past a memory cap.
+
+The search is deterministic (costs are counted in backups, not seconds, except
+for the time limit itself); ``seed`` fixes the Perseus order and the order in
+which exactly tied observations are considered.
 """
 from __future__ import annotations
 
@@ -93,7 +107,7 @@ class PointBasedSolver:
         self.R = np.ascontiguousarray(model.R, dtype=float)
         self.O = np.ascontiguousarray(model.O, dtype=float)
         self.rng = np.random.default_rng(seed)
-        # Tie-break order for observations (the only use of the seed).
+        # Observation tie-break order and the Perseus order come from the seed.
         self.z_jitter = self.rng.permutation(self.Z) * 1e-15
         S, A = self.S, self.A
         # T as one S × (A·S) block: the successors of a belief under all actions are one
@@ -766,14 +780,16 @@ def solve_point_based(model: Pomdp, time_limit: float = 60.0, epsilon: float = 1
         model: the POMDP (``γ < 1``).
         time_limit: wall-clock seconds for the search (FIB initialisation included).
         epsilon: stop when ``UB(b0) − LB(b0) ≤ epsilon``.
-        seed: fixes tie-breaking among observations (the search is otherwise deterministic).
+        seed: fixes the Perseus order and tie-breaking among observations.
         progress: show LB/UB/gap on a tqdm line (stderr).
 
     Returns:
         :class:`SolveResult` with method ``"pointbased"``: the lower-bound α-vectors as the
         policy, ``value_at_start`` = LB(b0), ``upper_bound`` = UB(b0), ``iterations`` = trials,
-        ``converged`` when the gap reached ``epsilon``; ``extra`` has ``gap``, ``backups``,
-        ``vectors``, ``ub_points``, ``beliefs``, ``pruned``.
+        ``converged`` when the gap reached ``epsilon``; ``extra`` has ``gap``, ``backups``
+        (trial backups), ``perseus_backups``, ``sweeps``, ``vectors``, ``ub_points``, ``beliefs``,
+        ``pruned``, ``fib_iterations``, ``setup_seconds`` and ``history`` (``[seconds, LB, UB]``
+        about every 0.5 s).
     """
     t0 = time.perf_counter()
     solver = PointBasedSolver(model, seed=seed, fib_time=max(0.5, 0.1 * time_limit))
