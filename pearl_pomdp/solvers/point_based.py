@@ -172,6 +172,8 @@ class PointBasedSolver:
         self.seconds = 0.0
         #: Γ is pruned by usage only above this many entries (K·S; 40 M = 320 MB).
         self.max_gamma_entries = 40_000_000
+        #: Keep vectors maximal at successors of visited beliefs when pruning (see ``prune``).
+        self.prune_keeps_successors = True
         #: Trials stop at width ε_t γ^{-d} with ε_t = max(ε, κ · gap(b0)). Shallow trials
         #: (large κ) refine the bounds near b0 (hallway2 gains most), deep ones carry distant
         #: rewards back (TagAvoid's chase needs them), so κ is picked per trial by a small
@@ -485,7 +487,7 @@ class PointBasedSolver:
             B = sp.csr_matrix((data, (rows, cols)), shape=(len(part), self.S))
             vals = np.asarray(B @ self.GT[:, :K])
             used[vals.argmax(axis=1)] = True
-        if by_usage:
+        if by_usage or not self.prune_keeps_successors:
             keep = np.flatnonzero(used)
         else:
             # Keep what is maximal at a backed-up belief or at one of its successors (batched);
