@@ -11,6 +11,7 @@ launch file; build it in a Python process with :class:`BeliefTrackerNode`.
 from __future__ import annotations
 
 import sys
+import time
 from typing import Callable, Dict, List, Optional
 
 import numpy as np
@@ -115,8 +116,11 @@ class BeliefTrackerNode(PearlNode):
           observation and per-feature marginals (see :mod:`pearl_pomdp.nodes.conversions`).
         * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): counters (updates, timeouts,
           queued/dropped observations, speech without keywords, invalid inputs, zero-likelihood
-          recoveries); WARN level once anything was dropped, invalid or recovered. Sent
-          every ``diagnostics_period`` and at once when a warning counter grows.
+          recoveries, ``lost_inputs``: input messages DDS dropped before the node took them,
+          from gaps in each publisher's sequence numbers); WARN level once anything was
+          dropped, invalid, lost or recovered. Sent every ``diagnostics_period`` and at once
+          (at most every 0.1 s) when a warning counter grows. Per-input log lines are
+          throttled to one per second per kind; the counters stay exact.
 
     In-process use (tests, replay): ``BeliefTrackerNode(context=ctx,
     parameter_overrides={"domain": path, "use_sim_time": True}, domain=dom, model=model)``;
@@ -169,23 +173,52 @@ class BeliefTrackerNode(PearlNode):
         self.mapper = ObservationMapper(model, domain, keyword_filter)
         self._reported_warnings = 0
         self._marginal_index = None
+        # Inputs DDS dropped before this node took them (a reader queue of INPUT_QOS depth
+        # overflowing under a flood): gaps in each publisher's sequence numbers.
+        self.lost_inputs = 0
+        self._last_seq: Dict[str, int] = {}
+        self._last_diag = -1.0
 
         self.belief_pub = self.create_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
         self.marginals_pub = self.create_publisher(cv.TextMsg, p["marginals_topic"], LATCHED_QOS)
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
-        self.create_subscription(cv.TextMsg, p["speech_topic"], self._on_speech, INPUT_QOS)
+        self.create_subscription(cv.TextMsg, p["speech_topic"], self._counted("speech", self._on_speech), INPUT_QOS)
         for key in SYMBOL_INPUTS:
-            self.create_subscription(cv.TextMsg, p[f"{key}_topic"], self._symbol_callback(key), INPUT_QOS)
+            self.create_subscription(cv.TextMsg, p[f"{key}_topic"], self._counted(key, self._symbol_callback(key)),
+                                     INPUT_QOS)
         self.create_subscription(cv.TextMsg, p["action_topic"], self._on_action, LATCHED_QOS)
         if p["step_timeout"] > 0:
             # Poll at a tenth of the timeout: the step closes at most 10 % late, in node-clock time.
             self.create_timer(max(p["step_timeout"] / 10.0, 0.005), self._on_tick)
         self.create_timer(p["diagnostics_period"], self.publish_diagnostics)
+        # Warnings held back by the 0.1 s limit go out within 0.1 s of wall time (even when
+        # sim time stands still).
+        from rclpy.clock import Clock, ClockType
+
+        self.create_timer(0.1, self._flush_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._publish_belief(None)
         self.get_logger().info(f"tracking {model.name}: {model.num_states} states, {model.num_observations} "
                                f"observations; step_timeout {p['step_timeout']} s → {p['timeout_observation']!r}")
 
     # ----------------------------------------------------------- callbacks
+    def _counted(self, key: str, callback: Callable) -> Callable:
+        """Wrap an input callback: count messages lost before it (sequence-number gaps).
+
+        rclpy's message info has the writer's sequence number but not the writer's id, so
+        gaps are tracked per topic: exact with one publisher per input topic (the Pearl
+        graph); with several publishers on one topic a restart can make ``lost_inputs`` over-count.
+        """
+        def on_input(msg, info) -> None:
+            seq = info.get("publication_sequence_number") if isinstance(info, dict) else None
+            if seq:
+                last = self._last_seq.get(key)
+                if last is not None and seq > last + 1:
+                    self.lost_inputs += seq - last - 1
+                self._last_seq[key] = seq
+            callback(msg)
+
+        return on_input
+
     def _on_action(self, msg) -> None:
         self._handle(self.protocol.on_action(cv.msg_to_action(msg), self.now_s()))
 
@@ -195,11 +228,12 @@ class BeliefTrackerNode(PearlNode):
         symbol = cv.msg_to_observation(msg, self.mapper.speech)
         if self.mapper.unknown_speech > before:
             self.get_logger().info(f"speech {text!r} has no keyword: observation {symbol!r} "
-                                   f"({self.mapper.unknown_speech} such texts so far)")
+                                   f"({self.mapper.unknown_speech} such texts so far)", throttle_duration_sec=1.0)
         if symbol is None:
             self.get_logger().warning(f"speech {text!r} maps to no observation symbol of {self.model.name}; "
-                                      f"ignored (invalid speech inputs: {self.mapper.invalid['speech']})")
-            self.publish_diagnostics()
+                                      f"ignored (invalid speech inputs: {self.mapper.invalid['speech']})",
+                                      throttle_duration_sec=1.0)
+            self._diagnostics_soon()
             return
         self._handle(self.protocol.on_observation(symbol, "speech", self.now_s()))
 
@@ -210,8 +244,8 @@ class BeliefTrackerNode(PearlNode):
                 valid = ", ".join(sorted(self.mapper.allowed[key]))
                 self.get_logger().warning(f"{key} input {cv.msg_to_text(msg)!r} is not a {key} symbol "
                                           f"(valid: {valid}); ignored (invalid {key} inputs: "
-                                          f"{self.mapper.invalid[key]})")
-                self.publish_diagnostics()
+                                          f"{self.mapper.invalid[key]})", throttle_duration_sec=1.0)
+                self._diagnostics_soon()
                 return
             self._handle(self.protocol.on_observation(symbol, key, self.now_s()))
 
@@ -228,11 +262,22 @@ class BeliefTrackerNode(PearlNode):
         logger = self.get_logger()
         for event in self.protocol.take_events():
             # One call site per severity: rclpy refuses a second severity at the same line.
+            # Throttled: under a flood, one line per call site per second (the counters are exact).
             if event.level == "warn":
-                logger.warning(event.text)
+                logger.warning(event.text, throttle_duration_sec=1.0)
             else:
-                logger.info(event.text)
+                logger.info(event.text, throttle_duration_sec=1.0)
         if self._warning_total() > self._reported_warnings:
+            self._diagnostics_soon()
+
+    def _flush_diagnostics(self) -> None:
+        if self._warning_total() > self._reported_warnings:
+            self.publish_diagnostics()
+
+    def _diagnostics_soon(self) -> None:
+        """Publish /diagnostics now, unless done in the last 0.1 s (then the periodic one reports it)."""
+        now = time.monotonic()
+        if now - self._last_diag >= 0.1:
             self.publish_diagnostics()
 
     def _publish_belief(self, result: Optional[StepResult]) -> None:
@@ -258,6 +303,7 @@ class BeliefTrackerNode(PearlNode):
         """Every counter reported on /diagnostics."""
         out = dict(self.protocol.counters)
         out["unknown_speech"] = self.mapper.unknown_speech
+        out["lost_inputs"] = self.lost_inputs
         for key, n in self.mapper.invalid.items():
             out[f"invalid_{key}"] = n
         return out
@@ -265,12 +311,14 @@ class BeliefTrackerNode(PearlNode):
     def _warning_total(self) -> int:
         c = self.counters()
         return (c["dropped_stale"] + c["dropped_overflow"] + c["replaced_actions"] + c["unknown_actions"]
+                + c["lost_inputs"]
                 + c["zero_likelihood"] + sum(c[f"invalid_{k}"] for k in self.mapper.invalid))
 
     def publish_diagnostics(self) -> None:
         """Publish the counters on /diagnostics (WARN once any input was dropped/invalid/recovered)."""
         warnings = self._warning_total()
         self._reported_warnings = warnings
+        self._last_diag = time.monotonic()
         step, open_action, pending = self.protocol.snapshot()
         values = {"step": step, "open_action": open_action or "", "pending": pending, **self.counters()}
         level = cv.DIAG_WARN if warnings else cv.DIAG_OK
