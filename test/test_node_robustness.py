@@ -242,6 +242,7 @@ def test_flood_and_zero_likelihood(graph):
 
     # Zero likelihood: an observation impossible after the action, from b0.
     pair = _zero_likelihood_pair(model, domain)
+    assert pair is not None, "the Pearl domain should have an impossible (action, landmark/touch) pair at b0"
     if pair is not None:
         action, symbol = pair
         pub_a = graph.probe.publisher("/pearl/action", cv.TextMsg, LATCHED_QOS)
@@ -328,10 +329,12 @@ def test_policy_restart_resumes_from_last_belief(graph, flat_policy):
     assert graph.wait(lambda: graph.actions and graph.beliefs and speech.get_subscription_count() >= 1,
                       3 * DISCOVERY_TIMEOUT), policy.stderr()[-2000:] + tracker.stderr()[-2000:]
     for text in ("what time is it", "yes"):
-        n = len(graph.actions)
+        n, nb = len(graph.actions), len(graph.beliefs)
         speech.publish(cv.text_to_msg(text))
-        assert graph.wait(lambda: len(graph.actions) > n), tracker.stderr()[-2000:]
+        # Belief and answer come from two processes: wait for both (either may arrive first).
+        assert graph.wait(lambda: len(graph.actions) > n and len(graph.beliefs) > nb), tracker.stderr()[-2000:]
     last = cv.msg_to_belief(graph.beliefs[-1])
+    assert graph.wait(lambda: cv.msg_to_action(graph.actions[-1]) == decider.execute(last).action_name, 5.0)
     assert not np.allclose(last, model.b0)
     assert policy.stop(5.0) == 0
     n = len(graph.actions)
