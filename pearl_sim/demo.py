@@ -250,7 +250,10 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
             result.steps.append(step)
             if echo is not None:
                 echo(format_step(step, scenario.resident.name))
-        graph.spin_until(lambda: bool(sim.actions), timeout_sec=2.0)   # let the last belief/decision land
+        # The policy answers the last belief too: wait until that action is in the bag, or a
+        # replay (which always sees the answer) would find one action more than recorded.
+        graph.spin_until(lambda: recorder.counts.get("/pearl/action", 0) >= len(result.steps) + 1,
+                         timeout_sec=5.0)
         recorder.stop()
         result.bag_messages = sum(recorder.counts.values())
         result.tracker_counters = dict(graph.tracker.counters())
