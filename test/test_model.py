@@ -41,3 +41,12 @@ def test_fingerprint_same_for_sparse_and_dense_and_changes_with_reward():
     R2 = R.copy()
     R2[0, 0] = -2
     assert Pomdp.create(*names, T, O, R2).fingerprint() != dense.fingerprint()
+
+
+def test_create_copies_the_callers_arrays():
+    T, O, R = tiger_arrays()
+    m = Pomdp.create(["l", "r"], ["listen", "ol", "or"], ["hl", "hr"], T, O, R)
+    m.R[0, 0] = 99.0
+    m.O[0, 0, 0] = 0.5
+    m.T[0][0, 0] = 0.0
+    assert R[0, 0] == -1.0 and O[0, 0, 0] == 0.85 and T[0][0, 0] == 1.0

@@ -83,17 +83,18 @@ class Pomdp:
         if len(T) != A:
             raise ValueError(f"T has {len(T)} action matrices, expected {A}")
         for a, Ta in enumerate(T):
-            m = sp.csr_matrix(Ta, dtype=float) if sparse else (Ta.toarray() if sp.issparse(Ta) else np.asarray(Ta, dtype=float))
+            m = sp.csr_matrix(Ta, dtype=float, copy=True) if sparse else (Ta.toarray() if sp.issparse(Ta) else np.array(Ta, dtype=float))
             if m.shape != (S, S):
                 raise ValueError(f"T[{actions[a]}] has shape {m.shape}, expected ({S}, {S})")
             mats.append(m)
-        O = np.asarray(O, dtype=float)
+        # Copies: a model never aliases its caller's arrays (editing one must not edit the other).
+        O = np.array(O, dtype=float)
         if O.shape != (A, S, Z):
             raise ValueError(f"O has shape {O.shape}, expected ({A}, {S}, {Z})")
-        R = np.asarray(R, dtype=float)
+        R = np.array(R, dtype=float)
         if R.shape != (S, A):
             raise ValueError(f"R has shape {R.shape}, expected ({S}, {A})")
-        b0 = np.full(S, 1.0 / S) if b0 is None else np.asarray(b0, dtype=float)
+        b0 = np.full(S, 1.0 / S) if b0 is None else np.array(b0, dtype=float)
         if b0.shape != (S,):
             raise ValueError(f"b0 has shape {b0.shape}, expected ({S},)")
         if not 0.0 < discount <= 1.0:
