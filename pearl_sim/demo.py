@@ -254,6 +254,12 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
         # replay (which always sees the answer) would find one action more than recorded.
         graph.spin_until(lambda: recorder.counts.get("/pearl/action", 0) >= len(result.steps) + 1,
                          timeout_sec=5.0)
+        # A second of /clock past the end, so a replay sees time pass beyond the last step's
+        # timeout deadline as the live nodes did (less than step_timeout: nothing else fires).
+        for _ in range(10):
+            sim.clock.advance_to(sim.clock.now + 0.1)
+            for _ in range(30):
+                graph.spin_once(0.0)
         recorder.stop()
         result.bag_messages = sum(recorder.counts.values())
         result.tracker_counters = dict(graph.tracker.counters())
