@@ -33,13 +33,12 @@ import hashlib
 import io
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any, Optional, Union
 
 import numpy as np
 
+from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.solvers.base import AlphaVectorPolicy
@@ -84,20 +83,6 @@ def _json_number(value: Any) -> Any:
     return value if math.isfinite(value) else None
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
 
 
 def save_policy(path: PathLike, policy, model: Pomdp, meta: Optional[dict] = None) -> Path:
@@ -169,8 +154,8 @@ def save_policy(path: PathLike, policy, model: Pomdp, meta: Optional[dict] = Non
     except TypeError as err:
         raise PolicyError(f"{hpath}: meta is not JSON-serialisable: {err}") from None
     try:
-        _atomic_write(path, data)
-        _atomic_write(hpath, text.encode())
+        atomic_write(path, data)
+        atomic_write(hpath, text)
     except OSError as err:
         raise PolicyError(f"{err.filename or path}: cannot write policy: {err.strerror or err}") from None
     return path

@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Union
 
+from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.bags import metadata as md
 from pearl_pomdp.bags import msgdefs
 from pearl_pomdp.bags import well_known as wk
@@ -49,24 +50,6 @@ def _library() -> str:
     except Exception:  # pragma: no cover - metadata missing in odd installs
         mcap_version = "?"
     return f"pearl_pomdp {__version__}; mcap-python {mcap_version}"
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` so that ``path`` is never seen half-written."""
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    with open(tmp, "w", encoding="utf-8") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-    try:  # make the rename durable too
-        dfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:  # pragma: no cover - some filesystems refuse fsync on directories
-        pass
 
 
 class _Topic:
@@ -248,7 +231,7 @@ class BagWriter:
             os.fsync(self._file.fileno())
             self._file.close()
             self.closed = True
-        _atomic_write_text(self.path / wk.METADATA_FILENAME, md.metadata_yaml(info))
+        atomic_write(self.path / wk.METADATA_FILENAME, md.metadata_yaml(info))
         return self.path
 
     def _check_open(self) -> None:

@@ -19,15 +19,16 @@ temporary file and renamed into place, the JSON last.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Union
 
 import numpy as np
 
+from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import PolicyError
 
 __all__ = ["Decision", "TraceStep", "SubtaskPolicy", "HierarchicalPolicy", "load_hierarchical_policy",
@@ -203,22 +204,18 @@ class HierarchicalPolicy:
             arrays[f"{key}_effective"] = sub.effective
             subtasks.append({"name": name, "key": key, "actions": sub.actions, "abstract": sub.abstract,
                              "info": sub.info})
-        npz_tmp = d / f".{NPZ_NAME}.tmp{os.getpid()}"
-        with open(npz_tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-            fh.flush()
-            os.fsync(fh.fileno())
-        digest = hashlib.sha256(npz_tmp.read_bytes()).hexdigest()
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, **arrays)
+        npz_bytes = buffer.getvalue()
+        digest = hashlib.sha256(npz_bytes).hexdigest()
         header = {
             "format": "pearl-hierarchical-policy", "version": FORMAT_VERSION,
             "model_fingerprint": self.fingerprint, "model_name": self.model_name,
             "hierarchy": self.hierarchy_name, "root": self.root, "actions": self.action_names,
             "num_states": self.num_states, "npz_sha256": digest, "subtasks": subtasks, "report": self.report,
         }
-        os.replace(npz_tmp, d / NPZ_NAME)
-        json_tmp = d / f".{JSON_NAME}.tmp{os.getpid()}"
-        json_tmp.write_text(json.dumps(header, indent=1, default=_json_default) + "\n")
-        os.replace(json_tmp, d / JSON_NAME)
+        atomic_write(d / NPZ_NAME, npz_bytes)
+        atomic_write(d / JSON_NAME, json.dumps(header, indent=1, default=_json_default) + "\n")
         return d
 
 

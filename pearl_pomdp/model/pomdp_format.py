@@ -52,15 +52,14 @@ wrong (unknown name, wrong count of numbers, a row that does not sum to 1 — wh
 from __future__ import annotations
 
 import bisect
-import os
 import re
-import tempfile
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import scipy.sparse as sp
 
+from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import ModelFormatError
 from pearl_pomdp.model.pomdp import Pomdp
 
@@ -1161,17 +1160,4 @@ def write_pomdp(model: Pomdp, path: PathLike) -> Path:
 
 
 def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
-    try:
-        with os.fdopen(fd, "w", encoding="ascii", newline="\n") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    atomic_write(path, text, encoding="ascii")
