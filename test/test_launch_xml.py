@@ -2,6 +2,7 @@
 arguments it builds give a node the parameter values ``ros2 launch`` would."""
 from __future__ import annotations
 
+import ast
 import json
 import subprocess
 import sys
@@ -66,7 +67,7 @@ def test_a_later_param_beats_the_params_file_in_a_real_node(tmp_path):
                          timeout=60, env={"ROS_LOG_DIR": str(tmp_path), "PATH": "/usr/bin:/bin",
                                           "ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"})
     assert out.returncode == 0, out.stderr
-    assert eval(out.stdout.strip().splitlines()[-1]) == {  # noqa: S307 - our own printed dict
+    assert ast.literal_eval(out.stdout.strip().splitlines()[-1]) == {
         "step_timeout": 0.5, "max_pending": 8, "timeout_observation": "unknown", "policy": ""}
 
 
