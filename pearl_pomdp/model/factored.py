@@ -644,6 +644,20 @@ class _Builder:
             raise self.fail(where, f"unknown feature {name!r}; features: {', '.join(self.fnames)}", container, key)
         return self.fnames.index(name)
 
+    def parent_refs(self, spec: dict, where: str) -> List[int]:
+        """Feature indices of ``spec['parents']`` (a name or a list; each at most once)."""
+        parents_node = spec.get("parents", [])
+        if isinstance(parents_node, str):
+            parents_node = [parents_node]
+        parents_node = self.need_list(parents_node, f"{where}.parents", spec, "parents")
+        parents: List[int] = []
+        for i, p in enumerate(parents_node):
+            pi = self.feature_ref(p, f"{where}.parents[{i}]", parents_node, i)
+            if pi in parents:
+                raise self.fail(f"{where}.parents[{i}]", f"parent {p!r} listed twice", parents_node, i)
+            parents.append(pi)
+        return parents
+
     def build_effect(self, f: int, spec: Any, where: str, container: Any, key: Any) -> _Cpt:
         feat = self.features[f]
         n = len(feat)
@@ -666,16 +680,7 @@ class _Builder:
                 raise self.fail(f"{where}.{k}", "unknown key; expected set, parents, table or why", spec, k)
         if "table" not in spec:
             raise self.fail(where, "missing 'table' (or use 'set: VALUE' / 'persist')", container, key)
-        parents_node = spec.get("parents", [])
-        if isinstance(parents_node, str):
-            parents_node = [parents_node]
-        parents_node = self.need_list(parents_node, f"{where}.parents", spec, "parents")
-        parents = []
-        for i, p in enumerate(parents_node):
-            pi = self.feature_ref(p, f"{where}.parents[{i}]", parents_node, i)
-            if pi in parents:
-                raise self.fail(f"{where}.parents[{i}]", f"parent {p!r} listed twice", parents_node, i)
-            parents.append(pi)
+        parents = self.parent_refs(spec, where)
         table = self.need_map(spec["table"], f"{where}.table", spec, "table")
         uses_keep = any(isinstance(r, dict) and KEEP in r or r == KEEP for r in table.values())
         implicit_self = uses_keep and f not in parents
@@ -824,16 +829,7 @@ class _Builder:
                 raise self.fail(f"{where}.{k}", "unknown key; expected parents, table or why", spec, k)
         if "table" not in spec:
             raise self.fail(where, "missing 'table'", container, key)
-        parents_node = spec.get("parents", [])
-        if isinstance(parents_node, str):
-            parents_node = [parents_node]
-        parents_node = self.need_list(parents_node, f"{where}.parents", spec, "parents")
-        parents = []
-        for i, p in enumerate(parents_node):
-            pi = self.feature_ref(p, f"{where}.parents[{i}]", parents_node, i)
-            if pi in parents:
-                raise self.fail(f"{where}.parents[{i}]", f"parent {p!r} listed twice", parents_node, i)
-            parents.append(pi)
+        parents = self.parent_refs(spec, where)
         table = self.need_map(spec["table"], f"{where}.table", spec, "table")
         Z = len(self.symbols)
         shape = tuple(len(self.features[p]) for p in parents) + (Z,)
