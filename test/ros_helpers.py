@@ -136,6 +136,7 @@ class Probe:
         self.received: Dict[str, list] = {}
         self.arrival: Dict[str, List[float]] = {}
         self.publishers: Dict[str, object] = {}
+        self.subscriptions: Dict[str, object] = {}
 
     def listen(self, topic: str, msg_type, qos) -> list:
         """Record every message on ``topic`` (the list fills while the executor spins)."""
@@ -146,8 +147,24 @@ class Probe:
             stamps.append(time.perf_counter())
             store.append(msg)
 
-        self.node.create_subscription(msg_type, topic, callback, qos)
+        self.subscriptions[topic] = self.node.create_subscription(msg_type, topic, callback, qos)
         return store
+
+    def unmatched(self, peers=()) -> List[str]:
+        """Topics whose DDS match is not yet complete on *both* ends, ``[]`` when all are.
+
+        Discovery is asymmetric: a publisher can see its subscriber before the subscriber
+        sees the publisher, and a message sent then may be lost or arrive late. A probe
+        subscription counts as matched when it sees a publisher; a probe publisher when it
+        sees a subscriber and every subscription on that topic in the ``peers`` nodes (the
+        nodes under test, same process) sees a publisher.
+        """
+        missing = [t for t, sub in self.subscriptions.items() if sub.get_publisher_count() == 0]
+        for topic, pub in self.publishers.items():
+            theirs = [s for node in peers for s in node.subscriptions if s.topic_name == topic]
+            if pub.get_subscription_count() == 0 or any(s.get_publisher_count() == 0 for s in theirs):
+                missing.append(topic)
+        return missing
 
     def publisher(self, topic: str, msg_type, qos):
         pub = self.node.create_publisher(msg_type, topic, qos)

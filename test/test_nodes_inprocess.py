@@ -91,6 +91,8 @@ def _probe(graph):
     probe.publisher("/clock", cv.ClockMsg, 10)
     for topic in ("speech", "touchscreen", "laser", "reminder"):
         probe.publisher(f"/pearl/{topic}", cv.TextMsg, EVENT_QOS)
+    peers = [n for n in graph.nodes if n is not node]
+    assert graph.spin_until(lambda: not probe.unmatched(peers), 15.0), f"not matched: {probe.unmatched(peers)}"
     return probe
 
 
@@ -127,8 +129,7 @@ def test_tiger_dialogue_in_one_process(ros_context):
         probe = _probe(g)
         _set_clock(g, probe, 100.0)
         # b0 is published at start; the policy answers it.
-        assert g.spin_until(lambda: len(probe.received["/pearl/action"]) >= 1
-                            and len(probe.received["/pearl/belief"]) >= 1, 10.0)
+        assert _steps(g, probe, 1)
         assert _actions(probe) == ["listen"]
         np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][0]), [0.5, 0.5])
         assert g.spin_until(lambda: probe.received["/pearl/display"], 10.0)
