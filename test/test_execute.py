@@ -66,6 +66,48 @@ def test_batch_agrees_with_execute(planned):
     assert list(hp.actions_batch(B)) == [hp.execute(b).action for b in B]
 
 
+LOOKAHEAD_HIERARCHY = """
+root: Act
+defaults: {solver: incprune, horizon: 4}
+subtasks:
+  Act: {actions: [ClarifyTask, Help], horizon: 2, lookahead: 2}
+  Help: {actions: [CheckMeds, Move]}
+"""
+
+
+@pytest.fixture(scope="module")
+def planned_lookahead():
+    model = meds_domain()
+    return model, plan(model, parse_hierarchy(LOOKAHEAD_HIERARCHY, ACTIONS))
+
+
+def test_lookahead_is_the_deeper_exact_value(planned, planned_lookahead):
+    """Horizon 2 + forward search 2 = exact horizon 4: same values as incremental pruning to
+    4 epochs and as brute-force expectimax, and the same choices."""
+    model, deep = planned
+    _, searched = planned_lookahead
+    assert searched.report["subtasks"][-1]["lookahead"] == 2
+    assert searched.subtasks["Act"].alphas.shape[0] < deep.subtasks["Act"].alphas.shape[0]
+    ab = searched.abstract_models["Act"]
+    for b in np.random.default_rng(7).dirichlet(np.ones(3), size=40):
+        v = searched.subtasks["Act"].value(b)
+        assert v == pytest.approx(deep.subtasks["Act"].value(b), abs=1e-9)
+        assert v == pytest.approx(expectimax(ab.model, ab.project(b), 4), abs=1e-9)
+        assert searched.execute(b).action == deep.execute(b).action
+
+
+def test_lookahead_batch_and_round_trip(planned_lookahead, tmp_path):
+    model, hp = planned_lookahead
+    B = np.random.default_rng(3).dirichlet(np.ones(3), size=100)
+    assert list(hp.actions_batch(B)) == [hp.execute(b).action for b in B]
+    hp.save(tmp_path / "pol")
+    header = json.loads((tmp_path / "pol" / "hierarchy.json").read_text())
+    assert [e.get("lookahead", {}).get("depth") for e in header["subtasks"]] == [None, 2]
+    loaded = load_hierarchical_policy(tmp_path / "pol", model)
+    for b in B[:30]:
+        assert loaded.execute(b) == hp.execute(b)
+
+
 def test_save_load_round_trip(planned, tmp_path):
     model, hp = planned
     hp.save(tmp_path / "pol")

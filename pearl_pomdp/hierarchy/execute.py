@@ -11,6 +11,10 @@ subtask by its X+ marginal, ``b_h = P_hᵀ b``, so ``α·b_h = (P_h α)·b``: th
 stored *expanded* to the full state space once (``alphas_full [K, S]``) and a decision
 is a few ``K×S`` mat-vecs.
 
+A subtask with ``lookahead: d`` (hierarchy spec) decides by exact forward search instead
+(:class:`Lookahead`): its abstract model and horizon-``h`` vectors are kept, and the
+action is the argmax of the exact horizon-``h + d`` Q-values at the current belief.
+
 Persistence (``save`` / :func:`load_hierarchical_policy`): a directory with
 ``policy.npz`` (arrays only, loaded with ``allow_pickle=False``) and ``hierarchy.json``
 (structure, sizes, the model fingerprint and the npz's SHA-256), each written to a
@@ -27,11 +31,12 @@ from pathlib import Path
 from typing import Dict, List, Optional, Union
 
 import numpy as np
+import scipy.sparse as sp
 
 from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import PolicyError
 
-__all__ = ["Decision", "TraceStep", "SubtaskPolicy", "HierarchicalPolicy", "load_hierarchical_policy",
+__all__ = ["Decision", "TraceStep", "SubtaskPolicy", "Lookahead", "HierarchicalPolicy", "load_hierarchical_policy",
            "FORMAT_VERSION"]
 
 FORMAT_VERSION = 1
@@ -65,6 +70,69 @@ class Decision:
                            "value": None if math.isnan(t.value) else t.value} for t in self.trace]}
 
 
+class Lookahead:
+    """Exact forward search over a subtask's model, ``depth`` steps, α-vectors at the leaves.
+
+    With ``V_0(b) = max_k α_k·b`` the solved horizon-``h`` value, one step of the
+    Bellman recursion (eq. 6) is ``Q_d(b, a) = b·R_a + γ Σ_o V_{d−1}(b T_a diag O_{a,o})``
+    and ``V_d(b) = max_a Q_d(b, a)``. Every ``V_d`` is positively homogeneous, so the
+    unnormalised successor ``b T_a diag O_{a,o}`` (whose mass is ``P(o | b, a)``) is used
+    as it is: ``Q_d`` is then the exact horizon-``h + d`` Q-function at ``b``, the same
+    value incremental pruning would give after ``d`` more epochs, without enumerating
+    the vectors that would need. Cost per belief: ``(|A|·|Z|)^d`` sparse mat-vecs.
+
+    Args:
+        T: per action, ``[S_h, S_h]`` transition matrix (dense or sparse) of the subtask model.
+        O: ``[A, S_h, Z]`` observation model (``O[a, s', o]``).
+        R: ``[S_h, A]`` reward (shaping included).
+        discount: γ.
+        alphas: ``[K, S_h]`` leaf vectors (the solved horizon-``h`` value).
+        depth: search depth ``d ≥ 1``.
+    """
+
+    def __init__(self, T, O, R, discount: float, alphas, depth: int):
+        if depth < 1:
+            raise ValueError(f"lookahead depth must be >= 1, got {depth}")
+        self.T = [sp.csr_matrix(t, dtype=float) for t in T]
+        self.O = np.asarray(O, dtype=float)
+        self.R = np.asarray(R, dtype=float)
+        self.discount = float(discount)
+        self.alphas = np.atleast_2d(np.asarray(alphas, dtype=float))
+        self.depth = int(depth)
+        # Tᵀ per action, so a batch of row beliefs B [N, S] advances as (Tᵀ Bᵀ)ᵀ.
+        self._Tt = [t.T.tocsr() for t in self.T]
+
+    def q_values(self, B: np.ndarray, depth: Optional[int] = None) -> np.ndarray:
+        """``Q_d(b, a)`` for every row ``b`` of ``B [N, S_h]`` (rows need not be normalised) → ``[N, A]``."""
+        d = self.depth if depth is None else depth
+        B = np.atleast_2d(np.asarray(B, dtype=float))
+        Q = B @ self.R
+        for a, Tt in enumerate(self._Tt):
+            predicted = np.asarray((Tt @ B.T).T)  # [N, S_h]
+            for o in range(self.O.shape[2]):
+                successor = predicted * self.O[a, :, o]
+                if d == 1:
+                    Q[:, a] += self.discount * (successor @ self.alphas.T).max(axis=1)
+                else:
+                    Q[:, a] += self.discount * self.q_values(successor, d - 1).max(axis=1)
+        return Q
+
+    def arrays(self, prefix: str) -> Dict[str, np.ndarray]:
+        """The arrays :meth:`from_arrays` needs, keys prefixed (for ``policy.npz``)."""
+        stacked = sp.vstack(self.T).tocsr()
+        return {f"{prefix}_T_data": stacked.data, f"{prefix}_T_indices": stacked.indices,
+                f"{prefix}_T_indptr": stacked.indptr, f"{prefix}_O": self.O, f"{prefix}_R": self.R}
+
+    @classmethod
+    def from_arrays(cls, arrays: Dict[str, np.ndarray], prefix: str, discount: float, alphas, depth: int) -> "Lookahead":
+        """Rebuild from :meth:`arrays` (``KeyError`` when one is missing)."""
+        O = arrays[f"{prefix}_O"]
+        A, S = O.shape[0], O.shape[1]
+        stacked = sp.csr_matrix((arrays[f"{prefix}_T_data"], arrays[f"{prefix}_T_indices"],
+                                 arrays[f"{prefix}_T_indptr"]), shape=(A * S, S))
+        return cls([stacked[a * S:(a + 1) * S] for a in range(A)], O, arrays[f"{prefix}_R"], discount, alphas, depth)
+
+
 @dataclass
 class SubtaskPolicy:
     """The solved local policy of one subtask.
@@ -79,6 +147,7 @@ class SubtaskPolicy:
         effective: ``[S]`` π_h(s): the primitive (full-model action index) EXECUTE(h) reaches
             at the belief concentrated on s (eq. 15–17's input for h's parent).
         info: the planning report of this subtask (sizes, solver, seconds...).
+        lookahead: the forward search EXECUTE uses instead of the bare vectors (``None``: none).
     """
 
     name: str
@@ -89,6 +158,7 @@ class SubtaskPolicy:
     state_to_model: np.ndarray
     effective: np.ndarray
     info: dict = field(default_factory=dict)
+    lookahead: Optional[Lookahead] = None
 
     def __post_init__(self) -> None:
         self.alphas = np.atleast_2d(np.asarray(self.alphas, dtype=float))
@@ -98,14 +168,36 @@ class SubtaskPolicy:
         # α expanded to the full state space: α_full[k, s] = α[k, state_to_model[s]].
         self.alphas_full = np.ascontiguousarray(self.alphas[:, self.state_to_model])
 
+        n_model = self.alphas.shape[1]
+        # P_h [S, S_h]: full state → its abstract state (copy 0), for the forward search.
+        self._projection = sp.csr_matrix((np.ones(self.state_to_model.shape[0]),
+                                          (np.arange(self.state_to_model.shape[0]), self.state_to_model)),
+                                         shape=(self.state_to_model.shape[0], n_model))
+
+    def _q_values(self, B: np.ndarray) -> np.ndarray:
+        return self.lookahead.q_values(np.asarray((self._projection.T @ B.T).T))
+
     def choose(self, belief: np.ndarray):
         """``(action index in self.actions, value)`` at a full belief ``[S]``."""
+        if self.lookahead is not None:
+            q = self._q_values(np.asarray(belief, dtype=float)[None, :])[0]
+            k = int(np.argmax(q))
+            return k, float(q[k])
         values = self.alphas_full @ belief
         k = int(np.argmax(values))
         return int(self.alpha_actions[k]), float(values[k])
 
+    def choose_batch(self, beliefs: np.ndarray) -> np.ndarray:
+        """``[N]`` action indices (into ``self.actions``) for full beliefs ``[N, S]``; ties as :meth:`choose`."""
+        B = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        if self.lookahead is not None:
+            return np.argmax(self._q_values(B), axis=1).astype(np.int64)
+        return self.alpha_actions[np.argmax(B @ self.alphas_full.T, axis=1)]
+
     def value(self, belief: np.ndarray) -> float:
-        """The subtask's value ``V_h(b) = max_k α_k·P_hᵀ b`` at a full belief."""
+        """The subtask's value at a full belief: ``max_k α_k·P_hᵀ b``, or ``max_a Q_{h+d}`` with lookahead."""
+        if self.lookahead is not None:
+            return float(np.max(self._q_values(np.asarray(belief, dtype=float)[None, :])))
         return float(np.max(self.alphas_full @ belief))
 
 
@@ -170,7 +262,7 @@ class HierarchicalPolicy:
         while pending:
             node, rows = pending.pop()
             sub = self.subtasks[node]
-            k = sub.alpha_actions[np.argmax(B[rows] @ sub.alphas_full.T, axis=1)]
+            k = sub.choose_batch(B[rows])
             for j in np.unique(k):
                 chosen = rows[k == j]
                 name = sub.actions[j]
@@ -202,8 +294,12 @@ class HierarchicalPolicy:
             arrays[f"{key}_alpha_actions"] = sub.alpha_actions
             arrays[f"{key}_state_to_model"] = sub.state_to_model
             arrays[f"{key}_effective"] = sub.effective
-            subtasks.append({"name": name, "key": key, "actions": sub.actions, "abstract": sub.abstract,
-                             "info": sub.info})
+            if sub.lookahead is not None:
+                arrays.update(sub.lookahead.arrays(f"{key}_la"))
+            entry = {"name": name, "key": key, "actions": sub.actions, "abstract": sub.abstract, "info": sub.info}
+            if sub.lookahead is not None:
+                entry["lookahead"] = {"depth": sub.lookahead.depth, "discount": sub.lookahead.discount}
+            subtasks.append(entry)
         buffer = io.BytesIO()
         np.savez_compressed(buffer, **arrays)
         npz_bytes = buffer.getvalue()
@@ -270,13 +366,20 @@ def load_hierarchical_policy(directory: Union[str, Path], domain) -> Hierarchica
     for entry in header["subtasks"]:
         key = entry["key"]
         try:
+            search = None
+            if entry.get("lookahead"):
+                spec = entry["lookahead"]
+                search = Lookahead.from_arrays(arrays, f"{key}_la", float(spec["discount"]), arrays[f"{key}_alphas"],
+                                               int(spec["depth"]))
             subtasks[entry["name"]] = SubtaskPolicy(
                 name=entry["name"], actions=list(entry["actions"]), abstract=[bool(x) for x in entry["abstract"]],
                 alphas=arrays[f"{key}_alphas"], alpha_actions=arrays[f"{key}_alpha_actions"],
                 state_to_model=arrays[f"{key}_state_to_model"], effective=arrays[f"{key}_effective"],
-                info=entry.get("info", {}))
+                info=entry.get("info", {}), lookahead=search)
         except KeyError as err:
             raise PolicyError(f"{npath}: missing array {err} for subtask {entry['name']!r}") from None
+        except (ValueError, TypeError, IndexError) as err:
+            raise PolicyError(f"{npath}: inconsistent arrays for subtask {entry['name']!r}: {err}") from None
     if header["root"] not in subtasks:
         raise PolicyError(f"{jpath}: root {header['root']!r} is not among the subtasks")
     return HierarchicalPolicy(header["root"], subtasks, list(model.actions), fp, header.get("report"),

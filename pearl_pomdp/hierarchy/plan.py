@@ -20,7 +20,7 @@ import numpy as np
 
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.hierarchy.abstraction import AbstractSubtask, KernelBuilder, abstract_subtask
-from pearl_pomdp.hierarchy.execute import HierarchicalPolicy, SubtaskPolicy
+from pearl_pomdp.hierarchy.execute import HierarchicalPolicy, Lookahead, SubtaskPolicy
 from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
 from pearl_pomdp.hierarchy.spec import Hierarchy, SubtaskSpec
 from pearl_pomdp.solvers.base import SolveResult
@@ -96,9 +96,15 @@ def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optiona
         t2 = time.perf_counter()
         pol = SubtaskPolicy(name=name, actions=list(spec.children), abstract=list(sub.abstract),
                             alphas=result.policy.alphas, alpha_actions=result.policy.actions,
-                            state_to_model=abst.state_to_model, effective=np.zeros(model.num_states, dtype=np.int64))
+                            state_to_model=abst.state_to_model, effective=np.zeros(model.num_states, dtype=np.int64),
+                            lookahead=(Lookahead(abst.model.T, abst.model.O, abst.model.R, abst.model.discount,
+                                                 result.policy.alphas, spec.lookahead) if spec.lookahead else None))
         # π_h(s): the primitive EXECUTE(h, e_s) reaches, for h's parent (eq. 15–17).
-        best = pol.alpha_actions[np.argmax(pol.alphas_full, axis=0)]  # [S] index into h's actions
+        if pol.lookahead is None:
+            best = pol.alpha_actions[np.argmax(pol.alphas_full, axis=0)]  # [S] index into h's actions
+        else:
+            best = np.concatenate([pol.choose_batch(np.eye(model.num_states)[lo:lo + 256])
+                                   for lo in range(0, model.num_states, 256)])
         eff = np.empty(model.num_states, dtype=np.int64)
         for k, child in enumerate(spec.children):
             rows = best == k
@@ -119,6 +125,7 @@ def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optiona
             "solve_seconds": round(t2 - t1, 6),
             "exact": method == "incprune" and not timed_out,
             "horizon": spec.horizon,
+            "lookahead": spec.lookahead,
             "iterations": result.iterations,
             "converged": bool(result.converged),
             "value_at_start": float(result.value_at_start),

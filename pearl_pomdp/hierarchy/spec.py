@@ -12,6 +12,7 @@ The YAML form (``config/pearl.hierarchy.yaml`` is a complete example)::
     defaults:                       # optional; per-subtask keys override
       solver: incprune              # incprune (exact, default) | pointbased
       horizon: 20                   # incprune: epochs (null = until converged)
+      lookahead: 0                  # EXECUTE: exact forward search this many steps deep (see below)
       epsilon: 1.0e-6               # incprune: convergence / pointbased: target gap
       time_limit: 10                # seconds, per subtask
     subtasks:
@@ -23,6 +24,12 @@ The YAML form (``config/pearl.hierarchy.yaml`` is a complete example)::
           - {action: RingDoorBell, reward: 1.0, when: {UserPresent: no}}
           # adds `reward` to R_h(s, action) in the states matching every `when` entry
           # (a value or a list of values); without `when`, in every state.
+
+``lookahead: d`` (default 0) makes EXECUTE choose the subtask's action by exact forward
+search over its abstract model, ``d`` steps deep, with the solved horizon-``h`` α-vectors at
+the leaves: the action maximising the exact horizon-``h + d`` value at the current belief
+(see :class:`~pearl_pomdp.hierarchy.execute.Lookahead`). It is for a subtask whose model
+is too large for incremental pruning beyond a few epochs (Pearl's root).
 
 A name in ``actions`` is abstract when it is a key of ``subtasks``, otherwise it must
 be a primitive action of the domain. Each subtask is used once (the structure is a
@@ -48,10 +55,12 @@ __all__ = ["Hierarchy", "SubtaskSpec", "ShapingRule", "load_hierarchy", "parse_h
 
 #: Solver names a subtask may ask for.
 SOLVERS = ("incprune", "pointbased")
-_SUBTASK_KEYS = {"actions", "solver", "horizon", "epsilon", "time_limit", "shaping", "description"}
-_DEFAULT_KEYS = {"solver", "horizon", "epsilon", "time_limit"}
+_SUBTASK_KEYS = {"actions", "solver", "horizon", "lookahead", "epsilon", "time_limit", "shaping", "description"}
+_DEFAULT_KEYS = {"solver", "horizon", "lookahead", "epsilon", "time_limit"}
+#: Deepest forward search allowed: its cost grows as (|A|·|Z|)^d per decision.
+MAX_LOOKAHEAD = 3
 _TOP_KEYS = {"name", "root", "defaults", "subtasks", "description"}
-_BUILTIN_DEFAULTS = {"solver": "incprune", "horizon": None, "epsilon": 1e-6, "time_limit": 30.0}
+_BUILTIN_DEFAULTS = {"solver": "incprune", "horizon": None, "lookahead": 0, "epsilon": 1e-6, "time_limit": 30.0}
 
 
 @dataclass(frozen=True)
@@ -75,6 +84,7 @@ class SubtaskSpec:
         children: its action set, in file order (primitive or abstract names).
         solver: ``"incprune"`` or ``"pointbased"``.
         horizon: incremental-pruning epochs (``None``: until the ε-convergence test).
+        lookahead: depth of EXECUTE's exact forward search over the subtask model (0: none).
         epsilon: incprune convergence tolerance, or point-based target gap.
         time_limit: seconds allowed to this subtask's solver.
         shaping: reward-shaping rules added to the subtask's reward.
@@ -84,6 +94,7 @@ class SubtaskSpec:
     children: List[str]
     solver: str = "incprune"
     horizon: Optional[int] = None
+    lookahead: int = 0
     epsilon: float = 1e-6
     time_limit: Optional[float] = 30.0
     shaping: List[ShapingRule] = field(default_factory=list)
@@ -225,6 +236,11 @@ def _setting(chk: _Checker, where: str, key: str, value):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise chk.fail(where, f"horizon must be a positive integer or null, got {value!r}")
         return int(value)
+    if key == "lookahead":
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_LOOKAHEAD:
+            raise chk.fail(where, f"lookahead must be an integer from 0 to {MAX_LOOKAHEAD} (steps of forward "
+                                  f"search), got {value!r}")
+        return int(value)
     if key in ("epsilon", "time_limit"):
         if value is None and key == "time_limit":
             return None
@@ -298,7 +314,7 @@ def parse_hierarchy(text: str, primitives: Sequence[str], features: Optional[Map
                 raise chk.fail(cw, f"unknown action {child!r}: neither a primitive of the domain nor a subtask "
                                    f"(subtasks: {', '.join(raw_subtasks)})")
         settings = dict(defaults)
-        for key in ("solver", "horizon", "epsilon", "time_limit"):
+        for key in ("solver", "horizon", "lookahead", "epsilon", "time_limit"):
             if key in body:
                 settings[key] = _setting(chk, f"{where}.{key}", key, body[key])
         shaping = _parse_shaping(chk, f"{where}.shaping", body.get("shaping"), children, features)
