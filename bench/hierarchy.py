@@ -69,7 +69,7 @@ def main() -> int:
         "episodes": args.episodes, "seed": args.seed,
         "plan_seconds": {"hierarchical": round(hier_seconds, 3), "flat_pointbased": round(flat.seconds, 3),
                          "qmdp": round(qmdp_seconds, 3)},
-        "subtasks": [{k: r[k] for k in ("name", "states_full", "states_abstract", "observations_full",
+        "subtasks": [{k: r[k] for k in ("name", "states_full", "states_abstract", "observations_full", "horizon", "lookahead",
                                         "observations_abstract", "actions", "solver", "exact", "alpha_vectors",
                                         "seconds", "relevant_features")} for r in hp.report["subtasks"]],
         "all_subtasks_exact": all(r["exact"] for r in hp.report["subtasks"]),
