@@ -27,6 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def subtask_labels(hierarchy, report: Optional[dict]) -> Dict[str, str]:
+    from pearl_pomdp.hierarchy.plan import horizon_text
+
     by_name = {r["name"]: r for r in (report or {}).get("subtasks", [])}
     labels = {}
     for name in hierarchy.subtasks:
@@ -35,7 +37,7 @@ def subtask_labels(hierarchy, report: Optional[dict]) -> Dict[str, str]:
             labels[name] = name
         else:
             labels[name] = (f"{name}\nS {r['states_full']}→{r['states_abstract']}  Z {r['observations_full']}→"
-                            f"{r['observations_abstract']}\n{r['solver']}, |Γ|={r['alpha_vectors']}")
+                            f"{r['observations_abstract']}\n{r['solver']}, h={horizon_text(r)}, |Γ|={r['alpha_vectors']}")
     return labels
 
 

@@ -69,6 +69,7 @@ def load_hierarchy_for(domain, domain_path: str, hierarchy_path):
 def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.cli import print_json
     from pearl_pomdp.hierarchy import plan
+    from pearl_pomdp.hierarchy.plan import horizon_text
 
     logging.basicConfig(level=logging.WARNING, format="pearl plan: warning: %(message)s", stream=sys.stderr)
     domain = load_domain_any(args.domain)
@@ -83,10 +84,10 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"{report['domain']} / {report['hierarchy']}: {len(report['subtasks'])} subtasks in "
           f"{report['total_seconds']:.2f} s")
-    print(f"{'subtask':<12} {'states':>11} {'obs':>8} {'actions':>7} {'solver':>10} {'exact':>5} {'|Γ|':>5} {'s':>7}  relevant features")
+    print(f"{'subtask':<12} {'states':>11} {'obs':>8} {'actions':>7} {'solver':>10} {'exact':>5} {'h':>4} {'|Γ|':>5} {'s':>7}  relevant features")
     for r in report["subtasks"]:
         print(f"{r['name']:<12} {r['states_full']:>5}→{r['states_abstract']:<5} {r['observations_full']:>3}→{r['observations_abstract']:<4}"
-              f" {len(r['actions']):>7} {r['solver']:>10} {('yes' if r['exact'] else 'no'):>5} {r['alpha_vectors']:>5}"
+              f" {len(r['actions']):>7} {r['solver']:>10} {('yes' if r['exact'] else 'no'):>5} {horizon_text(r):>4} {r['alpha_vectors']:>5}"
               f" {r['seconds']:>7.2f}  {', '.join(r['relevant_features']) or '-'}")
         for w in r["warnings"]:
             print(f"  warning: {w}")

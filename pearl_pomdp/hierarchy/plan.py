@@ -25,9 +25,16 @@ from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
 from pearl_pomdp.hierarchy.spec import Hierarchy, SubtaskSpec
 from pearl_pomdp.solvers.base import SolveResult
 
-__all__ = ["plan", "solve_subtask"]
+__all__ = ["plan", "solve_subtask", "horizon_text"]
 
 log = logging.getLogger("pearl_pomdp.hierarchy")
+
+
+def horizon_text(info: dict) -> str:
+    """A subtask's planning horizon for tables: ``"4"``, ``"1+1"`` (horizon + lookahead), ``"∞"`` (until converged)."""
+    horizon = info.get("horizon")
+    text = "∞" if horizon is None else str(horizon)
+    return f"{text}+{info['lookahead']}" if info.get("lookahead") else text
 
 
 def solve_subtask(model, spec: SubtaskSpec, seed: int = 0, solver: Optional[str] = None) -> SolveResult:
