@@ -6,7 +6,8 @@
   the tracker took, lost_inputs (DDS dropped them, counted), unaccounted (must be 0), beliefs
   published and whether all were valid (finite, ≥ 0, sum 1), tracker RSS growth.
 * sigkill: --trials (≥ 50) bag writers SIGKILLed at random moments: bags readable and
-  messages missing among those write() returned for (must be 0).
+  messages missing among those write() returned for (must be 0: a missing, altered or
+  invented message fails the trial and is listed in `failures`).
 
     .venv/bin/python bench/reliability.py [--fuzz 2000] [--rate 10000] [--seconds 10] [--trials 50]
 """
@@ -61,7 +62,7 @@ def sigkill(trials: int, seed: int = 0) -> dict:
     from test_data_safety import sigkill_trial
 
     rng = np.random.default_rng(seed)
-    readable, missing, reported, read, failures = 0, 0, 0, 0, []
+    readable, reported, read, failures = 0, 0, 0, []
     with tempfile.TemporaryDirectory() as tmpdir:
         for t in range(trials):
             d = Path(tmpdir) / f"t{t}"

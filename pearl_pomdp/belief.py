@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import logging
 import numbers
-from typing import Optional, Union
+from typing import Union
 
 import numpy as np
 import scipy.sparse as sp

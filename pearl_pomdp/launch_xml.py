@@ -367,8 +367,8 @@ def _walk(elements: List[_Element], scope: _Scope, given: Dict[str, str], declar
         elif el.tag == "node":
             nodes.append(_node(el, scope, namespace))
         else:
-            raise scope.error(el, "", f"unsupported element (pearl launch reads arg, let, group, "
-                                      f"push-ros-namespace, node, param, remap)")
+            raise scope.error(el, "", "unsupported element (pearl launch reads arg, let, group, "
+                                      "push-ros-namespace, node, param, remap)")
 
 
 def _node(el: _Element, scope: _Scope, namespace: Optional[str]) -> LaunchNode:

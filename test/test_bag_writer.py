@@ -258,7 +258,6 @@ def test_truncated_file_salvage_and_strict_error(tmp_path):
 
 
 def test_malformed_bags_name_file_and_problem(tmp_path):
-    data = _mcap_bytes(tmp_path)
     cases = {
         "notmcap.mcap": (b"hello world, not a bag", r"notmcap.mcap: offset 0: not an MCAP file"),
         "empty.mcap": (b"", r"empty.mcap: offset 0: file is empty"),

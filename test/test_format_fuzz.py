@@ -3,7 +3,6 @@ any valid model survives write -> read exactly (.pomdp and PomdpX)."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 import scipy.sparse as sp
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st

@@ -8,7 +8,6 @@ loaded 2-core machine. ``bench/fuzz.py`` runs the same checks with many more exa
 """
 from __future__ import annotations
 
-import json
 import shutil
 import time
 import tracemalloc

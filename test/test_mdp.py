@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
 
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.solvers import mdp

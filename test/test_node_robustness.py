@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ros_helpers import (DISCOVERY_TIMEOUT, DOMAIN, REPO, Probe, Proc, allocate_domain_id, configure_test_process,
+from ros_helpers import (DISCOVERY_TIMEOUT, DOMAIN, Probe, Proc, allocate_domain_id, configure_test_process,
                          ros_env, wait_for)
 
 pytestmark = [pytest.mark.ros]
@@ -301,7 +301,7 @@ def test_nodes_exit_zero_within_2s_on_sigint_and_sigterm(graph, flat_policy):
                                       f"__node:=policy_{sig.lower()}", "-p", f"domain:={DOMAIN}",
                                       "-p", f"policy:={flat_policy}"])
     # Ready: each node has published (the trackers' b0, the policies' answers) and logged.
-    names = {f"pearl: tracker_sigint", "pearl: tracker_sigterm", "pearl: policy_sigint", "pearl: policy_sigterm"}
+    names = {"pearl: tracker_sigint", "pearl: tracker_sigterm", "pearl: policy_sigint", "pearl: policy_sigterm"}
     assert graph.wait(lambda: names <= {k for d in graph.diags for k in d}, 3 * DISCOVERY_TIMEOUT), \
         {k: p.stderr()[-500:] for k, p in procs.items()}
     results = {}

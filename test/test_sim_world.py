@@ -1,7 +1,6 @@
 """pearl_sim's ground-truth world, recogniser and scenario files."""
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from pearl_pomdp.errors import SpecError

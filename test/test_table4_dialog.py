@@ -12,7 +12,6 @@ unprompted-speech table (the update of ``ask_repeat``, which leaves the request 
 """
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from pearl_pomdp.belief import BeliefFilter

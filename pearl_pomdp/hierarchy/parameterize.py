@@ -23,12 +23,12 @@ exact downstream: :mod:`pearl_pomdp.hierarchy.abstraction` turns it into a stand
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Mapping, Optional, Sequence
+from typing import List, Mapping, Optional, Sequence
 
 import numpy as np
 import scipy.sparse as sp
 
-from pearl_pomdp.hierarchy.spec import ShapingRule, SubtaskSpec
+from pearl_pomdp.hierarchy.spec import SubtaskSpec
 from pearl_pomdp.model.pomdp import Pomdp
 
 __all__ = ["SubtaskModel", "StateFactors", "parameterize", "local_reward_problems"]
