@@ -6,7 +6,8 @@ and the most-likely-state policy; then simulates every policy over the same seed
 episodes (:func:`pearl_pomdp.simulate.simulate`: same seed → the same random stream for
 every policy) and prints one JSON object: plan times, subtask sizes, mean discounted
 return ± 95 % CI per policy, the paired per-episode differences hierarchical − other
-(mean ± 95 % CI), and the acceptance ratios (hierarchical ≥ 95 % of flat
+(mean ± 95 % CI), the same hierarchical plan executed without lookahead (ablation, when
+the hierarchy uses it), and the acceptance ratios (hierarchical ≥ 95 % of flat
 point-based; better than QMDP and MLS).
 
     .venv/bin/python bench/hierarchy.py [--episodes 500] [--flat-time 60] [--seed 0]
@@ -16,6 +17,7 @@ Timings are wall-clock on a shared machine: compare within one run.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -55,6 +57,12 @@ def main() -> int:
     t0 = time.perf_counter()
     hp = plan(domain, hierarchy)
     hier_seconds = time.perf_counter() - t0
+    # Ablation: the same plan executed without any subtask's forward search (EXECUTE by the
+    # bare horizon-h vectors), to show what the lookahead contributes.
+    bare = None
+    if any(spec.lookahead for spec in hierarchy.subtasks.values()):
+        bare = plan(domain, dataclasses.replace(hierarchy, subtasks={
+            name: dataclasses.replace(spec, lookahead=0) for name, spec in hierarchy.subtasks.items()}))
     flat = solve_point_based(model, time_limit=args.flat_time, seed=args.seed)
     t1 = time.perf_counter()
     qmdp = solve_qmdp(model)
@@ -62,8 +70,11 @@ def main() -> int:
     mls = most_likely_state_policy(model)
 
     runs, returns = {}, {}
-    for name, policy in (("hierarchical", hp), ("flat_pointbased", flat.policy), ("qmdp", qmdp.policy),
-                         ("most_likely_state", mls)):
+    policies = [("hierarchical", hp), ("flat_pointbased", flat.policy), ("qmdp", qmdp.policy),
+                ("most_likely_state", mls)]
+    if bare is not None:
+        policies.append(("hierarchical_without_lookahead", bare))
+    for name, policy in policies:
         result = simulate(model, policy, episodes=args.episodes, steps=args.steps, seed=args.seed)
         runs[name] = summary(result)
         returns[name] = result["returns"]
