@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import platform
 import re
@@ -249,6 +248,7 @@ def main() -> None:
 
     from tqdm import tqdm
 
+    from pearl_pomdp.jsonable import numpy_to_json
     from pearl_pomdp.model import load_model
 
     bench = Path(args.benchmarks)
@@ -354,17 +354,7 @@ def main() -> None:
                     "incprune_time_limit": args.incprune_time_limit, "peers_on_path": sorted(peers)},
         "problems": problems,
         "summary": summary,
-    }, default=_json_default))
-
-
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+    }, default=numpy_to_json))
 
 
 if __name__ == "__main__":

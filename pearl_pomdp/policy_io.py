@@ -40,6 +40,7 @@ import numpy as np
 
 from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import PolicyError
+from pearl_pomdp.jsonable import numpy_to_json
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.solvers.base import AlphaVectorPolicy
 
@@ -150,7 +151,7 @@ def save_policy(path: PathLike, policy, model: Pomdp, meta: Optional[dict] = Non
         "meta": meta,
     }
     try:
-        text = json.dumps(header, indent=2, default=_json_default) + "\n"
+        text = json.dumps(header, indent=2, default=numpy_to_json) + "\n"
     except TypeError as err:
         raise PolicyError(f"{hpath}: meta is not JSON-serialisable: {err}") from None
     try:
@@ -159,14 +160,6 @@ def save_policy(path: PathLike, policy, model: Pomdp, meta: Optional[dict] = Non
     except OSError as err:
         raise PolicyError(f"{err.filename or path}: cannot write policy: {err.strerror or err}") from None
     return path
-
-
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
 
 
 def read_policy_header(path: PathLike) -> dict:

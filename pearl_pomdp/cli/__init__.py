@@ -21,6 +21,7 @@ import sys
 from typing import List, Optional
 
 from pearl_pomdp.errors import PearlError
+from pearl_pomdp.jsonable import numpy_to_json
 
 
 def _command_modules():
@@ -54,19 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def print_json(obj) -> None:
     """Print one JSON object on stdout (the ``--json`` contract of every command)."""
-    json.dump(obj, sys.stdout, indent=None, sort_keys=False, default=_json_default)
+    json.dump(obj, sys.stdout, indent=None, sort_keys=False, default=numpy_to_json)
     sys.stdout.write("\n")
     sys.stdout.flush()
-
-
-def _json_default(value):
-    import numpy as np
-
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
 def main(argv: Optional[List[str]] = None) -> int:

@@ -35,6 +35,7 @@ import scipy.sparse as sp
 
 from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import PolicyError
+from pearl_pomdp.jsonable import numpy_to_json
 
 __all__ = ["Decision", "TraceStep", "SubtaskPolicy", "Lookahead", "HierarchicalPolicy", "load_hierarchical_policy",
            "FORMAT_VERSION"]
@@ -311,16 +312,8 @@ class HierarchicalPolicy:
             "num_states": self.num_states, "npz_sha256": digest, "subtasks": subtasks, "report": self.report,
         }
         atomic_write(d / NPZ_NAME, npz_bytes)
-        atomic_write(d / JSON_NAME, json.dumps(header, indent=1, default=_json_default) + "\n")
+        atomic_write(d / JSON_NAME, json.dumps(header, indent=1, default=numpy_to_json) + "\n")
         return d
-
-
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
 def load_hierarchical_policy(directory: Union[str, Path], domain) -> HierarchicalPolicy:
