@@ -36,8 +36,6 @@ import json
 import os
 import random
 import shutil
-import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -48,7 +46,9 @@ REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"
 PEARL = BAGS / "pearl"
 BIN = Path(sys.executable).parent
-PROFILE = REPO / "config" / "fastdds_profile.xml"
+sys.path.insert(0, str(REPO / "test"))
+# The node-process helpers the ROS tests use: environment per domain, SIGINT → SIGTERM → SIGKILL.
+from ros_helpers import Proc, ros_env  # noqa: E402
 
 #: Tracker parameters of the recording (stored in custom_data, used again by the replay).
 TRACKER_PARAMS = {"step_timeout": 10.0, "timeout_observation": "unknown", "max_pending": 8, "stale_after": 30.0}
@@ -110,45 +110,6 @@ SCENARIOS: Dict[str, Dict] = {
 
 
 # ------------------------------------------------------------------------------ helpers
-def ros_env(domain_id: int, log_dir: Path) -> Dict[str, str]:
-    env = dict(os.environ)
-    env.pop("ROS_LOCALHOST_ONLY", None)
-    env.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               ROS_LOG_DIR=str(log_dir), PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
-    if PROFILE.is_file():
-        env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(PROFILE)
-    return env
-
-
-class Proc:
-    def __init__(self, name: str, cmd: List[str], env: Dict[str, str], log_dir: Path):
-        self.name = name
-        self.err_path = log_dir / f"{name}.err"
-        self._out = open(log_dir / f"{name}.out", "wb")
-        self._err = open(self.err_path, "wb")
-        self.popen = subprocess.Popen(cmd, env=env, cwd=str(REPO), stdout=self._out, stderr=self._err,
-                                      stdin=subprocess.DEVNULL)
-
-    def stderr(self) -> str:
-        return self.err_path.read_text(errors="replace")
-
-    def stop(self, timeout: float = 15.0) -> int:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            if self.popen.poll() is not None:
-                break
-            self.popen.send_signal(sig)
-            try:
-                self.popen.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                pass
-        if self.popen.poll() is None:
-            self.popen.kill()
-            self.popen.wait(timeout=10)
-        self._out.close()
-        self._err.close()
-        return self.popen.returncode
-
-
 def ensure_policy(replan: bool) -> None:
     """Plan bags/pearl/policy from the snapshot domain + hierarchy unless it exists."""
     if (PEARL / "policy").is_dir() and not replan:
@@ -191,8 +152,7 @@ def record(name: str, spec: Dict, domain_id: int, log_dir: Path) -> List[str]:
         shutil.rmtree(out)
     env = ros_env(domain_id, log_dir)
     os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR")})
-    if "FASTRTPS_DEFAULT_PROFILES_FILE" in env:
-        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = env["FASTRTPS_DEFAULT_PROFILES_FILE"]
+    os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = env["FASTRTPS_DEFAULT_PROFILES_FILE"]
 
     rel = os.path.relpath(PEARL, out)
     common = ["-p", f"domain:={PEARL / 'domain.yaml'}", "-p", "use_sim_time:=true"]
@@ -202,18 +162,18 @@ def record(name: str, spec: Dict, domain_id: int, log_dir: Path) -> List[str]:
     rclpy.init(domain_id=domain_id)
     node = rclpy.create_node("scenario_driver")
     try:
-        procs.append(Proc("belief_tracker", [str(BIN / "belief_tracker"), "--ros-args", *common, *tracker_args],
-                          env, log_dir))
-        procs.append(Proc("hierarchical_policy", [str(BIN / "hierarchical_policy"), "--ros-args", *common,
-                                                  "-p", f"policy:={PEARL / 'policy'}"], env, log_dir))
+        procs.append(Proc([str(BIN / "belief_tracker"), "--ros-args", *common, *tracker_args],
+                          env, log_dir, "belief_tracker"))
+        procs.append(Proc([str(BIN / "hierarchical_policy"), "--ros-args", *common,
+                                                  "-p", f"policy:={PEARL / 'policy'}"], env, log_dir, "hierarchical_policy"))
         if params_file.is_file():
-            procs.append(Proc("action_executor", [str(BIN / "action_executor"), "--ros-args", "--params-file",
-                                                  str(params_file), *common], env, log_dir))
+            procs.append(Proc([str(BIN / "action_executor"), "--ros-args", "--params-file",
+                                                  str(params_file), *common], env, log_dir, "action_executor"))
         custom = [f"pearl.domain={rel}/domain.yaml", f"pearl.policy={rel}/policy",
                   f"pearl.tracker_params={json.dumps(TRACKER_PARAMS, separators=(',', ':'))}",
                   f"pearl.scenario={name}"]
-        recorder = Proc("recorder", [str(BIN / "pearl"), "record", str(out), "--use-sim-time", "--topics",
-                                     *RECORD_TOPICS, "--custom-data", *custom], env, log_dir)
+        recorder = Proc([str(BIN / "pearl"), "record", str(out), "--use-sim-time", "--topics",
+                                     *RECORD_TOPICS, "--custom-data", *custom], env, log_dir, "recorder")
         procs.append(recorder)
 
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -309,7 +269,7 @@ def record(name: str, spec: Dict, domain_id: int, log_dir: Path) -> List[str]:
         wait_until(on_disk, 20, spin, "the recorder to write every action")
     finally:
         for p in reversed(procs):
-            p.stop()
+            p.stop(timeout=15.0)
         node.destroy_node()
         rclpy.shutdown()
     return actions
