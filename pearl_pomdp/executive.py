@@ -1,33 +1,43 @@
-"""The executive: belief tracking plus a decider, one step at a time (DESIGN.md §6).
+"""The executive: the step loop of :mod:`pearl_pomdp.tracking` plus a decider (DESIGN.md §6).
 
-The step protocol: an action ``a_t`` is taken, the next observation ``o_{t+1}`` (one
-message from any modality) closes the step, the belief is updated with
-``(a_t, o_{t+1})`` (eq. 5), and the decider answers with ``a_{t+1}``::
+The robot runs this loop split over two nodes — ``belief_tracker`` wraps the
+:class:`~pearl_pomdp.tracking.BeliefTracker`, ``hierarchical_policy`` wraps the decider —
+and the simulator and the study run it in one object, :class:`Executive`, driven by the
+world's clock. Both use the same tracker, so the study measures the rules the robot
+follows (timeouts, queueing, stale drops, drives that never time out, low-confidence
+speech).
 
-    ex = Executive(model, decider, keyword_filter=KeywordFilter(domain.keywords))
-    decision = ex.decide()                       # a_0 from b0
-    ex.observe(decision.action_name, "go")       # closes step 0
-    decision = ex.decide()                       # a_1 ...
+Timed use, the way the nodes see it::
 
-This is a plain Python object (numpy only): the ROS nodes wrap it and experiments
-with thousands of episodes use it directly.
+    ex = Executive(model, decider, domain=domain)
+    action = ex.start(now=0.0)                          # a_0 from b0; opens step 1
+    action = ex.on_input("speech", "what time is it", now=5.0)   # closes it → a_1 (or None)
+    action = ex.on_tick(now=15.0)                       # a timeout closes a step → next action
 
-A *decider* is anything with ``.execute(belief) -> Decision``: a
-:class:`~pearl_pomdp.hierarchy.execute.HierarchicalPolicy`, or
-:class:`FlatPolicyDecider` around a flat policy.
+Untimed use, for tests and scripted dialogs (one observation per action)::
+
+    decision = ex.decide()                        # a_0 from b0
+    ex.observe(decision.action_name, "go")        # closes step 0
+    decision = ex.decide()                        # a_1 ...
+
+A *decider* is a :class:`~pearl_pomdp.interfaces.Decider` (``execute(belief) -> Decision``):
+a :class:`~pearl_pomdp.hierarchy.execute.HierarchicalPolicy`, or :class:`FlatPolicyDecider`
+around a flat policy. An :class:`~pearl_pomdp.interfaces.ObservingDecider` (a behaviour
+tree, a state machine) is also told every closed step.
 """
 from __future__ import annotations
 
 import logging
 import math
-from typing import Optional
+from typing import List, Optional
 
 import numpy as np
 
-from pearl_pomdp.belief import BeliefFilter
 from pearl_pomdp.errors import BeliefError
-from pearl_pomdp.hierarchy.execute import Decision, TraceStep
+from pearl_pomdp.interfaces import Decider, Decision, ObservingDecider, Policy, TraceStep
 from pearl_pomdp.model.pomdp import Pomdp
+from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.tracking import BeliefTracker, StepResult, StepSettings
 
 __all__ = ["Executive", "FlatPolicyDecider", "Decision", "TraceStep"]
 
@@ -39,24 +49,25 @@ class FlatPolicyDecider:
 
     Args:
         policy: an :class:`~pearl_pomdp.solvers.base.AlphaVectorPolicy` (the trace value is
-            ``max_k α_k·b``) or anything with ``.action(belief) -> int`` such as
+            ``max_k α_k·b``) or any :class:`~pearl_pomdp.interfaces.Policy` such as
             :class:`~pearl_pomdp.solvers.mdp.MostLikelyStatePolicy` (value NaN: it has none).
         model: the model whose action names the decisions carry.
         name: the trace's subtask label.
     """
 
-    def __init__(self, policy, model: Pomdp, name: str = "flat"):
+    def __init__(self, policy: Policy, model: Pomdp, name: str = "flat"):
         self.policy = policy
         self.model = model
         self.name = name
-        alphas = getattr(policy, "alphas", None)
-        self._alphas = np.asarray(alphas, dtype=float) if isinstance(alphas, np.ndarray) else None
-        self._labels = np.asarray(policy.actions) if self._alphas is not None else None
+        self._alphas: Optional[np.ndarray] = None
+        self._labels: Optional[np.ndarray] = None
+        if isinstance(policy, AlphaVectorPolicy):
+            self._alphas, self._labels = policy.alphas, policy.actions
 
     def execute(self, belief) -> Decision:
         """The policy's action at ``belief`` ``[S]``, with the value where the policy has one."""
         b = np.asarray(belief, dtype=float)
-        if self._alphas is not None:
+        if self._alphas is not None and self._labels is not None:
             values = self._alphas @ b
             k = int(np.argmax(values))
             a, value = int(self._labels[k]), float(values[k])
@@ -70,71 +81,134 @@ class FlatPolicyDecider:
 
 
 class Executive:
-    """Belief tracking (eq. 5) and decisions, one step of the step protocol at a time.
+    """The step loop (:class:`~pearl_pomdp.tracking.BeliefTracker`) with a decider answering each step.
 
     Args:
         model: the full flat POMDP (beliefs are ``[S]`` over its states).
-        decider: ``.execute(belief) -> Decision`` (hierarchical or flat policy).
-        keyword_filter: a :class:`~pearl_pomdp.speech.KeywordFilter`; when given,
-            :meth:`observe` also accepts recognised speech *text*, classified to a Speech
-            symbol (words matching no keyword become its unknown symbol and are counted).
-        domain: the FactoredDomain, for :meth:`marginals` (optional).
+        decider: a :class:`~pearl_pomdp.interfaces.Decider`.
+        keyword_filter: overrides the domain's keyword filter; with either, :meth:`observe`
+            also accepts recognised speech *text* (words matching no keyword become the
+            unknown symbol and are counted).
+        domain: the FactoredDomain (modalities, keywords, drives, :meth:`marginals`), optional.
+        settings: the step rules (:class:`~pearl_pomdp.tracking.StepSettings`; the params
+            file's belief_tracker section via :func:`pearl_pomdp.params.step_settings`).
 
     Attributes:
-        belief: the current belief ``[S]`` (a fresh array after each update; never mutated).
-        updates: belief updates done.
-        zero_likelihood: updates whose observation had zero likelihood (recovered; see
-            :mod:`pearl_pomdp.belief`).
-        unknown_inputs: inputs the keyword filter could not classify.
+        tracker: the :class:`~pearl_pomdp.tracking.BeliefTracker` (the belief_tracker node runs the same class).
         last_decision: the most recent :class:`Decision` (``None`` before the first).
+        steps: the closed :class:`~pearl_pomdp.tracking.StepResult` s since :meth:`reset`, oldest first.
     """
 
-    def __init__(self, model: Pomdp, decider, keyword_filter=None, domain=None):
+    def __init__(self, model: Pomdp, decider: Decider, keyword_filter=None, domain=None,
+                 settings: Optional[StepSettings] = None):
         self.model = model
         self.decider = decider
-        self.keyword_filter = keyword_filter
         self.domain = domain
-        self.filter = BeliefFilter(model)
+        self.tracker = BeliefTracker(model, domain, settings or StepSettings(step_timeout=0.0), keyword_filter)
+        self.keyword_filter = self.tracker.mapper.keyword_filter
         self._obs_index = {o: i for i, o in enumerate(model.observations)}
         self._act_index = {a: i for i, a in enumerate(model.actions)}
         self.reset()
 
+    # ------------------------------------------------------------------ state
     def reset(self) -> None:
-        """Back to ``b0`` with zeroed counters."""
-        self.belief = self.filter.initial()
-        self.updates = 0
-        self.zero_likelihood = 0
-        self.unknown_inputs = 0
+        """Back to ``b0`` with zeroed counters (and the decider's memory, if it has one)."""
+        self.tracker.reset()
         self.last_decision: Optional[Decision] = None
-        self._unknown_base = getattr(self.keyword_filter, "unknown_count", 0)
-        self._zero_base = self.filter.zero_likelihood_count
+        self.steps: List[StepResult] = []
+        kf = self.keyword_filter
+        self._unknown_base = kf.unknown_count if kf is not None else 0
+        self._zero_base = self.tracker.protocol.filter.zero_likelihood_count
+        if isinstance(self.decider, ObservingDecider):
+            self.decider.reset()
 
+    @property
+    def belief(self) -> np.ndarray:
+        """The current belief ``[S]`` (a fresh array after each update; never mutated)."""
+        return self.tracker.belief
+
+    @property
+    def updates(self) -> int:
+        """Belief updates done."""
+        return self.tracker.protocol.counters["updates"]
+
+    @property
+    def zero_likelihood(self) -> int:
+        """Updates whose observation had zero likelihood (recovered; see :mod:`pearl_pomdp.belief`)."""
+        return self.tracker.protocol.filter.zero_likelihood_count - self._zero_base
+
+    @property
+    def unknown_inputs(self) -> int:
+        """Speech texts the keyword filter could not classify."""
+        kf = self.keyword_filter
+        return (kf.unknown_count - self._unknown_base) if kf is not None else 0
+
+    # ------------------------------------------------------------- timed loop
+    def decide(self) -> Decision:
+        """The decider's :class:`Decision` at the current belief."""
+        self.last_decision = self.decider.execute(self.belief)
+        return self.last_decision
+
+    def start(self, now: float = 0.0) -> str:
+        """Decide ``a_0`` at ``b0`` and open the first step at ``now``; returns the action name."""
+        return self._answer(None, now)
+
+    def on_input(self, key: str, data: str, now: float) -> Optional[str]:
+        """One input message (see :meth:`BeliefTracker.on_input`); the next action when it closed a step."""
+        outcome = self.tracker.on_input(key, data, now)
+        return self._answer(outcome.closed, now) if outcome.closed is not None else None
+
+    def on_tick(self, now: float) -> Optional[str]:
+        """The clock reads ``now``; the next action when a timeout closed the step."""
+        closed = self.tracker.on_tick(now)
+        return self._answer(closed, now) if closed is not None else None
+
+    def _answer(self, closed: Optional[StepResult], now: float) -> str:
+        """A step closed (or the loop starts): decide and open the next step, as the two nodes do.
+
+        A queued observation can close the new step at once; the loop then answers again,
+        exactly as the tracker node would publish the next belief at once.
+        """
+        while True:
+            if closed is not None:
+                self.steps.append(closed)
+                if isinstance(self.decider, ObservingDecider):
+                    self.decider.observe(closed.action, closed.observation)
+            action = self.decide().action_name
+            closed = self.tracker.on_action(action, now)
+            if closed is None:
+                return action
+
+    def deadline(self) -> Optional[float]:
+        """When the open step times out, or ``None``."""
+        return self.tracker.deadline()
+
+    # ----------------------------------------------------------- untimed use
     def symbol(self, observation: str) -> str:
-        """The model observation symbol for ``observation`` (a symbol, or speech text via the keyword filter).
+        """The model symbol for ``observation``: a symbol as it is, else speech text through the keyword filter.
 
         Raises:
             BeliefError: not a symbol of the model and no keyword filter to classify it.
         """
         if observation in self._obs_index:
             return observation
-        if self.keyword_filter is None:
+        mapper = self.tracker.mapper
+        if mapper.keyword_filter is None:
             shown = ", ".join(self.model.observations[:20])
             raise BeliefError(f"unknown observation {observation!r}; known: {shown} "
                               "(give a keyword_filter to accept recognised speech text)")
-        symbol = self.keyword_filter.classify(observation)
-        self.unknown_inputs = getattr(self.keyword_filter, "unknown_count", 0) - self._unknown_base
-        if symbol not in self._obs_index:
-            raise BeliefError(f"the keyword filter mapped {observation!r} to {symbol!r}, which is not an "
-                              "observation of the model")
+        symbol = mapper.speech(observation)
+        if symbol is None:
+            raise BeliefError(f"the keyword filter mapped {observation!r} to no observation of the model")
         return symbol
 
-    def observe(self, action_name: str, observation_symbol: str) -> np.ndarray:
+    def observe(self, action_name: str, observation: str) -> np.ndarray:
         """Close one step: update the belief with the action taken and the observation that followed.
 
         Args:
             action_name: the primitive action that was executed (``a_t``).
-            observation_symbol: ``o_{t+1}``: a model observation symbol, or recognised speech
-                text when a keyword filter was given.
+            observation: ``o_{t+1}``: a model observation symbol, or recognised speech
+                text when the executive has a keyword filter.
 
         Returns:
             The new belief ``[S]`` (also in :attr:`belief`).
@@ -144,26 +218,27 @@ class Executive:
         """
         if action_name not in self._act_index:
             raise BeliefError(f"unknown action {action_name!r}; known: {', '.join(self.model.actions)}")
-        symbol = self.symbol(observation_symbol)
-        self.belief = self.filter.update(self.belief, self._act_index[action_name], self._obs_index[symbol])
-        self.updates += 1
-        self.zero_likelihood = self.filter.zero_likelihood_count - self._zero_base
+        symbol = self.symbol(observation)
+        protocol = self.tracker.protocol
+        now = float(protocol.step)
+        if protocol.current_action != action_name:
+            protocol.on_action(action_name, now)
+        closed = protocol.on_observation(symbol, "observe", now, observation)
+        assert closed is not None  # the step was opened just above
+        self.steps.append(closed)
+        if isinstance(self.decider, ObservingDecider):
+            self.decider.observe(action_name, symbol)
         return self.belief
 
-    def decide(self) -> Decision:
-        """The decider's :class:`Decision` at the current belief."""
-        self.last_decision = self.decider.execute(self.belief)
-        return self.last_decision
-
-    def step(self, observation_symbol: str) -> Decision:
+    def step(self, observation: str) -> Decision:
         """Observe the outcome of the last decided action, then decide the next one."""
         if self.last_decision is None:
             raise BeliefError("step() needs a previous decide(): no action has been taken yet")
-        self.observe(self.last_decision.action_name, observation_symbol)
+        self.observe(self.last_decision.action_name, observation)
         return self.decide()
 
     def marginals(self) -> dict:
         """Per state feature, its marginal under the current belief (needs ``domain``)."""
         if self.domain is None:
             raise ValueError("marginals() needs the FactoredDomain (Executive(..., domain=...))")
-        return self.domain.feature_marginals(self.belief)
+        return self.tracker.marginals()

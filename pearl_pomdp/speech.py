@@ -27,7 +27,7 @@ import re
 from collections import deque
 from typing import Deque, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
-__all__ = ["KeywordFilter", "normalise", "tokens"]
+__all__ = ["KeywordFilter", "normalise", "parse_speech_message", "tokens"]
 
 _QUOTES = str.maketrans({"\u2019": "'", "\u2018": "'", "\u02bc": "'", "`": "'"})
 _BREAK = re.compile(r"[^0-9a-z']+")
@@ -39,6 +39,30 @@ def normalise(text: str) -> str:
     t = _BREAK.sub(" ", t)
     # Apostrophes are part of a word only inside it ("let's"), not as quotes around it.
     return " ".join(w.strip("'") for w in t.split() if w.strip("'"))
+
+
+def parse_speech_message(data: str) -> Tuple[str, float]:
+    """``(text, confidence)`` of a ``/pearl/speech`` message's data.
+
+    Plain text has confidence 1.0. A recogniser that knows its confidence sends a JSON
+    object ``{"text": "...", "confidence": 0.83}`` (confidence in [0, 1]). Anything else —
+    JSON that is not such an object, a confidence out of range — is taken as plain text,
+    so this never raises.
+    """
+    stripped = str(data).strip()
+    if stripped.startswith("{") and stripped.endswith("}"):
+        import json
+        import math
+
+        try:
+            obj = json.loads(stripped)
+        except ValueError:
+            return str(data), 1.0
+        if isinstance(obj, dict) and isinstance(obj.get("text"), str):
+            c = obj.get("confidence", 1.0)
+            if isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) and 0.0 <= c <= 1.0:
+                return obj["text"], float(c)
+    return str(data), 1.0
 
 
 def tokens(text: str) -> List[str]:

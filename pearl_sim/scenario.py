@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple, Union
 
-import yaml
+
 
 from pearl_pomdp.errors import SpecError
 
@@ -121,12 +121,27 @@ def load_scenarios(path: Union[str, Path]) -> List[Scenario]:
 
 def parse_scenarios(text: str, source: str = "<string>") -> List[Scenario]:
     """Like :func:`load_scenarios`, from YAML text."""
+    from pearl_pomdp.yaml_lines import line_table, parse_yaml
+
+    data = parse_yaml(text, source)
+    lines = line_table(data)
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        raise SpecError(source, "", f"not valid YAML: {getattr(err, 'problem', err)}",
-                        line=mark.line + 1 if mark else None) from None
+        return _parse(data, source)
+    except SpecError as err:
+        # Field errors name a path; the one loader knows its line (an episode override's
+        # field is looked up as written, e.g. episodes[3].resident.walking_speed).
+        if err.line is None and err.where:
+            line = lines.get(err.where)
+            probe = err.where
+            while line is None and ("." in probe or "[" in probe):
+                probe = probe.rsplit(".", 1)[0] if "." in probe else probe.rsplit("[", 1)[0]
+                line = lines.get(probe)
+            if line is not None:
+                raise SpecError(err.source, err.where, err.problem, line=line) from None
+        raise
+
+
+def _parse(data, source: str) -> List[Scenario]:
     if not isinstance(data, dict):
         raise SpecError(source, "", "a scenario file must be a mapping with at least `name`")
     episodes = data.pop("episodes", None)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.nodes.step_protocol import StepProtocol
+from pearl_pomdp.tracking import StepProtocol
 
 
 def tiger(impossible: bool = False) -> Pomdp:

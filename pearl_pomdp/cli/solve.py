@@ -27,11 +27,12 @@ import math
 import sys
 
 from pearl_pomdp.errors import PearlError
+from pearl_pomdp.solvers.registry import solver_names
 
 COMMAND = "solve"
 HELP = "solve a .pomdp or domain .yaml model (incremental pruning, point-based, QMDP)"
 
-METHODS = ("incprune", "pointbased", "qmdp")
+METHODS = solver_names()
 #: Models with |S|·|A|·|Z| up to this are solved exactly by default.
 TINY_MODEL = 32
 
@@ -76,31 +77,13 @@ def default_method(model, horizon=None) -> str:
 
 
 def solve(model, method: str, horizon=None, epsilon=None, time_limit=None, seed=0, progress=False):
-    """Run ``method`` on ``model``; the solver modules are imported here, when needed."""
+    """Run ``method`` on ``model`` (looked up in :mod:`pearl_pomdp.solvers.registry`)."""
+    from pearl_pomdp.solvers.registry import solve as registry_solve
+
     if horizon is not None and method != "incprune":
         raise PearlError(f"--horizon applies to incprune only, not to {method}")
-    try:
-        if method == "incprune":
-            from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
-
-            kwargs = {"horizon": horizon, "time_limit": time_limit, "progress": progress}
-            if epsilon is not None:
-                kwargs["epsilon"] = epsilon
-            return solve_incremental_pruning(model, **kwargs)
-        if method == "pointbased":
-            from pearl_pomdp.solvers.point_based import solve_point_based
-
-            kwargs = {"time_limit": 60.0 if time_limit is None else time_limit, "seed": seed, "progress": progress}
-            if epsilon is not None:
-                kwargs["epsilon"] = epsilon
-            return solve_point_based(model, **kwargs)
-        if method == "qmdp":
-            from pearl_pomdp.solvers.mdp import solve_qmdp
-
-            return solve_qmdp(model)
-    except ImportError as err:
-        raise PearlError(f"method {method} is not available in this installation ({err})") from None
-    raise PearlError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    return registry_solve(model, method, horizon=horizon, epsilon=epsilon, time_limit=time_limit, seed=seed,
+                          progress=progress, where="--method")
 
 
 def summary(model, result) -> dict:

@@ -35,6 +35,7 @@ import scipy.sparse as sp
 
 from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import PolicyError
+from pearl_pomdp.interfaces import Decision, TraceStep
 from pearl_pomdp.jsonable import numpy_to_json
 
 __all__ = ["Decision", "TraceStep", "SubtaskPolicy", "Lookahead", "HierarchicalPolicy", "load_hierarchical_policy",
@@ -43,32 +44,6 @@ __all__ = ["Decision", "TraceStep", "SubtaskPolicy", "Lookahead", "HierarchicalP
 FORMAT_VERSION = 1
 NPZ_NAME = "policy.npz"
 JSON_NAME = "hierarchy.json"
-
-
-@dataclass(frozen=True)
-class TraceStep:
-    """One level of an EXECUTE trace: in ``subtask`` the local policy chose ``choice``, whose
-    α-vector gives the subtask value ``value`` at the current belief."""
-
-    subtask: str
-    choice: str
-    value: float
-
-
-@dataclass(frozen=True)
-class Decision:
-    """The primitive action to take now (index into the full model's actions and its name),
-    with the trace root → … → primitive."""
-
-    action: int
-    action_name: str
-    trace: List[TraceStep] = field(default_factory=list)
-
-    def as_dict(self) -> dict:
-        """JSON-ready form (``value`` NaN becomes ``None``)."""
-        return {"action": self.action, "action_name": self.action_name,
-                "trace": [{"subtask": t.subtask, "choice": t.choice,
-                           "value": None if math.isnan(t.value) else t.value} for t in self.trace]}
 
 
 class Lookahead:

@@ -39,17 +39,15 @@ def horizon_text(info: dict) -> str:
 
 def solve_subtask(model, spec: SubtaskSpec, seed: int = 0, solver: Optional[str] = None) -> SolveResult:
     """SOLVE(h): run the subtask's configured solver on its (abstract) model."""
+    from pearl_pomdp.solvers.registry import solve
+
     which = solver or spec.solver
-    if which == "incprune":
-        from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
-
-        return solve_incremental_pruning(model, horizon=spec.horizon, epsilon=spec.epsilon,
-                                         time_limit=spec.time_limit)
     if which == "pointbased":
-        from pearl_pomdp.solvers.point_based import solve_point_based
-
-        return solve_point_based(model, time_limit=spec.time_limit or 60.0, epsilon=spec.epsilon, seed=seed)
-    raise PearlError(f"subtask {spec.name!r}: unknown solver {which!r}")
+        # The point-based solver is anytime: its budget is the subtask's time limit.
+        return solve(model, which, epsilon=spec.epsilon, time_limit=spec.time_limit or 60.0, seed=seed,
+                     where=f"subtask {spec.name!r}: solver")
+    return solve(model, which, horizon=spec.horizon, epsilon=spec.epsilon, time_limit=spec.time_limit,
+                 seed=seed, where=f"subtask {spec.name!r}: solver")
 
 
 def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optional[str] = None,

@@ -33,10 +33,12 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Set, Tuple, Un
 
 import numpy as np
 import scipy.sparse as sp
-import yaml
 
 from pearl_pomdp.errors import SpecError
 from pearl_pomdp.model.pomdp import DENSE_LIMIT, Pomdp
+from pearl_pomdp.yaml_lines import LineMap as _Map
+from pearl_pomdp.yaml_lines import line_of as _line_of
+from pearl_pomdp.yaml_lines import parse_yaml
 
 __all__ = [
     "StateFeature",
@@ -55,84 +57,6 @@ ROW_TOLERANCE = 1e-6
 #: Top-level keys a domain file may have.
 TOP_KEYS = ("name", "discount", "description", "features", "start", "modalities", "keywords",
             "defaults", "actions", "observations", "rewards", "horizon")
-
-
-# ====================================================================== YAML with line numbers
-class _Map(dict):
-    """A mapping that remembers the 1-based line of each key (``lines``) and of itself (``line``)."""
-
-    line: Optional[int] = None
-
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.lines: Dict[Any, int] = {}
-
-
-class _Seq(list):
-    """A sequence that remembers the line of each item (``lines``) and of itself (``line``)."""
-
-    line: Optional[int] = None
-
-    def __init__(self, *args):
-        super().__init__(*args)
-        self.lines: List[int] = []
-
-
-class _Loader(yaml.SafeLoader):
-    """SafeLoader with YAML 1.2 booleans (``yes``/``no``/``on``/``off`` stay strings) and line marks.
-
-    Pearl's domain uses ``yes``/``no`` as feature values and speech symbols; YAML 1.1
-    would silently turn them into booleans.
-    """
-
-
-_Loader.yaml_implicit_resolvers = {
-    ch: [(tag, rx) for tag, rx in resolvers if tag != "tag:yaml.org,2002:bool"]
-    for ch, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
-}
-_Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF"))
-
-
-def _construct_map(loader: yaml.SafeLoader, node: yaml.MappingNode) -> _Map:
-    loader.flatten_mapping(node)
-    out = _Map()
-    out.line = node.start_mark.line + 1
-    for key_node, value_node in node.value:
-        key = loader.construct_object(key_node, deep=True)
-        try:
-            hash(key)
-        except TypeError:
-            raise SpecError(loader.name, "", f"unhashable mapping key {key!r}", line=key_node.start_mark.line + 1) from None
-        if key in out:
-            raise SpecError(loader.name, str(key), "duplicate key (YAML would silently keep only the last one)",
-                            line=key_node.start_mark.line + 1)
-        out[key] = loader.construct_object(value_node, deep=True)
-        out.lines[key] = key_node.start_mark.line + 1
-    return out
-
-
-def _construct_seq(loader: yaml.SafeLoader, node: yaml.SequenceNode) -> _Seq:
-    out = _Seq()
-    out.line = node.start_mark.line + 1
-    for item in node.value:
-        out.append(loader.construct_object(item, deep=True))
-        out.lines.append(item.start_mark.line + 1)
-    return out
-
-
-_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_map)
-_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_seq)
-
-
-def _line_of(container: Any, key: Any = None) -> Optional[int]:
-    if key is not None:
-        lines = getattr(container, "lines", None)
-        if isinstance(lines, dict) and key in lines:
-            return lines[key]
-        if isinstance(lines, list) and isinstance(key, int) and 0 <= key < len(lines):
-            return lines[key]
-    return getattr(container, "line", None)
 
 
 # ====================================================================== public data types
@@ -452,19 +376,7 @@ def load_domain(path: Union[str, Path]) -> FactoredDomain:
 
 def parse_domain(text: str, source: str = "<string>", default_name: str = "domain") -> FactoredDomain:
     """Parse and validate a domain from YAML text (see :func:`load_domain`)."""
-    try:
-        loader = _Loader(text)
-        loader.name = source
-        try:
-            data = loader.get_single_data()
-        finally:
-            loader.dispose()
-    except yaml.MarkedYAMLError as err:
-        mark = err.problem_mark or err.context_mark
-        line = mark.line + 1 if mark is not None else None
-        raise SpecError(source, "", f"YAML syntax: {err.problem or err}", line=line) from None
-    except yaml.YAMLError as err:
-        raise SpecError(source, "", f"YAML syntax: {err}") from None
+    data = parse_yaml(text, source)
     return _Builder(source, data, default_name).build()
 
 

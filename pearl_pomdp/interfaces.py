@@ -1,0 +1,88 @@
+"""The interfaces the parts of Pearl POMDP meet at, declared once (after POMDPs.jl's verbs).
+
+* :class:`Policy` — a flat policy over beliefs: ``action(belief) -> int``
+  (:class:`~pearl_pomdp.solvers.base.AlphaVectorPolicy`,
+  :class:`~pearl_pomdp.solvers.mdp.MostLikelyStatePolicy`).
+* :class:`Decider` — what the executive and the policy node run: ``execute(belief) ->``
+  :class:`Decision` with an EXECUTE trace
+  (:class:`~pearl_pomdp.hierarchy.execute.HierarchicalPolicy`,
+  :class:`~pearl_pomdp.executive.FlatPolicyDecider`).
+* :class:`ObservingDecider` — a decider that also keeps its own memory of what was heard
+  (a behaviour tree, a state machine): the executive tells it every closed step.
+* :class:`Solver` — ``solve(model, **options) -> SolveResult``; solvers are looked up by
+  name in :mod:`pearl_pomdp.solvers.registry`.
+
+These are :class:`typing.Protocol` s: anything with the methods fits, and mypy checks it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, List, Protocol, runtime_checkable
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from pearl_pomdp.model.pomdp import Pomdp
+    from pearl_pomdp.solvers.base import SolveResult
+
+__all__ = ["TraceStep", "Decision", "Policy", "Decider", "ObservingDecider", "Solver"]
+
+
+@dataclass(frozen=True)
+class TraceStep:
+    """One level of an EXECUTE trace: in ``subtask`` the local policy chose ``choice``, whose
+    α-vector gives the subtask value ``value`` at the current belief (NaN: the policy has none)."""
+
+    subtask: str
+    choice: str
+    value: float
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The primitive action to take now (index into the full model's actions and its name),
+    with the trace root → … → primitive."""
+
+    action: int
+    action_name: str
+    trace: List[TraceStep] = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        """JSON-ready form (``value`` NaN becomes ``None``)."""
+        return {"action": self.action, "action_name": self.action_name,
+                "trace": [{"subtask": t.subtask, "choice": t.choice,
+                           "value": None if math.isnan(t.value) else t.value} for t in self.trace]}
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """A flat policy: the action index to take at a belief ``[S]``."""
+
+    def action(self, belief: np.ndarray) -> int: ...
+
+
+@runtime_checkable
+class Decider(Protocol):
+    """Chooses the next primitive action at a belief, with the trace of why."""
+
+    def execute(self, belief: np.ndarray) -> Decision: ...
+
+
+@runtime_checkable
+class ObservingDecider(Decider, Protocol):
+    """A decider with its own memory of the steps (it may ignore the belief).
+
+    The executive calls :meth:`reset` with the belief and :meth:`observe` after every
+    closed step, with the action that opened it and the observation symbol that closed it.
+    """
+
+    def reset(self) -> None: ...
+
+    def observe(self, action: str, observation: str) -> None: ...
+
+
+class Solver(Protocol):
+    """A POMDP solver: ``solve(model, **options) -> SolveResult`` (see the registry for options)."""
+
+    def __call__(self, model: "Pomdp", **options: Any) -> "SolveResult": ...

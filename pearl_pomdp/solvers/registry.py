@@ -1,0 +1,84 @@
+"""Solvers by name: the one table the CLI, PLAN and the experiment look them up in.
+
+Each entry is a :class:`~pearl_pomdp.interfaces.Solver`: ``solve(model, **options) ->
+SolveResult``. The options every entry understands are ``horizon``, ``epsilon``,
+``time_limit``, ``seed`` and ``progress``; ``None`` means the solver's own default, and
+an option a solver has no use for must be ``None`` (a finite horizon given to the
+point-based solver is an error, not silently ignored). Solver modules are imported
+when first used, so ``pearl --help`` does not load them.
+
+=============  ==============================================================
+name           solver
+=============  ==============================================================
+``incprune``   exact incremental pruning (Cassandra, Littman & Zhang 1997)
+``pointbased`` point-based lower bound with an upper bound (HSVI2/SARSOP style)
+``qmdp``       QMDP (one α-vector per action; an upper bound of the optimum)
+=============  ==============================================================
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, Dict, Optional
+
+from pearl_pomdp.errors import PearlError
+
+__all__ = ["SOLVERS", "solve", "solver_names"]
+
+
+def _incprune(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False):
+    from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
+
+    kwargs: Dict[str, Any] = {"horizon": horizon, "time_limit": time_limit, "progress": progress}
+    if epsilon is not None:
+        kwargs["epsilon"] = epsilon
+    return solve_incremental_pruning(model, **kwargs)
+
+
+def _pointbased(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False):
+    from pearl_pomdp.solvers.point_based import solve_point_based
+
+    if horizon is not None:
+        raise PearlError("a finite horizon applies to incprune only, not to pointbased")
+    kwargs: Dict[str, Any] = {"time_limit": 60.0 if time_limit is None else time_limit,
+                              "seed": 0 if seed is None else seed, "progress": progress}
+    if epsilon is not None:
+        kwargs["epsilon"] = epsilon
+    return solve_point_based(model, **kwargs)
+
+
+def _qmdp(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False):
+    from pearl_pomdp.solvers.mdp import solve_qmdp
+
+    if horizon is not None:
+        raise PearlError("a finite horizon applies to incprune only, not to qmdp")
+    return solve_qmdp(model) if epsilon is None else solve_qmdp(model, epsilon=epsilon)
+
+
+#: name → solver (see the module doc).
+SOLVERS: Dict[str, Callable[..., Any]] = {"incprune": _incprune, "pointbased": _pointbased, "qmdp": _qmdp}
+
+
+def solver_names():
+    """The registered names, in table order."""
+    return tuple(SOLVERS)
+
+
+def solve(model, name: str, *, horizon: Optional[int] = None, epsilon: Optional[float] = None,
+          time_limit: Optional[float] = None, seed: Optional[int] = None, progress: bool = False,
+          where: str = "solver"):
+    """Run the solver called ``name`` on ``model``.
+
+    Args:
+        where: how the caller names the field in errors (``--method``, ``subtask 'Act': solver``).
+
+    Raises:
+        PearlError: unknown name, an option the solver cannot take, or a solver module that
+            cannot be imported here.
+    """
+    try:
+        solver = SOLVERS[name]
+    except KeyError:
+        raise PearlError(f"{where}: unknown solver {name!r}; choose one of {', '.join(SOLVERS)}") from None
+    try:
+        return solver(model, horizon=horizon, epsilon=epsilon, time_limit=time_limit, seed=seed, progress=progress)
+    except ImportError as err:
+        raise PearlError(f"{where}: solver {name} is not available in this installation ({err})") from None
