@@ -10,9 +10,13 @@ speech).
 Timed use, the way the nodes see it::
 
     ex = Executive(model, decider, domain=domain)
-    action = ex.start(now=0.0)                          # a_0 from b0; opens step 1
-    action = ex.on_input("speech", "what time is it", now=5.0)   # closes it → a_1 (or None)
-    action = ex.on_tick(now=15.0)                       # a timeout closes a step → next action
+    ex.start(now=0.0)                                   # ["GotoPatientRoom"]: a_0 from b0, step 1 open
+    ex.on_input("speech", "what time is it", now=5.0)   # closes it → [a_1] ([] if nothing closed)
+    ex.on_tick(now=15.0)                                # a timeout closed a step → [next action]
+
+Each call returns the actions decided, in order: usually none or one; more when an
+observation queued while no step was open closes the new step at once (the tracker node
+then publishes each of them too).
 
 Untimed use, for tests and scripted dialogs (one observation per action)::
 
@@ -149,35 +153,37 @@ class Executive:
         self.last_decision = self.decider.execute(self.belief)
         return self.last_decision
 
-    def start(self, now: float = 0.0) -> str:
-        """Decide ``a_0`` at ``b0`` and open the first step at ``now``; returns the action name."""
+    def start(self, now: float = 0.0) -> List[str]:
+        """Decide ``a_0`` at ``b0`` and open the first step at ``now``; returns the actions decided."""
         return self._answer(None, now)
 
-    def on_input(self, key: str, data: str, now: float) -> Optional[str]:
-        """One input message (see :meth:`BeliefTracker.on_input`); the next action when it closed a step."""
+    def on_input(self, key: str, data: str, now: float) -> List[str]:
+        """One input message (see :meth:`BeliefTracker.on_input`); the actions decided because it closed a step."""
         outcome = self.tracker.on_input(key, data, now)
-        return self._answer(outcome.closed, now) if outcome.closed is not None else None
+        return self._answer(outcome.closed, now) if outcome.closed is not None else []
 
-    def on_tick(self, now: float) -> Optional[str]:
-        """The clock reads ``now``; the next action when a timeout closed the step."""
+    def on_tick(self, now: float) -> List[str]:
+        """The clock reads ``now``; the actions decided because a timeout closed the step."""
         closed = self.tracker.on_tick(now)
-        return self._answer(closed, now) if closed is not None else None
+        return self._answer(closed, now) if closed is not None else []
 
-    def _answer(self, closed: Optional[StepResult], now: float) -> str:
+    def _answer(self, closed: Optional[StepResult], now: float) -> List[str]:
         """A step closed (or the loop starts): decide and open the next step, as the two nodes do.
 
         A queued observation can close the new step at once; the loop then answers again,
         exactly as the tracker node would publish the next belief at once.
         """
+        actions: List[str] = []
         while True:
             if closed is not None:
                 self.steps.append(closed)
                 if isinstance(self.decider, ObservingDecider):
                     self.decider.observe(closed.action, closed.observation)
             action = self.decide().action_name
+            actions.append(action)
             closed = self.tracker.on_action(action, now)
             if closed is None:
-                return action
+                return actions
 
     def deadline(self) -> Optional[float]:
         """When the open step times out, or ``None``."""

@@ -1,75 +1,36 @@
-"""Robot controllers that the experiment compares, behind one small interface.
+"""The robot controllers the experiment compares, all run through the one step loop.
 
-An agent chooses the next action and is told what the world answered::
+Every controller is a :class:`~pearl_pomdp.interfaces.Decider` inside a core
+:class:`~pearl_pomdp.executive.Executive` — the same belief tracker rules (timeouts,
+queueing, drives, low-confidence speech) for all of them, as on the robot:
 
-    agent.reset()
-    action = agent.act()
-    agent.observe(action, symbol)   # symbol: the observation that closed the step
+* the POMDP policies (hierarchical, flat point-based, QMDP, most-likely state) decide
+  from the belief;
+* :class:`ScriptedAgent`, the baseline a hand-written state machine encodes, is an
+  :class:`~pearl_pomdp.interfaces.ObservingDecider`: it ignores the belief and reacts to
+  the last observation the tracker closed a step with.
 
-:class:`PomdpAgent` wraps the core :class:`~pearl_pomdp.executive.Executive`
-(belief tracking + any decider: hierarchical, flat point-based, QMDP, most-likely
-state). :class:`ScriptedAgent` is the baseline a behaviour tree or state machine
-would encode: it reacts to the last keyword it heard, without a belief and
-without clarification questions.
+:class:`Controller` pairs a name with a decider; the experiment builds a fresh executive
+for it per episode (the scenario sets the step timeout).
 """
 from __future__ import annotations
 
-from typing import Optional, Protocol
+import math
+from dataclasses import dataclass
+from typing import Optional
 
-from pearl_pomdp.speech import KeywordFilter
-from pearl_sim.world import Message
+from pearl_pomdp.interfaces import Decider, Decision, TraceStep
 
 #: Symbol that closes a step in which nothing was heard (the tracker's timeout rule).
 TIMEOUT_SYMBOL = "unknown"
 
 
-def message_symbol(message: Optional[Message], keyword_filter: KeywordFilter) -> str:
-    """The observation symbol of a world message, as the belief tracker maps it.
-
-    Speech goes through the keyword filter; touchscreen, laser and reminder messages
-    carry their symbol; silence until the timeout is Speech ``unknown``.
-    """
-    if message is None:
-        return TIMEOUT_SYMBOL
-    if message.modality == "Speech":
-        return keyword_filter.classify(message.text)
-    return message.text
-
-
-class Agent(Protocol):
-    """What the experiment needs from a controller."""
+@dataclass
+class Controller:
+    """A named decider: what ``pearl experiment`` compares."""
 
     name: str
-
-    def reset(self) -> None: ...
-
-    def act(self) -> str: ...
-
-    def observe(self, action: str, symbol: str) -> None: ...
-
-
-class PomdpAgent:
-    """A POMDP controller: the core executive with a given decider.
-
-    Args:
-        name: label in reports.
-        executive: a :class:`pearl_pomdp.executive.Executive`.
-    """
-
-    def __init__(self, name: str, executive):
-        self.name = name
-        self.executive = executive
-        self.last_decision = None
-
-    def reset(self) -> None:
-        self.executive.reset()
-
-    def act(self) -> str:
-        self.last_decision = self.executive.decide()
-        return self.last_decision.action_name
-
-    def observe(self, action: str, symbol: str) -> None:
-        self.executive.observe(action, symbol)
+    decider: Decider
 
 
 class ScriptedAgent:
@@ -92,9 +53,20 @@ class ScriptedAgent:
 
     REMIND = {"physio": "RemindPhysioAppt", "vitamin": "RemindVitamin", "checklist": "UpdateChecklist"}
 
-    def __init__(self, name: str = "scripted"):
+    def __init__(self, name: str = "scripted", actions: Optional[list] = None):
         self.name = name
+        self.decider = self  # a Controller of its own
+        if actions is None:
+            from pearl_sim.scenario import default_domain
+
+            actions = default_domain().actions
+        self._index = {a: i for i, a in enumerate(actions)}
         self.reset()
+
+    def execute(self, belief) -> Decision:
+        """The rule's action (the belief is not used: this controller has none)."""
+        action = self.act()
+        return Decision(self._index[action], action, [TraceStep(self.name, action, math.nan)])
 
     def reset(self) -> None:
         self.pending: list = []

@@ -16,7 +16,6 @@ from typing import Callable, Dict, Iterable, List, Optional, Sequence
 
 import numpy as np
 
-from pearl_sim.agents import message_symbol
 from pearl_sim.scenario import Scenario
 from pearl_sim.world import World
 
@@ -41,38 +40,53 @@ class EpisodeResult:
     actions: List[str] = field(default_factory=list)
 
 
-def run_episode(scenario: Scenario, agent, domain, keyword_filter, seed: Optional[int] = None,
-                pace_adaptation: Optional[bool] = None, on_step: Optional[Callable] = None) -> EpisodeResult:
-    """Run ``agent`` in a fresh :class:`World` until the scenario's step budget is used.
+def episode_executive(controller, domain, scenario: Scenario, model=None):
+    """The robot's loop for one episode: the controller's decider in an Executive with the
+    belief tracker's parameters from ``config/pearl_nodes.yaml`` and the scenario's step timeout."""
+    from pearl_pomdp.executive import Executive
+    from pearl_pomdp.params import step_settings
 
-    The return is Σ_t γ^t R[s_t, a_t] with R and γ from ``domain`` (a FactoredDomain)
-    and s_t the world's true state mapped onto the domain's features.
+    settings = step_settings(step_timeout=float(scenario.step_timeout))
+    return Executive(model if model is not None else domain.compile(), controller.decider, domain=domain,
+                     settings=settings)
+
+
+def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Optional[int] = None,
+                pace_adaptation: Optional[bool] = None, on_step: Optional[Callable] = None) -> EpisodeResult:
+    """Run ``agent`` (a :class:`~pearl_sim.agents.Controller`) in a fresh :class:`World` through the step loop.
+
+    The loop is :func:`pearl_sim.loop.run_episode` with the core executive as the robot —
+    the tracker rules of the ``belief_tracker`` node. The return is Σ_t γ^t R[s_t, a_t] with
+    R and γ from ``domain`` (a FactoredDomain) and s_t the world's true state, mapped onto
+    the domain's features, when a_t starts. ``keyword_filter`` is unused (the tracker builds
+    the domain's own); it stays for callers of the old signature.
     """
+    from pearl_sim.loop import ExecutiveBackend, run_episode as run_loop
+
     model = domain.compile()
-    world = World(scenario, seed=seed, pace_adaptation=pace_adaptation)
-    agent.reset()
-    total, discount = 0.0, 1.0
-    actions: List[str] = []
-    while not world.done:
-        action = agent.act()
+    world = World(scenario, seed=seed, pace_adaptation=pace_adaptation, domain=domain)
+    executive = episode_executive(agent, domain, scenario, model)
+    backend = ExecutiveBackend(executive)
+    returns = {"total": 0.0, "discount": 1.0}
+    action_index = {a: i for i, a in enumerate(model.actions)}
+
+    def score(action: str) -> None:
+        # Reward of the true state the action starts in (before the world changes it).
         state = domain.state_index(world.truth())
-        total += discount * float(model.R[state, model.actions.index(action)])
-        discount *= model.discount
-        result = world.step(action)
-        symbol = message_symbol(result.message, keyword_filter)
-        agent.observe(action, symbol)
-        actions.append(action)
-        if on_step is not None:
-            on_step(world, result, symbol, agent)
+        returns["total"] += returns["discount"] * float(model.R[state, action_index[action]])
+        returns["discount"] *= model.discount
+
+    callback = (lambda result, waits: on_step(world, result, waits, executive)) if on_step is not None else None
+    trace = run_loop(world, backend, on_action=callback, before_action=score)
     m = world.metrics
     needed = any(a.kind == "physio" for a in scenario.appointments)
     return EpisodeResult(
-        scenario=scenario.name, agent=agent.name, seed=world.seed, discounted_return=total, steps=m.steps,
+        scenario=scenario.name, agent=agent.name, seed=world.seed, discounted_return=returns["total"], steps=m.steps,
         guidance_needed=needed, guidance_completed=m.guidances_completed > 0,
         time_to_goal=m.time_to_goal[0] if m.time_to_goal else None, clarifications=m.clarifications,
         goals_achieved=m.reminders_delivered + m.questions_answered + m.guidances_completed,
         wrong_actions=m.wrong_actions, residents_lost=m.residents_lost,
-        walking_speed=scenario.resident.walking_speed, actions=actions,
+        walking_speed=scenario.resident.walking_speed, actions=list(trace.actions),
     )
 
 
@@ -139,8 +153,9 @@ def build_agents(domain, hierarchy_path, flat_time_limit: float = 30.0, policies
     """
     import time as _time
 
-    from pearl_pomdp.executive import Executive, FlatPolicyDecider
-    from pearl_sim.agents import PomdpAgent, ScriptedAgent
+    from pearl_pomdp.executive import FlatPolicyDecider
+    from pearl_pomdp.solvers.registry import solve
+    from pearl_sim.agents import Controller, ScriptedAgent
 
     unknown = sorted(set(policies) - set(POLICY_NAMES))
     if unknown:
@@ -150,27 +165,24 @@ def build_agents(domain, hierarchy_path, flat_time_limit: float = 30.0, policies
     timings: Dict[str, float] = {}
     for name in policies:
         t0 = _time.perf_counter()
+        decider: object
         if name == "hierarchical":
             from pearl_pomdp.hierarchy import load_hierarchy, plan
 
             decider = plan(domain, load_hierarchy(hierarchy_path, domain), seed=seed)
         elif name == "flat_pointbased":
-            from pearl_pomdp.solvers.point_based import solve_point_based
-
-            decider = FlatPolicyDecider(solve_point_based(model, time_limit=flat_time_limit, seed=seed).policy, model)
+            decider = FlatPolicyDecider(solve(model, "pointbased", time_limit=flat_time_limit, seed=seed).policy, model)
         elif name == "qmdp":
-            from pearl_pomdp.solvers.mdp import solve_qmdp
-
-            decider = FlatPolicyDecider(solve_qmdp(model).policy, model)
+            decider = FlatPolicyDecider(solve(model, "qmdp").policy, model)
         elif name == "most_likely_state":
             from pearl_pomdp.solvers.mdp import most_likely_state_policy
 
             decider = FlatPolicyDecider(most_likely_state_policy(model), model)
         else:
-            agents[name] = ScriptedAgent(name)
+            agents[name] = ScriptedAgent(name, list(model.actions))
             timings[name] = 0.0
             continue
-        agents[name] = PomdpAgent(name, Executive(model, decider, domain=domain))
+        agents[name] = Controller(name, decider)  # type: ignore[arg-type]
         timings[name] = _time.perf_counter() - t0
         if log:
             log(f"planned {name} in {timings[name]:.1f} s")

@@ -22,6 +22,7 @@ below the slowest walker modelled (0.05 m/s)``.
 from __future__ import annotations
 
 import copy
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple, Union
@@ -107,6 +108,18 @@ class Scenario:
 
 
 # --------------------------------------------------------------------------- loading
+@functools.lru_cache(maxsize=1)
+def default_domain():
+    """The shipped Pearl domain (``config/pearl.domain.yaml``), loaded once per process."""
+    from pearl_pomdp.launch_xml import package_share_dir
+    from pearl_pomdp.model.factored import load_domain
+
+    share = package_share_dir("pearl_pomdp")
+    if share is None:
+        raise FileNotFoundError("config/pearl.domain.yaml: the pearl_pomdp share directory was not found")
+    return load_domain(share / "config" / "pearl.domain.yaml")
+
+
 def load_scenarios(path: Union[str, Path]) -> List[Scenario]:
     """Read a scenario file: one :class:`Scenario` per episode (one if no ``episodes:``).
 

@@ -45,11 +45,23 @@ REANNOUNCE_SECONDS = 60.0
 #: Battery fraction below which the battery counts as low.
 LOW_BATTERY = 0.2
 
-CLARIFICATIONS = {
-    "ConfirmGuideToPhysio", "VerifyInfoRequest", "ConfirmWantTime", "ConfirmWantWeather",
-    "ConfirmGoHome", "ConfirmDone", "CheckUserPresent",
-}
-MOVES = {"GotoPatientRoom": "room", "GuideToPhysio": "physio", "GoHome": "home"}
+#: The domain feature whose value a drive sets: the robot's place (home, room, physio).
+ROBOT_PLACE = "RobotLocation"
+#: The Laser landmark the navigation reports on arrival at each place.
+LANDMARKS = {"home": "atHome", "room": "atRoom", "physio": "atPhysio"}
+
+
+def action_roles(domain) -> Dict[str, Dict[str, str]]:
+    """What the world needs to know of the domain's actions, from its ``category:`` tags.
+
+    Returns ``{"moves": {action: place}, "clarifications": {action: category}}``: a move is a
+    ``category: Move`` action and its destination the value it sets on :data:`ROBOT_PLACE`;
+    a clarification is a ``category: Clarify`` action (a question asked to resolve uncertainty).
+    """
+    moves = {a: place for a in domain.actions if domain.categories.get(a) == "Move"
+             and (place := domain.deterministic_effect(a, ROBOT_PLACE)) is not None}
+    clarifications = {a: "Clarify" for a in domain.actions if domain.categories.get(a) == "Clarify"}
+    return {"moves": moves, "clarifications": clarifications}
 
 #: What the resident says for each intent (chosen at random, then passed through the recogniser).
 UTTERANCES: Dict[str, List[str]] = {
@@ -78,14 +90,19 @@ class Message:
 
 @dataclass
 class StepResult:
-    """What one action did: its time span, the closing message and notable events."""
+    """What one action (or a wait) did: its time span, the messages it produced and notable events."""
 
     action: str
     start: float
     end: float
-    message: Optional[Message]
+    messages: List[Message] = field(default_factory=list)
     events: List[str] = field(default_factory=list)
     wrong: Optional[str] = None
+
+    @property
+    def message(self) -> Optional[Message]:
+        """The first message, or ``None`` when nothing was heard."""
+        return self.messages[0] if self.messages else None
 
 
 @dataclass
@@ -111,10 +128,20 @@ class World:
         scenario: the episode.
         seed: overrides ``scenario.seed`` (every stochastic piece is seeded from it).
         pace_adaptation: overrides ``scenario.pace_adaptation`` when not ``None``.
+        domain: the Pearl FactoredDomain whose ``category:`` tags say which actions are
+            drives and clarifications (default: the shipped ``config/pearl.domain.yaml``).
     """
 
-    def __init__(self, scenario: Scenario, seed: Optional[int] = None, pace_adaptation: Optional[bool] = None):
+    def __init__(self, scenario: Scenario, seed: Optional[int] = None, pace_adaptation: Optional[bool] = None,
+                 domain=None):
         self.scenario = scenario
+        if domain is None:
+            from pearl_sim.scenario import default_domain
+
+            domain = default_domain()
+        roles = action_roles(domain)
+        self.moves: Dict[str, str] = roles["moves"]
+        self.clarifications = frozenset(roles["clarifications"])
         self.seed = scenario.seed if seed is None else int(seed)
         self.rng = np.random.default_rng(self.seed)
         self.pace_adaptation = scenario.pace_adaptation if pace_adaptation is None else bool(pace_adaptation)
@@ -160,42 +187,55 @@ class World:
         }
 
     # ------------------------------------------------------------------ stepping
-    def step(self, action: str) -> StepResult:
-        """Carry out ``action`` and return the message that closes the step (or ``None``)."""
+    def act(self, action: str) -> StepResult:
+        """Carry out ``action`` and return what it did, with every message it produced (timestamped).
+
+        An action runs to completion (a sentence is finished, a drive arrives) before the
+        next one starts. The world does not decide when a step closes: the messages go to
+        the step loop (:mod:`pearl_sim.loop`), whose tracker rules decide. When the action
+        produced no message, the loop lets time pass with :meth:`wait`.
+        """
         start = self.time
         events: List[str] = []
         wrong: Optional[str] = None
-        reply: Optional[str] = None       # the resident's intent, if she answers
         self.metrics.steps += 1
-        if action in CLARIFICATIONS:
+        if action in self.clarifications:
             self.metrics.clarifications += 1
-        if action in MOVES:
-            message = self._move(MOVES[action], action, events)
-            if action == "GuideToPhysio" and not self._follower_started:
+        if action in self.moves:
+            message = self._move(self.moves[action], action, events)
+            if self._was_guide and not self._follower_started:
                 wrong = "guided a resident who did not want to go" if not self._was_willing else None
             self._finish(action, wrong, events)
-            return StepResult(action, start, self.time, message, events, wrong)
+            return StepResult(action, start, self.time, [message], events, wrong)
         self._advance(SPEAK_SECONDS, events)
         listening = self.engaged and self._near()
         handler = getattr(self, f"_act_{action}", None)
         if handler is None:
             raise ValueError(f"the simulated world does not know action {action!r}")
         reply, wrong = handler(listening, events)
-        message: Optional[Message] = None
+        messages: List[Message] = []
         if reply is not None:
             self._advance(ANSWER_SECONDS, events)
-            message = self._say(reply)
-        else:
-            # Wait for the scheduler (or anything queued during a drive) until the tracker's
-            # timeout, counted like the tracker does: from the moment the action was given.
-            deadline = start + self.scenario.step_timeout
-            while not self._scheduler_queue and self.time < deadline - 1e-9:
-                self._advance(min(1.0, deadline - self.time), events)
-            if self._scheduler_queue:
-                queued = self._scheduler_queue.pop(0)
-                message = Message(self.time, queued.modality, queued.text, queued.said)
+            messages.append(self._say(reply))
         self._finish(action, wrong, events)
-        return StepResult(action, start, self.time, message, events, wrong)
+        return StepResult(action, start, self.time, messages, events, wrong)
+
+    def wait(self, until: float) -> StepResult:
+        """Let time pass with the robot idle, until the scheduler speaks or ``until`` (world seconds).
+
+        The scheduler announces a due reminder only while the robot is idle (it does not
+        talk over the robot); an announcement made during an action waits for this.
+        Returns the (at most one) message heard, timestamped, and the events of the wait.
+        """
+        start = self.time
+        events: List[str] = []
+        while not self._scheduler_queue and self.time < until - 1e-9:
+            self._advance(min(1.0, until - self.time), events)
+        messages: List[Message] = []
+        if self._scheduler_queue:
+            queued = self._scheduler_queue.pop(0)
+            messages.append(Message(self.time, queued.modality, queued.text, queued.said))
+        return StepResult("", start, self.time, messages, events, None)
 
     # ------------------------------------------------------------ action effects
     def _act_DoNothing(self, listening, events):
@@ -308,7 +348,9 @@ class World:
         together = self.engaged and self._near() and self.resident_at == origin
         self._was_willing = self.wants_guidance
         self._follower_started = False
-        if action == "GuideToPhysio" and together and self.wants_guidance and goal != origin:
+        # A guidance is the drive to the department, where the resident's appointment is.
+        self._was_guide = goal == "physio"
+        if self._was_guide and together and self.wants_guidance and goal != origin:
             self._follower_started = True
             self.metrics.guidances_started += 1
             self._follower = {"pos": 0.0, "length": distance, "rest_until": -1.0, "origin": origin}
@@ -318,11 +360,11 @@ class World:
         else:
             if self.engaged and goal != origin:
                 self.engaged = False
-                if self.wants_guidance and action == "GuideToPhysio":
+                if self.wants_guidance and self._was_guide:
                     events.append("the robot drives off without the resident")
             self._advance(distance / self.scenario.robot_speed, events, moving=True)
         self.robot_at = goal
-        return Message(self.time, "Laser", {"home": "atHome", "room": "atRoom", "physio": "atPhysio"}[goal])
+        return Message(self.time, "Laser", LANDMARKS[goal])
 
     def _drive_guided(self, distance: float, events: List[str]) -> None:
         """Drive ``distance`` metres with the resident following, one second at a time."""

@@ -32,9 +32,11 @@ def test_sizes_features_and_symbols_as_in_the_paper(pearl):
     for a in d.actions:
         by_category.setdefault(d.categories[a], set()).add(a)
     assert by_category == {
-        "Communicate": {"RemindPhysioAppt", "RemindVitamin", "UpdateChecklist", "CheckUserPresent", "TerminateGuidance",
-                        "TellTime", "TellWeather", "ConfirmGuideToPhysio", "VerifyInfoRequest", "ConfirmWantTime",
-                        "ConfirmWantWeather", "ConfirmGoHome", "ConfirmDone"},
+        "Communicate": {"RemindPhysioAppt", "RemindVitamin", "UpdateChecklist", "TerminateGuidance",
+                        "TellTime", "TellWeather"},
+        # Questions asked to resolve uncertainty: the clarifications the study counts.
+        "Clarify": {"CheckUserPresent", "ConfirmGuideToPhysio", "VerifyInfoRequest", "ConfirmWantTime",
+                    "ConfirmWantWeather", "ConfirmGoHome", "ConfirmDone"},
         "Move": {"GotoPatientRoom", "GuideToPhysio", "GoHome"},
         "Other": {"DoNothing", "RingDoorBell", "RechargeBattery"}}
 
@@ -88,7 +90,7 @@ def test_hand_checked_rewards(pearl):
     assert R(s(d), "DoNothing") == 0
     assert R(s(d, RobotLocation="room", UserPresent="yes", UserMotionGoal="toPhysioWithRobot"), "GuideToPhysio") == 45
     # motion costs more than any speech act that is not a mistake
-    speech = [a for a in d.actions if d.categories[a] == "Communicate"]
+    speech = [a for a in d.actions if d.categories[a] in ("Communicate", "Clarify")]
     assert max(-m.R[:, m.actions.index(a)].min() for a in ("GotoPatientRoom", "GuideToPhysio", "GoHome")) > 0
     assert all(m.R[:, m.actions.index(a)].max() >= -2 for a in speech)
 

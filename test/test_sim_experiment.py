@@ -5,7 +5,7 @@ import pytest
 
 from pearl_pomdp.model.factored import load_domain
 from pearl_pomdp.speech import KeywordFilter
-from pearl_sim.agents import ScriptedAgent, message_symbol
+from pearl_sim.agents import ScriptedAgent
 from pearl_sim.experiment import mean_ci, proportion_ci, run_episode, summarise, with_word_error_rate
 from pearl_sim.scenario import load_scenarios, parse_scenarios
 from pearl_sim.world import Message
@@ -28,11 +28,18 @@ def test_mean_ci_matches_hand_computation():
 
 
 def test_message_symbols_follow_the_tracker_rules():
-    kf = KeywordFilter({"weather": ["weather", "whether"], "time": ["time"]})
-    assert message_symbol(None, kf) == "unknown"
-    assert message_symbol(Message(0, "Speech", "give me the whether forecast"), kf) == "weather"
-    assert message_symbol(Message(0, "Touchscreen", "t_time"), kf) == "t_time"
-    assert message_symbol(Message(0, "Laser", "atRoom"), kf) == "atRoom"
+    """World messages become symbols through the tracker's own mapper (one mapping for robot and study)."""
+    from pearl_pomdp.tracking import BeliefTracker, StepSettings
+
+    domain = load_domain(REPO / "config/pearl.domain.yaml")
+    tracker = BeliefTracker(domain.compile(), domain, StepSettings(step_timeout=5.0))
+    symbol = lambda m: tracker.on_input(m.modality.lower(), m.text, m.time).symbol  # noqa: E731
+    assert symbol(Message(0, "Speech", "give me the whether forecast")) == "weather"
+    assert symbol(Message(0, "Touchscreen", "t_time")) == "t_time"
+    assert symbol(Message(0, "Laser", "atRoom")) == "atRoom"
+    tracker.reset()                                             # (the three above wait in the queue)
+    tracker.on_action("DoNothing", 10.0)
+    assert tracker.on_tick(15.0).observation == "unknown"      # nothing heard → the timeout symbol
 
 
 @pytest.fixture(scope="module")

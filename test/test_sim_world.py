@@ -1,4 +1,5 @@
 """pearl_sim's ground-truth world, recogniser and scenario files."""
+import re
 from pathlib import Path
 
 import pytest
@@ -75,24 +76,35 @@ def test_scenario_errors_name_file_and_field(text, where, problem):
     with pytest.raises(SpecError) as info:
         parse_scenarios(text, source="scen.yaml")
     message = str(info.value)
-    assert message.startswith("scen.yaml: ") and where in message and problem in message
+    # File, then the line the one YAML loader knows (the field's own, or its nearest parent's).
+    assert re.match(r"scen\.yaml(:\d+)?: ", message) and where in message and problem in message
 
 
 # ----------------------------------------------------------------------- world
+def step(w: World, action: str, timeout: float = 10.0):
+    """One classic step: the action, then (if it produced nothing) idle time until ``timeout``
+    after it — what the step loop does with the tracker's deadline."""
+    r = w.act(action)
+    if r.messages:
+        return r
+    waited = w.wait(until=r.start + timeout)
+    return type(r)(action, r.start, w.time, waited.messages, r.events + waited.events, r.wrong)
+
+
 def test_scheduler_message_closes_an_idle_step_and_timeout_gives_none():
     w = World(scenario())
-    first = w.step("DoNothing")
+    first = step(w, "DoNothing")
     assert first.message.modality == "Reminder" and first.message.text == "g_physio"
     assert first.end == pytest.approx(1.0 + 0.0, abs=3.5)  # due at 1 s, heard within the speaking time
     w2 = World(parse_scenarios("name: quiet\nstep_timeout: 5\n")[0])
-    r = w2.step("DoNothing")
+    r = step(w2, "DoNothing", timeout=5.0)
     assert r.message is None and r.end - r.start == pytest.approx(5.0)   # the timeout counts from the action
 
 
 def test_contact_remind_and_guidance_with_pace_adaptation_completes():
     w = World(scenario(), pace_adaptation=True)
-    w.step("DoNothing")
-    results = [w.step(a) for a in GUIDE]
+    step(w, "DoNothing")
+    results = [step(w, a) for a in GUIDE]
     assert results[0].message.text == "atRoom"
     assert results[1].message.modality == "Speech" and w.engaged
     assert w.truth()["ReminderGoal"] == "none" and w.wants_guidance
@@ -100,15 +112,15 @@ def test_contact_remind_and_guidance_with_pace_adaptation_completes():
     # The adaptive robot drives at her 0.1 m/s: 30 m take ~300 s, and she stays within reach.
     assert results[3].end - results[3].start > 250
     for _ in range(3):
-        w.step("DoNothing")
+        step(w, "DoNothing")
     assert w.metrics.guidances_completed == 1 and w.metrics.residents_lost == 0
     assert w.truth()["UserLocation"] == "physio"
 
 
 def test_fixed_pace_loses_a_slow_resident():
     w = World(scenario(), pace_adaptation=False)
-    w.step("DoNothing")
-    results = [w.step(a) for a in GUIDE]
+    step(w, "DoNothing")
+    results = [step(w, a) for a in GUIDE]
     assert results[3].end - results[3].start == pytest.approx(30 / 0.6, abs=1.0)
     assert w.metrics.residents_lost == 1 and w.metrics.guidances_completed == 0
     assert not w.engaged
@@ -116,9 +128,9 @@ def test_fixed_pace_loses_a_slow_resident():
 
 def test_wrong_actions_are_counted_with_reasons():
     w = World(scenario())
-    r = w.step("RemindVitamin")
+    r = step(w, "RemindVitamin")
     assert r.wrong == "reminded of vitamin with no such reminder due"
-    r = w.step("TellTime")
+    r = step(w, "TellTime")
     assert r.wrong == "told the time nobody asked for"
     assert w.metrics.wrong_actions == 2
 
@@ -129,7 +141,7 @@ def test_world_is_deterministic_for_a_seed():
                                   "questions: [{ask: time, at: 1}]\nresident: {answers_door: 0.5}\n")[0], seed=seed)
         out = []
         for a in ["GotoPatientRoom", "RingDoorBell", "RingDoorBell", "DoNothing", "VerifyInfoRequest", "TellTime"]:
-            m = w.step(a).message
+            m = step(w, a).message
             out.append(None if m is None else (m.modality, m.text))
         return out
     assert run(3) == run(3)

@@ -175,6 +175,22 @@ class FactoredDomain:
     def feature_index(self, name: str) -> int:
         return self.feature_names.index(self.feature(name).name)
 
+    def actions_in(self, category: str) -> List[str]:
+        """The actions tagged ``category: <category>``, in file order."""
+        return [a for a in self.actions if self.categories.get(a) == category]
+
+    def deterministic_effect(self, action: str, feature: str) -> Optional[str]:
+        """The value ``action`` always gives ``feature`` (whatever the state), or ``None``.
+
+        E.g. a drive's destination: ``GoHome`` sets ``RobotLocation`` to ``home``.
+        """
+        cpt = self._transitions[self.actions.index(action)][self.feature_index(feature)]
+        rows = cpt.table.reshape(-1, cpt.table.shape[-1])
+        first = rows[0]
+        if not np.allclose(rows, first) or not np.isclose(first.max(), 1.0):
+            return None
+        return self.feature(feature).values[int(first.argmax())]
+
     @property
     def state_values(self) -> np.ndarray:
         """``[S, F]`` int array: ``state_values[s, f]`` is the value index of feature ``f`` in state ``s``."""

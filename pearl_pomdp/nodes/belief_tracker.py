@@ -1,8 +1,10 @@
 """The belief tracker node: observations in, beliefs out (DESIGN.md §6).
 
-Maps each input message to an observation symbol, runs the step protocol of
-:mod:`pearl_pomdp.nodes.step_protocol` (what closes a step, queueing, timeouts, stale
-input — documented there) and publishes the belief after every closed step.
+A thin rclpy wrapper of the core :class:`~pearl_pomdp.tracking.BeliefTracker` — the same
+object the simulator and the study drive (input → symbol, what closes a step, queueing,
+timeouts, stale input: all documented in :mod:`pearl_pomdp.tracking`). Subscriptions feed
+it inputs and actions, a one-shot timer armed at the open step's deadline feeds it the
+clock, and the belief is published after every closed step.
 
 Run it with ``belief_tracker --ros-args -p domain:=config/pearl.domain.yaml`` (console
 script), ``pearl run belief_tracker …``, ``ros2 run pearl_pomdp belief_tracker`` or from a
@@ -19,72 +21,9 @@ import numpy as np
 from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import (EVENT_QOS, INPUT_QOS, LATCHED_QOS, NodeSetupError, Param, PearlNode,
                                       load_domain_and_model, resolve_path, run_node)
-from pearl_pomdp.nodes.step_protocol import StepProtocol, StepResult
+from pearl_pomdp.tracking import SYMBOL_INPUTS, BeliefTracker, ObservationMapper, StepResult, StepSettings
 
 __all__ = ["BeliefTrackerNode", "ObservationMapper", "main", "SYMBOL_INPUTS"]
-
-#: Symbol inputs: parameter suffix → the domain modality whose symbols the topic carries.
-SYMBOL_INPUTS = {"touchscreen": "touchscreen", "laser": "laser", "reminder": "reminder"}
-
-
-class ObservationMapper:
-    """Turns input strings into observation symbols of the model (ROS-free).
-
-    * Speech text goes through the domain's keyword filter
-      (:class:`pearl_pomdp.speech.KeywordFilter`): text with no keyword becomes the
-      ``unknown`` symbol (still an observation — the robot heard something it did not
-      understand); such texts are counted (:attr:`unknown_speech`) and logged with their text.
-    * Touchscreen / laser / reminder strings must be symbols of their modality
-      (``t_yes``, ``atRoom``, ``g_physio`` …; blanks around them are ignored). Anything
-      else is *invalid*: counted per input and reported, and no observation is made.
-
-    For a flat model without modalities every observation symbol is valid on every input,
-    and speech text must itself be a symbol (there are no keywords).
-
-    Args:
-        model: the compiled :class:`~pearl_pomdp.model.pomdp.Pomdp`.
-        domain: the :class:`FactoredDomain` (modalities, keywords), or ``None``.
-        keyword_filter: a ready keyword filter (default: built from ``domain.keywords``).
-    """
-
-    def __init__(self, model, domain=None, keyword_filter=None):
-        self.model = model
-        symbols = set(model.observations)
-        self.allowed: Dict[str, frozenset] = {}
-        modalities = {m.lower(): list(v) for m, v in (getattr(domain, "modalities", None) or {}).items()}
-        for key, modality in SYMBOL_INPUTS.items():
-            self.allowed[key] = frozenset(modalities.get(modality, symbols))
-        self.invalid: Dict[str, int] = {key: 0 for key in ("speech", *SYMBOL_INPUTS)}
-        self.keyword_filter = keyword_filter
-        if keyword_filter is None and domain is not None and getattr(domain, "keywords", None):
-            from pearl_pomdp.speech import KeywordFilter
-
-            self.keyword_filter = KeywordFilter(domain.keywords)
-        self.speech_symbols = frozenset(modalities.get("speech", symbols))
-
-    @property
-    def unknown_speech(self) -> int:
-        """Speech texts with no keyword, classified as the unknown symbol (0 without a filter)."""
-        return int(getattr(self.keyword_filter, "unknown_count", 0))
-
-    def speech(self, text: str) -> Optional[str]:
-        """The symbol of recognised text, or ``None`` (counted) when it maps to no symbol."""
-        if self.keyword_filter is not None:
-            symbol = self.keyword_filter.classify(text)
-        else:
-            symbol = text.strip()
-        if symbol not in self.speech_symbols or symbol not in self.model.observations:
-            self.invalid["speech"] += 1
-            return None
-        return symbol
-
-    def symbol(self, key: str, text: str) -> Optional[str]:
-        """The symbol of a touchscreen/laser/reminder string, or ``None`` (counted) if invalid."""
-        symbol = text.strip()
-        if symbol not in self.allowed[key]:
-            self.invalid[key] += 1
-            return None
-        return symbol
 
 
 class BeliefTrackerNode(PearlNode):
@@ -96,7 +35,10 @@ class BeliefTrackerNode(PearlNode):
         * ``step_timeout`` (double, s, ≥ 0): close an open step with ``timeout_observation``
           after this long without input; 0 waits forever.
         * ``timeout_observation`` (str): the symbol used on timeout (default ``unknown``).
-        * ``no_timeout_actions`` (str[]): actions never timed out (default: the Pearl drives).
+        * ``no_timeout_actions`` (str[]): actions never timed out (empty: the domain's
+          ``category: Move`` actions).
+        * ``confidence_floor`` (double, 0–1): speech recognised with a lower confidence
+          counts as ``unknown`` (see :mod:`pearl_pomdp.tracking`).
         * ``max_pending`` (int, 0–1000): observations that may wait for the next action.
         * ``stale_after`` (double, s, ≥ 0): drop a waiting observation older than this; 0 never.
         * ``diagnostics_period`` (double, s, > 0): period of the /diagnostics summary.
@@ -126,7 +68,8 @@ class BeliefTrackerNode(PearlNode):
     parameter_overrides={"domain": path, "use_sim_time": True}, domain=dom, model=model)``;
     ``domain``/``model`` are optional preloaded objects that skip loading the file
     (``model`` alone for a flat model). After construction, :attr:`protocol` is the
-    :class:`StepProtocol` (belief, counters) and :attr:`mapper` the :class:`ObservationMapper`.
+    :class:`~pearl_pomdp.tracking.StepProtocol` (belief, counters), :attr:`mapper` the
+    :class:`~pearl_pomdp.tracking.ObservationMapper` and :attr:`core` the :class:`~pearl_pomdp.tracking.BeliefTracker`.
 
     Raises:
         NodeSetupError: missing domain file or invalid parameter combination (one line).
@@ -139,12 +82,14 @@ class BeliefTrackerNode(PearlNode):
         Param("step_timeout", 10.0, "Seconds without input after an action before the step is closed "
                                     "with timeout_observation (0: wait forever)", range=(0.0, 3600.0)),
         Param("timeout_observation", "unknown", "Observation symbol that closes a step on timeout"),
-        Param("no_timeout_actions", ["GotoPatientRoom", "GuideToPhysio", "GoHome"],
+        Param("no_timeout_actions", [""],
               "Actions whose step only an input closes (drives end with a laser landmark); "
-              "names the model does not have are ignored"),
+              "empty: the domain's category: Move actions; names the model does not have are ignored"),
         Param("max_pending", 8, "Observations that may wait for the next action (FIFO)", range=(0, 1000)),
         Param("stale_after", 0.0, "Drop a waiting observation older than this many seconds (0: never)",
               range=(0.0, 3600.0)),
+        Param("confidence_floor", 0.0, "Speech recognised with a lower confidence counts as unknown",
+              range=(0.0, 1.0)),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
         Param("speech_topic", "/pearl/speech", "Recognised speech text (std_msgs/String)"),
         Param("touchscreen_topic", "/pearl/touchscreen", "Touchscreen symbols (std_msgs/String)"),
@@ -163,16 +108,14 @@ class BeliefTrackerNode(PearlNode):
             domain, model = load_domain_and_model(path)
         self.domain, self.model = domain, model
         try:
-            self.protocol = StepProtocol(model, step_timeout=p["step_timeout"],
-                                         timeout_observation=p["timeout_observation"],
-                                         no_timeout_actions=[a for a in p["no_timeout_actions"]
-                                                             if a in model.actions],
-                                         max_pending=p["max_pending"], stale_after=p["stale_after"])
+            given = [name for name in p["no_timeout_actions"] if name]
+            settings = StepSettings.from_params({**p, "no_timeout_actions": given})
+            self.core = BeliefTracker(model, domain, settings, keyword_filter)
         except ValueError as err:
             raise NodeSetupError(f"parameter {str(err)}") from None
-        self.mapper = ObservationMapper(model, domain, keyword_filter)
+        self.protocol = self.core.protocol
+        self.mapper = self.core.mapper
         self._reported_warnings = 0
-        self._marginal_index = None
         # Inputs DDS dropped before this node took them (a reader queue of INPUT_QOS depth
         # overflowing under a flood): gaps in each publisher's sequence numbers.
         self.lost_inputs = 0
@@ -187,9 +130,14 @@ class BeliefTrackerNode(PearlNode):
             self.create_subscription(cv.TextMsg, p[f"{key}_topic"], self._counted(key, self._symbol_callback(key)),
                                      INPUT_QOS)
         self.create_subscription(cv.TextMsg, p["action_topic"], self._on_action, LATCHED_QOS)
+        # One-shot timer for the open step's deadline (node clock, so sim time in replay and demo):
+        # armed when a step opens, cancelled when it closes, so a step times out exactly
+        # step_timeout after its action, as in the core loop the simulator runs.
+        self._deadline_timer = None
+        self._armed_for: Optional[float] = None
         if p["step_timeout"] > 0:
-            # Poll at a tenth of the timeout: the step closes at most 10 % late, in node-clock time.
-            self.create_timer(max(p["step_timeout"] / 10.0, 0.005), self._on_tick)
+            self._deadline_timer = self.create_timer(p["step_timeout"], self._on_tick)
+            self._deadline_timer.cancel()
         self.create_timer(p["diagnostics_period"], self.publish_diagnostics)
         # Warnings held back by the 0.1 s limit go out within 0.1 s of wall time (even when
         # sim time stands still).
@@ -220,45 +168,45 @@ class BeliefTrackerNode(PearlNode):
         return on_input
 
     def _on_action(self, msg) -> None:
-        self._handle(self.protocol.on_action(cv.msg_to_action(msg), self.now_s()))
+        self._handle(self.core.on_action(cv.msg_to_action(msg), self.now_s()))
 
     def _on_speech(self, msg) -> None:
-        text = cv.msg_to_text(msg)
         before = self.mapper.unknown_speech
-        symbol = cv.msg_to_observation(msg, self.mapper.speech)
+        outcome = self.core.on_input("speech", cv.msg_to_text(msg), self.now_s())
         if self.mapper.unknown_speech > before:
-            self.get_logger().info(f"speech {text!r} has no keyword: observation {symbol!r} "
+            self.get_logger().info(f"speech {outcome.text!r} has no keyword: observation {outcome.symbol!r} "
                                    f"({self.mapper.unknown_speech} such texts so far)", throttle_duration_sec=1.0)
-        if symbol is None:
-            self.get_logger().warning(f"speech {text!r} maps to no observation symbol of {self.model.name}; "
+        if outcome.symbol is None:
+            self.get_logger().warning(f"speech {outcome.text!r} maps to no observation symbol of {self.model.name}; "
                                       f"ignored (invalid speech inputs: {self.mapper.invalid['speech']})",
                                       throttle_duration_sec=1.0)
             self._diagnostics_soon()
             return
-        self._handle(self.protocol.on_observation(symbol, "speech", self.now_s()))
+        self._handle(outcome.closed)
 
     def _symbol_callback(self, key: str) -> Callable:
         def callback(msg) -> None:
-            symbol = cv.msg_to_observation(msg, lambda text: self.mapper.symbol(key, text))
-            if symbol is None:
+            outcome = self.core.on_input(key, cv.msg_to_text(msg), self.now_s())
+            if outcome.symbol is None:
                 valid = ", ".join(sorted(self.mapper.allowed[key]))
                 self.get_logger().warning(f"{key} input {cv.msg_to_text(msg)!r} is not a {key} symbol "
                                           f"(valid: {valid}); ignored (invalid {key} inputs: "
                                           f"{self.mapper.invalid[key]})", throttle_duration_sec=1.0)
                 self._diagnostics_soon()
                 return
-            self._handle(self.protocol.on_observation(symbol, key, self.now_s()))
+            self._handle(outcome.closed)
 
         return callback
 
     def _on_tick(self) -> None:
-        self._handle(self.protocol.on_tick(self.now_s()))
+        self._handle(self.core.on_tick(self.now_s()))
 
     # -------------------------------------------------------------- output
     def _handle(self, result: Optional[StepResult]) -> None:
         # The belief goes out first: logging and diagnostics must not delay the policy.
         if result is not None:
             self._publish_belief(result)
+        self._arm_deadline()
         logger = self.get_logger()
         for event in self.protocol.take_events():
             # One call site per severity: rclpy refuses a second severity at the same line.
@@ -269,6 +217,18 @@ class BeliefTrackerNode(PearlNode):
                 logger.info(event.text, throttle_duration_sec=1.0)
         if self._warning_total() > self._reported_warnings:
             self._diagnostics_soon()
+
+    def _arm_deadline(self) -> None:
+        """Keep the one-shot timer in step with the core's deadline (armed while a step can time out)."""
+        timer = self._deadline_timer
+        deadline = self.core.deadline()
+        if timer is None or deadline == self._armed_for:
+            return
+        self._armed_for = deadline
+        if deadline is None:
+            timer.cancel()
+        else:
+            timer.reset()  # next call = now + step_timeout: the deadline changes only when a step opens
 
     def _flush_diagnostics(self) -> None:
         if self._warning_total() > self._reported_warnings:
@@ -289,30 +249,16 @@ class BeliefTrackerNode(PearlNode):
 
     def marginals(self, belief: np.ndarray) -> Dict[str, Dict[str, float]]:
         """``{feature: {value: P}}``; a flat model reports the pseudo-feature ``"state"``."""
-        if self.domain is None:
-            return {"state": {s: float(pv) for s, pv in zip(self.model.states, belief)}}
-        if self._marginal_index is None:
-            # state_values[s, f] = value index of feature f in state s: a marginal is one bincount.
-            values = np.asarray(self.domain.state_values)
-            self._marginal_index = [(f.name, [str(v) for v in f.values], values[:, i])
-                                    for i, f in enumerate(self.domain.features)]
-        return {name: dict(zip(names, np.bincount(col, weights=belief, minlength=len(names)).tolist()))
-                for name, names, col in self._marginal_index}
+        return self.core.marginals(belief)
 
     def counters(self) -> Dict[str, int]:
         """Every counter reported on /diagnostics."""
-        out = dict(self.protocol.counters)
-        out["unknown_speech"] = self.mapper.unknown_speech
+        out = self.core.counters()
         out["lost_inputs"] = self.lost_inputs
-        for key, n in self.mapper.invalid.items():
-            out[f"invalid_{key}"] = n
         return out
 
     def _warning_total(self) -> int:
-        c = self.counters()
-        return (c["dropped_stale"] + c["dropped_overflow"] + c["replaced_actions"] + c["unknown_actions"]
-                + c["lost_inputs"]
-                + c["zero_likelihood"] + sum(c[f"invalid_{k}"] for k in self.mapper.invalid))
+        return self.core.warnings() + self.lost_inputs
 
     def publish_diagnostics(self) -> None:
         """Publish the counters on /diagnostics (WARN once any input was dropped/invalid/recovered)."""
