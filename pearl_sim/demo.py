@@ -19,7 +19,7 @@ from typing import Callable, Dict, List, Optional
 
 from pearl_pomdp.errors import PearlError
 from pearl_sim.scenario import Scenario, load_scenarios
-from pearl_sim.world import CLARIFICATIONS, StepResult, World
+from pearl_sim.world import StepResult, World
 
 #: Features shown in the transcript and the plot (the ones a reader of Figure 4 follows).
 SHOWN_FEATURES = ("ReminderGoal", "UserPresent", "UserMotionGoal", "UserInfoGoal", "UserLocation")
@@ -63,7 +63,7 @@ class DemoResult:
 
     @property
     def clarifications(self) -> int:
-        return sum(1 for s in self.steps if s.action in CLARIFICATIONS)
+        return int(self.metrics.get("clarifications", 0))
 
     def outcome(self) -> str:
         m = self.metrics
@@ -121,8 +121,11 @@ def plot_belief(steps: List[DemoStep], path: Path, title: str) -> Path:
     times = [s.time for s in steps if s.marginals]
     for label, (f, v) in series.items():
         ax.step(times, [s.marginals.get(f, {}).get(v, 0.0) for s in steps if s.marginals], where="post", label=label)
+    from pearl_sim.scenario import default_domain
+
+    clarify = set(default_domain().actions_in("Clarify"))
     for s in steps:
-        if s.action in CLARIFICATIONS:
+        if s.action in clarify:
             ax.axvline(s.time, color="grey", lw=0.6, ls=":")
     ax.set_xlabel("simulated time (s)   (dotted: clarification questions)")
     ax.set_ylabel("belief")
@@ -165,7 +168,6 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
     bag_dir = out_dir / "bag"
     if bag_dir.exists() and any(bag_dir.iterdir()):
         raise PearlError(f"{bag_dir}: already holds a bag; choose another --out folder")
-    world = World(scenario, seed=seed)
     # The bag must be replayable on its own: keep the domain and the planned policy beside it.
     import shutil
 
@@ -176,6 +178,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
 
     shutil.copyfile(domain_path, out_dir / "domain.yaml")
     domain = load_domain(out_dir / "domain.yaml")
+    world = World(scenario, seed=seed, domain=domain)
     if policy:
         decider = load_hierarchical_policy(policy, domain)
         policy_dir = Path(policy).resolve()
@@ -196,7 +199,9 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
                            domain=domain, model=domain.compile(), decider=decider,
                            overrides={"belief_tracker": {**tracker_params, "diagnostics_period": 60.0},
                                       "hierarchical_policy": {"policy": str(policy_dir), "diagnostics_period": 60.0}})
-        from pearl_sim.nodes import SimulatedHardware
+        from pearl_pomdp.nodes.sim_clock import SimClockDriver
+        from pearl_sim.loop import run_episode
+        from pearl_sim.nodes import GraphBackend, SimulatedHardware
 
         sim = SimulatedHardware(context, world)
         for node in sim.nodes:
@@ -220,46 +225,42 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
             "pearl.tracker_params": json.dumps(tracker_params)})
         recorder = Recorder(rec_node, writer, topics=RECORDED_TOPICS)
         graph.spin_until(lambda: len(recorder.subscriptions) >= 10, timeout_sec=5.0)
+        driver = SimClockDriver(graph, wait_s=wall_timeout)
+        backend = GraphBackend(graph, sim, driver)
+        # Every /clock must reach the bag, or a replay would see inputs at the wrong time:
+        # wait until each sim-time node and the recorder subscribe to the driver's /clock.
+        clock_readers = 1 + sum(1 for n in graph.nodes if n.get_parameter("use_sim_time").value)
+        if not graph.spin_until(lambda: driver.clock_pub.get_subscription_count() >= clock_readers,
+                                timeout_sec=wall_timeout):
+            raise PearlError(f"/clock reached {driver.clock_pub.get_subscription_count()} of {clock_readers} "
+                             f"subscribers within {wall_timeout} s")
 
-        for index in range(1, scenario.max_steps + 1):
-            if not graph.spin_until(lambda: bool(sim.actions), timeout_sec=wall_timeout):
-                raise PearlError(f"step {index}: no action on /pearl/action within {wall_timeout} s "
-                                 "(is the policy node running?)")
-            action = sim.actions.pop(0)
-            graph.spin_until(lambda: len(decisions) >= index, timeout_sec=wall_timeout)
+        def on_action(step_result: StepResult, waits: List[StepResult]) -> None:
+            index = len(result.steps) + 1
+            graph.spin_until(lambda: len(decisions) >= index and len(marginals) > index, timeout_sec=wall_timeout)
             decision = decisions[index - 1] if len(decisions) >= index else {"trace": []}
-            seen = len(marginals)
-            step_result: StepResult = sim.apply(action)
-            if step_result.message is None:
-                # Nothing heard: let sim time run until the tracker's timeout closes the step.
-                # Small ticks, each fully processed (timers of every node, /clock callbacks), so the
-                # tracker's timeout fires at the same sim time live and in a replay of the bag.
-                deadline = time.monotonic() + wall_timeout
-                while len(marginals) <= seen and time.monotonic() < deadline:
-                    sim.clock.advance_to(sim.clock.now + 0.1)
-                    for _ in range(30):
-                        graph.spin_once(0.0)
-            graph.spin_until(lambda: len(marginals) > seen, timeout_sec=wall_timeout)
-            latest = marginals[-1] if len(marginals) > seen else {}
-            msg = step_result.message
-            step = DemoStep(index=index, time=step_result.start, action=action, trace=decision.get("trace", []),
-                            modality=msg.modality if msg else None, said=msg.said if msg else "",
-                            heard=msg.text if msg else "", observation=latest.get("observation"),
-                            marginals=latest.get("marginals", {}), events=step_result.events,
-                            wrong=step_result.wrong)
+            latest = marginals[index] if len(marginals) > index else {}
+            heard = step_result.messages + [m for w in waits for m in w.messages]
+            msg = heard[0] if heard else None
+            sim.publish_truth(backend.now_ns * 1e-9, step_result)
+            step = DemoStep(index=index, time=step_result.start, action=step_result.action,
+                            trace=decision.get("trace", []), modality=msg.modality if msg else None,
+                            said=msg.said if msg else "", heard=msg.text if msg else "",
+                            observation=latest.get("observation"), marginals=latest.get("marginals", {}),
+                            events=step_result.events + [e for w in waits for e in w.events], wrong=step_result.wrong)
             result.steps.append(step)
             if echo is not None:
                 echo(format_step(step, scenario.resident.name))
+
+        run_episode(world, backend, on_action=on_action)
         # The policy answers the last belief too: wait until that action is in the bag, or a
         # replay (which always sees the answer) would find one action more than recorded.
-        graph.spin_until(lambda: recorder.counts.get("/pearl/action", 0) >= len(result.steps) + 1,
+        graph.spin_until(lambda: recorder.counts.get("/pearl/action", 0) >= len(driver.actions),
                          timeout_sec=5.0)
-        # A second of /clock past the end, so a replay sees time pass beyond the last step's
-        # timeout deadline as the live nodes did (less than step_timeout: nothing else fires).
-        for _ in range(10):
-            sim.clock.advance_to(sim.clock.now + 0.1)
-            for _ in range(30):
-                graph.spin_once(0.0)
+        # A second of /clock past the end, so a replay sees time pass beyond the last step as
+        # the live nodes did (less than step_timeout: nothing else fires).
+        for k in range(1, 11):
+            driver.set_time(backend.now_ns + k * 100_000_000)
         recorder.stop()
         result.bag_messages = sum(recorder.counts.values())
         result.tracker_counters = dict(graph.tracker.counters())

@@ -13,26 +13,25 @@ node                   publishes
                        ``/pearl/sim/said`` (what she actually said, for transcripts)
 ``sim_speech``         ``/pearl/speech`` (recogniser text, with word errors)
 ``sim_reminder``       ``/pearl/reminder`` (scheduler: ``g_physio`` …)
-``sim_clock``          ``/clock`` (rosgraph_msgs/Clock): the graph runs on sim time
 =====================  ===========================================================
 
-:class:`SimulatedHardware` builds them on a context and drives one step at a time:
-the robot's action (``/pearl/action``) is applied to the world, the clock is moved
-to the moment the answer arrives, and the answer is published by the node of its
-modality. When nothing is heard, the clock runs on until the belief tracker's own
-timeout closes the step (DESIGN.md §6). Everything is seeded, so a scenario replays
-identically.
+:class:`SimulatedHardware` builds them on a context; :class:`GraphBackend` makes the
+real Pearl graph the robot of the episode loop (:func:`pearl_sim.loop.run_episode`): each
+message the world produces is published by the node of its modality at its time, with
+``/clock`` moved there first by the graph's
+:class:`~pearl_pomdp.nodes.sim_clock.SimClockDriver`; when nothing is heard the clock
+moves to the tracker's own deadline and its timer closes the step (DESIGN.md §6).
+Everything is seeded, so a scenario replays identically.
 """
 from __future__ import annotations
 
 import json
 import math
-from typing import Callable, List, Optional
+from typing import List
 
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from pearl_sim.world import StepResult, World
@@ -52,24 +51,6 @@ def _stamp(seconds: float):
 
     sec = int(math.floor(seconds))
     return Time(sec=sec, nanosec=int(round((seconds - sec) * 1e9)) % 1_000_000_000)
-
-
-class SimClockNode(Node):
-    """Publishes ``/clock``; time moves only when :meth:`advance_to` is called."""
-
-    def __init__(self, context, start: float = 0.0):
-        super().__init__("sim_clock", context=context)
-        self.pub = self.create_publisher(Clock, "/clock", 10)
-        self.now = start
-        self.publish()
-
-    def publish(self) -> None:
-        self.pub.publish(Clock(clock=_stamp(self.now)))
-
-    def advance_to(self, t: float) -> None:
-        if t > self.now:
-            self.now = t
-            self.publish()
 
 
 class SimNavigationNode(Node):
@@ -122,52 +103,88 @@ class SimReminderNode(Node):
 
 
 class SimulatedHardware:
-    """All simulated hardware nodes on one context, stepping a :class:`World`.
+    """All simulated hardware nodes on one context, publishing what a :class:`World` produces.
 
     Args:
         context: an initialised rclpy context (the same as the Pearl nodes').
         world: the simulated nursing home.
-        on_step: called with each :class:`~pearl_sim.world.StepResult` after its message is published.
 
     Attributes:
-        nodes: the rclpy nodes, to add to an executor.
-        actions: actions received on ``/pearl/action`` and not yet applied.
+        nodes: the rclpy nodes, to add to an executor. ``/clock`` is published by the
+            graph's :class:`~pearl_pomdp.nodes.sim_clock.SimClockDriver`, not here.
     """
 
-    def __init__(self, context, world: World, on_step: Optional[Callable[[StepResult], None]] = None):
+    def __init__(self, context, world: World):
         self.world = world
-        self.on_step = on_step
-        self.clock = SimClockNode(context)
         self.navigation = SimNavigationNode(context, world)
         self.user = SimUserNode(context)
         self.speech = SimSpeechNode(context)
         self.reminder = SimReminderNode(context)
-        self.truth = self.clock.create_publisher(String, "/pearl/sim/truth", RELIABLE)
-        self.nodes = [self.clock, self.navigation, self.user, self.speech, self.reminder]
-        self.actions: List[str] = []
-        self.clock.create_subscription(String, "/pearl/action", lambda m: self.actions.append(m.data), RELIABLE)
+        self.truth = self.navigation.create_publisher(String, "/pearl/sim/truth", RELIABLE)
+        self.nodes = [self.navigation, self.user, self.speech, self.reminder]
+        self.publishers = {"Speech": self.speech.pub, "Touchscreen": self.user.touch,
+                           "Laser": self.navigation.laser, "Reminder": self.reminder.pub}
 
-    def apply(self, action: str) -> StepResult:
-        """Apply ``action`` to the world, move the clock to its answer and publish the answer."""
-        self.clock.advance_to(self.world.time)
-        result = self.world.step(action)
-        if result.message is not None:
-            self.clock.advance_to(result.message.time)
-        self.navigation.publish_pose(self.clock.now)
-        self.truth.publish(String(data=json.dumps({"time": self.world.time, "action": action,
+    def publish_truth(self, t: float, result: StepResult) -> None:
+        """The true state after an action (or a wait) on ``/pearl/sim/truth``, and the robot's pose."""
+        self.navigation.publish_pose(t)
+        self.truth.publish(String(data=json.dumps({"time": self.world.time, "action": result.action,
                                                     "state": self.world.truth(), "events": result.events,
                                                     "wrong": result.wrong})))
-        msg = result.message
-        if msg is not None:
-            if msg.said:
-                self.user.said.publish(String(data=msg.said))
-            publisher = {"Speech": self.speech.pub, "Touchscreen": self.user.touch,
-                         "Laser": self.navigation.laser, "Reminder": self.reminder.pub}[msg.modality]
-            publisher.publish(String(data=msg.text))
-        if self.on_step is not None:
-            self.on_step(result)
-        return result
 
     def destroy(self) -> None:
         for node in self.nodes:
             node.destroy_node()
+
+
+class GraphBackend:
+    """The real Pearl nodes as the robot of :func:`pearl_sim.loop.run_episode` (over DDS, under /clock).
+
+    Each world message is published by the simulated node of its modality at its time
+    (the :class:`~pearl_pomdp.nodes.sim_clock.SimClockDriver` moves ``/clock`` there first
+    and waits for the graph's answer); a deadline is reached by moving ``/clock`` to it, so
+    the tracker node's own timer closes the step.
+
+    Raises:
+        PearlError: the graph did not answer within the driver's wait (names the phase).
+    """
+
+    def __init__(self, graph, hardware: SimulatedHardware, driver):
+        self.graph, self.hardware, self.driver = graph, hardware, driver
+        self.now_ns = 0
+
+    def start(self) -> List[str]:
+        from pearl_pomdp.errors import PearlError
+
+        if not self.driver.wait_until_matched(list(self.hardware.publishers.values())):
+            raise PearlError("the Pearl graph gave no first action (is the policy node running?)")
+        return list(self.driver.actions)
+
+    def _advance(self, t_ns: int) -> None:
+        from pearl_pomdp.errors import PearlError
+
+        if t_ns > self.now_ns:
+            if not self.driver.set_time(t_ns):
+                raise PearlError(f"the Pearl graph did not settle at sim time {t_ns * 1e-9:.3f} s")
+            self.now_ns = t_ns
+
+    def deliver(self, message) -> List[str]:
+        from pearl_pomdp.errors import PearlError
+        from pearl_sim.loop import clock_ns
+
+        self._advance(clock_ns(message.time))
+        before = len(self.driver.actions)
+        if message.said:
+            self.hardware.user.said.publish(String(data=message.said))
+        if not self.driver.feed(self.hardware.publishers[message.modality], String(data=message.text)):
+            raise PearlError(f"the Pearl graph did not take {message.modality} {message.text!r} "
+                             f"at {message.time:.3f} s")
+        return self.driver.actions[before:]
+
+    def tick(self, t_ns: int) -> List[str]:
+        before = len(self.driver.actions)
+        self._advance(t_ns)
+        return self.driver.actions[before:]
+
+    def deadline(self):
+        return self.graph.tracker.core.deadline()

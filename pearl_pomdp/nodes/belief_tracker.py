@@ -116,6 +116,7 @@ class BeliefTrackerNode(PearlNode):
         self.protocol = self.core.protocol
         self.mapper = self.core.mapper
         self._reported_warnings = 0
+        self.actions_received = 0  # /pearl/action messages taken (the sim-clock driver waits on it)
         # Inputs DDS dropped before this node took them (a reader queue of INPUT_QOS depth
         # overflowing under a flood): gaps in each publisher's sequence numbers.
         self.lost_inputs = 0
@@ -168,6 +169,7 @@ class BeliefTrackerNode(PearlNode):
         return on_input
 
     def _on_action(self, msg) -> None:
+        self.actions_received += 1
         self._handle(self.core.on_action(cv.msg_to_action(msg), self.now_s()))
 
     def _on_speech(self, msg) -> None:
