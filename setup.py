@@ -59,5 +59,7 @@ setup(
     entry_points={
         "console_scripts": ["pearl = pearl_pomdp.cli:main"]
         + [f"{name} = {target}" for name, target in NODES.items()],
+        # Subcommands other packages add to `pearl` (the core never imports the simulator).
+        "pearl.commands": ["demo = pearl_sim.cli.demo", "experiment = pearl_sim.cli.experiment"],
     },
 )

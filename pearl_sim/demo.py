@@ -156,7 +156,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
     from rclpy.context import Context
     from rclpy.signals import SignalHandlerOptions
 
-    from pearl_pomdp.bags.recorder import Recorder
+    from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.bags.writer import BagWriter
     from pearl_pomdp.nodes.graph import PearlGraph
     from std_msgs.msg import String

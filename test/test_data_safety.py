@@ -275,7 +275,7 @@ def test_pearl_record_sigkilled_keeps_what_it_wrote(tmp_path):
     from ros_helpers import Proc, allocate_domain_id, ros_env, wait_for
 
     from pearl_pomdp.bags.reader import BagReader
-    from pearl_pomdp.bags.replay import _string_data
+    from pearl_pomdp.nodes.bag_replay import _string_data
 
     env = ros_env(allocate_domain_id(), tmp_path / "log")
     bag = tmp_path / "rec"

@@ -44,7 +44,7 @@ def test_demo_transcript_shows_clarification_and_completed_guidance(demo):
 
 
 def test_demo_bag_replays_to_the_same_actions(demo):
-    from pearl_pomdp.bags.replay import replay_bag
+    from pearl_pomdp.nodes.bag_replay import replay_bag
 
     result, _ = demo
     replay = replay_bag(result.bag, domain_id=allocate_domain_id())

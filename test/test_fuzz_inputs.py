@@ -432,7 +432,7 @@ def test_garbage_cdr_on_action_topic_is_a_bag_error(tmp_path, payload):
     """Replay decodes recorded /pearl/action and /clock CDR: garbage there is a BagError naming topic."""
     from pearl_pomdp.bags.metadata import QosProfile
     from pearl_pomdp.bags.reader import BagError, BagReader
-    from pearl_pomdp.bags.replay import _clock_ns, expected_actions
+    from pearl_pomdp.nodes.bag_replay import _clock_ns, expected_actions
     from pearl_pomdp.bags.writer import BagWriter
 
     with BagWriter(tmp_path / "b") as bag:

@@ -19,7 +19,7 @@ pytestmark = pytest.mark.ros
 pytest.importorskip("rclpy")
 
 from pearl_pomdp.bags.reader import BagError, BagReader  # noqa: E402
-from pearl_pomdp.bags.replay import replay_bag  # noqa: E402
+from pearl_pomdp.nodes.bag_replay import replay_bag  # noqa: E402
 from pearl_pomdp.bags.writer import BagWriter  # noqa: E402
 from pearl_pomdp.errors import PearlError  # noqa: E402
 

@@ -7,7 +7,9 @@ Each subcommand lives in its own module of this package and exposes::
     def add_arguments(parser: argparse.ArgumentParser) -> None: ...
     def run(args: argparse.Namespace) -> int: ...   # exit code
 
-Modules are discovered automatically, so adding a command never edits this file.
+Modules are discovered automatically, so adding a command never edits this file;
+other packages add commands through the ``pearl.commands`` entry-point group (pearl_sim's
+``demo`` and ``experiment``).
 User errors (:class:`~pearl_pomdp.errors.PearlError`, missing files) print one
 line ``pearl <command>: error: …`` on stderr and exit 2, without a traceback.
 """
@@ -24,11 +26,23 @@ from pearl_pomdp.errors import PearlError
 from pearl_pomdp.jsonable import numpy_to_json
 
 
+#: Entry-point group through which other packages (pearl_sim) add subcommands.
+COMMAND_GROUP = "pearl.commands"
+
+
 def _command_modules():
+    modules = []
     for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"{__name__}.{info.name}")
+        if not info.name.startswith("_"):
+            modules.append(importlib.import_module(f"{__name__}.{info.name}"))
+    from importlib.metadata import entry_points
+
+    for ep in sorted(entry_points(group=COMMAND_GROUP), key=lambda e: e.name):
+        try:
+            modules.append(importlib.import_module(ep.value))
+        except ImportError as err:  # a plug-in whose dependencies are missing: say so, keep the rest
+            print(f"pearl: subcommand {ep.name!r} ({ep.value}) is unavailable: {err}", file=sys.stderr)
+    for module in sorted(modules, key=lambda m: getattr(m, "COMMAND", "")):
         if hasattr(module, "COMMAND") and hasattr(module, "run"):
             yield module
 

@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     from rclpy.parameter import Parameter
     from rclpy.signals import SignalHandlerOptions
 
-    from pearl_pomdp.bags.recorder import Recorder, log
+    from pearl_pomdp.nodes.bag_recorder import Recorder, log
     from pearl_pomdp.bags.writer import BagWriter
     from pearl_pomdp.cli import print_json
 

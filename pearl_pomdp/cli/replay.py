@@ -36,7 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pearl_pomdp.bags.replay import replay_bag
+    from pearl_pomdp.nodes.bag_replay import replay_bag
     from pearl_pomdp.cli import print_json
 
     domain_id = args.domain_id

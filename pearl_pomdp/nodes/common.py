@@ -57,7 +57,7 @@ class Param:
     """One ROS parameter of a node.
 
     Attributes:
-        name: parameter name (dots allowed, ``actions.TellTime.say``).
+        name: parameter name (dots allowed, ``actions.<action>.say``).
         default: default value; its Python type fixes the ROS type (``float`` → DOUBLE …).
         description: one line for ``ros2 param describe``.
         read_only: True for parameters read once at start-up (most are).

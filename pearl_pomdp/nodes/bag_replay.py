@@ -193,13 +193,11 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
     expected = expected_actions(reader)
     cfg = replay_config(reader, domain, policy)
 
-    import rclpy
-    from rclpy.executors import TimeoutException
-    from rosgraph_msgs.msg import Clock
     from std_msgs.msg import String
 
-    from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS
+    from pearl_pomdp.nodes.common import EVENT_QOS
     from pearl_pomdp.nodes.graph import PearlGraph
+    from pearl_pomdp.nodes.sim_clock import SimClockDriver
 
     # Diagnostics are not compared; slowing their timers keeps them out of the lock-step
     # (fewer timer deadlines to stop at). Nothing else about the nodes changes.
@@ -210,72 +208,17 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
                        shared={"domain": cfg["domain"], "policy": cfg["policy"]}, overrides=overrides,
                        **_graph_options())
     try:
-        node = graph.add_node(rclpy.create_node("pearl_replay", context=graph.context))
-        actions: List[str] = []
-        node.create_subscription(String, ACTION_TOPIC, lambda m: actions.append(m.data), LATCHED_QOS)
+        # Phases of the shared sim-clock driver (pearl_pomdp.nodes.sim_clock): match, then per
+        # bag message set_time (/clock, coalesced) or feed (an input), each settling the graph.
+        driver = SimClockDriver(graph, wait_s=step_timeout_s)
+        actions = driver.actions
+        node = driver.node
         pubs = {t: node.create_publisher(String, t, EVENT_QOS) for t in INPUT_TOPICS if t in reader.topics}
-        clock_pub = node.create_publisher(Clock, wk.CLOCK_TOPIC, 10)
-        tracker, policy_node = graph.tracker, graph.policy
-        clocks = [n.get_clock() for n in graph.nodes if n is not node]
-        executor = graph.executor
-
-        def drain() -> None:
-            """Run every callback that is ready now (timers due after a clock jump)."""
-            while True:
-                try:
-                    handler, _entity, _node = executor.wait_for_ready_callbacks(timeout_sec=0.0)
-                except TimeoutException:
-                    return
-                handler()
-                if handler.exception() is not None:
-                    raise handler.exception()
-
-        def wait(pred, what: str) -> bool:
-            if graph.spin_until(pred, timeout_sec=step_timeout_s):
-                return True
-            node.get_logger().warning(f"replay: gave up waiting for {what} after {step_timeout_s} s")
-            return False
-
-        def await_answer(decisions_before: int) -> None:
-            # The step closed: the policy answers, and the tracker must see that action
-            # (opening the next step) before the next input, as in the recorded run.
-            if wait(lambda: policy_node.decisions > decisions_before and len(actions) >= policy_node.decisions
-                    and tracker.protocol.step_open, "the policy's answer"):
-                drain()
-
-        # Matching before feeding: our publishers must reach the tracker, the first action us.
-        wait(lambda: all(p.get_subscription_count() > 0 for p in pubs.values())
-             and clock_pub.get_subscription_count() > 0, "subscriptions to match")
-        wait(lambda: len(actions) >= 1 and tracker.protocol.step_open, "the first action")
-
-        graph_nodes = [n for n in graph.nodes if n is not node]
-
-        def next_deadline() -> Optional[int]:
-            """Sim time (ns) at which the next node timer falls due, or None."""
-            best = None
-            for n in graph_nodes:
-                now = n.get_clock().now().nanoseconds
-                for tm in n.timers:
-                    if tm.clock is not n.get_clock() or tm.is_canceled():
-                        continue  # steady/system-clock timers do not follow /clock
-                    left = tm.time_until_next_call()
-                    if left is not None:
-                        best = now + left if best is None else min(best, now + left)
-            return best
-
-        def feed_clock(data: bytes, t: int) -> None:
-            nonlocal fed
-            updates, decisions = tracker.protocol.counters["updates"], policy_node.decisions
-            clock_pub.publish(data)
-            fed += 1
-            wait(lambda: all(c.now().nanoseconds >= t for c in clocks), f"/clock {t} ns")
-            drain()
-            if tracker.protocol.counters["updates"] > updates:  # a step timed out
-                await_answer(decisions)
+        driver.wait_until_matched(list(pubs.values()))
 
         messages = fed = skipped = 0
         pending = None  # (bytes, t) of a /clock not yet fed: see coalesce_clock
-        deadline = next_deadline()
+        deadline = driver.next_timer_deadline()
         bar = None
         if progress:
             from tqdm import tqdm
@@ -301,23 +244,21 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
                         # matter, before the next input or the next due timer.
                         pending = (m.data, t)
                         continue
-                feed_clock(m.data, t)
-                deadline = next_deadline()
+                driver.set_time(t, raw=m.data)
+                fed += 1
+                deadline = driver.next_timer_deadline()
             elif m.topic in pubs:
                 if pending is not None:
-                    feed_clock(*pending)
+                    driver.set_time(pending[1], raw=pending[0])
+                    fed += 1
                     pending = None
-                    deadline = next_deadline()
-                before = tracker.counters()
-                updates, decisions = tracker.protocol.counters["updates"], policy_node.decisions
-                pubs[m.topic].publish(m.data)
+                driver.feed(pubs[m.topic], m.data)
                 fed += 1
-                wait(lambda: tracker.counters() != before, f"the tracker to take {m.topic}")
-                if tracker.protocol.counters["updates"] > updates:
-                    await_answer(decisions)
-                deadline = next_deadline()
+                deadline = driver.next_timer_deadline()
         if pending is not None:
-            feed_clock(*pending)
+            driver.set_time(pending[1], raw=pending[0])
+            fed += 1
+        tracker = graph.tracker
         seconds = time.perf_counter() - start
         if bar is not None:
             bar.close()

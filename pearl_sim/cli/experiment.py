@@ -19,7 +19,7 @@ HELP = "run the guidance study (policies × residents × speech noise) on the co
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from pearl_pomdp.cli.demo import _share
+    from pearl_sim.cli.demo import _share
 
     parser.add_argument("--scenarios", nargs="+", default=[_share("config/scenarios/study.yaml")],
                         help="scenario files (every episode of each is run)")
