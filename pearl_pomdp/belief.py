@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import logging
 import numbers
-from typing import Union
+from typing import Dict, Optional, Union
 
 import numpy as np
 import scipy.sparse as sp
@@ -60,7 +60,7 @@ try:  # scipy's compiled CSR mat-vec, called directly: a third of the cost of ``
     from scipy.sparse._sparsetools import csr_matvec as _csr_matvec
 except ImportError:  # pragma: no cover - depends on the scipy version
     _csr_matvec = None
-_DIRECT_MATVEC = {"ok": None}
+_DIRECT_MATVEC: Dict[str, Optional[bool]] = {"ok": None}
 _sum = np.add.reduce
 _min = np.minimum.reduce
 

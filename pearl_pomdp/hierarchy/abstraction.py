@@ -46,7 +46,7 @@ Array conventions as everywhere: ``T[a][s, s']``, ``O[a, s', o]``, ``R[s, a]``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Set
 
 import numpy as np
 import scipy.sparse as sp
@@ -308,7 +308,7 @@ def _violations(sub, K, X, Z, partners, keep, tol) -> Dict[str, set]:
     """Features outside ``keep`` that eq. 18's conditions (1), (2), (3) still read."""
     summer = sp.csr_matrix((np.ones(X * Z), (np.arange(X * Z), np.repeat(np.arange(X), Z))), shape=(X * Z, X))
     marginals = [(Kk @ summer).tocsr() for Kk in K]
-    out = {"reward": set(), "transition": set(), "observation": set()}
+    out: Dict[str, Set[int]] = {"reward": set(), "transition": set(), "observation": set()}
     for f in range(len(partners)):
         if f in keep:
             continue
@@ -368,12 +368,12 @@ def _merge_observations(cols: List[sp.csc_matrix], tol: float) -> List[List[int]
     n, Z = cols[0].shape
     rng = np.random.default_rng(12345)
     r = rng.random(n)
-    sigs = []  # [A] per observation: projection of the normalised column, NaN when zero
+    rows = []  # [A] per observation: projection of the normalised column, NaN when zero
     for M in cols:
         total = np.asarray(M.sum(axis=0)).ravel()
         proj = np.asarray(M.T @ r).ravel()
-        sigs.append(np.where(total > TOL, proj / np.where(total > TOL, total, 1.0), np.nan))
-    sigs = np.array(sigs).T  # [Z, A]
+        rows.append(np.where(total > TOL, proj / np.where(total > TOL, total, 1.0), np.nan))
+    sigs = np.array(rows).T  # [Z, A]
     classes: List[List[int]] = []
     class_sig: List[np.ndarray] = []
     for o in range(Z):

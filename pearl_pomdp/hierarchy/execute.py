@@ -27,7 +27,7 @@ import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Union
+from typing import Any, Dict, List, Optional, Union
 
 import numpy as np
 import scipy.sparse as sp
@@ -195,6 +195,8 @@ class HierarchicalPolicy:
         self.action_names = list(action_names)
         self.fingerprint = fingerprint
         self.report = report or {}
+        #: The abstract models PLAN solved, per subtask (kept for inspection; not saved).
+        self.abstract_models: Dict[str, Any] = {}
         self.hierarchy_name = hierarchy_name
         self.model_name = model_name
         self._index = {name: i for i, name in enumerate(self.action_names)}
@@ -276,7 +278,7 @@ class HierarchicalPolicy:
                 entry["lookahead"] = {"depth": sub.lookahead.depth, "discount": sub.lookahead.discount}
             subtasks.append(entry)
         buffer = io.BytesIO()
-        np.savez_compressed(buffer, **arrays)
+        np.savez_compressed(buffer, **arrays)  # type: ignore[arg-type]  # numpy stubs type **kwds as allow_pickle
         npz_bytes = buffer.getvalue()
         digest = hashlib.sha256(npz_bytes).hexdigest()
         header = {

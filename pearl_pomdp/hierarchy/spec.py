@@ -44,7 +44,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import yaml
 
@@ -313,7 +313,7 @@ def parse_hierarchy(text: str, primitives: Sequence[str], features: Optional[Map
             if child not in prim_set and child not in raw_subtasks:
                 raise chk.fail(cw, f"unknown action {child!r}: neither a primitive of the domain nor a subtask "
                                    f"(subtasks: {', '.join(raw_subtasks)})")
-        settings = dict(defaults)
+        settings: Dict[str, Any] = dict(defaults)
         for key in ("solver", "horizon", "lookahead", "epsilon", "time_limit"):
             if key in body:
                 settings[key] = _setting(chk, f"{where}.{key}", key, body[key])
@@ -400,7 +400,7 @@ def _parse_shaping(chk: _Checker, where: str, raw, children: Sequence[str],
                     if v not in features[feat]:
                         raise chk.fail(fw, f"unknown value {v!r} of {feat}; expected one of: {', '.join(features[feat])}")
             conds.append((feat, tuple(vals)))
-        rules.append(ShapingRule(action=action, reward=float(reward), when=tuple(conds)))
+        rules.append(ShapingRule(action=str(action), reward=float(reward), when=tuple(conds)))
     return rules
 
 
