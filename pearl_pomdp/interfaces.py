@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
     from pearl_pomdp.model.pomdp import Pomdp
     from pearl_pomdp.solvers.base import SolveResult
 
-__all__ = ["TraceStep", "Decision", "Policy", "Decider", "ObservingDecider", "Solver"]
+__all__ = ["TraceStep", "Decision", "Policy", "BatchPolicy", "Decider", "ObservingDecider", "Solver"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,13 @@ class Policy(Protocol):
     """A flat policy: the action index to take at a belief ``[S]``."""
 
     def action(self, belief: np.ndarray) -> int: ...
+
+
+@runtime_checkable
+class BatchPolicy(Policy, Protocol):
+    """A policy that can also choose for many beliefs at once (``[N, S] -> [N]``): fast simulation."""
+
+    def actions_batch(self, beliefs: np.ndarray) -> np.ndarray: ...
 
 
 @runtime_checkable

@@ -67,9 +67,11 @@ def header_path(path: PathLike) -> Path:
 
 
 def _kind_of(policy) -> str:
-    if isinstance(policy, AlphaVectorPolicy) or (hasattr(policy, "alphas") and hasattr(policy, "actions")):
+    from pearl_pomdp.solvers.mdp import MostLikelyStatePolicy
+
+    if isinstance(policy, AlphaVectorPolicy):
         return KIND_ALPHA
-    if hasattr(policy, "state_actions"):
+    if isinstance(policy, MostLikelyStatePolicy):
         return KIND_MLS
     raise PolicyError(
         f"cannot save a {type(policy).__name__}: supported are AlphaVectorPolicy (alphas, actions) "

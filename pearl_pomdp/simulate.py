@@ -63,17 +63,10 @@ class _RowSampler:
 
 def _batched_actions(policy):
     """A function ``B [N, S] -> actions [N]`` for ``policy``."""
-    if hasattr(policy, "actions_batch"):
+    from pearl_pomdp.interfaces import BatchPolicy
+
+    if isinstance(policy, BatchPolicy):
         return lambda B: np.asarray(policy.actions_batch(B), dtype=np.int64)
-    alphas = getattr(policy, "alphas", None)
-    labels = getattr(policy, "actions", None)
-    if isinstance(alphas, np.ndarray) and isinstance(labels, np.ndarray) and alphas.ndim == 2:
-        # Same rule as AlphaVectorPolicy.action: the first maximising vector.
-        return lambda B: labels[np.argmax(B @ alphas.T, axis=1)]
-    state_actions = getattr(policy, "state_actions", None)
-    if isinstance(state_actions, np.ndarray) and state_actions.ndim == 1:
-        # MostLikelyStatePolicy's rule: the action of the most probable state (ties: lowest index).
-        return lambda B: state_actions[np.argmax(B, axis=1)]
     return lambda B: np.fromiter((policy.action(b) for b in B), dtype=np.int64, count=B.shape[0])
 
 

@@ -80,8 +80,7 @@ _DEADLINE_SLACK = 1e-9
 
 def drive_actions(domain) -> List[str]:
     """The actions of ``domain`` tagged ``category: Move`` (drives: never timed out)."""
-    categories = getattr(domain, "categories", None) or {}
-    return [a for a in domain.actions if categories.get(a) == "Move"]
+    return domain.actions_in("Move")
 
 
 @dataclass(frozen=True)

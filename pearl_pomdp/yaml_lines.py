@@ -129,25 +129,29 @@ def load_yaml(path: Union[str, Path]) -> Any:
     return parse_yaml(p.read_text(encoding="utf-8"), str(p))
 
 
-def line_table(data: Any, path: str = "", out: Optional[Dict[str, int]] = None) -> Dict[str, int]:
-    """``{"a.b[2].c": line}`` for every key and item of parsed ``data`` (1-based lines)."""
-    out = {} if out is None else out
-    if path and path not in out:
-        line = line_of(data)
-        if line is not None:
-            out[path] = line
-    if isinstance(data, dict):
-        for key, value in data.items():
-            sub = f"{path}.{key}" if path else str(key)
-            line = line_of(data, key)
+def line_table(data: Any) -> Dict[str, int]:
+    """``{"a.b[2].c": line}`` for every key and item of parsed ``data`` (1-based lines).
+
+    A container reached again through a YAML alias is not walked again: its lines are
+    those of its anchor, and a small file of nested aliases ("billion laughs") would
+    otherwise take exponential time and memory.
+    """
+    out: Dict[str, int] = {}
+    seen: set = set()
+
+    def walk(node: Any, path: str) -> None:
+        if not isinstance(node, (dict, list)):
+            return
+        if id(node) in seen:
+            return
+        seen.add(id(node))
+        items = node.items() if isinstance(node, dict) else enumerate(node)
+        for key, value in items:
+            sub = (f"{path}.{key}" if path else str(key)) if isinstance(node, dict) else f"{path}[{key}]"
+            line = line_of(node, key)
             if line is not None:
-                out[sub] = line
-            line_table(value, sub, out)
-    elif isinstance(data, list):
-        for i, value in enumerate(data):
-            sub = f"{path}[{i}]"
-            line = line_of(data, i)
-            if line is not None:
-                out[sub] = line
-            line_table(value, sub, out)
+                out.setdefault(sub, line)
+            walk(value, sub)
+
+    walk(data, "")
     return out

@@ -66,7 +66,9 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.hierarchy import load_hierarchical_policy
 
     domain = load_domain_any(args.domain)
-    if not hasattr(domain, "features"):
+    from pearl_pomdp.model.factored import FactoredDomain
+
+    if not isinstance(domain, FactoredDomain):
         raise BeliefError("explain needs a factored domain (.yaml) to read --belief")
     policy = load_hierarchical_policy(args.policy, domain)
     b = belief_from_spec(domain, args.belief)

@@ -53,6 +53,7 @@ import scipy.sparse as sp
 
 from pearl_pomdp.hierarchy.parameterize import StateFactors, SubtaskModel
 from pearl_pomdp.model.pomdp import Pomdp
+from pearl_pomdp.model.factored import FactoredDomain
 
 __all__ = ["AbstractSubtask", "abstract_subtask", "KernelBuilder"]
 
@@ -206,7 +207,7 @@ def _seed(sub: SubtaskModel, factors: StateFactors, domain, child_relevant: Sequ
     names = factors.names
     seed = set(n for n in child_relevant if n in names)
     prims = [sub.model.actions[int(p)] for p in np.unique(sub.source)]
-    if domain is not None and hasattr(domain, "reward_features"):
+    if isinstance(domain, FactoredDomain):
         for p in prims:
             seed |= set(domain.reward_features(p))
         grew = True
@@ -266,7 +267,7 @@ def abstract_subtask(sub: SubtaskModel, factors: StateFactors, domain=None, chil
             for f in feats:
                 reasons.setdefault(factors.names[f], []).append(cond)
         keep |= added
-        if domain is not None and hasattr(domain, "transition_parents"):
+        if isinstance(domain, FactoredDomain):
             keep |= set(_seed_closure(sub, factors, domain, keep))
     # The fixpoint: no condition reads a feature outside X+ (recorded for the report).
     checks = {cond: not feats for cond, feats in found.items()}

@@ -36,6 +36,7 @@ from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.interfaces import Decision, TraceStep
 from pearl_pomdp.jsonable import numpy_to_json
+from pearl_pomdp.model.factored import FactoredDomain
 
 __all__ = ["Decision", "TraceStep", "SubtaskPolicy", "Lookahead", "HierarchicalPolicy", "load_hierarchical_policy",
            "FORMAT_VERSION"]
@@ -318,7 +319,7 @@ def load_hierarchical_policy(directory: Union[str, Path], domain) -> Hierarchica
     raw = npath.read_bytes()
     if hashlib.sha256(raw).hexdigest() != header.get("npz_sha256"):
         raise PolicyError(f"{npath}: SHA-256 does not match {jpath.name} (the pair was not written together)")
-    model = domain.compile() if hasattr(domain, "compile") else domain
+    model = domain.compile() if isinstance(domain, FactoredDomain) else domain
     fp = model.fingerprint()
     if fp != header.get("model_fingerprint"):
         raise PolicyError(f"{jpath}: the policy was planned for model {header.get('model_name')!r} with fingerprint "

@@ -30,6 +30,7 @@ import scipy.sparse as sp
 
 from pearl_pomdp.hierarchy.spec import SubtaskSpec
 from pearl_pomdp.model.pomdp import Pomdp
+from pearl_pomdp.model.factored import FactoredDomain
 
 __all__ = ["SubtaskModel", "StateFactors", "parameterize", "local_reward_problems"]
 
@@ -51,7 +52,7 @@ class StateFactors:
     @classmethod
     def from_domain(cls, domain) -> "StateFactors":
         """From a FactoredDomain (its features), or a flat Pomdp (one feature ``state``)."""
-        if hasattr(domain, "features") and hasattr(domain, "state_values"):
+        if isinstance(domain, FactoredDomain):
             return cls([f.name for f in domain.features], [list(f.values) for f in domain.features],
                        np.asarray(domain.state_values, dtype=np.int64))
         return cls(["state"], [list(domain.states)], np.arange(domain.num_states, dtype=np.int64)[:, None])

@@ -24,6 +24,7 @@ from pearl_pomdp.hierarchy.execute import HierarchicalPolicy, Lookahead, Subtask
 from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
 from pearl_pomdp.hierarchy.spec import Hierarchy, SubtaskSpec
 from pearl_pomdp.solvers.base import SolveResult
+from pearl_pomdp.model.factored import FactoredDomain
 
 __all__ = ["plan", "solve_subtask", "horizon_text"]
 
@@ -72,8 +73,8 @@ def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optiona
         ``pearl plan --json`` object (``subtasks`` list and ``total_seconds``).
     """
     t_start = time.perf_counter()
-    model = domain.compile() if hasattr(domain, "compile") else domain
-    factored = domain if hasattr(domain, "reward_features") else None
+    model = domain.compile() if isinstance(domain, FactoredDomain) else domain
+    factored = domain if isinstance(domain, FactoredDomain) else None
     factors = StateFactors.from_domain(domain)
     builder = KernelBuilder(model)
     policies: Dict[str, SubtaskPolicy] = {}

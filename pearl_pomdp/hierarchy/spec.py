@@ -49,6 +49,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 import yaml
 
 from pearl_pomdp.errors import SpecError
+from pearl_pomdp.model.factored import FactoredDomain
 
 __all__ = ["Hierarchy", "SubtaskSpec", "ShapingRule", "load_hierarchy", "parse_hierarchy",
            "flat_hierarchy", "SOLVERS"]
@@ -429,7 +430,7 @@ def load_hierarchy(path: Union[str, Path], domain) -> Hierarchy:
     if not path.is_file():
         raise FileNotFoundError(2, "no such hierarchy file", str(path))
     features = None
-    if hasattr(domain, "features"):
+    if isinstance(domain, FactoredDomain):
         features = {f.name: list(f.values) for f in domain.features}
     return parse_hierarchy(path.read_text(), list(domain.actions), features, source=str(path))
 

@@ -136,7 +136,7 @@ class HierarchicalPolicyNode(PearlNode):
         latency = time.perf_counter() - start
         self.latencies.append(latency)
         self.decision_pub.publish(cv.decision_to_msg(self.decisions, decision.action_name,
-                                                     getattr(decision, "trace", ()), latency))
+                                                     decision.trace, latency))
         self.decisions += 1
         self.last_decision = decision
 

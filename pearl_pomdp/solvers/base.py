@@ -52,6 +52,10 @@ class AlphaVectorPolicy:
         """The action index the policy takes at ``belief``."""
         return int(self.actions[self.best_vector(belief)])
 
+    def actions_batch(self, beliefs: np.ndarray) -> np.ndarray:
+        """:meth:`action` for every row of ``beliefs`` ``[N, S]`` (the first maximising vector)."""
+        return self.actions[np.argmax(np.asarray(beliefs, dtype=float) @ self.alphas.T, axis=1)]
+
 
 @dataclass
 class SolveResult:

@@ -219,6 +219,10 @@ class MostLikelyStatePolicy:
             raise ValueError(f"belief has {b.shape[0]} entries, the policy has {self.state_actions.shape[0]} states")
         return int(self.state_actions[int(np.argmax(b))])
 
+    def actions_batch(self, beliefs: np.ndarray) -> np.ndarray:
+        """:meth:`action` for every row of ``beliefs`` ``[N, S]`` (ties: the lowest state index)."""
+        return self.state_actions[np.argmax(np.asarray(beliefs, dtype=float), axis=1)]
+
 
 def most_likely_state_policy(model: Pomdp) -> MostLikelyStatePolicy:
     """The most-likely-state policy with the MDP-optimal action per state (ties: lowest action index)."""
