@@ -258,7 +258,7 @@ def record(name: str, spec: Dict, domain_id: int, log_dir: Path) -> List[str]:
         # Stop the recorder only once every action is on disk: it flushes each message, so
         # the bag can be read (salvaged) while it is being written.
         from pearl_pomdp.bags.reader import BagReader
-        from pearl_pomdp.bags.replay import expected_actions
+        from pearl_pomdp.nodes.bag_replay import expected_actions
 
         def on_disk() -> bool:
             try:
@@ -284,7 +284,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = ap.parse_args(argv)
     ensure_policy(args.replan)
     from pearl_pomdp.bags.reader import BagReader
-    from pearl_pomdp.bags.replay import expected_actions
+    from pearl_pomdp.nodes.bag_replay import expected_actions
 
     for name, spec in SCENARIOS.items():
         if args.only and name != args.only:

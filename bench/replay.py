@@ -34,7 +34,7 @@ def build_long_bag(src: Path, out: Path, steps: int, clock_hz: float) -> int:
     """Write the synthetic bag; returns its message count."""
     from pearl_pomdp.bags import well_known as wk
     from pearl_pomdp.bags.reader import BagReader
-    from pearl_pomdp.bags.replay import INPUT_TOPICS
+    from pearl_pomdp.nodes.bag_replay import INPUT_TOPICS
     from pearl_pomdp.bags.writer import BagWriter
     from rclpy.serialization import serialize_message
     from rosgraph_msgs.msg import Clock
@@ -67,7 +67,7 @@ def main() -> int:
     ap.add_argument("--domain-id", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "97") or 97))
     args = ap.parse_args()
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    from pearl_pomdp.bags.replay import replay_bag
+    from pearl_pomdp.nodes.bag_replay import replay_bag
 
     result = {"benchmark": "replay", "unit": "messages/s", "scenarios": {}, "long": {}}
     for bag in sorted(p for p in (REPO / "bags").iterdir() if (p / "metadata.yaml").is_file()):

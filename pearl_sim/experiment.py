@@ -1,4 +1,8 @@
-"""The guidance study, run fast on the core executive (no DDS).
+"""The guidance study, run fast on the robot's own step loop (the core executive, no DDS).
+
+Every episode runs through :func:`pearl_sim.loop.run_episode` with the belief tracker's
+rules from ``config/pearl_nodes.yaml`` (the same object the ``belief_tracker`` node
+wraps; ``test/test_one_loop.py`` checks that the nodes over DDS give the same actions).
 
 Reproduces the shape of the paper's evaluation (12 guidances, 6 residents) and goes
 past it: every controller of :mod:`pearl_sim.agents` meets the same seeded

@@ -46,7 +46,7 @@ def test_root_is_inferred_when_unique():
     (GOOD.replace("solver: pointbased", "solver: magic"), "subtasks.Help.solver", 8, "unknown solver 'magic'"),
     (GOOD.replace("horizon: 5", "horizon: -1"), "defaults.horizon", 2, "positive integer"),
     (GOOD.replace("horizon: 5", "horizon: 5, lookahead: 4"), "defaults.lookahead", 2, "from 0 to 3"),
-    (GOOD.replace("horizon: 5", "horizon: 5, lookahead: yes"), "defaults.lookahead", 2, "got True"),
+    (GOOD.replace("horizon: 5", "horizon: 5, lookahead: yes"), "defaults.lookahead", 2, "got 'yes'"),
     (GOOD.replace("time_limit: 2", "timelimit: 2"), "subtasks.Help.timelimit", 9, "unknown key"),
     (GOOD.replace("root: Act", "root: Top"), "root", 1, "root 'Top' is not a subtask"),
     (GOOD + "  Spare:\n    actions: [Move]\n", "subtasks.Spare", 10, "not reachable from the root"),

@@ -46,7 +46,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
-import yaml
 
 from pearl_pomdp.errors import SpecError
 from pearl_pomdp.model.factored import FactoredDomain
@@ -162,55 +161,15 @@ class Hierarchy:
 
 
 # --------------------------------------------------------------------- YAML with lines
-#: Most YAML nodes a hierarchy file may expand to (with its aliases expanded).
-_MAX_NODES = 100_000
-
-
 def _compose(text: str, source: str):
-    """Parse YAML into plain Python objects plus ``{field.path: line}`` (1-based)."""
-    try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        raise SpecError(source, "", f"not valid YAML: {getattr(err, 'problem', err)}",
-                        line=(mark.line + 1) if mark else None) from None
-    lines: Dict[str, int] = {}
-    constructor = yaml.SafeLoader("")
-    built = [0]
+    """Parse YAML with the one line-aware loader (:mod:`pearl_pomdp.yaml_lines`): data plus
+    ``{field.path: line}`` (1-based)."""
+    from pearl_pomdp.yaml_lines import line_table, parse_yaml
 
-    def build(n, path: str):
-        # Aliases are expanded here (each path gets its own copy): a small file of nested
-        # aliases ("billion laughs") would otherwise take exponential time and memory.
-        built[0] += 1
-        if built[0] > _MAX_NODES:
-            raise SpecError(source, path, f"the document expands to more than {_MAX_NODES:,} YAML nodes "
-                                          f"(nested aliases?); hierarchy files are far smaller",
-                            line=n.start_mark.line + 1)
-        lines.setdefault(path, n.start_mark.line + 1)
-        if isinstance(n, yaml.MappingNode):
-            out = {}
-            for k, v in n.value:
-                key = constructor.construct_object(k, deep=True)
-                key = str(key) if not isinstance(key, str) else key
-                sub = f"{path}.{key}" if path else key
-                lines[sub] = k.start_mark.line + 1
-                if key in out:
-                    raise SpecError(source, sub, "duplicate key", line=k.start_mark.line + 1)
-                out[key] = build(v, sub)
-            return out
-        if isinstance(n, yaml.SequenceNode):
-            return [build(v, f"{path}[{i}]") for i, v in enumerate(n.value)]
-        return constructor.construct_object(n, deep=True)
-
-    if node is None:
+    data = parse_yaml(text, source)
+    if data is None:
         raise SpecError(source, "", "the file is empty; expected a mapping with 'root' and 'subtasks'")
-    try:
-        return build(node, ""), lines
-    except (yaml.YAMLError, ValueError, TypeError) as err:
-        # A tag SafeLoader refuses (!!python/...) or cannot convert (!!int abc, unhashable key).
-        mark = getattr(err, "problem_mark", None)
-        raise SpecError(source, "", f"not valid YAML: {getattr(err, 'problem', None) or err}",
-                        line=(mark.line + 1) if mark else None) from None
+    return data, line_table(data)
 
 
 class _Checker:

@@ -49,6 +49,10 @@ class PearlGraph:
             parameter in ``shared``, or from the package's ``config/pearl.domain.yaml``).
         decider: preloaded policy for the policy node (skips loading/planning).
         executor: False to leave out the action executor.
+        params_file: the ROS 2 params file whose belief_tracker and hierarchical_policy
+            sections (and ``/**``) are applied first, as ``--params-file`` does for the
+            launched nodes (default: the shipped ``config/pearl_nodes.yaml``; ``None``
+            keeps the nodes' built-in defaults). ``shared`` and ``overrides`` win over it.
         parameter_services: False builds the nodes without parameter services (faster
             executor iterations; no remote ``ros2 param`` access).
 
@@ -60,7 +64,8 @@ class PearlGraph:
                  args: Optional[List[str]] = None, use_sim_time: bool = True,
                  shared: Optional[Mapping[str, Any]] = None,
                  overrides: Optional[Mapping[str, Mapping[str, Any]]] = None,
-                 domain=None, model=None, decider=None, executor: bool = True, parameter_services: bool = True):
+                 domain=None, model=None, decider=None, executor: bool = True, parameter_services: bool = True,
+                 params_file: Any = "default"):
         self._own_context = context is None
         if context is None:
             context = Context()
@@ -77,8 +82,18 @@ class PearlGraph:
                 domain, model = load_domain_and_model(resolve_path(path, "domain"))
             self.domain, self.model = domain, model
 
+            from_file: Dict[str, Dict[str, Any]] = {}
+            if params_file is not None:
+                from pearl_pomdp.params import node_params
+
+                path = None if params_file == "default" else params_file
+                for name in ("belief_tracker", "hierarchical_policy"):
+                    # Scalars and lists only: nested tables are dotted parameters the node reads itself.
+                    from_file[name] = {k: v for k, v in node_params(name, path).items()
+                                       if not isinstance(v, dict) and k != "domain"}
+
             def params(name: str) -> Dict[str, Any]:
-                return {**shared, **dict(overrides.get(name, {}))}
+                return {**from_file.get(name, {}), **shared, **dict(overrides.get(name, {}))}
 
             common = {"context": context, "start_parameter_services": parameter_services}
             self.tracker = BeliefTrackerNode(parameter_overrides=params("belief_tracker"), domain=domain, model=model,
