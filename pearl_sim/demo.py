@@ -276,7 +276,8 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
     result.metrics = {"steps": m.steps, "reminders_delivered": m.reminders_delivered,
                       "guidances_started": m.guidances_started, "guidances_completed": m.guidances_completed,
                       "residents_lost": m.residents_lost, "questions_answered": m.questions_answered,
-                      "clarifications": m.clarifications, "wrong_actions": m.wrong_actions,
+                      "clarifications": m.clarifications, "unprompted_questions": m.unprompted_questions,
+                      "wrong_actions": m.wrong_actions,
                       "time_to_goal": m.time_to_goal, "wrong": m.wrong}
     result.bag = bag_dir
     result.transcript = out_dir / "transcript.txt"

@@ -37,6 +37,7 @@ class EpisodeResult:
     guidance_completed: bool
     time_to_goal: Optional[float]
     clarifications: int
+    unprompted_questions: int
     goals_achieved: int
     wrong_actions: int
     residents_lost: int
@@ -88,6 +89,7 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
         scenario=scenario.name, agent=agent.name, seed=world.seed, discounted_return=returns["total"], steps=m.steps,
         guidance_needed=needed, guidance_completed=m.guidances_completed > 0,
         time_to_goal=m.time_to_goal[0] if m.time_to_goal else None, clarifications=m.clarifications,
+        unprompted_questions=m.unprompted_questions,
         goals_achieved=m.reminders_delivered + m.questions_answered + m.guidances_completed,
         wrong_actions=m.wrong_actions, residents_lost=m.residents_lost,
         walking_speed=scenario.resident.walking_speed, actions=list(trace.actions),
@@ -129,6 +131,7 @@ def summarise(results: Iterable[EpisodeResult]) -> Dict[str, dict]:
             "guidance_success": proportion_ci(sum(r.guidance_completed for r in guided), len(guided)),
             "time_to_goal_s": mean_ci([r.time_to_goal for r in guided if r.time_to_goal is not None]),
             "clarifications_per_goal": (sum(r.clarifications for r in rs) / goals) if goals else None,
+            "unprompted_questions_per_episode": mean_ci([r.unprompted_questions for r in rs]),
             "wrong_actions_per_episode": mean_ci([r.wrong_actions for r in rs]),
             "residents_lost": int(sum(r.residents_lost for r in rs)),
             "discounted_return": mean_ci([r.discounted_return for r in rs]),

@@ -116,6 +116,9 @@ class Metrics:
     residents_lost: int = 0
     questions_answered: int = 0
     clarifications: int = 0
+    #: Offers or confirmations about a goal the resident does not have at that moment
+    #: ("Shall we walk to physiotherapy?" to a resident who does not want to go).
+    unprompted_questions: int = 0
     wrong_actions: int = 0
     time_to_goal: List[float] = field(default_factory=list)
     wrong: List[str] = field(default_factory=list)
@@ -313,16 +316,25 @@ class World:
     def _act_TellWeather(self, listening, events):
         return self._tell("weather", listening, events)
 
+    def _unprompted(self, about: str, has_goal: bool, events) -> None:
+        if not has_goal:
+            self.metrics.unprompted_questions += 1
+            events.append(f"unprompted question: {about} (the resident has no such wish)")
+
     def _act_ConfirmGuideToPhysio(self, listening, events):
+        self._unprompted("offered the walk to physiotherapy", self.wants_guidance, events)
         return (("yes" if self.wants_guidance else "no") if listening else None), None
 
     def _act_VerifyInfoRequest(self, listening, events):
+        self._unprompted("asked what she would like to know", self.info_goal is not None, events)
         return ((self.info_goal or "no") if listening else None), None
 
     def _act_ConfirmWantTime(self, listening, events):
+        self._unprompted("asked whether she wants the time", self.info_goal == "time", events)
         return (("yes" if self.info_goal == "time" else "no") if listening else None), None
 
     def _act_ConfirmWantWeather(self, listening, events):
+        self._unprompted("asked whether she wants the weather", self.info_goal == "weather", events)
         return (("yes" if self.info_goal == "weather" else "no") if listening else None), None
 
     def _act_ConfirmGoHome(self, listening, events):
