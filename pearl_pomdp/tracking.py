@@ -191,7 +191,8 @@ class StepProtocol:
         if unknown:
             raise ValueError(f"no_timeout_actions names {unknown[0]!r}, which is not an action of {model.name}")
         self.model = model
-        self.filter = belief_filter or BeliefFilter(model)
+        # The protocol reports each recovery as an Event (the node logs it once); the filter stays quiet.
+        self.filter = belief_filter or BeliefFilter(model, log_recoveries=False)
         self.step_timeout = float(step_timeout)
         self.no_timeout_actions: FrozenSet[str] = frozenset(no_timeout_actions)
         self.timeout_observation = timeout_observation
