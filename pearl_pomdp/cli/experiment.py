@@ -14,6 +14,8 @@ import sys
 import time
 from pathlib import Path
 
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
+
 COMMAND = "experiment"
 HELP = "run the guidance study (policies × residents × speech noise) on the core executive"
 
@@ -34,6 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sweep-episodes", type=int, default=2, help="seeds per episode in each sweep point")
     parser.add_argument("--out", default=None, help="folder for the PNG and the JSON (default out/experiment-<time>)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    add_progress_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,14 +64,15 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as err:
         raise SpecError("<command line>", "--policies", str(err)) from None
     plan_seconds = dict(build_agents.timings)
+    progress = show_progress(args)
 
-    main = summarise(run_study(domain, agents, scenarios, kf, episodes=args.episodes, progress=True, desc="study"))
+    main = summarise(run_study(domain, agents, scenarios, kf, episodes=args.episodes, progress=progress, desc="study"))
     pace = {}
     if "hierarchical" in agents:
         adaptive = {"hierarchical": agents["hierarchical"]}
         for label, flag in (("paper_fixed_pace", False), ("pace_adaptation", True)):
             rs = run_study(domain, adaptive, scenarios, kf, episodes=args.episodes, pace_adaptation=flag,
-                           progress=True, desc=label)
+                           progress=progress, desc=label)
             by_speed = {}
             for r in rs:
                 by_speed.setdefault(r.walking_speed, []).append(r.guidance_completed)
@@ -78,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     sweep = {name: {"success": [], "wrong": []} for name in agents}
     for wer in wers:
         s = summarise(run_study(domain, agents, scenarios, kf, episodes=args.sweep_episodes, wer=wer,
-                                progress=True, desc=f"WER {wer:.1f}"))
+                                progress=progress, desc=f"WER {wer:.1f}"))
         for name in agents:
             sweep[name]["success"].append(s[name]["guidance_success"]["rate"])
             sweep[name]["wrong"].append(s[name]["wrong_actions_per_episode"]["mean"])

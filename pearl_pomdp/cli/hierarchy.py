@@ -13,6 +13,8 @@ import argparse
 import sys
 from typing import Dict, List, Optional, Tuple
 
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
+
 COMMAND = "hierarchy"
 HELP = "draw the action hierarchy (dot or png) with per-subtask sizes"
 
@@ -24,6 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", help="output file (dot: default stdout; png: default hierarchy.png)")
     parser.add_argument("--policy", help="saved plan (pearl plan --out DIR) to read the sizes from")
     parser.add_argument("--no-sizes", action="store_true", help="draw the tree only (no planning)")
+    add_progress_arguments(parser)
 
 
 def subtask_labels(hierarchy, report: Optional[dict]) -> Dict[str, str]:
@@ -132,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     elif not args.no_sizes:
         from pearl_pomdp.hierarchy import plan
 
-        report = plan(domain, hierarchy, progress=sys.stderr.isatty()).report
+        report = plan(domain, hierarchy, progress=show_progress(args)).report
     labels = subtask_labels(hierarchy, report)
     if args.format == "dot":
         text = to_dot(hierarchy, labels)

@@ -16,6 +16,8 @@ import logging
 import sys
 from pathlib import Path
 
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
+
 COMMAND = "plan"
 HELP = "plan a hierarchical policy (PLAN/SOLVE with abstraction) for a factored domain"
 
@@ -29,6 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--solver", choices=["incprune", "pointbased"], help="override every subtask's solver")
     parser.add_argument("--seed", type=int, default=0, help="seed of the point-based solver")
     parser.add_argument("--strict", action="store_true", help="fail on a local reward assumption violation")
+    add_progress_arguments(parser)
 
 
 def default_hierarchy(domain_path: Path):
@@ -75,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     domain = load_domain_any(args.domain)
     hierarchy = load_hierarchy_for(domain, args.domain, args.hierarchy)
     policy = plan(domain, hierarchy, abstraction=not args.no_abstraction, solver=args.solver, seed=args.seed,
-                  progress=sys.stderr.isatty() and not args.json, strict_local_reward=args.strict)
+                  progress=show_progress(args), strict_local_reward=args.strict)
     report = dict(policy.report)
     if args.out:
         report["out"] = str(policy.save(args.out))

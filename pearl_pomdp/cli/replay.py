@@ -20,6 +20,8 @@ from __future__ import annotations
 import argparse
 import os
 
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
+
 COMMAND = "replay"
 HELP = "replay a bag's inputs through tracker + policy under sim time; compare with the recorded actions"
 
@@ -32,7 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--step-timeout", type=float, default=10.0, metavar="S",
                         help="wall seconds to wait for the graph's reaction to one message (default 10)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--progress", action="store_true", help="progress bar on stderr")
+    add_progress_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -43,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     if domain_id is None and os.environ.get("ROS_DOMAIN_ID", "").isdigit():
         domain_id = int(os.environ["ROS_DOMAIN_ID"])
     result = replay_bag(args.bag, domain=args.domain, policy=args.policy, domain_id=domain_id,
-                        step_timeout_s=args.step_timeout, progress=args.progress)
+                        step_timeout_s=args.step_timeout, progress=show_progress(args))
     if args.json:
         print_json(result.to_dict())
     else:

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import argparse
 
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
+
 COMMAND = "simulate"
 HELP = "mean discounted return of a saved policy, with a 95% confidence interval"
 
@@ -33,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="steps per episode (default: until γ^T < 1e-3)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
+    add_progress_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -45,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     policy = load_policy(args.policy, model)
     result = simulate(model, policy, episodes=args.episodes, steps=args.steps, seed=args.seed,
-                      progress=not args.quiet)
+                      progress=show_progress(args))
     result.pop("returns")
     result = {"model": model.name, "policy": str(args.policy), **result}
     if args.json:

@@ -18,7 +18,8 @@ Default method: incprune when --horizon is given or the model is tiny
 --json prints one object: states, actions, observations, method, value_at_start (the
 policy's value at b0; a lower bound for pointbased), upper_bound (null if none),
 alpha_vectors, iterations, seconds, converged, and for incprune vectors_per_epoch.
-Progress goes to stderr (tqdm); --quiet turns it off.
+Progress (tqdm) goes to stderr when it is a terminal and --json is not given; --progress
+forces it, --quiet turns it off.
 """
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ import argparse
 import math
 import sys
 
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
 from pearl_pomdp.errors import PearlError
 
 COMMAND = "solve"
@@ -64,7 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="POLICY", default=None,
                         help="save the policy: POLICY (.npz) plus its JSON header beside it")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
+    add_progress_arguments(parser)
 
 
 def default_method(model, horizon=None) -> str:
@@ -132,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     method = args.method or default_method(model, args.horizon)
     result = solve(model, method, horizon=args.horizon, epsilon=args.epsilon, time_limit=args.time_limit,
-                   seed=args.seed, progress=not args.quiet)
+                   seed=args.seed, progress=show_progress(args))
     info = summary(model, result)
     if args.horizon is not None:
         info["horizon"] = args.horizon
