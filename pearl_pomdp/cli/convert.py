@@ -39,6 +39,9 @@ def run(args: argparse.Namespace) -> int:
     src = Path(args.model)
     if src.resolve() == out.resolve():
         raise PearlError(f"{out}: output is the input file")
+    from pearl_pomdp.cli._inputs import require_file
+
+    require_file(src, "model file (.pomdp, .pomdpx or domain .yaml)")
     t0 = time.perf_counter()
     model = load_model(src)
     if suffix == ".pomdp":

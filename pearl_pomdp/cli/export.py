@@ -51,6 +51,9 @@ def run(args: argparse.Namespace) -> int:
     src = Path(args.domain)
     if out is not None and out.resolve() == src.resolve():
         raise PearlError(f"{out}: output is the input file")
+    from pearl_pomdp.cli._inputs import require_file
+
+    require_file(src, "domain file (.yaml, or a .pomdp)")
     t0 = time.perf_counter()
     model = load_model(src)
     if fmt == "pomdp":

@@ -44,8 +44,10 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.policy_io import load_policy
     from pearl_pomdp.simulate import simulate
 
-    model = load_model(args.model)
-    policy = load_policy(args.policy, model)
+    from pearl_pomdp.cli._inputs import require_file
+
+    model = load_model(require_file(args.model, "model file (.pomdp, .pomdpx or domain .yaml)"))
+    policy = load_policy(require_file(args.policy, "policy file (.npz from `pearl solve --out`)"), model)
     result = simulate(model, policy, episodes=args.episodes, steps=args.steps, seed=args.seed,
                       progress=show_progress(args))
     result.pop("returns")

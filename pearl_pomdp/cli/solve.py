@@ -131,7 +131,9 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.cli import print_json
     from pearl_pomdp.model import load_model
 
-    model = load_model(args.model)
+    from pearl_pomdp.cli._inputs import require_file
+
+    model = load_model(require_file(args.model, "model file (.pomdp, .pomdpx or domain .yaml)"))
     method = args.method or default_method(model, args.horizon)
     result = solve(model, method, horizon=args.horizon, epsilon=args.epsilon, time_limit=args.time_limit,
                    seed=args.seed, progress=show_progress(args))
