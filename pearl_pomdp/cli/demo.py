@@ -3,6 +3,10 @@
 The Pearl nodes and simulated hardware run in one process under simulated time;
 prints a transcript, writes a bag, the transcript and a belief plot into --out,
 and ends with a one-line outcome.
+
+Examples:
+  pearl demo --scenario config/scenarios/table4_dialog.yaml --seed 3
+  pearl plan config/pearl.domain.yaml && pearl demo --policy out/policies/pearl --json
 """
 from __future__ import annotations
 

@@ -6,6 +6,12 @@ and a scripted state machine — and reports guidance success, time to goal,
 clarification questions per goal, wrong actions and mean return with 95% CIs; then
 sweeps the word error rate (PNG: success and wrong actions vs noise per policy) and
 compares the paper's fixed-pace guidance with walking-pace adaptation.
+
+`pearl experiment` with the defaults runs every policy on the whole study (minutes, with a
+30 s flat solve); a quick look at the cheap policies:
+
+Examples:
+  pearl experiment --policies qmdp,scripted --episodes 1 --wer 0,0.5 --sweep-episodes 1
 """
 from __future__ import annotations
 

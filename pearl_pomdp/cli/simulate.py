@@ -9,6 +9,10 @@ Episodes start from b0, track the belief with eq. 5 and sum ``γ^t R[s_t, a_t]``
 --json prints one object: mean, ci95 (half width of the 95 % confidence interval of the
 mean, 1.96·s/√N), episodes, steps, seed, std, min, max, interval ([mean − ci95, mean + ci95]),
 seconds. Default --steps: until γ^T < 1e-3 (135 for γ = 0.95).
+
+Examples:
+  pearl solve config/table4.domain.yaml --time-limit 5 --out table4.npz
+  pearl simulate config/table4.domain.yaml table4.npz --episodes 200 --json
 """
 from __future__ import annotations
 

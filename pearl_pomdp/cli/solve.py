@@ -18,6 +18,10 @@ Default method: incprune when --horizon is given or the model is tiny
 --json prints one object: states, actions, observations, method, value_at_start (the
 policy's value at b0; a lower bound for pointbased), upper_bound (null if none),
 alpha_vectors, iterations, seconds, converged, and for incprune vectors_per_epoch.
+Examples:
+  pearl solve config/table4.domain.yaml --time-limit 5 --out table4.npz
+  pearl solve config/table4.domain.yaml --method qmdp --json
+
 Progress (tqdm) goes to stderr when it is a terminal and --json is not given; --progress
 forces it, --quiet turns it off.
 """
