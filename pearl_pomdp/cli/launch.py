@@ -14,6 +14,10 @@ to stop and every node exited cleanly; otherwise the first failing node's exit c
 Children get ``FASTRTPS_DEFAULT_PROFILES_FILE`` = the package's ``config/fastdds_profile.xml``
 (fast discovery) unless it is already set, and die with the launcher (``PR_SET_PDEATHSIG``).
 ``--print`` shows the commands as JSON instead of running them.
+
+Examples:
+  pearl launch launch/pearl.launch.xml --print
+  pearl launch launch/pearl.launch.xml policy:=out/policies/pearl     # until Ctrl-C
 """
 from __future__ import annotations
 

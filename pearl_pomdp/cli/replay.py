@@ -27,6 +27,8 @@ from __future__ import annotations
 import argparse
 import os
 
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
+
 COMMAND = "replay"
 HELP = "replay a bag's inputs through tracker + policy under sim time; compare with the recorded actions"
 
@@ -42,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--explain", action="store_true",
                         help="per step: what closed it, the belief after, the EXECUTE trace with values; "
                              "the first divergence from the recording")
-    parser.add_argument("--progress", action="store_true", help="progress bar on stderr")
+    add_progress_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -53,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     if domain_id is None and os.environ.get("ROS_DOMAIN_ID", "").isdigit():
         domain_id = int(os.environ["ROS_DOMAIN_ID"])
     result = replay_bag(args.bag, domain=args.domain, policy=args.policy, domain_id=domain_id,
-                        step_timeout_s=args.step_timeout, progress=args.progress, explain=args.explain)
+                        step_timeout_s=args.step_timeout, progress=show_progress(args), explain=args.explain)
     if args.json:
         print_json(result.to_dict())
     else:

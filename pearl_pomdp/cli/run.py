@@ -3,10 +3,10 @@
 Everything after NODE is passed to the node (``--ros-args -p domain:=… --params-file …``).
 Exit code: 0 after SIGINT/SIGTERM, 2 when the node cannot start (one line on stderr).
 
-Examples::
+Examples (each runs until Ctrl-C; `pearl plan config/pearl.domain.yaml` saves out/policies/pearl)::
 
     pearl run belief_tracker --ros-args --params-file config/pearl_nodes.yaml
-    pearl run hierarchical_policy --ros-args -p policy:=plans/pearl -p use_sim_time:=true
+    pearl run hierarchical_policy --ros-args -p policy:=out/policies/pearl -p use_sim_time:=true
 """
 from __future__ import annotations
 
