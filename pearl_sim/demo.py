@@ -285,7 +285,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
             latest = marginals[index] if len(marginals) > index else {}
             heard = step_result.messages + [m for w in waits for m in w.messages]
             msg = heard[0] if heard else None
-            sim.publish_truth(backend.now_ns * 1e-9, step_result)
+            sim.publish_truth(backend.now_ns * 1e-9, "end", step_result.action, step_result)
             step = DemoStep(index=index, time=step_result.start, action=step_result.action,
                             trace=decision.get("trace", []), modality=msg.modality if msg else None,
                             said=msg.said if msg else "", heard=msg.text if msg else "",
@@ -295,7 +295,9 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
             if echo is not None:
                 echo(format_step(step, scenario.resident.name))
 
-        run_episode(world, backend, on_action=on_action)
+        run_episode(world, backend, on_action=on_action,
+                    before_action=lambda action: sim.publish_truth(backend.now_ns * 1e-9, "start", action))
+        sim.publish_truth(backend.now_ns * 1e-9, "start")   # the state after the last action
         # The policy answers the last belief too: wait until that action is in the bag, or a
         # replay (which always sees the answer) would find one action more than recorded.
         graph.spin_until(lambda: recorder.counts.get("/pearl/action", 0) >= len(driver.actions),

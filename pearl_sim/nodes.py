@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import List
+from typing import List, Optional
 
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
@@ -125,12 +125,18 @@ class SimulatedHardware:
         self.publishers = {"Speech": self.speech.pub, "Touchscreen": self.user.touch,
                            "Laser": self.navigation.laser, "Reminder": self.reminder.pub}
 
-    def publish_truth(self, t: float, result: StepResult) -> None:
-        """The true state after an action (or a wait) on ``/pearl/sim/truth``, and the robot's pose."""
+    def publish_truth(self, t: float, phase: str, action: str = "", result: Optional[StepResult] = None) -> None:
+        """The true state on ``/pearl/sim/truth`` (JSON), and the robot's pose.
+
+        ``phase`` ``"start"``: the state an action starts in (``pearl fit`` counts transitions
+        between consecutive starts; one more follows the last action); ``"end"``: after the
+        action, with its events and whether it was wrong.
+        """
         self.navigation.publish_pose(t)
-        self.truth.publish(String(data=json.dumps({"time": self.world.time, "action": result.action,
-                                                    "state": self.world.truth(), "events": result.events,
-                                                    "wrong": result.wrong})))
+        body = {"time": self.world.time, "phase": phase, "action": action, "state": self.world.truth()}
+        if result is not None:
+            body.update(events=result.events, wrong=result.wrong)
+        self.truth.publish(String(data=json.dumps(body)))
 
     def destroy(self) -> None:
         for node in self.nodes:
