@@ -131,3 +131,21 @@ def test_cli_fit_writes_a_loadable_domain(tmp_path, capsys):
     load_domain(out)
     assert main(["fit", str(PEARL), str(path), "--out", str(PEARL)]) == 2
     assert "would overwrite the domain it fits" in capsys.readouterr().err
+
+
+def test_world_episodes_round_trip_into_the_fit(tmp_path):
+    """pearl_sim.episodes records the study loop's steps with the world's truth; the fit reads them."""
+    from pearl_sim.agents import ScriptedAgent
+    from pearl_sim.episodes import record_episodes
+    from pearl_sim.scenario import load_scenarios
+
+    designer = load_domain(PEARL)
+    (figure4,) = load_scenarios(REPO / "config" / "scenarios" / "figure4.yaml")
+    path = tmp_path / "world.jsonl"
+    written = record_episodes([figure4], ScriptedAgent("scripted", designer.actions), designer, range(2), path)
+    episodes = load_episodes([path])
+    assert len(episodes) == 2 and all(ep.states is not None for ep in episodes)
+    assert [ep.actions for ep in episodes] == [w["actions"] for w in written]
+    assert episodes[0].actions[0] == "DoNothing" and "GotoPatientRoom" in episodes[0].actions
+    result = fit_domain(designer, episodes, min_count=3)
+    assert result.with_truth and result.rows
