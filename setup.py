@@ -24,6 +24,8 @@ NODES = {
     "belief_tracker": "pearl_pomdp.nodes.belief_tracker:main",
     "hierarchical_policy": "pearl_pomdp.nodes.hierarchical_policy:main",
     "action_executor": "pearl_pomdp.nodes.action_executor:main",
+    "landmark_detector": "pearl_pomdp.nodes.landmark_detector:main",
+    "guide_pace": "pearl_pomdp.nodes.guide_pace:main",
 }
 
 setup(

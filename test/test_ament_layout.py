@@ -22,7 +22,7 @@ def test_colcon_style_install_layout(tmp_path):
                           "--single-version-externally-managed", "--record", str(build / "install.log")],
                          cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
-    for name in ("belief_tracker", "hierarchical_policy", "action_executor"):
+    for name in ("belief_tracker", "hierarchical_policy", "action_executor", "landmark_detector", "guide_pace"):
         exe = prefix / "lib" / "pearl_pomdp" / name
         assert exe.is_file() and os.access(exe, os.X_OK), name
         assert f"'console_scripts', '{name}'" in exe.read_text()

@@ -1,6 +1,6 @@
 """Bounded shutdown (issue 14), with real node processes over Fast DDS.
 
-* Every node exits with code 0 within 2 s of SIGINT and of SIGTERM while an input flood runs
+* Every node (the five of the package) exits with code 0 within 2 s of SIGINT and of SIGTERM while an input flood runs
   (:func:`shutdown_trials`; 2 repetitions per signal here, 20 in ``bench/shutdown.py``).
 * A node stopped while it is still starting (planning a policy) exits at once.
 * A clean-up that hangs is cut at ``SHUTDOWN_DEADLINE`` (1.5 s): in Python (a thread can
@@ -54,7 +54,7 @@ FLOOD = textwrap.dedent("""
                           durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
     TYPES = {"text": String, "belief": cv.BeliefMsg, "amcl": PoseWithCovarianceStamped, "odom": Odometry,
              "twist": Twist, "point": PointStamped}
-    TEXTS = ["what time is it", "yes", "t_yes", "atRoom", "atPhysio", "g_physio", "TellTime", "CheckUserPresent",
+    TEXTS = ["what time is it", "yes", "t_yes", "atRoom", "atPhysio", "g_physio", "TellTime", "GuideToPhysio",
              "", "nonsense \\u00e9", "x" * 300]
     pubs = [(t, kind, node.create_publisher(TYPES[kind], t, qos(latched))) for t, kind, latched in spec]
     belief = cv.belief_to_msg(np.full(states, 1.0 / states))
@@ -128,6 +128,9 @@ def pearl_nodes(domain: Path, policy: Path) -> List[NodeUnderTest]:
                       {"/pearl/belief": 1}),
         NodeUnderTest("action_executor", ["--params-file", str(REPO / "config" / "pearl_nodes.yaml")],
                       "executing", {"/pearl/action": 1}),
+        NodeUnderTest("landmark_detector", ["-p", d], "landmarks", {"/amcl_pose": 1}),
+        NodeUnderTest("guide_pace", ["-p", "control_rate:=50.0"], "guide pace",
+                      {"/pearl/action": 1, "/cmd_vel_nav": 1, "/pearl/resident_position": 1}),
     ]
 
 
@@ -136,6 +139,7 @@ def pearl_nodes(domain: Path, policy: Path) -> List[NodeUnderTest]:
 FLOOD_TOPICS = {
     "/pearl/speech": ("text", False), "/pearl/touchscreen": ("text", False), "/pearl/laser": ("text", False),
     "/pearl/reminder": ("text", False), "/pearl/action": ("text", True), "/pearl/belief": ("belief", True),
+    "/amcl_pose": ("amcl", False), "/cmd_vel_nav": ("twist", False), "/pearl/resident_position": ("point", False),
 }
 
 
@@ -234,7 +238,7 @@ def failures(results: Sequence[dict]) -> List[dict]:
 
 def test_every_node_exits_within_2s_of_sigint_and_sigterm_under_a_flood(tmp_path, pearl_policy):
     results = shutdown_trials(tmp_path, pearl_nodes(DOMAIN, pearl_policy), ("SIGINT", "SIGTERM"), 2)
-    assert len(results) == 2 * 2 * 3
+    assert len(results) == 2 * 2 * 5
     assert failures(results) == []
     assert max(r["seconds"] for r in results) < EXIT_WITHIN
 

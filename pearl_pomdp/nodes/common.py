@@ -253,8 +253,14 @@ class _StopSignals:
         self._arm()
 
     def close(self) -> None:
-        """Clean-up finished in time: disarm and restore the previous handlers (in-process callers)."""
-        signal.setitimer(signal.ITIMER_REAL, 0)
+        """Clean-up finished in time: stop the watchdog thread and restore the previous handlers.
+
+        After a stop signal the SIGALRM backstop stays armed: the process is about to exit,
+        and interpreter finalisation (rclpy/Fast DDS destructors) is bounded too. Without a
+        signal (a start-up error, an in-process caller) it is disarmed.
+        """
+        if self.signum is None:
+            signal.setitimer(signal.ITIMER_REAL, 0)
         if self._timer is not None:
             self._timer.cancel()
         for s, handler in self._previous.items():
@@ -270,7 +276,9 @@ def run_node(node_class: Type[PearlNode], args: Optional[List[str]] = None) -> i
       executor that still holds the node's entities makes ``Node.destroy_node`` spin in
       ``destroy_when_not_in_use``), and the whole clean-up must finish within
       :data:`SHUTDOWN_DEADLINE` s of the signal — otherwise one line on stderr and exit code
-      :data:`EXIT_FORCED` (1), or SIGALRM :data:`SHUTDOWN_BACKSTOP` s later.
+      :data:`EXIT_FORCED` (1), or SIGALRM :data:`SHUTDOWN_BACKSTOP` s later. After a signal
+      the SIGALRM stays armed when this returns, so the interpreter's exit is bounded too:
+      a caller is expected to exit (the console scripts do).
     """
     args = list(sys.argv if args is None else args)
     prog = node_class.DEFAULT_NAME
