@@ -134,8 +134,10 @@ class ActionExecutorNode(PearlNode):
         spec = self.behaviour.get(action)
         if spec is None:
             self.unknown += 1
+            # At most one line a second: a stream of foreign actions must not become a log flood
+            # (every one is counted on /diagnostics).
             self.get_logger().warning(f"unknown action {action!r}: not in action_names; nothing executed "
-                                      f"(unknown actions: {self.unknown})")
+                                      f"(unknown actions: {self.unknown})", throttle_duration_sec=1.0)
             self.publish_diagnostics()
             return
         self.executed[action] = self.executed.get(action, 0) + 1

@@ -30,6 +30,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.utilities import get_default_context
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from pearl_pomdp.errors import PearlError
@@ -205,8 +206,12 @@ class _StopSignals:
       ``os._exit(EXIT_FORCED)``; :data:`SHUTDOWN_BACKSTOP` s later ``SIGALRM`` (default
       action: terminate) ends the process from the kernel, in case the main thread holds the
       GIL in C code and the thread never runs;
-    * raises ``KeyboardInterrupt`` in the main thread, so a long start-up (planning a policy)
-      stops at once instead of finishing first.
+    * during start-up, raises ``KeyboardInterrupt`` in the main thread, so a long start-up
+      (planning a policy) stops at once instead of finishing first. While the executor
+      spins it raises nothing: rclpy's handler has shut the context down and woken the
+      executor, and ``spin()`` returns by itself (an exception raised inside rclpy's
+      executor machinery leaves half-built objects behind, e.g. a ``Task`` whose
+      ``__del__`` then prints a traceback).
 
     Later signals are ignored: the clean-up that is running is not interrupted (the watchdog
     bounds it).
@@ -216,6 +221,7 @@ class _StopSignals:
         self.prog = prog
         self.signum: Optional[int] = None
         self.cleaning_up = False
+        self.spinning = False
         self._timer: Optional[threading.Timer] = None
         self._previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
         for s in self._previous:
@@ -226,7 +232,7 @@ class _StopSignals:
             return
         self.signum = signum
         self._arm()
-        if not self.cleaning_up:
+        if not (self.cleaning_up or self.spinning):
             raise KeyboardInterrupt
 
     def _arm(self) -> None:
@@ -255,9 +261,8 @@ class _StopSignals:
     def close(self) -> None:
         """Clean-up finished in time: stop the watchdog thread and restore the previous handlers.
 
-        After a stop signal the SIGALRM backstop stays armed: the process is about to exit,
-        and interpreter finalisation (rclpy/Fast DDS destructors) is bounded too. Without a
-        signal (a start-up error, an in-process caller) it is disarmed.
+        After a stop signal the SIGALRM backstop stays armed until :func:`run_node` ends the
+        process. Without a signal (a start-up error, an in-process caller) it is disarmed.
         """
         if self.signum is None:
             signal.setitimer(signal.ITIMER_REAL, 0)
@@ -276,17 +281,29 @@ def run_node(node_class: Type[PearlNode], args: Optional[List[str]] = None) -> i
       executor that still holds the node's entities makes ``Node.destroy_node`` spin in
       ``destroy_when_not_in_use``), and the whole clean-up must finish within
       :data:`SHUTDOWN_DEADLINE` s of the signal — otherwise one line on stderr and exit code
-      :data:`EXIT_FORCED` (1), or SIGALRM :data:`SHUTDOWN_BACKSTOP` s later. After a signal
-      the SIGALRM stays armed when this returns, so the interpreter's exit is bounded too:
-      a caller is expected to exit (the console scripts do).
+      :data:`EXIT_FORCED` (1), or SIGALRM :data:`SHUTDOWN_BACKSTOP` s later.
+    * After a stop signal this function does not return: once the clean-up is done it ends
+      the process (``os._exit`` with the exit code, stdout/stderr flushed), skipping the
+      interpreter's finalisation. Without a signal (a start-up error) it returns the code.
     """
     args = list(sys.argv if args is None else args)
     prog = node_class.DEFAULT_NAME
     stop = _StopSignals(prog)
     try:
-        return _init_spin_and_clean_up(node_class, args, prog, stop)
+        code = _init_spin_and_clean_up(node_class, args, prog, stop)
     finally:
         stop.close()
+    if stop.signum is not None:
+        # Stopped by a signal and cleaned up (node, context and DDS participant destroyed):
+        # end the process here. The interpreter's finalisation has nothing left that matters
+        # and, on a loaded machine, can take longer than the rest of the shutdown.
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
+    return code
 
 
 def _init_spin_and_clean_up(node_class: Type[PearlNode], args: List[str], prog: str, stop: _StopSignals) -> int:
@@ -311,7 +328,9 @@ def _init_spin_and_clean_up(node_class: Type[PearlNode], args: List[str], prog: 
             print(f"{prog}: error: {_one_line(err)}", file=sys.stderr)
             return 2
         executor.add_node(node)
-        executor.spin()
+        if stop.signum is None:  # a signal between the node's last line and here: do not spin
+            stop.spinning = True
+            executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
@@ -326,7 +345,17 @@ def _init_spin_and_clean_up(node_class: Type[PearlNode], args: List[str], prog: 
                 executor.shutdown(timeout_sec=0.5)  # releases the entities it was waiting on
             if node is not None:
                 node.destroy_node()
+            context = get_default_context()
             rclpy.try_shutdown()
+            # After a signal rclpy's handler has shut the context down, so try_shutdown() did
+            # not finalise logging: do it (flushes the log file), as Context.shutdown would.
+            logging_fini = getattr(context, "_logging_fini", None)
+            if logging_fini is not None and getattr(context, "_logging_initialized", False):
+                with context._lock:
+                    logging_fini()
+            # Delete the DDS participant now, inside the bounded clean-up (peers see the node
+            # leave at once), not later in the interpreter's finalisation.
+            context.destroy()
         except KeyboardInterrupt:  # pragma: no cover - a signal from outside rclpy's handlers
             pass
     return 0
