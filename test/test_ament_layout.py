@@ -28,7 +28,7 @@ def test_colcon_style_install_layout(tmp_path):
         assert f"'console_scripts', '{name}'" in exe.read_text()
     share = prefix / "share" / "pearl_pomdp"
     for rel in ("package.xml", "launch/pearl.launch.xml", "config/pearl_nodes.yaml", "config/fastdds_profile.xml",
-                "config/pearl.domain.yaml"):
+                "config/pearl.domain.yaml", "config/foxglove/pearl.layout.json"):
         assert (share / rel).is_file(), rel
     assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "pearl_pomdp").is_file()
     # $(find-pkg-share pearl_pomdp) resolves through the ament index, as ros2 launch does.
