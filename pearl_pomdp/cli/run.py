@@ -14,13 +14,15 @@ import argparse
 import importlib
 
 COMMAND = "run"
-HELP = "run one node (belief_tracker, hierarchical_policy, action_executor) with --ros-args"
+HELP = "run one node (belief_tracker, hierarchical_policy, action_executor, landmark_detector, guide_pace) with --ros-args"
 
 #: Node executables of this package → module holding their ``main``.
 NODES = {
     "belief_tracker": "pearl_pomdp.nodes.belief_tracker",
     "hierarchical_policy": "pearl_pomdp.nodes.hierarchical_policy",
     "action_executor": "pearl_pomdp.nodes.action_executor",
+    "landmark_detector": "pearl_pomdp.nodes.landmark_detector",
+    "guide_pace": "pearl_pomdp.nodes.guide_pace",
 }
 
 
