@@ -25,7 +25,7 @@ from pearl_sim.world import StepResult, World
 SHOWN_FEATURES = ("ReminderGoal", "UserPresent", "UserMotionGoal", "UserInfoGoal", "UserLocation")
 RECORDED_TOPICS = ["/clock", "/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder",
                    "/pearl/action", "/pearl/belief", "/pearl/belief_marginals", "/pearl/decision",
-                   "/pearl/say", "/pearl/display", "/pearl/nav_goal", "/pearl/pose", "/pearl/sim/said",
+                   "/pearl/say", "/pearl/display", "/goal_pose", "/pearl/pose", "/pearl/sim/said",
                    "/pearl/sim/truth"]
 
 

@@ -8,7 +8,7 @@ publishes its own modality, as a simulator's sensor plugins would:
 node                   publishes
 =====================  ===========================================================
 ``sim_navigation``     ``/pearl/laser`` (landmark reached), ``/pearl/pose``
-                       (geometry_msgs/PoseStamped); follows ``/pearl/nav_goal``
+                       (geometry_msgs/PoseStamped); follows ``/goal_pose`` (Nav2's topic)
 ``sim_user``           ``/pearl/touchscreen`` (the resident's screen presses) and
                        ``/pearl/sim/said`` (what she actually said, for transcripts)
 ``sim_speech``         ``/pearl/speech`` (recogniser text, with word errors)
@@ -54,7 +54,7 @@ def _stamp(seconds: float):
 
 
 class SimNavigationNode(Node):
-    """The robot base: landmarks on ``/pearl/laser``, pose on ``/pearl/pose``; logs ``/pearl/nav_goal``."""
+    """The robot base: landmarks on ``/pearl/laser``, pose on ``/pearl/pose``; logs ``/goal_pose``."""
 
     def __init__(self, context, world: World):
         super().__init__("sim_navigation", context=context, parameter_overrides=[])
@@ -62,7 +62,7 @@ class SimNavigationNode(Node):
         self.laser = self.create_publisher(String, MODALITY_TOPICS["Laser"], RELIABLE)
         self.pose = self.create_publisher(PoseStamped, "/pearl/pose", 10)
         self.goals: List[str] = []
-        self.create_subscription(PoseStamped, "/pearl/nav_goal", self._on_goal, RELIABLE)
+        self.create_subscription(PoseStamped, "/goal_pose", self._on_goal, RELIABLE)
 
     def _on_goal(self, msg: PoseStamped) -> None:
         self.goals.append(f"({msg.pose.position.x:.1f}, {msg.pose.position.y:.1f})")

@@ -24,7 +24,7 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.action_executor import ActionExecutorNode  # noqa: E402
 from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS, NodeSetupError  # noqa: E402
-from pearl_pomdp.params_file import node_parameters  # noqa: E402
+from pearl_pomdp.params import node_parameters  # noqa: E402
 
 PARAMS = REPO / "config" / "pearl_nodes.yaml"
 
@@ -122,7 +122,7 @@ def test_overrides_beat_the_file_and_an_empty_defaults_file_configures_nothing(r
      "{f}: action_executor.actions.Go.sya: unknown field 'sya' (expected one of say, display, goal)"),
     ("/**:\n  ros__parameters:\n    locations:\n      home: [0, 0, zero]\n    location_names: [home]\n",
      "{f}: action_executor.locations.home: expected a list of numbers, got [0, 0, 'zero']"),
-    ("action_executor: [1, 2]\n", "parameter defaults_file: {f}: action_executor: expected {{ros__parameters: "
+    ("action_executor: [1, 2]\n", "parameter defaults_file: {f}:1: action_executor: expected {{ros__parameters: "
                                   "{{name: value, ...}}}}"),
 ])
 def test_a_bad_defaults_file_is_one_clear_error(ros_context, tmp_path, body, message):

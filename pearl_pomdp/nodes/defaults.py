@@ -4,7 +4,7 @@ Nodes whose configuration is a table — what each action says and where it driv
 each place is and which landmark it is — keep no such table in code: they declare a
 ``defaults_file`` parameter (default ``config/pearl_nodes.yaml``, looked up like every file
 parameter: working directory, then the package share directory), read the ``/**`` and
-``<node default name>`` sections of it (:func:`pearl_pomdp.params_file.node_parameters`)
+``<node default name>`` sections of it (:func:`pearl_pomdp.params.node_parameters`)
 and declare each parameter with the file's value as its default. So
 
 * ``ros2 run pearl_pomdp action_executor`` with no parameters behaves as the launch file;
@@ -18,7 +18,7 @@ from typing import Any, Dict, List, Mapping, Sequence
 
 from pearl_pomdp.errors import SpecError
 from pearl_pomdp.nodes.common import NodeSetupError, Param, PearlNode, resolve_path
-from pearl_pomdp.params_file import node_parameters
+from pearl_pomdp.params import node_parameters
 
 __all__ = ["DEFAULTS_FILE", "FileDefaults"]
 
