@@ -24,7 +24,14 @@ NODES = {
     "belief_tracker": "pearl_pomdp.nodes.belief_tracker:main",
     "hierarchical_policy": "pearl_pomdp.nodes.hierarchical_policy:main",
     "action_executor": "pearl_pomdp.nodes.action_executor:main",
+    "speech_recognizer": "pearl_pomdp.nodes.speech_recognizer:main",
+    "speech_synthesizer": "pearl_pomdp.nodes.speech_synthesizer:main",
 }
+
+#: Real speech (pearl_pomdp.asr): CMU Sphinx with its en-us model in the wheel, and
+#: libespeak-ng with its voice data; nothing downloads at run time. A microphone or
+#: speaker additionally needs PortAudio (sounddevice, which pocketsphinx pulls in).
+SPEECH = ["pocketsphinx>=5,<6", "espeakng-loader>=0.2"]
 
 setup(
     name=PACKAGE,
@@ -48,8 +55,10 @@ setup(
             "mcap>=1.1",
             "mcap-ros2-support>=0.5",
             "matplotlib>=3.6",
-        ],
-        "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6"],
+        ]
+        + SPEECH,
+        "speech": SPEECH,
+        "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6"] + SPEECH,
     },
     zip_safe=True,
     maintainer="Pearl POMDP developers",
