@@ -102,10 +102,14 @@ class ChannelTable:
         n = max(1, cell["n"])
         return {s: cell["counts"].get(s, 0) / n for s in self.symbols}
 
-    def accuracy(self, snr: float) -> float:
-        """Fraction of trials at ``snr`` whose recognised symbol is the meant one."""
+    def accuracy(self, snr: float, meant_symbols: Optional[Sequence[str]] = None) -> float:
+        """Fraction of trials at ``snr`` whose recognised symbol is the meant one.
+
+        ``meant_symbols`` restricts the count to those meanings (e.g. the keyword symbols,
+        leaving out chatter meant as ``unknown``).
+        """
         hit = total = 0
-        for meant in self.meant:
+        for meant in (self.meant if meant_symbols is None else meant_symbols):
             cell = self._cell(meant, snr)
             hit += cell["counts"].get(meant, 0)
             total += cell["n"]

@@ -8,7 +8,8 @@ from a corpus of three parts:
    (:data:`CARRIERS`: ``"what {k} is it"``, ``"tell me the {k}"``, ``"{k} please"`` …),
    so a keyword is likely in the places people say it;
 2. **filler sentences**: seeded random sequences of :data:`FILLER_WORDS`, common
-   English words that are *not* keywords. They are the garbage path: speech outside
+   English words that are *not* keywords, and everyday :data:`CHATTER` ("hello pearl",
+   "thank you") that contains no keyword. They are the garbage path: speech outside
    the domain is decoded as fillers, which the keyword filter maps to ``unknown``,
    instead of being forced onto the nearest keyword;
 3. optional extra sentences (e.g. a deployment's own phrases).
@@ -56,7 +57,16 @@ FILLER_WORDS = (
     "warm", "hungry", "thirsty", "help", "wait", "sorry", "excuse", "robot", "music", "television", "book",
     "read", "sit", "sleep", "eat", "drink", "pills", "glasses", "phone", "call", "visit", "today's", "she",
     "he", "we", "they", "was", "were", "so", "but", "if", "about", "just", "all", "one", "two", "three",
-    "therapy", "today", "lovely", "dear", "mine", "get", "put", "make", "keep",
+    "therapy", "today", "lovely", "dear", "mine", "get", "put", "make", "keep", "not", "know", "pardon",
+)
+
+#: Everyday sentences that carry no request (greetings, thanks, small talk): part of the
+#: garbage path, so that "hello pearl" is heard as itself and not as "no pearl".
+CHATTER = (
+    "hello pearl", "hello", "hi pearl", "good morning", "good morning pearl", "good afternoon", "good night",
+    "thank you", "thank you pearl", "thanks", "that is nice", "that is lovely", "what did you say", "pardon",
+    "sorry", "i am fine", "how are you", "where are my glasses", "i am tired", "hmm", "oh dear",
+    "is that so", "very good", "that was nice", "see you later",
 )
 
 #: How many random filler sentences the corpus holds (about as many as keyword sentences).
@@ -157,7 +167,9 @@ def build_language_model(keywords: Mapping[str, Sequence[str]], lookup: Callable
     from pocketsphinx.lm import ArpaBoLM
 
     keyword_words = {w for phrases in keywords.values() for p in phrases for w in tokens(p)}
-    corpus = keyword_sentences(keywords) * KEYWORD_WEIGHT + filler_sentences(keywords, seed=seed)
+    chatter = [c for c in CHATTER if not any(_contains(c.split(), tuple(tokens(p)))
+                                              for ps in keywords.values() for p in ps)]
+    corpus = keyword_sentences(keywords) * KEYWORD_WEIGHT + filler_sentences(keywords, seed=seed) + chatter * 2
     corpus += [" ".join(tokens(s)) for s in extra_sentences if tokens(s)]
     vocabulary = sorted({w for s in corpus for w in s.split()})
     dictionary, missing = {}, []
