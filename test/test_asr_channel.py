@@ -104,3 +104,37 @@ def test_sampler_draws_recorded_outputs_with_the_measured_frequencies():
     assert {ch.sample("yes", 50.0, rng)[0] for _ in range(200)} <= {"yes", "yes please", "yeah", "the"}
     with pytest.raises(ChannelError, match="no meant symbol 'go'"):
         ch.sample("go", 20.0, rng)
+
+
+def test_fitted_confusion_is_the_dirichlet_posterior_mean():
+    from pearl_pomdp.asr.channel import fitted_confusion
+
+    cells = {"20": {"yes": {"n": 10, "counts": {"yes": 6, "no": 1, "unknown": 3}, "samples": []}}}
+    table = ChannelTable([20.0], ["yes", "no", "unknown"], ["yes"], cells)
+    c = fitted_confusion(table, 20.0, prior_strength=10.0)["yes"]
+    assert c == pytest.approx({"yes": (10 + 6) / 20, "no": 1 / 20, "unknown": 3 / 20})
+    assert fitted_confusion(table, 20.0, 0.0)["yes"] == pytest.approx({"yes": 0.6, "no": 0.1, "unknown": 0.3})
+    with pytest.raises(ValueError, match="negative"):
+        fitted_confusion(table, 20.0, -1.0)
+
+
+def test_fitted_domain_loads_and_moves_speech_rows_only(measured, tmp_path):
+    import yaml
+
+    from pearl_pomdp.asr.channel import fit_observation_rows
+    from pearl_pomdp.model.factored import parse_domain
+
+    table = measured[0]
+    designer = load_domain(DOMAIN).compile()
+    data, changed = fit_observation_rows(DOMAIN, table, -10.0, prior_strength=5.0)
+    fitted = parse_domain(yaml.safe_dump(data, sort_keys=False), "fitted").compile()
+    assert changed > 0 and fitted.O.shape == designer.O.shape
+    np.testing.assert_allclose(fitted.O.sum(axis=2), 1.0, atol=1e-8)
+    speech = [designer.observations.index(o) for o in ("time", "weather", "go", "no", "yes", "unknown")]
+    touch = [i for i in range(len(designer.observations)) if i not in speech]
+    np.testing.assert_allclose(fitted.O[:, :, touch], designer.O[:, :, touch], atol=1e-8)
+    assert np.abs(fitted.O[:, :, speech] - designer.O[:, :, speech]).max() > 0.01
+    # An overwhelming prior keeps the designer's table.
+    same, _ = fit_observation_rows(DOMAIN, table, -10.0, prior_strength=1e12)
+    np.testing.assert_allclose(parse_domain(yaml.safe_dump(same, sort_keys=False), "same").compile().O,
+                               designer.O, atol=1e-8)

@@ -48,11 +48,16 @@ def test_calibrate_speech_writes_the_channel(tmp_path):
     utts.write_text("time: [what time is it]\nunknown: [hello pearl]\n")
     env = {**__import__("os").environ, "PEARL_CACHE_DIR": str(tmp_path / "cache")}
     out = pearl("calibrate-speech", str(DOMAIN), "--snr", "30", "--voices", "clear", "--utterances", str(utts),
-                "--out", str(tmp_path / "ch.json"), "--json", env=env)
+                "--out", str(tmp_path / "ch.json"), "--write-observation-table", str(tmp_path / "fitted.yaml"),
+                "--json", env=env)
     assert out.returncode == 0, out.stderr
     summary = json.loads(out.stdout)
     assert summary["trials"] == 2 and summary["accuracy"]["30"] == 1.0
     table = json.loads((tmp_path / "ch.json").read_text())
     assert table["cells"]["30"]["time"]["counts"] == {"time": 1}
+    from pearl_pomdp.model.factored import load_domain
+
+    assert summary["observation_table"]["snr_db"] == 30.0
+    assert load_domain(tmp_path / "fitted.yaml").compile().num_observations == 18
     bad = pearl("calibrate-speech", str(DOMAIN), "--snr", "loud", env=env)
     assert bad.returncode == 2 and "--snr" in bad.stderr

@@ -313,3 +313,91 @@ def calibrate(recognizer, keyword_filter, utterances: Mapping[str, Sequence[str]
             "voices": {v: voice_objs[v].to_dict() for v in voices}, "utterances": {k: list(v) for k, v in utterances.items()}}
     info.update(meta or {})
     return ChannelTable([float(s) for s in snrs], symbols, list(utterances), cells, info)
+
+
+def fitted_confusion(table: ChannelTable, snr: float, prior_strength: float) -> Dict[str, Dict[str, float]]:
+    """Posterior-mean P(heard | meant) at a measured SNR, Dirichlet prior = "heard as meant".
+
+    For a meant symbol ``m`` with counts ``c(o|m)`` over ``n_m`` trials:
+    ``Ĉ(o|m) = (κ·[o = m] + c(o|m)) / (κ + n_m)`` with ``κ = prior_strength``. The prior is
+    the designer's table (which writes what the resident means as what is heard): with no
+    trials the fitted rows equal the designer's, with many they follow the measurement.
+    """
+    if prior_strength < 0:
+        raise ValueError(f"prior strength {prior_strength} is negative")
+    out = {}
+    for meant in table.meant:
+        cell = table._cell(meant, snr)
+        denom = prior_strength + cell["n"]
+        if denom <= 0:
+            continue
+        row = {o: cell["counts"].get(o, 0) / denom for o in table.symbols}
+        row[meant] = row.get(meant, 0.0) + prior_strength / denom
+        out[meant] = row
+    return out
+
+
+def fit_observation_rows(domain_path: Union[str, Path], table: ChannelTable, snr: float,
+                         prior_strength: float = 20.0) -> Tuple[dict, int]:
+    """The domain file's data with every Speech part of every observation row passed through the channel.
+
+    Each row ``r`` (a table row, or a row of a ``mix`` component) becomes
+    ``r'(o) = r(o)`` for non-speech symbols and ``r'(o) = Σ_m r(m) Ĉ(o|m)`` for speech symbols,
+    with ``Ĉ`` from :func:`fitted_confusion` (a meant symbol the channel did not measure is
+    kept as it is). Row sums are unchanged. Returns ``(data, rows changed)``; the data loads
+    with :func:`pearl_pomdp.model.factored.parse_domain` after ``yaml.safe_dump``.
+
+    Raises:
+        ChannelError: the channel's symbols are not the domain's Speech symbols.
+    """
+    import yaml
+
+    from pearl_pomdp.model.factored import _Loader, _number, load_domain
+
+    domain = load_domain(domain_path)
+    speech = list((domain.modalities or {}).get("Speech", []))
+    if not speech or set(table.symbols) - set(speech):
+        raise ChannelError(f"channel symbols {', '.join(table.symbols)} are not the Speech symbols of "
+                           f"{domain.name} ({', '.join(speech) or 'none'})")
+    confusion = fitted_confusion(table, snr, prior_strength)
+    data = _plain(yaml.load(Path(domain_path).read_text(encoding="utf-8"), Loader=_Loader))
+    changed = 0
+
+    def fit(row):
+        nonlocal changed
+        probs = {row: 1.0} if isinstance(row, str) else {str(k): float(_number(v)) for k, v in row.items()}
+        out = {o: p for o, p in probs.items() if o not in speech}
+        for m, p in probs.items():
+            if m not in speech:
+                continue
+            for o, q in confusion.get(m, {m: 1.0}).items():
+                if q > 0:
+                    out[o] = out.get(o, 0.0) + p * q
+        total = sum(probs.values())
+        rounded = {o: round(p, 9) for o, p in out.items() if round(p, 9) > 0}
+        top = max(rounded, key=rounded.get)
+        rounded[top] = round(rounded[top] + total - sum(rounded.values()), 9)
+        if rounded != {o: round(p, 9) for o, p in probs.items()}:
+            changed += 1
+        return rounded
+
+    def fit_table(spec):
+        if isinstance(spec, dict) and isinstance(spec.get("table"), dict):
+            spec["table"] = {k: fit(v) for k, v in spec["table"].items()}
+
+    for spec in (data.get("observations") or {}).values():
+        if isinstance(spec, dict) and isinstance(spec.get("mix"), list):
+            for comp in spec["mix"]:
+                fit_table(comp)
+        else:
+            fit_table(spec)
+    return data, changed
+
+
+def _plain(node):
+    """Loader containers (with line marks) as plain dicts and lists, for yaml.safe_dump."""
+    if isinstance(node, dict):
+        return {(_plain(k)): _plain(v) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_plain(v) for v in node]
+    return node

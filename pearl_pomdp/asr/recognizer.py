@@ -45,6 +45,8 @@ __all__ = ["Recognition", "Recognizer", "RecognizerError", "UtteranceSegmenter",
 
 #: Longest utterance decoded (s). Longer ones are dropped (counted), not decoded for minutes.
 MAX_UTTERANCE_SECONDS = 20.0
+#: pocketsphinx settings that differ from its defaults (none yet; see bench/speech.py).
+DECODER_OPTIONS: Mapping[str, object] = {}
 #: Shortest audio worth decoding (s): a syllable.
 MIN_UTTERANCE_SECONDS = 0.1
 
@@ -108,6 +110,7 @@ class Recognizer:
             pocketsphinx's default large language model.
         extra_sentences: more corpus sentences for the generated model.
         max_seconds: utterances longer than this raise :class:`UtteranceTooLong`.
+        decoder_options: extra pocketsphinx settings (``{"lw": 8.0}``); part of :attr:`identity`.
 
     Attributes:
         language_model: the generated :class:`~pearl_pomdp.asr.grammar.LanguageModel` (or None).
@@ -118,8 +121,11 @@ class Recognizer:
     """
 
     def __init__(self, keywords: Optional[Mapping[str, Sequence[str]]] = None, extra_sentences: Sequence[str] = (),
-                 max_seconds: float = MAX_UTTERANCE_SECONDS):
+                 max_seconds: float = MAX_UTTERANCE_SECONDS, decoder_options: Optional[Mapping[str, object]] = None):
         ps = _import_pocketsphinx()
+        options = dict(DECODER_OPTIONS)
+        options.update(decoder_options or {})
+        tag = "".join(f":{k}={v}" for k, v in sorted(options.items()))
         if max_seconds <= 0:
             raise ValueError(f"max_seconds {max_seconds} is not positive")
         self.max_seconds = float(max_seconds)
@@ -127,8 +133,8 @@ class Recognizer:
         self.language_model = None
         try:
             if keywords is None:
-                self._decoder = ps.Decoder(loglevel="FATAL", bestpath=True, cmn="batch")
-                self.identity = f"pocketsphinx-{_version()}:default-en-us"
+                self._decoder = ps.Decoder(loglevel="FATAL", bestpath=True, cmn="batch", **options)
+                self.identity = f"pocketsphinx-{_version()}:default-en-us{tag}"
             else:
                 from pearl_pomdp.asr.grammar import build_language_model
 
@@ -137,10 +143,10 @@ class Recognizer:
                 del probe
                 lm_path, dict_path = _write_model(lm)
                 self._decoder = ps.Decoder(loglevel="FATAL", lm=str(lm_path), dict=str(dict_path), bestpath=True,
-                                           cmn="batch")
+                                           cmn="batch", **options)
                 self.language_model = lm
-                self.identity = f"pocketsphinx-{_version()}:domain-{lm.digest}"
-        except RuntimeError as err:
+                self.identity = f"pocketsphinx-{_version()}:domain-{lm.digest}{tag}"
+        except (RuntimeError, ValueError, KeyError) as err:
             raise RecognizerError(f"pocketsphinx cannot load its model: {err}") from None
 
     def recognise(self, pcm: np.ndarray, sample_rate: int = SAMPLE_RATE, where: str = "audio") -> Recognition:
@@ -224,8 +230,11 @@ class UtteranceSegmenter:
     """
 
     def __init__(self, window: float = 0.3, ratio: float = 0.9, vad_mode: int = 0,
-                 max_seconds: float = MAX_UTTERANCE_SECONDS):
+                 max_seconds: float = MAX_UTTERANCE_SECONDS, decoder_options: Optional[Mapping[str, object]] = None):
         ps = _import_pocketsphinx()
+        options = dict(DECODER_OPTIONS)
+        options.update(decoder_options or {})
+        tag = "".join(f":{k}={v}" for k, v in sorted(options.items()))
         self._ep = ps.Endpointer(window=window, ratio=ratio, vad_mode=vad_mode, sample_rate=SAMPLE_RATE)
         self._frame = self._ep.frame_bytes
         self._pending = b""

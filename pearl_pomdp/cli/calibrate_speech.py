@@ -9,6 +9,13 @@ cache dir, so a rerun (or one more SNR) only decodes what is new.
 Utterances: the simulated residents' (pearl_sim, "chatter" meaning `unknown`) plus every
 keyword in three carrier phrases; --utterances FILE.yaml (symbol: [sentences]) replaces them.
 
+--write-observation-table OUT.yaml writes the domain with the Speech part of every
+observation row passed through the measured confusion at --fit-snr: what the designer's
+row says she means is heard as the channel hears it. The confusion is the posterior mean
+under a Dirichlet prior equal to the designer's table ("heard as meant") worth
+--prior-strength trials, so rows move from the designer's numbers towards the measured
+ones as trials accumulate (docs/speech.md).
+
 Examples:
   pearl calibrate-speech config/pearl.domain.yaml --out channel.json
   pearl calibrate-speech config/pearl.domain.yaml --snr 20,10 --voices clear,slow --repeats 2 --json
@@ -35,6 +42,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="base seed of the noise (default: 0)")
     parser.add_argument("--no-cache", action="store_true", help="decode everything again, store nothing")
     parser.add_argument("--out", metavar="channel.json", help="write the measured channel here")
+    parser.add_argument("--write-observation-table", metavar="OUT.yaml",
+                        help="write the domain with its Speech observation rows fitted from the measured channel")
+    parser.add_argument("--fit-snr", type=float, default=None,
+                        help="SNR whose measurement the fit uses (default: 20 if measured, else the first --snr)")
+    parser.add_argument("--prior-strength", type=float, default=20.0,
+                        help="Dirichlet prior weight of the designer's table, in trials (default: 20)")
     parser.add_argument("--json", action="store_true", help="print one JSON summary object")
 
 
@@ -124,11 +137,14 @@ def run(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - t0
     if args.out:
         table.save(args.out)
+    fitted = None
+    if args.write_observation_table:
+        fitted = write_observation_table(args, table, snrs)
     summary = {"domain": domain.name, "recogniser": recognizer.identity, "noise": args.noise, "voices": voices,
                "repeats": args.repeats, "trials": sum(c["n"] for row in table.cells.values() for c in row.values()),
                "seconds": round(seconds, 2),
                "accuracy": {table.key(s): round(table.accuracy(s), 4) for s in snrs},
-               "out": args.out}
+               "out": args.out, "observation_table": fitted}
     if args.json:
         print_json(summary)
         return 0
@@ -139,4 +155,30 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {s:>5g} dB  keyword accuracy {table.accuracy(s):.3f}   P(right | meant): {row}")
     if args.out:
         print(f"wrote {args.out}")
+    if fitted:
+        print(f"wrote {fitted['file']}: {fitted['rows_changed']} observation rows fitted at {fitted['snr_db']:g} dB "
+              f"(prior strength {fitted['prior_strength']:g})")
     return 0
+
+
+def write_observation_table(args: argparse.Namespace, table, snrs) -> dict:
+    """Fit the domain's Speech rows from ``table`` and write the fitted domain (checked by loading it)."""
+    import yaml
+
+    from pearl_pomdp.asr.channel import fit_observation_rows
+    from pearl_pomdp.atomic import atomic_write
+    from pearl_pomdp.errors import SpecError
+    from pearl_pomdp.model.factored import parse_domain
+
+    snr = args.fit_snr if args.fit_snr is not None else (20.0 if 20.0 in snrs else snrs[0])
+    if snr not in snrs:
+        raise SpecError("--fit-snr", "", f"{snr:g} dB was not measured (--snr {args.snr})")
+    data, changed = fit_observation_rows(args.domain, table, snr, args.prior_strength)
+    header = (f"# {args.domain} with its Speech observation rows fitted by `pearl calibrate-speech` at {snr:g} dB\n"
+              f"# ({table.meta.get('recogniser')}, voices {', '.join(table.meta.get('voices', {}))}, "
+              f"{table.meta.get('noise')} noise, Dirichlet prior strength {args.prior_strength:g}).\n")
+    text = header + yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=120)
+    parse_domain(text, source=args.write_observation_table)  # never write a domain that does not load
+    atomic_write(args.write_observation_table, text)
+    return {"file": args.write_observation_table, "snr_db": snr, "prior_strength": args.prior_strength,
+            "rows_changed": changed}

@@ -143,6 +143,7 @@ class SpeechRecognizerNode(PearlNode):
         self.counts: Dict[str, int] = {k: 0 for k in ("chunks", "utterances", "published", "empty", "too_long",
                                                      "wrong_rate", "malformed", "overflow", "clipped", "errors", "lost")}
         self._last_seq: Optional[int] = None
+        self._closing = False
         self.last: List[dict] = []
         self._queue: "queue.Queue[Optional[np.ndarray]]" = queue.Queue(maxsize=p["max_queue"])
         self._feed_lock = threading.Lock()
@@ -258,9 +259,14 @@ class SpeechRecognizerNode(PearlNode):
                 if not self.params["publish_empty"]:
                     continue
             data = speech_message(rec.text, rec.confidence) if self.params["publish_format"] == "json" else rec.text
-            if not self.context.ok():
+            if self._closing or not self.context.ok():
                 return
-            self.speech_pub.publish(cv.text_to_msg(data))
+            try:
+                self.speech_pub.publish(cv.text_to_msg(data))
+            except Exception:  # noqa: BLE001 - the node is being destroyed under us: stop quietly
+                if self._closing or not self.context.ok():
+                    return
+                raise
             self.counts["published"] += 1
             self.get_logger().info(f"heard {rec.text!r} (confidence {rec.confidence:.2f}, "
                                    f"{rec.audio_seconds:.1f} s audio in {rec.decode_seconds:.2f} s)")
@@ -274,6 +280,7 @@ class SpeechRecognizerNode(PearlNode):
                                                     text, dict(self.counts), self.now_s()))
 
     def destroy_node(self):
+        self._closing = True
         if self._stream is not None:
             try:
                 self._stream.stop()
