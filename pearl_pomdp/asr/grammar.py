@@ -33,11 +33,11 @@ __all__ = ["CARRIERS", "FILLER_WORDS", "LanguageModel", "build_language_model"]
 
 #: Carrier phrases a keyword is spoken in; ``{k}`` is the keyword phrase.
 CARRIERS = (
-    "{k}", "{k} please", "{k} thank you", "oh {k}", "{k} {k}", "the {k}", "what is the {k}",
+    "{k}", "{k} please", "{k} thank you", "oh {k}", "the {k}", "what is the {k}",
     "what is the {k} like", "what {k} is it", "tell me the {k}", "can you tell me the {k}", "give me the {k}",
     "i want the {k}", "i said {k}", "um {k}", "well {k}", "{k} pearl", "pearl {k}", "{k} i think",
     "will it {k} today", "is it going to {k}", "{k} today", "{k} tomorrow", "the {k} for tomorrow",
-    "{k} to my appointment", "{k} to the {k}", "{k} now", "oh {k} please", "{k} all right",
+    "{k} to my appointment", "{k} now", "oh {k} please", "{k} all right",
 )
 #: Each keyword sentence is counted this many times: keywords are what the robot listens
 #: for, so the model prefers them to a filler of similar sound.
