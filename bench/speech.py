@@ -11,6 +11,11 @@
   ``per_voice_keyword_accuracy`` splits it by voice; ``keyword_accuracy_ci95`` is the
   Wilson 95 % interval (one trial is 0.7 % of 136: read the goal against it).
 
+* ``sim_channel``: wall time per utterance of ``pearl_sim.speech_channel`` — the
+  ``recogniser`` channel (synthesis cached per sentence + noise + decode) and the
+  ``measured`` channel sampled from the clear-voice calibration table above; what a
+  simulated episode pays per thing the resident says.
+
 Prints one JSON object.
 
     .venv/bin/python bench/speech.py [--snr 30,20,10,5,0] [--voices clear,slow,quiet,slurred] [--repeats 2]
@@ -45,6 +50,29 @@ def real_time_factor(recognizer, clips) -> dict:
         audio += rec.audio_seconds
         decode += rec.decode_seconds
     return {"rtf": round(decode / audio, 4), "audio_seconds": round(audio, 2), "decode_seconds": round(decode, 3)}
+
+
+def sim_channel_cost(domain, sentences, utterances) -> dict:
+    from pearl_pomdp.asr.channel import calibrate
+    from pearl_pomdp.speech import KeywordFilter
+    from pearl_sim.speech_channel import MeasuredSpeechChannel, make_speech_channel
+
+    rng = np.random.default_rng(1)
+    intents = [m for m, says in utterances.items() for _ in says]
+    rec = make_speech_channel({"channel": "recogniser", "snr_db": 20}, domain.keywords)
+    t0 = time.perf_counter()
+    for intent, s in zip(intents, sentences):
+        rec.hear(intent, s, "clear", rng)
+    per_rec = (time.perf_counter() - t0) / len(sentences)
+    table = calibrate(rec.recognizer, KeywordFilter.from_domain(domain), utterances, [20.0], ["clear"], cache=True)
+    measured = MeasuredSpeechChannel(table, snr_db=20.0)
+    n = 20000
+    t0 = time.perf_counter()
+    for i in range(n):
+        measured.hear(intents[i % len(intents)], "", "clear", rng)
+    per_meas = (time.perf_counter() - t0) / n
+    return {"recogniser_seconds_per_utterance": round(per_rec, 4),
+            "measured_microseconds_per_utterance": round(per_meas * 1e6, 2)}
 
 
 def main(argv=None) -> int:
@@ -110,6 +138,7 @@ def main(argv=None) -> int:
     acc["trials"] = len(snrs) * len(voices) * args.repeats * len(sentences)
     acc["seconds"] = round(time.perf_counter() - t0, 1)
     acc["goal_keyword_accuracy_at_20db"] = 0.95
+    out["sim_channel"] = sim_channel_cost(domain, sentences, utterances)
     acc["goal_met"] = acc["keyword_accuracy"].get("20", 0.0) >= 0.95
     out["accuracy"] = acc
     out["load_after"] = [round(x, 2) for x in os.getloadavg()]

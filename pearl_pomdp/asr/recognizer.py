@@ -230,11 +230,8 @@ class UtteranceSegmenter:
     """
 
     def __init__(self, window: float = 0.3, ratio: float = 0.9, vad_mode: int = 0,
-                 max_seconds: float = MAX_UTTERANCE_SECONDS, decoder_options: Optional[Mapping[str, object]] = None):
+                 max_seconds: float = MAX_UTTERANCE_SECONDS):
         ps = _import_pocketsphinx()
-        options = dict(DECODER_OPTIONS)
-        options.update(decoder_options or {})
-        tag = "".join(f":{k}={v}" for k, v in sorted(options.items()))
         self._ep = ps.Endpointer(window=window, ratio=ratio, vad_mode=vad_mode, sample_rate=SAMPLE_RATE)
         self._frame = self._ep.frame_bytes
         self._pending = b""
