@@ -112,3 +112,11 @@ def test_segmenter_cuts_two_utterances_and_drops_an_overlong_one():
     res = long_seg.feed(np.concatenate([gap, speechy, gap])) + long_seg.flush()
     assert long_seg.too_long >= 1 and all(len(u) <= 16000 + 480 for u in res)
     del rng
+
+
+def test_unwritable_cache_dir_falls_back_to_a_temporary_folder(tmp_path, monkeypatch):
+    blocked = tmp_path / "file-not-dir"
+    blocked.write_text("x")
+    monkeypatch.setenv("PEARL_CACHE_DIR", str(blocked))  # mkdir under a file fails
+    rec = Recognizer({"yes": ["yes"], "no": ["no"]})
+    assert rec.language_model is not None and not any(blocked.parent.glob("file-not-dir/*"))

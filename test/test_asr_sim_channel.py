@@ -57,3 +57,19 @@ def test_word_error_channel_is_the_old_model(domain):
 def test_bad_speech_fields_name_the_field(domain, spec, field):
     with pytest.raises(SpecError, match=field.replace(".", r"\.")):
         make_speech_channel(spec, domain.keywords, "scenario.yaml")
+
+
+def test_babble_noise_is_talkers_at_the_requested_snr(domain):
+    from pearl_pomdp.asr.audio import mix_at_snr
+    from pearl_pomdp.asr.channel import babble_track
+    from pearl_pomdp.asr.synthesizer import synthesize
+
+    track = babble_track()
+    assert len(track) > 2 * 16000 and np.std(track) > 100
+    speech = synthesize("yes please", "clear")
+    mixed = mix_at_snr(speech, 10.0, np.random.default_rng(0), "babble", track, pad_seconds=0.3).astype(float)
+    noise = mixed[4800:4800 + len(speech)] - speech
+    assert 10 * np.log10(np.mean(speech.astype(float) ** 2) / np.mean(noise ** 2)) == pytest.approx(10.0, abs=0.2)
+    kf = KeywordFilter.from_domain(domain)
+    ch = make_speech_channel({"channel": "recogniser", "snr_db": 30, "noise": "babble"}, domain.keywords)
+    assert kf.classify(ch.hear("yes", "yes please", "clear", np.random.default_rng(1)).text) == "yes"

@@ -206,13 +206,21 @@ def _write_model(lm) -> "tuple[Path, Path]":
     """The model's ARPA and dictionary files under the cache dir (written once, atomically)."""
     from pearl_pomdp.atomic import atomic_write
 
-    folder = cache_dir() / "asr" / lm.digest
-    lm_path, dict_path = folder / "domain.lm", folder / "domain.dict"
-    if not (lm_path.exists() and dict_path.exists()):
-        folder.mkdir(parents=True, exist_ok=True)
-        atomic_write(lm_path, lm.arpa)
-        atomic_write(dict_path, "".join(f"{w} {p}\n" for w, p in sorted(lm.dictionary.items())))
-    return lm_path, dict_path
+    def write(folder: Path) -> "tuple[Path, Path]":
+        lm_path, dict_path = folder / "domain.lm", folder / "domain.dict"
+        if not (lm_path.exists() and dict_path.exists()):
+            folder.mkdir(parents=True, exist_ok=True)
+            atomic_write(lm_path, lm.arpa)
+            atomic_write(dict_path, "".join(f"{w} {p}\n" for w, p in sorted(lm.dictionary.items())))
+        return lm_path, dict_path
+
+    try:
+        return write(cache_dir() / "asr" / lm.digest)
+    except OSError:
+        # A read-only home (some CI runners, robots): a private temporary folder still works.
+        import tempfile
+
+        return write(Path(tempfile.mkdtemp(prefix=f"pearl-asr-{lm.digest}-")))
 
 
 class UtteranceSegmenter:
