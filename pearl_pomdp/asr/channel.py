@@ -47,7 +47,7 @@ _BABBLE_TEXT = (
     "could you pass me the newspaper and my glasses from the table",
     "the garden looks lovely now that the roses are out",
 )
-_BABBLE_VOICES = ("en-us+m1", "en-us+f2", "en-gb", "en-us+m4")
+_BABBLE_VOICES = ("en-us+m1", "en-us+f2", "en-gb-x-rp", "en-us+m4")
 
 
 class ChannelError(PearlError):

@@ -160,7 +160,7 @@ class Synthesizer:
         raw = text.encode("utf-8") + b"\0"
         with self._lock:
             if self._lib.espeak_SetVoiceByName(v.name.encode()) != _EE_OK:
-                raise SynthesisError(f"espeak-ng has no voice {v.name!r} (e.g. en-us, en-gb, en-us+f3, en-us+grandma)")
+                raise SynthesisError(f"espeak-ng has no voice {v.name!r} (e.g. en-us, en, en-gb-x-rp, en-us+f3, en-us+grandma)")
             for key, value in (("rate", v.rate), ("pitch", v.pitch), ("range", v.pitch_range),
                                ("volume", v.volume), ("wordgap", v.word_gap)):
                 self._lib.espeak_SetParameter(_PARAM[key], int(value), 0)

@@ -47,7 +47,7 @@ class SpeechSynthesizerNode(PearlNode):
         Param("output", "topic", "'topic' (audio_topic), 'device' (sound card via sounddevice) or 'none'"),
         Param("audio_topic", "/pearl/audio_out", "Audio output for output:=topic (std_msgs/Int16MultiArray, 16 kHz)"),
         Param("device", "", "Output device name or index for output:=device ('' = system default)"),
-        Param("voice", "en-us", "espeak-ng voice name (en-us, en-gb, en-us+f3 ...) or a preset (clear, slow ...)"),
+        Param("voice", "en-us", "espeak-ng voice name (en-us, en, en-gb-x-rp, en-us+f3 ...) or a preset (clear, slow ...)"),
         Param("rate", 150, "Words per minute (slower is easier for elderly listeners)", range=(80, 450)),
         Param("pitch", 50, "Pitch 0-100", range=(0, 100)),
         Param("volume", 100, "Volume 0-200", range=(0, 200)),
