@@ -26,7 +26,14 @@ NODES = {
     "action_executor": "pearl_pomdp.nodes.action_executor:main",
     "landmark_detector": "pearl_pomdp.nodes.landmark_detector:main",
     "guide_pace": "pearl_pomdp.nodes.guide_pace:main",
+    "speech_recognizer": "pearl_pomdp.nodes.speech_recognizer:main",
+    "speech_synthesizer": "pearl_pomdp.nodes.speech_synthesizer:main",
 }
+
+#: Real speech (pearl_pomdp.asr): CMU Sphinx with its en-us model in the wheel, and
+#: libespeak-ng with its voice data; nothing downloads at run time. A microphone or
+#: speaker additionally needs PortAudio (sounddevice, which pocketsphinx pulls in).
+SPEECH = ["pocketsphinx>=5,<6", "espeakng-loader>=0.2"]
 
 setup(
     name=PACKAGE,
@@ -52,9 +59,13 @@ setup(
             "mcap-ros2-support>=0.5",
             "matplotlib>=3.6",
             "foxglove-sdk>=0.30",  # pearl_pomdp/live_view.py: the Foxglove WebSocket server, schemas included
-        ],
+        ]
+        + SPEECH,
+        "speech": SPEECH,
         "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6",
-                 "websockets>=12"],  # a real WebSocket client for test/test_live_view.py
+                 "websockets>=12",  # a real WebSocket client for test/test_live_view.py
+                 "mypy>=1.8"]  # .ci/run type-checks the core (mypy.ini)
+        + SPEECH,
     },
     zip_safe=True,
     maintainer="Pearl POMDP developers",
@@ -65,6 +76,7 @@ setup(
         "console_scripts": ["pearl = pearl_pomdp.cli:main"]
         + [f"{name} = {target}" for name, target in NODES.items()],
         # Subcommands other packages add to `pearl` (the core never imports the simulator).
-        "pearl.commands": ["demo = pearl_sim.cli.demo", "experiment = pearl_sim.cli.experiment"],
+        "pearl.commands": ["demo = pearl_sim.cli.demo", "experiment = pearl_sim.cli.experiment",
+                           "calibrate-speech = pearl_sim.cli.calibrate_speech"],
     },
 )
