@@ -117,3 +117,36 @@ def test_bad_input_is_rejected_with_a_reason(bad, msg):
 def test_negative_tolerance_is_rejected():
     with pytest.raises(ValueError, match="tol must be >= 0"):
         prune(np.eye(2), tol=-1.0)
+
+
+def test_scipys_bundled_highs_is_the_fallback_when_highspy_is_missing(monkeypatch):
+    import sys
+
+    import pearl_pomdp.solvers.prune as prune_module
+
+    rng = np.random.default_rng(11)
+    alphas = rng.normal(size=(60, 5))
+    with_highspy = prune(alphas, use_lp_core=True).tolist()
+    monkeypatch.setitem(sys.modules, "highspy._core", None)  # `import highspy._core` now fails
+    monkeypatch.setattr(prune_module, "_HAVE_HIGHS_CORE", None)
+    monkeypatch.setattr(prune_module, "_highs_core", None)
+    assert prune_module._load_highs()
+    assert prune_module._highs_core.__name__.startswith("scipy.")
+    assert prune(alphas, use_lp_core=True).tolist() == with_highspy
+
+
+def test_the_solvers_import_no_lp_solver_until_the_first_lp():
+    """Start-up: a two-state model (closed-form LPs) or `pearl --help` never pays for HiGHS/scipy.optimize."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "import pearl_pomdp.solvers.incremental_pruning as ip\n"
+            "from pearl_pomdp.solvers.prune import prune\n"
+            "import numpy as np\n"
+            "prune(np.random.default_rng(0).normal(size=(30, 2)))\n"
+            "print(sorted(m for m in ('scipy.optimize', 'highspy') if m in sys.modules))\n"
+            "prune(np.random.default_rng(0).normal(size=(30, 3)))\n"
+            "print('highspy' in sys.modules or 'scipy.optimize' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "[]" and out[1] == "True"

@@ -13,8 +13,6 @@ from __future__ import annotations
 import argparse
 import math
 
-import numpy as np
-
 from pearl_pomdp.errors import BeliefError
 
 COMMAND = "explain"
@@ -30,6 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def belief_from_spec(domain, spec: str) -> np.ndarray:
     """The product-of-marginals belief described by ``spec`` (see the command help)."""
+    import numpy as np  # here, not at module top: `pearl --help` imports every command module
+
     b0 = domain.compile().b0
     marginals = domain.feature_marginals(b0)
     names = [f.name for f in domain.features]
@@ -61,6 +61,8 @@ def belief_from_spec(domain, spec: str) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from pearl_pomdp.cli import print_json
     from pearl_pomdp.cli.plan import load_domain_any
     from pearl_pomdp.hierarchy import load_hierarchical_policy

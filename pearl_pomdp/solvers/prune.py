@@ -40,9 +40,11 @@ The LPs are solved by HiGHS, the solver behind ``scipy.optimize.linprog(
 method="highs")``. Only the objective changes from one candidate to the next
 and ``K`` only grows, so one HiGHS model is kept per prune and warm-started
 (rows are appended, the cost vector is swapped): about 7x less overhead per
-LP than a fresh ``linprog`` call. The incremental model uses scipy's bundled
-HiGHS bindings (``scipy.optimize._highspy``); if a scipy release lacks them,
-every LP goes through ``linprog(method="highs")`` instead, with the same result.
+LP than a fresh ``linprog`` call. The incremental model uses HiGHS's own
+``highspy`` bindings, or scipy's bundled copy (``scipy.optimize._highspy``)
+when ``highspy`` is not installed, imported on the first LP; if neither is
+there, every LP goes through ``linprog(method="highs")`` instead, with the
+same result.
 
 Array convention: ``alphas`` is ``[K, S]``, one vector per row.
 """
@@ -53,13 +55,33 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-try:  # the incremental HiGHS model (scipy's own bindings; private, hence the fallback)
-    from scipy.optimize._highspy import _core as _highs_core
+_highs_core = None  # the HiGHS bindings, imported on first use (see _load_highs)
+_HAVE_HIGHS_CORE: Optional[bool] = None  # unknown until _load_highs has run
 
-    _HAVE_HIGHS_CORE = hasattr(_highs_core, "_Highs")
-except Exception:  # pragma: no cover - depends on the scipy build
-    _highs_core = None
-    _HAVE_HIGHS_CORE = False
+
+def _load_highs() -> bool:
+    """Import HiGHS's Python bindings on first use; True when an incremental model is available.
+
+    ``highspy`` (HiGHS's own package) imports in ~50 ms; scipy's bundled copy
+    (``scipy.optimize._highspy``, private, hence the fallback order) drags in all
+    of ``scipy.optimize`` (~0.3 s), which a two-state model — solved in closed
+    form — or a command that never prunes should not pay. Both expose the same
+    raw ``_Highs`` class (the ``highspy.Highs`` wrapper prints a banner on stdout).
+    """
+    global _highs_core, _HAVE_HIGHS_CORE
+    if _HAVE_HIGHS_CORE is None:
+        _HAVE_HIGHS_CORE = False
+        for name in ("highspy._core", "scipy.optimize._highspy._core"):
+            try:
+                import importlib
+
+                core = importlib.import_module(name)
+            except Exception:  # pragma: no cover - depends on what is installed
+                continue
+            if hasattr(core, "_Highs"):
+                _highs_core, _HAVE_HIGHS_CORE = core, True
+                break
+    return bool(_HAVE_HIGHS_CORE)
 
 #: A vector must win by at least this much somewhere (pomdp-solve's effective threshold, see above).
 DEFAULT_TOL = 5.01e-7
@@ -105,11 +127,12 @@ class _WitnessLP:
         # unless plain linprog was asked for.
         self.exact_2 = use_core is not False
         self._bp: Optional[tuple] = None
-        self.use_core = _HAVE_HIGHS_CORE if use_core is None else (use_core and _HAVE_HIGHS_CORE)
         self.rows: List[np.ndarray] = []
         self._col_index = np.arange(num_states + 1, dtype=np.int32)
         if self.S == 2 and self.exact_2:
             self.use_core = False  # solved in closed form, no LP model needed
+        else:
+            self.use_core = use_core is not False and _load_highs()
         if self.use_core:
             h = _highs_core._Highs()
             h.setOptionValue("output_flag", False)
