@@ -172,12 +172,34 @@ class _WitnessLP:
             den = slope[i] - slope[j]
             ok = den != 0.0
             p = (a0[j][ok] - a0[i][ok]) / den[ok]
-            p = np.concatenate([[0.0, 1.0], p[(p > 0.0) & (p < 1.0)]])
+            inside = (p > 0.0) & (p < 1.0)
+            ii, p = i[ok][inside], p[inside]
+            p = np.concatenate([[0.0, 1.0], p])
             V = (a0[None, :] + slope[None, :] * p[:, None]).max(axis=1)
-            # only points on the upper envelope matter (its breakpoints)
+            # Only the envelope's breakpoints matter: a crossing below the envelope is a
+            # point where V is linear, so c·b − V there never beats both neighbouring vertices.
             on = np.ones(p.size, dtype=bool)
+            on[2:] = a0[ii] + slope[ii] * p[2:] >= V[2:] - 1e-12 * (1.0 + np.abs(V[2:]))
             self._bp = (p[on], V[on], len(self.rows))
         return self._bp[0], self._bp[1]
+
+    @property
+    def closed_form(self) -> bool:
+        """True when the LPs are solved exactly at the envelope's breakpoints (two states)."""
+        return self.S == 2 and self.exact_2
+
+    def solve_many(self, C: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """Two states only: :meth:`solve` for every row of ``C [N, 2]`` at once (same arithmetic).
+
+        Returns ``(δ* [N], b* [N, 2])``.
+        """
+        if not (self.closed_form and self.rows):
+            raise RuntimeError("solve_many needs two states and at least one kept vector")
+        p, V = self._breakpoints_2()
+        g = C[:, 0:1] + (C[:, 1:2] - C[:, 0:1]) * p[None, :] - V[None, :]
+        k = np.argmax(g, axis=1)
+        pk = p[k]
+        return g[np.arange(C.shape[0]), k], np.stack([1.0 - pk, pk], axis=1)
 
     def solve(self, c: np.ndarray, need_below: Optional[float] = None) -> Tuple[float, Optional[np.ndarray]]:
         """Return ``(δ*, b*)``: the largest advantage of ``c`` over the kept set and where it is.
@@ -407,6 +429,10 @@ def prune(
         alive[rem] = True
         filtered_upto = nk  # kept rows already used by the pointwise filter
         pos = 0
+        if lp.closed_form:
+            # Two states: every candidate's LP at once (same arithmetic, same order of events).
+            _lark_two_states(A, queue, alive, lp, KA, nk, tol, lexrank, keep, stats, deadline)
+            queue = []
         while pos < len(queue):
             c = queue[pos]
             pos += 1
@@ -451,6 +477,57 @@ def prune(
     if return_witnesses:
         return kept, np.array([witness[i] for i in kept]).reshape(kept.size, S)
     return kept
+
+
+def _lark_two_states(A, queue, alive, lp, KA, nk, tol, lexrank, keep, stats, deadline) -> None:
+    """Lark's filter of :func:`prune` for two states, with each round's LPs solved together.
+
+    The sequential loop takes the queue in order: a candidate with ``δ* < tol``
+    is dropped, the first with ``δ* ≥ tol`` yields a witness (and the kept set
+    grows). Between two witnesses the kept set is fixed, so the LPs of all
+    waiting candidates are solved at once (closed form, :meth:`_WitnessLP.solve_many`);
+    those before the first witness-giving one are dropped, exactly as the loop
+    would, and the rest wait for the grown set. The pointwise re-filter runs at
+    the same moments as in the loop, so the kept vectors (and their order) are
+    the loop's.
+    """
+    filtered_upto = nk
+    rest = [c for c in queue if alive[c]]
+    while rest:
+        if deadline is not None and time.perf_counter() > deadline:
+            raise PruneTimeout()
+        if nk - filtered_upto >= max(1, nk // 8):
+            live = np.flatnonzero(alive)
+            dom = pointwise_dominated(A[live], KA[filtered_upto:nk], slack=tol)
+            alive[live[dom]] = False
+            filtered_upto = nk
+            rest = [c for c in rest if alive[c]]
+            if not rest:
+                break
+        delta, where = lp.solve_many(A[rest])
+        hits = np.flatnonzero(delta >= tol)
+        first = int(hits[0]) if hits.size else len(rest)
+        if stats is not None:
+            stats.lps += min(first + 1, len(rest))  # the LPs the sequential loop would solve
+        alive[rest[:first]] = False
+        if first == len(rest):
+            break
+        c = rest[first]
+        b = where[first]
+        j, vbest = _best_index(A, np.flatnonzero(alive), b, tol, lexrank)
+        tail = rest[first + 1:]
+        if vbest - float(np.max(KA[:nk] @ b)) <= 0.0:  # the witness must hold up in plain arithmetic
+            alive[c] = False
+            rest = tail
+            continue
+        if stats is not None:
+            stats.lp_witnesses += 1
+        alive[j] = False
+        keep(j, b)
+        KA[nk] = A[j]
+        nk += 1
+        lp.add(A[j])
+        rest = [x for x in tail if alive[x]] + ([c] if j != c else [])
 
 
 def _dominated_within(B: np.ndarray, chunk_elems: int = 4_000_000) -> np.ndarray:
