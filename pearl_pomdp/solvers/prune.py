@@ -285,6 +285,33 @@ def _best_index(alphas: np.ndarray, idx: np.ndarray, b: np.ndarray, tol: float,
     return int(tied[order[-1]]), float(m)
 
 
+_EYE: dict = {}
+_RANDOM_BELIEFS: dict = {}
+
+
+def _eye(S: int) -> np.ndarray:
+    """``np.eye(S)``, made once per size (read-only: witnesses are views of its rows)."""
+    e = _EYE.get(S)
+    if e is None:
+        e = _EYE[S] = np.eye(S)
+        e.flags.writeable = False
+    return e
+
+
+def _random_beliefs(seed: int, S: int, n: int) -> np.ndarray:
+    """``n`` Dirichlet(1) beliefs from ``default_rng(seed)``, cached: the same numbers
+    for the same arguments (a prune's result must not depend on earlier calls), without
+    paying a new generator per prune."""
+    key = (seed, S, n)
+    P = _RANDOM_BELIEFS.get(key)
+    if P is None:
+        if len(_RANDOM_BELIEFS) > 4096:
+            _RANDOM_BELIEFS.clear()
+        P = _RANDOM_BELIEFS[key] = np.random.default_rng(seed).dirichlet(np.ones(S), n)
+        P.flags.writeable = False
+    return P
+
+
 def _lex_order(alphas: np.ndarray) -> np.ndarray:
     """Row indices in lexicographic order (state 0 first); stable, so equal rows keep input order."""
     return np.lexsort(alphas.T[::-1])
@@ -385,7 +412,7 @@ def prune(
         kept_order.append(i)
         witness[i] = b
 
-    eye = np.eye(S)
+    eye = _eye(S)
     for s, i in enumerate(_best_at_corners(A, cand, tol, lexrank)):
         if not is_kept[i]:
             keep(int(i), eye[s])
@@ -394,8 +421,8 @@ def prune(
     n_random = int(min(max(4 * S, 64), max(0, random_budget // max(1, cand.size))))
     P_parts = [] if points is None or not len(points) else [np.asarray(points, dtype=float)]
     if n_random > 0 and cand.size > max(S, len(kept_order) + sum(len(p) for p in P_parts)):
-        P_parts.append(np.random.default_rng(cand.size).dirichlet(np.ones(S), n_random))
-    if P_parts:
+        P_parts.append(_random_beliefs(cand.size, S, n_random))
+    if P_parts and len(kept_order) < cand.size:  # (nothing left to find when all are kept)
         P = np.vstack(P_parts)
         vals = A[cand] @ P.T  # [C, P]
         if cand.size >= 2:
@@ -540,9 +567,11 @@ def _dominated_within(B: np.ndarray, chunk_elems: int = 4_000_000) -> np.ndarray
     N, S = B.shape
     # With two states the LP is solved in closed form, so a cheap dominator set is enough.
     if N * N * S <= (200_000 if S == 2 else 10_000_000):
-        by = B
-    else:
-        by = B[np.unique(np.argmax(B, axis=0))]
+        # Every row against every row: the only exact self-match of a row is itself.
+        ge = (B[None, :, :] >= B[:, None, :]).all(axis=2)  # ge[i, j]: row j ≥ row i everywhere
+        np.fill_diagonal(ge, False)
+        return ge.any(axis=1)
+    by = B[np.unique(np.argmax(B, axis=0))]
     out = np.zeros(N, dtype=bool)
     step = max(1, chunk_elems // max(1, by.shape[0] * S))
     for i in range(0, N, step):
