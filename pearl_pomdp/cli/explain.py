@@ -12,8 +12,12 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import TYPE_CHECKING
 
 from pearl_pomdp.errors import BeliefError
+
+if TYPE_CHECKING:  # numpy itself is imported where it is used, not when `pearl --help` loads this module
+    import numpy as np
 
 COMMAND = "explain"
 HELP = "print the EXECUTE trace of a planned hierarchical policy at a belief"
