@@ -156,9 +156,10 @@ def run_pomdp_solve(exe: str, path: Path, horizon: Optional[int], timeout: float
     alpha = Path(str(prefix) + ".alpha")
     if proc.returncode != 0 or not alpha.is_file():
         return {"error": f"exit {proc.returncode}, no .alpha: {proc.stdout.strip()[-300:]}", "wall_s": wall}
-    epochs = re.findall(r"Epoch: (\d+)\.\.\.", proc.stdout)
-    total = re.search(r"Total execution time = .*\(= ([\d.]+) secs\.?\)", proc.stdout)
-    warn = re.findall(r"lp_solve reported (\d+) LPs", proc.stdout)
+    out = proc.stdout + proc.stderr  # its warnings go to stderr
+    epochs = re.findall(r"Epoch: (\d+)\.\.\.", out)
+    total = re.search(r"Total execution time = .*\(= ([\d.]+) secs\.?\)", out)
+    warn = re.findall(r"lp_solve reported (\d+) LPs", out)
     alphas, actions = read_alpha(alpha)
     return {"wall_s": wall,
             "cpu_s": (ru1.children_user - ru0.children_user) + (ru1.children_system - ru0.children_system),
