@@ -287,14 +287,17 @@ def _best_index(alphas: np.ndarray, idx: np.ndarray, b: np.ndarray, tol: float,
 
 _EYE: dict = {}
 _RANDOM_BELIEFS: dict = {}
+_RANDOM_BELIEFS_SIZE = 0  # floats held by _RANDOM_BELIEFS
 
 
 def _eye(S: int) -> np.ndarray:
-    """``np.eye(S)``, made once per size (read-only: witnesses are views of its rows)."""
+    """``np.eye(S)``, read-only (witnesses are views of its rows), made once per small size."""
     e = _EYE.get(S)
     if e is None:
-        e = _EYE[S] = np.eye(S)
+        e = np.eye(S)
         e.flags.writeable = False
+        if S <= 512:  # (a large identity is cheap to build next to that prune's work)
+            _EYE[S] = e
     return e
 
 
@@ -305,10 +308,15 @@ def _random_beliefs(seed: int, S: int, n: int) -> np.ndarray:
     key = (seed, S, n)
     P = _RANDOM_BELIEFS.get(key)
     if P is None:
-        if len(_RANDOM_BELIEFS) > 4096:
-            _RANDOM_BELIEFS.clear()
-        P = _RANDOM_BELIEFS[key] = np.random.default_rng(seed).dirichlet(np.ones(S), n)
-        P.flags.writeable = False
+        P = np.random.default_rng(seed).dirichlet(np.ones(S), n)
+        if P.size <= 65_536:  # only small sets are worth keeping (large S: the draw is not the cost)
+            global _RANDOM_BELIEFS_SIZE
+            if _RANDOM_BELIEFS_SIZE + P.size > 4_000_000:  # at most ~32 MB cached
+                _RANDOM_BELIEFS.clear()
+                _RANDOM_BELIEFS_SIZE = 0
+            P.flags.writeable = False
+            _RANDOM_BELIEFS[key] = P
+            _RANDOM_BELIEFS_SIZE += P.size
     return P
 
 
