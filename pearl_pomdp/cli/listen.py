@@ -17,8 +17,6 @@ from __future__ import annotations
 import argparse
 import sys
 
-import numpy as np
-
 COMMAND = "listen"
 HELP = "recognise a WAV file or the microphone with the domain's recogniser; print text, confidence, symbol"
 
@@ -38,7 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
-def _record(seconds: float) -> np.ndarray:
+def _record(seconds: float):
     from pearl_pomdp.asr.audio import AudioError
 
     try:
@@ -49,6 +47,8 @@ def _record(seconds: float) -> np.ndarray:
         data = sounddevice.rec(int(seconds * 16000), samplerate=16000, channels=1, dtype="int16", blocking=True)
     except Exception as err:  # PortAudioError: no input device
         raise AudioError(f"microphone ('-'): no usable input device: {err}") from None
+    import numpy as np
+
     return np.asarray(data[:, 0], dtype=np.int16)
 
 
@@ -74,6 +74,8 @@ def run(args: argparse.Namespace) -> int:
         if rate != 16000:
             notes.append(f"resampled from {rate} Hz")
     if args.snr is not None:
+        import numpy as np
+
         pcm = mix_at_snr(pcm, args.snr, np.random.default_rng(args.seed))
         notes.append(f"white noise at {args.snr:g} dB SNR")
     domain = load_domain(args.domain)
