@@ -19,14 +19,15 @@ from typing import Callable, Dict, List, Optional
 import numpy as np
 
 from pearl_pomdp.nodes import conversions as cv
-from pearl_pomdp.nodes.common import (EVENT_QOS, INPUT_QOS, LATCHED_QOS, NodeSetupError, Param, PearlNode,
+from pearl_pomdp.nodes.common import (EVENT_QOS, INPUT_QOS, LATCHED_QOS, NodeSetupError, Param,
                                       load_domain_and_model, resolve_path, run_node)
+from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
 from pearl_pomdp.tracking import SYMBOL_INPUTS, BeliefTracker, ObservationMapper, StepResult, StepSettings
 
 __all__ = ["BeliefTrackerNode", "ObservationMapper", "main", "SYMBOL_INPUTS"]
 
 
-class BeliefTrackerNode(PearlNode):
+class BeliefTrackerNode(ManagedPearlNode):
     """Tracks the belief over the domain's states from the robot's inputs.
 
     Parameters (all read-only, declared with descriptions and ranges):
@@ -80,16 +81,17 @@ class BeliefTrackerNode(PearlNode):
     PARAMETERS = (
         Param("domain", "config/pearl.domain.yaml", "Factored domain (.yaml) or flat model (.pomdp) file"),
         Param("step_timeout", 10.0, "Seconds without input after an action before the step is closed "
-                                    "with timeout_observation (0: wait forever)", range=(0.0, 3600.0)),
+                                    "with timeout_observation (0: wait forever; changeable at run time)",
+              range=(0.0, 3600.0), read_only=False),
         Param("timeout_observation", "unknown", "Observation symbol that closes a step on timeout"),
         Param("no_timeout_actions", [""],
               "Actions whose step only an input closes (drives end with a laser landmark); "
               "empty: the domain's category: Move actions; names the model does not have are ignored"),
         Param("max_pending", 8, "Observations that may wait for the next action (FIFO)", range=(0, 1000)),
-        Param("stale_after", 0.0, "Drop a waiting observation older than this many seconds (0: never)",
-              range=(0.0, 3600.0)),
-        Param("confidence_floor", 0.0, "Speech recognised with a lower confidence counts as unknown",
-              range=(0.0, 1.0)),
+        Param("stale_after", 0.0, "Drop a waiting observation older than this many seconds (0: never; "
+                                  "changeable at run time)", range=(0.0, 3600.0), read_only=False),
+        Param("confidence_floor", 0.0, "Speech recognised with a lower confidence counts as unknown "
+                                       "(changeable at run time)", range=(0.0, 1.0), read_only=False),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
         Param("speech_topic", "/pearl/speech", "Recognised speech text (std_msgs/String)"),
         Param("touchscreen_topic", "/pearl/touchscreen", "Touchscreen symbols (std_msgs/String)"),
@@ -98,14 +100,36 @@ class BeliefTrackerNode(PearlNode):
         Param("action_topic", "/pearl/action", "Primitive actions, which open steps (std_msgs/String)"),
         Param("belief_topic", "/pearl/belief", "Belief output (std_msgs/Float64MultiArray)"),
         Param("marginals_topic", "/pearl/belief_marginals", "Per-feature marginals output (JSON String)"),
+        Param("reset_service", "/pearl/reset", "std_srvs/Trigger service that returns the belief to b0"),
+        AUTOSTART,
     )
 
     def __init__(self, *, domain=None, model=None, keyword_filter=None, **kwargs):
         super().__init__(**kwargs)
         self.params = p = self.declare_table(self.PARAMETERS)
+        self._preloaded = (domain, model, keyword_filter)
+        self.core = None
+        self._reported_warnings = 0
+        self.actions_received = 0  # /pearl/action messages taken (the sim-clock driver waits on it)
+        self.inactive_inputs = 0   # inputs and actions that arrived while the node was not active (dropped)
+        # Inputs DDS dropped before this node took them (a reader queue of INPUT_QOS depth
+        # overflowing under a flood): gaps in each publisher's sequence numbers.
+        self.lost_inputs = 0
+        self._last_seq: Dict[str, int] = {}
+        self._last_diag = -1.0
+        self._deadline_timer = None
+        self._armed_for: Optional[float] = None
+        self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.start(p["autostart"])
+
+    # ----------------------------------------------------------- lifecycle
+    def configure_node(self) -> None:
+        """Load the domain, build the core tracker, create topics, timers and /pearl/reset."""
+        p = self.params
+        domain, model, keyword_filter = self._preloaded
         if model is None:
-            path = resolve_path(p["domain"], "domain")
-            domain, model = load_domain_and_model(path)
+            domain, model = load_domain_and_model(resolve_path(p["domain"], "domain"))
         self.domain, self.model = domain, model
         try:
             given = [name for name in p["no_timeout_actions"] if name]
@@ -115,39 +139,98 @@ class BeliefTrackerNode(PearlNode):
             raise NodeSetupError(f"parameter {str(err)}") from None
         self.protocol = self.core.protocol
         self.mapper = self.core.mapper
-        self._reported_warnings = 0
-        self.actions_received = 0  # /pearl/action messages taken (the sim-clock driver waits on it)
-        # Inputs DDS dropped before this node took them (a reader queue of INPUT_QOS depth
-        # overflowing under a flood): gaps in each publisher's sequence numbers.
-        self.lost_inputs = 0
-        self._last_seq: Dict[str, int] = {}
-        self._last_diag = -1.0
 
-        self.belief_pub = self.create_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
-        self.marginals_pub = self.create_publisher(cv.TextMsg, p["marginals_topic"], LATCHED_QOS)
-        self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
-        self.create_subscription(cv.TextMsg, p["speech_topic"], self._counted("speech", self._on_speech), INPUT_QOS)
+        self.belief_pub = self.lifecycle_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
+        self.marginals_pub = self.lifecycle_publisher(cv.TextMsg, p["marginals_topic"], LATCHED_QOS)
+        self.managed_subscription(cv.TextMsg, p["speech_topic"], self._counted("speech", self._on_speech), INPUT_QOS)
         for key in SYMBOL_INPUTS:
-            self.create_subscription(cv.TextMsg, p[f"{key}_topic"], self._counted(key, self._symbol_callback(key)),
-                                     INPUT_QOS)
-        self.create_subscription(cv.TextMsg, p["action_topic"], self._on_action, LATCHED_QOS)
+            self.managed_subscription(cv.TextMsg, p[f"{key}_topic"], self._counted(key, self._symbol_callback(key)),
+                                      INPUT_QOS)
+        self.managed_subscription(cv.TextMsg, p["action_topic"], self._on_action, LATCHED_QOS)
         # One-shot timer for the open step's deadline (node clock, so sim time in replay and demo):
         # armed when a step opens, cancelled when it closes, so a step times out exactly
         # step_timeout after its action, as in the core loop the simulator runs.
         self._deadline_timer = None
-        self._armed_for: Optional[float] = None
+        self._armed_for = None
         if p["step_timeout"] > 0:
-            self._deadline_timer = self.create_timer(p["step_timeout"], self._on_tick)
+            self._deadline_timer = self.managed_timer(p["step_timeout"], self._on_tick)
             self._deadline_timer.cancel()
-        self.create_timer(p["diagnostics_period"], self.publish_diagnostics)
+        self.managed_timer(p["diagnostics_period"], self.publish_diagnostics)
         # Warnings held back by the 0.1 s limit go out within 0.1 s of wall time (even when
         # sim time stands still).
         from rclpy.clock import Clock, ClockType
 
-        self.create_timer(0.1, self._flush_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self._publish_belief(None)
+        self.managed_timer(0.1, self._flush_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        from std_srvs.srv import Trigger
+
+        self._reset_srv = self.create_service(Trigger, p["reset_service"], self._on_reset)
         self.get_logger().info(f"tracking {model.name}: {model.num_states} states, {model.num_observations} "
                                f"observations; step_timeout {p['step_timeout']} s → {p['timeout_observation']!r}")
+
+    def activate_node(self) -> None:
+        """Publish the current belief (b0 at first): the policy answers it and the loop runs."""
+        self._publish_belief(None)
+
+    def deactivate_node(self) -> None:
+        """Stop tracking; keep the belief. An open step is abandoned (no update): the robot
+        stops doing what it was doing, and on activation the policy decides afresh."""
+        if self.core is not None:
+            self.core.protocol.current_action = None
+            self.core.protocol.opened_at = None
+            self._arm_deadline()
+
+    def cleanup_node(self) -> None:
+        if getattr(self, "_reset_srv", None) is not None:
+            self.destroy_service(self._reset_srv)
+            self._reset_srv = None
+        self.core = None
+
+    def _on_reset(self, request, response):
+        """``/pearl/reset`` (std_srvs/Trigger): back to b0 with nothing open or queued; counters zeroed."""
+        if self.core is None:
+            response.success, response.message = False, "not configured: nothing to reset"
+            return response
+        self.core.reset()
+        self._arm_deadline()
+        self._publish_belief(None)
+        response.success = True
+        response.message = f"belief reset to b0 of {self.model.name}" + ("" if self.active else " (inactive)")
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_set_parameters(self, params):
+        """Run-time changes of step_timeout, stale_after and confidence_floor, validated; others are read-only."""
+        from rcl_interfaces.msg import SetParametersResult
+
+        for param in params:
+            if param.name == "step_timeout" and self.core is not None and self._deadline_timer is None \
+                    and param.value > 0:
+                return SetParametersResult(successful=False, reason="step_timeout: this node was configured "
+                                           "without a timeout (0); set it before configure")
+            if param.name == "confidence_floor" and not 0.0 <= param.value <= 1.0:
+                return SetParametersResult(successful=False, reason=f"confidence_floor must be in [0, 1], "
+                                                                    f"got {param.value}")
+        for param in params:
+            if self.core is None:
+                continue
+            if param.name == "step_timeout":
+                self.core.protocol.step_timeout = float(param.value)
+                if self._deadline_timer is not None:
+                    # rcl timers keep their period: a new one-shot timer for the new timeout.
+                    old = self._deadline_timer
+                    self._managed_timers.remove(old)
+                    self.destroy_timer(old)
+                    self._deadline_timer = None
+                    if param.value > 0:
+                        self._deadline_timer = self.managed_timer(float(param.value), self._on_tick)
+                        self._deadline_timer.cancel()
+                    self._armed_for = None
+                    self._arm_deadline()
+            elif param.name == "stale_after":
+                self.core.protocol.stale_after = float(param.value)
+            elif param.name == "confidence_floor":
+                self.core.mapper.confidence_floor = float(param.value)
+        return SetParametersResult(successful=True)
 
     # ----------------------------------------------------------- callbacks
     def _counted(self, key: str, callback: Callable) -> Callable:
@@ -168,11 +251,22 @@ class BeliefTrackerNode(PearlNode):
 
         return on_input
 
+    def _inactive(self) -> bool:
+        """Inputs while not active are dropped (counted): a deactivated tracker does not track."""
+        if self.active and self.core is not None:
+            return False
+        self.inactive_inputs += 1
+        return True
+
     def _on_action(self, msg) -> None:
+        if self._inactive():
+            return
         self.actions_received += 1
         self._handle(self.core.on_action(cv.msg_to_action(msg), self.now_s()))
 
     def _on_speech(self, msg) -> None:
+        if self._inactive():
+            return
         before = self.mapper.unknown_speech
         outcome = self.core.on_input("speech", cv.msg_to_text(msg), self.now_s())
         if self.mapper.unknown_speech > before:
@@ -188,6 +282,8 @@ class BeliefTrackerNode(PearlNode):
 
     def _symbol_callback(self, key: str) -> Callable:
         def callback(msg) -> None:
+            if self._inactive():
+                return
             outcome = self.core.on_input(key, cv.msg_to_text(msg), self.now_s())
             if outcome.symbol is None:
                 valid = ", ".join(sorted(self.mapper.allowed[key]))
@@ -201,7 +297,8 @@ class BeliefTrackerNode(PearlNode):
         return callback
 
     def _on_tick(self) -> None:
-        self._handle(self.core.on_tick(self.now_s()))
+        if self.active and self.core is not None:
+            self._handle(self.core.on_tick(self.now_s()))
 
     # -------------------------------------------------------------- output
     def _handle(self, result: Optional[StepResult]) -> None:
@@ -255,15 +352,18 @@ class BeliefTrackerNode(PearlNode):
 
     def counters(self) -> Dict[str, int]:
         """Every counter reported on /diagnostics."""
-        out = self.core.counters()
+        out = self.core.counters() if self.core is not None else {}
         out["lost_inputs"] = self.lost_inputs
+        out["inactive_inputs"] = self.inactive_inputs
         return out
 
     def _warning_total(self) -> int:
-        return self.core.warnings() + self.lost_inputs
+        return (self.core.warnings() if self.core is not None else 0) + self.lost_inputs
 
     def publish_diagnostics(self) -> None:
         """Publish the counters on /diagnostics (WARN once any input was dropped/invalid/recovered)."""
+        if self.core is None:
+            return  # not configured: nothing to report
         warnings = self._warning_total()
         self._reported_warnings = warnings
         self._last_diag = time.monotonic()

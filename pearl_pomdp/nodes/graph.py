@@ -98,11 +98,12 @@ class PearlGraph:
                 return {**from_file.get(name, {}), **shared, **dict(overrides.get(name, {}))}
 
             common = {"context": context, "start_parameter_services": parameter_services}
+            managed = {**common, "lifecycle_services": parameter_services}
             self.tracker = BeliefTrackerNode(parameter_overrides=params("belief_tracker"), domain=domain, model=model,
-                                             **common)
+                                             **managed)
             self.nodes.append(self.tracker)
             self.policy = HierarchicalPolicyNode(parameter_overrides=params("hierarchical_policy"), domain=domain,
-                                                 model=model, decider=decider, **common)
+                                                 model=model, decider=decider, **managed)
             self.nodes.append(self.policy)
             self.executor_node = None
             if executor:

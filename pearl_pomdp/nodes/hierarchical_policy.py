@@ -15,8 +15,9 @@ import numpy as np
 
 from pearl_pomdp.errors import BeliefError
 from pearl_pomdp.nodes import conversions as cv
-from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Param, PearlNode,
+from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Param,
                                       load_domain_and_model, resolve_path, run_node)
+from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
 
 __all__ = ["HierarchicalPolicyNode", "load_decider", "main"]
 
@@ -59,7 +60,7 @@ def load_decider(model, domain, policy: str, hierarchy: str, logger=None):
     return decider
 
 
-class HierarchicalPolicyNode(PearlNode):
+class HierarchicalPolicyNode(ManagedPearlNode):
     """Answers each belief with a primitive action (EXECUTE of the hierarchical policy).
 
     Parameters (read-only):
@@ -101,28 +102,44 @@ class HierarchicalPolicyNode(PearlNode):
         Param("belief_topic", "/pearl/belief", "Belief input (std_msgs/Float64MultiArray)"),
         Param("action_topic", "/pearl/action", "Primitive action output (std_msgs/String)"),
         Param("decision_topic", "/pearl/decision", "EXECUTE trace output (JSON std_msgs/String)"),
+        AUTOSTART,
     )
 
     def __init__(self, *, domain=None, model=None, decider=None, **kwargs):
         super().__init__(**kwargs)
         self.params = p = self.declare_table(self.PARAMETERS)
+        self._preloaded = (domain, model, decider)
+        self.decider = None
+        self.decisions = 0
+        self.rejected = 0
+        self.inactive_beliefs = 0  # beliefs that arrived while not active (not answered)
+        self.latencies: Deque[float] = collections.deque(maxlen=1000)
+        self.last_decision = None
+        self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
+        self.start(p["autostart"])
+
+    def configure_node(self) -> None:
+        """Load the domain and the policy (or PLAN it); create the topics."""
+        p = self.params
+        domain, model, decider = self._preloaded
         if model is None:
             domain, model = load_domain_and_model(resolve_path(p["domain"], "domain"))
         self.domain, self.model = domain, model
         self.decider = decider if decider is not None else load_decider(model, domain, p["policy"],
                                                                         p["hierarchy"], self.get_logger())
-        self.decisions = 0
-        self.rejected = 0
-        self.latencies: Deque[float] = collections.deque(maxlen=1000)
-        self.last_decision = None
-        self.action_pub = self.create_publisher(cv.TextMsg, p["action_topic"], LATCHED_QOS)
-        self.decision_pub = self.create_publisher(cv.TextMsg, p["decision_topic"], EVENT_QOS)
-        self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
-        self.create_subscription(cv.BeliefMsg, p["belief_topic"], self._on_belief, LATCHED_QOS)
-        self.create_timer(p["diagnostics_period"], self.publish_diagnostics)
+        self.action_pub = self.lifecycle_publisher(cv.TextMsg, p["action_topic"], LATCHED_QOS)
+        self.decision_pub = self.lifecycle_publisher(cv.TextMsg, p["decision_topic"], EVENT_QOS)
+        self.managed_subscription(cv.BeliefMsg, p["belief_topic"], self._on_belief, LATCHED_QOS)
+        self.managed_timer(p["diagnostics_period"], self.publish_diagnostics)
         self.get_logger().info(f"policy ready for {model.name} ({type(self.decider).__name__})")
 
+    def cleanup_node(self) -> None:
+        self.decider = None
+
     def _on_belief(self, msg) -> None:
+        if not self.active or self.decider is None:
+            self.inactive_beliefs += 1   # a deactivated policy does not act
+            return
         start = time.perf_counter()
         try:
             belief = cv.msg_to_belief(msg, self.model.num_states)
@@ -147,6 +164,7 @@ class HierarchicalPolicyNode(PearlNode):
                   "latency_p50_ms": f"{np.percentile(lat, 50) * 1e3:.3f}",
                   "latency_p99_ms": f"{np.percentile(lat, 99) * 1e3:.3f}",
                   "latency_max_ms": f"{lat.max() * 1e3:.3f}"}
+        values["inactive_beliefs"] = self.inactive_beliefs
         level = cv.DIAG_WARN if self.rejected else cv.DIAG_OK
         self.diag_pub.publish(cv.diagnostics_to_msg(f"pearl: {self.get_name()}", self.model.name, level,
                                                     f"{self.decisions} decisions", values, self.now_s()))

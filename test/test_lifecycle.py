@@ -1,0 +1,119 @@
+"""Managed nodes (issue 14): the tracker and the policy as separate processes with autostart:=false,
+driven over DDS through configure → activate → deactivate → activate → shutdown by
+lifecycle_msgs/ChangeState; no action while inactive; the belief survives deactivate;
+/pearl/reset (std_srvs/Trigger) returns the tracker to b0."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ros_helpers import (DISCOVERY_TIMEOUT, DOMAIN, Probe, Proc, allocate_domain_id, configure_test_process,
+                         ros_env, wait_for)
+
+pytestmark = [pytest.mark.ros]
+
+rclpy = pytest.importorskip("rclpy")
+
+from lifecycle_msgs.msg import Transition  # noqa: E402
+from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.nodes import conversions as cv  # noqa: E402
+from pearl_pomdp.nodes.common import INPUT_QOS, LATCHED_QOS  # noqa: E402
+
+BIN = Path(sys.executable).parent
+
+
+def call(node, executor, client, request, timeout=DISCOVERY_TIMEOUT):
+    assert wait_for(client.service_is_ready, timeout, executor), f"{client.srv_name} never came up"
+    future = client.call_async(request)
+    assert wait_for(future.done, timeout, executor), f"{client.srv_name} did not answer"
+    return future.result()
+
+
+def transition(node, executor, name, transition_id):
+    client = node.create_client(ChangeState, f"/{name}/change_state")
+    req = ChangeState.Request()
+    req.transition.id = transition_id
+    ok = call(node, executor, client, req).success
+    node.destroy_client(client)
+    return ok
+
+
+def state(node, executor, name):
+    client = node.create_client(GetState, f"/{name}/get_state")
+    label = call(node, executor, client, GetState.Request()).current_state.label
+    node.destroy_client(client)
+    return label
+
+
+def test_lifecycle_over_dds(tmp_path, pearl_policy):
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    configure_test_process(tmp_path)
+    domain_id = allocate_domain_id()
+    env = ros_env(domain_id, tmp_path)
+    model = load_domain(DOMAIN).compile()
+    tracker = Proc([str(BIN / "belief_tracker"), "--ros-args", "-p", f"domain:={DOMAIN}", "-p", "autostart:=false",
+                    "-p", "step_timeout:=0.0"], env, tmp_path, "tracker")
+    policy = Proc([str(BIN / "hierarchical_policy"), "--ros-args", "-p", f"domain:={DOMAIN}",
+                   "-p", f"policy:={pearl_policy}", "-p", "autostart:=false"], env, tmp_path, "policy")
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    executor = SingleThreadedExecutor(context=context)
+    node = rclpy.create_node("lifecycle_probe", context=context)
+    executor.add_node(node)
+    try:
+        probe = Probe(node)
+        actions = probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
+        beliefs = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
+        speech = probe.publisher("/pearl/speech", cv.TextMsg, INPUT_QOS)
+        for name in ("belief_tracker", "hierarchical_policy"):
+            assert state(node, executor, name) == "unconfigured"
+            assert transition(node, executor, name, Transition.TRANSITION_CONFIGURE)
+            assert state(node, executor, name) == "inactive"
+        # Configured but inactive: nothing is published, nothing acts.
+        assert not wait_for(lambda: actions or beliefs, 1.0, executor)
+        for name in ("hierarchical_policy", "belief_tracker"):
+            assert transition(node, executor, name, Transition.TRANSITION_ACTIVATE)
+        assert wait_for(lambda: actions and beliefs, DISCOVERY_TIMEOUT, executor), "no first action after activate"
+        np.testing.assert_allclose(cv.msg_to_belief(beliefs[0]), model.b0)
+        assert wait_for(lambda: not probe.unmatched(), DISCOVERY_TIMEOUT, executor)
+        # One step: the answer moves the belief away from b0.
+        n = len(beliefs)
+        speech.publish(cv.TextMsg(data="what time is it"))
+        assert wait_for(lambda: len(beliefs) > n and len(actions) >= 2, DISCOVERY_TIMEOUT, executor)
+        stepped = cv.msg_to_belief(beliefs[-1])
+        assert not np.allclose(stepped, model.b0)
+        # Deactivated: inputs change nothing, no action goes out.
+        assert transition(node, executor, "hierarchical_policy", Transition.TRANSITION_DEACTIVATE)
+        assert transition(node, executor, "belief_tracker", Transition.TRANSITION_DEACTIVATE)
+        seen_actions, seen_beliefs = len(actions), len(beliefs)
+        speech.publish(cv.TextMsg(data="give me the weather forecast for tomorrow"))
+        assert not wait_for(lambda: len(actions) > seen_actions or len(beliefs) > seen_beliefs, 1.5, executor)
+        # Active again: the kept belief (not b0) is published and answered.
+        assert transition(node, executor, "hierarchical_policy", Transition.TRANSITION_ACTIVATE)
+        assert transition(node, executor, "belief_tracker", Transition.TRANSITION_ACTIVATE)
+        assert wait_for(lambda: len(beliefs) > seen_beliefs and len(actions) > seen_actions, DISCOVERY_TIMEOUT,
+                        executor)
+        np.testing.assert_allclose(cv.msg_to_belief(beliefs[-1]), stepped, atol=1e-12)
+        # /pearl/reset: back to b0.
+        reset = node.create_client(Trigger, "/pearl/reset")
+        answer = call(node, executor, reset, Trigger.Request())
+        assert answer.success and "b0" in answer.message
+        assert wait_for(lambda: np.allclose(cv.msg_to_belief(beliefs[-1]), model.b0), DISCOVERY_TIMEOUT, executor)
+        for name in ("belief_tracker", "hierarchical_policy"):
+            assert transition(node, executor, name, Transition.TRANSITION_ACTIVE_SHUTDOWN)
+            assert state(node, executor, name) == "finalized"
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        codes = [tracker.stop(5.0), policy.stop(5.0)]
+    assert codes == [0, 0], tracker.stderr()[-2000:] + policy.stderr()[-2000:]
