@@ -3,10 +3,11 @@
 The first check a roboticist runs: does the recogniser hear the domain's keywords?
 
 Examples:
+  pearl listen --say "what time is it" --snr 10 --save-wav recording.wav   # espeak-ng → noise → recogniser
   pearl listen recording.wav                      # text, confidence and keyword symbol
   pearl listen recording.wav --json               # {"text", "confidence", "symbol", ...}
-  pearl listen - --seconds 4                      # 4 s from the default microphone
-  pearl listen --say "what time is it" --snr 10   # espeak-ng → white noise at 10 dB → recogniser
+
+With a microphone (the optional sounddevice package): `pearl listen - --seconds 4`.
 
 Any WAV rate or channel count is converted to 16 kHz mono (and said so). Audio longer
 than --max-seconds is an error, not minutes of decoding. `symbol` is the domain's
@@ -33,6 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=float, default=5.0, help="microphone recording length (default: 5)")
     parser.add_argument("--max-seconds", type=float, default=60.0, help="longest audio accepted (default: 60)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the added noise")
+    parser.add_argument("--save-wav", metavar="PATH", help="also write the audio that was decoded (16 kHz mono WAV)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -53,7 +55,7 @@ def _record(seconds: float):
 
 
 def run(args: argparse.Namespace) -> int:
-    from pearl_pomdp.asr.audio import AudioError, mix_at_snr, read_wav
+    from pearl_pomdp.asr.audio import AudioError, mix_at_snr, read_wav, write_wav
     from pearl_pomdp.asr.recognizer import Recognizer
     from pearl_pomdp.cli import print_json
     from pearl_pomdp.model.factored import load_domain
@@ -78,6 +80,9 @@ def run(args: argparse.Namespace) -> int:
 
         pcm = mix_at_snr(pcm, args.snr, np.random.default_rng(args.seed))
         notes.append(f"white noise at {args.snr:g} dB SNR")
+    if args.save_wav:
+        write_wav(args.save_wav, pcm)
+        notes.append(f"audio written to {args.save_wav}")
     domain = load_domain(args.domain)
     recognizer = Recognizer(None if args.default_lm else domain.keywords, max_seconds=args.max_seconds)
     rec = recognizer.recognise(pcm, where=source)
