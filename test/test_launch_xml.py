@@ -36,7 +36,7 @@ def test_pearl_launch_file_graph():
         ("value", "hierarchy", str(REPO / "config" / "pearl.hierarchy.yaml")),
         ("value", "policy", "/plans/pearl"), ("value", "use_sim_time", "false")]
     assert set(d.arguments) == {"params_file", "domain", "hierarchy", "policy", "step_timeout", "use_sim_time",
-                                "navigation"}
+                                "navigation", "speech", "audio_source", "audio_output"}
 
 
 def test_params_are_written_like_launch_ros(tmp_path):
@@ -147,5 +147,15 @@ def test_pearl_launch_print_shows_the_commands():
                          capture_output=True, text=True, timeout=60, cwd=REPO)
     assert bad.returncode == 2
     assert bad.stderr.strip().splitlines() == [
-        f"pearl launch: error: {LAUNCH}: unknown launch argument(s) polcy (declared: domain, hierarchy, "
-        f"navigation, params_file, policy, step_timeout, use_sim_time)"]
+        f"pearl launch: error: {LAUNCH}: unknown launch argument(s) polcy (declared: audio_output, audio_source, "
+        f"domain, hierarchy, navigation, params_file, policy, speech, step_timeout, use_sim_time)"]
+
+
+def test_speech_nodes_are_off_unless_asked():
+    """speech:=true adds the recogniser and the synthesiser (off by default: no audio device is assumed)."""
+    default = [n.executable for n in parse_launch_file(LAUNCH).nodes]
+    assert "speech_recognizer" not in default and "speech_synthesizer" not in default
+    on = parse_launch_file(LAUNCH, {"speech": "true", "audio_source": "microphone"})
+    rec = next(n for n in on.nodes if n.executable == "speech_recognizer")
+    assert "speech_synthesizer" in [n.executable for n in on.nodes]
+    assert ("value", "source", "microphone") in rec.parameters
