@@ -229,8 +229,11 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
     domain = load_domain(out_dir / "domain.yaml")
     world = World(scenario, seed=seed, domain=domain)
     if policy:
+        # A copy beside the bag, so the bag replays on its own (as a freshly planned one does).
         decider = load_hierarchical_policy(policy, domain)
-        policy_dir = Path(policy).resolve()
+        policy_dir = out_dir / "policy"
+        if Path(policy).resolve() != policy_dir.resolve():
+            shutil.copytree(policy, policy_dir, dirs_exist_ok=True)
     else:
         decider = plan(domain, load_hierarchy(hierarchy_path, domain))
         policy_dir = decider.save(out_dir / "policy")
@@ -271,7 +274,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
         writer = BagWriter(bag_dir, custom_data={
             "scenario": str(scenario_path), "seed": str(world.seed),
             "pearl.domain": os.path.relpath(out_dir / "domain.yaml", bag_dir),
-            "pearl.policy": os.path.relpath(policy_dir, bag_dir.resolve()) if not policy else str(policy_dir),
+            "pearl.policy": os.path.relpath(policy_dir, bag_dir.resolve()),
             "pearl.tracker_params": json.dumps(tracker_params)})
         recorder = Recorder(rec_node, writer, topics=RECORDED_TOPICS)
         graph.spin_until(lambda: len(recorder.subscriptions) >= 10, timeout_sec=5.0)

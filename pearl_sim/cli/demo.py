@@ -2,11 +2,14 @@
 
 The Pearl nodes and simulated hardware run in one process under simulated time;
 prints a transcript, writes a bag, the transcript and a belief plot into --out,
-and ends with a one-line outcome.
+and ends with a one-line outcome. The policy is the one `pearl plan` saved in
+out/policies/NAME when it fits the domain (else the demo plans; --replan forces it); a copy
+goes beside the bag so that `pearl replay` needs nothing else.
 
 Examples:
   pearl demo --scenario config/scenarios/table4_dialog.yaml --seed 3
-  pearl plan config/pearl.domain.yaml && pearl demo --policy out/policies/pearl --json
+  pearl plan config/pearl.domain.yaml && pearl demo --json      # uses out/policies/pearl
+  pearl demo --scenario config/scenarios/figure4_recogniser.yaml # real speech: espeak-ng, noise, pocketsphinx
 """
 from __future__ import annotations
 
@@ -32,11 +35,39 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--domain", default=_share("config/pearl.domain.yaml"), help="factored domain")
     parser.add_argument("--hierarchy", default=_share("config/pearl.hierarchy.yaml"), help="action hierarchy")
     parser.add_argument("--policy", default="",
-                        help="planned policy folder (`pearl plan` saves out/policies/pearl); default: plan now")
+                        help="planned policy folder (default: the one `pearl plan` saved in out/policies/NAME "
+                             "if it fits the domain, else plan now)")
+    parser.add_argument("--replan", action="store_true",
+                        help="plan the policy now even when `pearl plan` saved one in out/policies/NAME")
     parser.add_argument("--out", default=None, help="output folder (default: out/demo-<scenario>-<time>)")
     parser.add_argument("--seed", type=int, default=None, help="override the scenario's seed")
     parser.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID of the in-process graph")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the transcript")
+
+
+def _saved_policy(args: argparse.Namespace) -> str:
+    """The policy `pearl plan DOMAIN` saved (out/policies/NAME), when it fits the domain and
+    --replan was not given; else '' (the demo plans)."""
+    if getattr(args, "replan", False):
+        return ""
+    from pearl_pomdp.cli.plan import DEFAULT_POLICY_ROOT
+    from pearl_pomdp.errors import PolicyError
+    from pearl_pomdp.hierarchy import load_hierarchical_policy
+    from pearl_pomdp.model.factored import load_domain
+
+    domain = load_domain(args.domain)
+    candidate = DEFAULT_POLICY_ROOT / domain.name
+    if not (candidate / "hierarchy.json").is_file():
+        return ""
+    try:
+        load_hierarchical_policy(candidate, domain)
+    except PolicyError as err:
+        if not args.json:
+            print(f"pearl demo: {candidate} does not fit {args.domain} ({err}); planning instead", flush=True)
+        return ""
+    if not args.json:
+        print(f"pearl demo: using the policy `pearl plan` saved in {candidate} (--replan to plan anew)", flush=True)
+    return str(candidate)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,13 +85,15 @@ def run(args: argparse.Namespace) -> int:
         require_dir(args.policy, "policy directory (--policy, from `pearl plan`)")
     else:
         require_file(args.hierarchy, "hierarchy file (--hierarchy)")
+        args.policy = _saved_policy(args) or ""
     load_scenarios(args.scenario)  # parse errors name the file and field
     out = Path(args.out) if args.out else Path("out") / f"demo-{Path(args.scenario).stem}-{time.strftime('%Y%m%d-%H%M%S')}"
     if (out / "bag").is_dir() and any((out / "bag").iterdir()):
         raise PearlError(f"{out / 'bag'}: already holds a bag; choose another --out folder")
     echo = None if args.json else (lambda text: print(text, flush=True))
     if not args.json:
-        print(f"pearl demo: scenario {args.scenario}; planning the policy and starting the graph…", flush=True)
+        what = "starting the graph" if args.policy else "planning the policy and starting the graph"
+        print(f"pearl demo: scenario {args.scenario}; {what}…", flush=True)
     result = run_demo(Path(args.scenario), out, domain_path=Path(args.domain), hierarchy_path=Path(args.hierarchy),
                       policy=args.policy, seed=args.seed, domain_id=args.domain_id, echo=echo)
     if args.json:
