@@ -48,8 +48,9 @@ setup(
             "mcap>=1.1",
             "mcap-ros2-support>=0.5",
             "matplotlib>=3.6",
+            "py_trees>=2.2",   # the behaviour-tree baseline (pearl_sim/behaviour_tree.py, bt_node)
         ],
-        "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6"],
+        "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6", "py_trees>=2.2"],
     },
     zip_safe=True,
     maintainer="Pearl POMDP developers",
