@@ -50,6 +50,12 @@ class Resident:
         touchscreen: fraction of her answers given on the touchscreen (the rest by voice).
         lose_distance: metres behind the robot at which she loses it and gives up following.
         word_error_rate: her speech's error rate; overrides ``speech.word_error_rate`` when set.
+        hearing: probability she hears a sentence the robot says to her (else it is as if
+            she were not listening: a reminder is not delivered, a question not answered).
+        responsiveness: probability she answers a question or prompt she heard.
+        forgets: chance per robot action that she forgets an unanswered question (memory).
+        changes_mind: chance per robot action that a wish to be walked over, not yet
+            started, is given up.
     """
 
     name: str = "resident"
@@ -61,6 +67,10 @@ class Resident:
     touchscreen: float = 0.2
     lose_distance: float = 15.0
     word_error_rate: Optional[float] = None
+    hearing: float = 1.0
+    responsiveness: float = 1.0
+    forgets: float = 0.0
+    changes_mind: float = 0.0
 
 
 @dataclass
@@ -271,7 +281,8 @@ def _build(data: dict, source: str, prefix: str) -> Scenario:
     scenario.word_error_rate = speech.number("word_error_rate", 0.2, 0.0, 1.0)
     res = _Fields(data.get("resident", {}), source, f"{prefix}resident.",
                   ("name", "walking_speed", "rest_probability", "rest_seconds", "willingness", "answers_door",
-                   "touchscreen", "lose_distance", "word_error_rate"))
+                   "touchscreen", "lose_distance", "word_error_rate", "hearing", "responsiveness", "forgets",
+                   "changes_mind"))
     scenario.resident = Resident(
         name=res.text("name", "resident"),
         walking_speed=res.number("walking_speed", 0.5, 0.05, 1.0, "m/s",
@@ -284,6 +295,10 @@ def _build(data: dict, source: str, prefix: str) -> Scenario:
         lose_distance=res.number("lose_distance", 15.0, 1.0, 100.0, "m"),
         word_error_rate=(res.number("word_error_rate", 0.0, 0.0, 1.0)
                          if data.get("resident", {}).get("word_error_rate") is not None else None),
+        hearing=res.number("hearing", 1.0, 0.0, 1.0),
+        responsiveness=res.number("responsiveness", 1.0, 0.0, 1.0),
+        forgets=res.number("forgets", 0.0, 0.0, 1.0, "per action"),
+        changes_mind=res.number("changes_mind", 0.0, 0.0, 1.0, "per action"),
     )
     appts = data.get("appointments", [])
     if not isinstance(appts, list):
