@@ -158,15 +158,25 @@ class Act(_PearlBehaviour):
         self.action = action
         self.judge = judge
         self.waiting = False
+        self.judged = False
+        self.verdict: Optional[Status] = None
 
     def initialise(self) -> None:
-        self.waiting = False
+        self.waiting = self.judged = False
         if self.name != "Idle":
             self.bb.quiet = 0
 
+    def step_closed(self) -> None:
+        """The step this leaf opened closed: judge it now, so its effect on the blackboard
+        (reminder delivered, contact made) is recorded even if a higher-priority branch
+        pre-empts this leaf on the next tick."""
+        if self.waiting and not self.judged:
+            self.verdict, self.judged = self.judge(self.bb), True
+
     def update(self) -> Status:
         if self.waiting:
-            verdict = self.judge(self.bb)
+            verdict = self.verdict if self.judged else self.judge(self.bb)
+            self.judged = False
             if verdict is not None:
                 self.waiting = False
                 return verdict
@@ -367,6 +377,7 @@ class PearlBehaviourTree:
     def reset(self) -> None:
         """A fresh episode: every node INVALID, the blackboard at the start of the day."""
         self.root.stop(Status.INVALID)
+        self._emitter: Optional[Act] = None
         bb = self.blackboard
         bb.heard, bb.last_action, bb.action = TIMEOUT, None, None
         bb.location, bb.contact, bb.guiding = "home", False, False
@@ -396,6 +407,9 @@ class PearlBehaviourTree:
         elif observation == "go" and bb.contact and bb.location == "room" and not bb.guiding \
                 and not bb.walk_requested:
             bb.walk_offer = True                               # spoken 'go' heard once: confirm it
+        if self._emitter is not None:
+            self._emitter.step_closed()
+            self._emitter = None
 
     def execute(self, belief=None) -> Decision:
         """Tick the tree; the action the tree chose (the belief is not used)."""
@@ -407,6 +421,7 @@ class PearlBehaviourTree:
             ticks += 1
         action = bb.action if bb.action is not None else "DoNothing"
         tip = self.root.tip()
+        self._emitter = tip if isinstance(tip, Act) and tip.waiting else None
         where = tip.name if tip is not None else "Pearl"
         return Decision(self._index[action], action, [TraceStep(self.name, where, math.nan),
                                                       TraceStep(where, action, math.nan)])

@@ -45,17 +45,31 @@ def test_contact_remind_confirm_guide_inform_tick_by_tick(bt):
     assert bt.snapshot()["contact"] is True
     # A plain 'yes' to the reminder acknowledges it; the walk is offered (confirmed) next.
     assert step(bt, "t_yes") == "ConfirmGuideToPhysio"
-    assert bt.snapshot()["pending"] == [] and bt.snapshot()["walk_offer"] is True
-    assert step(bt, "atPhysio") == "GuideToPhysio"             # the confirmation's yes was judged this tick
+    # Judged when its step closed: the answer is on the blackboard before the next tick.
+    snap = bt.snapshot()
+    assert snap["pending"] == [] and snap["walk_requested"] is True and snap["walk_offer"] is False
+    assert step(bt, "atPhysio") == "GuideToPhysio"
     assert bt.snapshot()["contact"] is True                    # she followed the robot
     assert step(bt, "weather") == "TerminateGuidance"
-    assert bt.snapshot()["guiding"] is True and bt.snapshot()["question"] == "weather"
+    assert bt.snapshot()["guiding"] is False and bt.snapshot()["question"] == "weather"
     assert step(bt, "unknown") == "TellWeather"                # Inform pre-empts everything below
-    quiet = [step(bt, "unknown") for _ in range(4)]
-    assert quiet == ["DoNothing"] * 4 and bt.snapshot()["question"] is None
-    assert bt.snapshot()["quiet"] >= bt_module.QUIET_TICKS_BEFORE_HOME
+    quiet = [step(bt, "unknown") for _ in range(bt_module.QUIET_TICKS_BEFORE_HOME)]
+    assert quiet == ["DoNothing"] * bt_module.QUIET_TICKS_BEFORE_HOME and bt.snapshot()["question"] is None
+    assert bt.snapshot()["quiet"] == bt_module.QUIET_TICKS_BEFORE_HOME
     assert step(bt, "atHome") == "GoHome"
     assert step(bt) == "DoNothing" and bt.snapshot()["location"] == "home"
+
+
+def test_preempted_reminder_still_counts_as_delivered(bt):
+    """A t_go answer to the reminder makes Guide pre-empt the Remind leaf on the next tick;
+    the delivery is recorded when the step closes, so the robot does not remind again."""
+    bt.blackboard.location, bt.blackboard.contact = "room", True
+    bt.observe("DoNothing", "g_physio")
+    assert step(bt, "t_go") == "RemindPhysioAppt"
+    assert bt.snapshot()["pending"] == []
+    assert step(bt, "atPhysio") == "GuideToPhysio"
+    assert step(bt, "yes") == "TerminateGuidance"
+    assert step(bt, "unknown") == "DoNothing"
 
 
 def test_unanswered_bell_backs_off_then_rings_again(bt):
