@@ -59,7 +59,9 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": ["pearl = pearl_pomdp.cli:main"]
-        + [f"{name} = {target}" for name, target in NODES.items()],
+        + [f"{name} = {target}" for name, target in NODES.items()]
+        # The behaviour-tree baseline, in place of hierarchical_policy (the core never imports pearl_sim).
+        + ["pearl_bt = pearl_sim.bt_node:main"],
         # Subcommands other packages add to `pearl` (the core never imports the simulator).
         "pearl.commands": ["demo = pearl_sim.cli.demo", "experiment = pearl_sim.cli.experiment"],
     },
