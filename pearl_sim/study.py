@@ -254,6 +254,11 @@ def plot_study(table: Dict[str, Dict[str, dict]], diffs: Dict[str, Dict[str, dic
             axes[2].plot(x, [m["mean"] for m in d], marker="o", label=f"{policy} − {baseline}", color=line.get_color())
             axes[2].fill_between(x, [m["low"] for m in d], [m["high"] for m in d], alpha=0.15, color=line.get_color())
     axes[2].axhline(0.0, color="black", linewidth=0.8)
+    # Symmetric log above 0.1: a policy with ~3 wrong actions per episode must not flatten the
+    # others' 0–0.2 onto the axis (linear below 0.1, so 0 and differences of either sign show).
+    for ax in axes[1:]:
+        ax.set_yscale("symlog", linthresh=0.1)
+        ax.grid(True, which="both", alpha=0.3)
     for ax, title, ylabel in ((axes[0], "Guidance success (Wilson 95 % CI)", "success rate"),
                               (axes[1], "Wrong actions (95 % CI)", "wrong actions per episode"),
                               (axes[2], f"Paired difference to {baseline} (95 % CI)", "Δ wrong actions per episode")):
