@@ -24,6 +24,8 @@ NODES = {
     "belief_tracker": "pearl_pomdp.nodes.belief_tracker:main",
     "hierarchical_policy": "pearl_pomdp.nodes.hierarchical_policy:main",
     "action_executor": "pearl_pomdp.nodes.action_executor:main",
+    "landmark_detector": "pearl_pomdp.nodes.landmark_detector:main",
+    "guide_pace": "pearl_pomdp.nodes.guide_pace:main",
 }
 
 setup(
@@ -37,6 +39,7 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.xml")),
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml")),
         (f"share/{PACKAGE}/config/scenarios", glob("config/scenarios/*.yaml")),
+        (f"share/{PACKAGE}/config/foxglove", glob("config/foxglove/*.json")),
     ],
     python_requires=">=3.10",
     install_requires=["numpy>=1.24", "scipy>=1.11", "PyYAML>=6", "tqdm>=4.60"],
@@ -48,9 +51,11 @@ setup(
             "mcap>=1.1",
             "mcap-ros2-support>=0.5",
             "matplotlib>=3.6",
+            "foxglove-sdk>=0.30",  # pearl_pomdp/live_view.py: the Foxglove WebSocket server, schemas included
             "py_trees>=2.2",   # the behaviour-tree baseline (pearl_sim/behaviour_tree.py, bt_node)
         ],
-        "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6", "py_trees>=2.2"],
+        "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6", "py_trees>=2.2",
+                 "websockets>=12"],  # a real WebSocket client for test/test_live_view.py
     },
     zip_safe=True,
     maintainer="Pearl POMDP developers",

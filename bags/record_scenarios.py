@@ -54,7 +54,7 @@ from ros_helpers import Proc, ros_env  # noqa: E402
 TRACKER_PARAMS = {"step_timeout": 10.0, "timeout_observation": "unknown", "max_pending": 8, "stale_after": 30.0}
 RECORD_TOPICS = ["/clock", "/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder",
                  "/pearl/action", "/pearl/decision", "/pearl/belief_marginals", "/pearl/say", "/pearl/display",
-                 "/pearl/nav_goal"]
+                 "/goal_pose"]
 INPUTS = ("speech", "touchscreen", "laser", "reminder")
 SILENCE = ("silence", "")
 Input = Tuple[str, str]
@@ -200,7 +200,7 @@ def record(name: str, spec: Dict, domain_id: int, log_dir: Path) -> List[str]:
 
         # Ready = the recorder subscribed to every topic and the tracker listens to every input.
         wanted = [f"subscribed {t} " for t in RECORD_TOPICS if t not in ("/pearl/say", "/pearl/display",
-                                                                         "/pearl/nav_goal")]
+                                                                         "/goal_pose")]
         wait_until(lambda: all(w in recorder.stderr() for w in wanted), 60, spin, "the recorder's subscriptions")
         wait_until(lambda: all(p.get_subscription_count() >= 2 for p in pubs.values()), 30, spin,
                    "the tracker and recorder to match the inputs")

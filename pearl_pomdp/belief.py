@@ -108,13 +108,17 @@ class BeliefFilter:
     Args:
         model: the POMDP.
         floor: weight ``ε`` of the uniform floor in the zero-likelihood recovery.
+        log_recoveries: log each recovery (first few, then every 1000th) on the
+            ``pearl_pomdp.belief`` logger; the step loop turns this off because it reports
+            the recovery itself (one message per event, with the node's name).
 
     Attributes:
         zero_likelihood_count: how many updates needed the recovery (see the module doc).
         updates: how many updates were done.
     """
 
-    def __init__(self, model: Pomdp, floor: float = 1e-6):
+    def __init__(self, model: Pomdp, floor: float = 1e-6, log_recoveries: bool = True):
+        self.log_recoveries = bool(log_recoveries)
         if not 0.0 < floor < 1.0:
             raise ValueError(f"floor must be in (0, 1), got {floor}")
         self.model = model
@@ -269,7 +273,7 @@ class BeliefFilter:
         self.zero_likelihood_count += 1
         n = self.zero_likelihood_count
         # Every recovery is counted; the log shows the first LOG_FIRST, then every 1000th.
-        loud = n <= LOG_FIRST or n % 1000 == 0
+        loud = self.log_recoveries and (n <= LOG_FIRST or n % 1000 == 0)
         eps = self.floor
         floored = (1.0 - eps) * predicted + eps / self.num_states
         floored /= floored.sum()

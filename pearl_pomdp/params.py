@@ -1,20 +1,25 @@
 """The node parameters file (``config/pearl_nodes.yaml``), read without ROS.
 
 One source per default: the robot (``--params-file`` in the launch file), ``PearlGraph``
-(demo, replay, tests) and the fast experiment path all take the node parameters from this
-file, so the demo and the robot run with the same step rules.
+(demo, replay, tests), the nodes whose defaults are tables (:mod:`pearl_pomdp.nodes.defaults`)
+and the fast experiment path all take the node parameters from this file, so the demo, the
+study and the robot follow the same rules.
 
-The file is in the ROS 2 params-file format: ``node_name: {ros__parameters: {...}}``, with
-``/**`` for parameters every node shares.
+The file is in the ROS 2 params-file format (Nav2's ``nav2_params.yaml`` convention):
+``node_name: {ros__parameters: {...}}``, with ``/**`` for parameters every node shares.
+:func:`node_parameters` returns what ``--params-file`` would give one node: ``/**`` first,
+then ``/**/node_name``, then ``node_name`` (later wins, as in rcl), with nested mappings
+flattened to dotted names (``actions: {TellTime: {say: …}}`` → ``actions.TellTime.say``).
+It is read with the one YAML loader (:mod:`pearl_pomdp.yaml_lines`: errors name the line).
 """
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any, Dict, Union
 
-from pearl_pomdp.errors import PearlError
+from pearl_pomdp.errors import PearlError, SpecError
 
-__all__ = ["default_params_file", "load_params_file", "node_params", "step_settings"]
+__all__ = ["default_params_file", "flatten", "node_parameters", "node_params", "step_settings"]
 
 PARAMS_NAME = "config/pearl_nodes.yaml"
 
@@ -30,30 +35,55 @@ def default_params_file() -> Path:
     return share / PARAMS_NAME
 
 
-def load_params_file(path: Union[str, Path, None] = None) -> Dict[str, Dict[str, Any]]:
-    """``{node name or '/**': {parameter: value}}`` of a ROS 2 params file.
+def flatten(tree: Any, prefix: str = "") -> Dict[str, Any]:
+    """``{"a": {"b": 1}}`` → ``{"a.b": 1}``; lists and scalars are leaves, empty mappings set nothing."""
+    if not isinstance(tree, dict):
+        return {prefix: tree}
+    out: Dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}.{key}" if prefix else str(key)
+        if isinstance(value, dict) and value:
+            out.update(flatten(value, name))
+        elif not isinstance(value, dict):
+            out[name] = value
+    return out
+
+
+def node_parameters(path: Union[str, Path, None], node_name: str) -> Dict[str, Any]:
+    """The flattened parameters that the params file ``path`` gives ``node_name`` (see the module doc).
+
+    ``path`` ``None``: the shipped file.
 
     Raises:
-        PearlError: unreadable file, or not in the params-file format (names the file and key).
+        SpecError: the file is missing, not YAML, or a section has no ``ros__parameters``
+            mapping (the message names the file, the section and the line).
     """
-    from pearl_pomdp.yaml_lines import load_yaml
+    from pearl_pomdp.yaml_lines import line_of, parse_yaml
 
     p = Path(path) if path is not None else default_params_file()
-    data = load_yaml(p)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as err:
+        raise SpecError(p, "", f"cannot read: {err.strerror or err}") from None
+    data = parse_yaml(text, str(p))
+    if data is None:
+        return {}
     if not isinstance(data, dict):
-        raise PearlError(f"{p}: a params file maps node names to {{ros__parameters: ...}}")
-    out: Dict[str, Dict[str, Any]] = {}
-    for node, section in data.items():
-        if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
-            raise PearlError(f"{p}: {node}: expected a 'ros__parameters' mapping")
-        out[str(node).lstrip("/") if str(node) != "/**" else "/**"] = dict(section["ros__parameters"])
+        raise SpecError(p, "", "expected a mapping of node names to {ros__parameters: ...}")
+    out: Dict[str, Any] = {}
+    for section in ("/**", f"/**/{node_name}", node_name, f"/{node_name}"):
+        if section not in data:
+            continue
+        body = data[section]
+        if not isinstance(body, dict) or not isinstance(body.get("ros__parameters", {}), dict):
+            raise SpecError(p, section, "expected {ros__parameters: {name: value, ...}}", line=line_of(data, section))
+        out.update(flatten(body.get("ros__parameters") or {}))
     return out
 
 
 def node_params(node: str, path: Union[str, Path, None] = None) -> Dict[str, Any]:
-    """The parameters ``node`` gets from the file: the shared ``/**`` section, then its own."""
-    table = load_params_file(path)
-    return {**table.get("/**", {}), **table.get(node, {})}
+    """:func:`node_parameters` with the shipped file as the default ``path``."""
+    return node_parameters(path, node)
 
 
 def step_settings(path: Union[str, Path, None] = None, **overrides: Any):

@@ -191,7 +191,8 @@ class StepProtocol:
         if unknown:
             raise ValueError(f"no_timeout_actions names {unknown[0]!r}, which is not an action of {model.name}")
         self.model = model
-        self.filter = belief_filter or BeliefFilter(model)
+        # The protocol reports each recovery as an Event (the node logs it once); the filter stays quiet.
+        self.filter = belief_filter or BeliefFilter(model, log_recoveries=False)
         self.step_timeout = float(step_timeout)
         self.no_timeout_actions: FrozenSet[str] = frozenset(no_timeout_actions)
         self.timeout_observation = timeout_observation
@@ -415,6 +416,17 @@ class BeliefTracker:
                                      stale_after=settings.stale_after)
         self.mapper = ObservationMapper(model, domain, keyword_filter, settings.confidence_floor)
         self._marginal_index: Optional[list] = None
+        #: The last closed steps, oldest first, when :meth:`keep_history` was called (replay --explain).
+        self.history: Optional[Deque[StepResult]] = None
+
+    def keep_history(self, maxlen: int = 10_000) -> None:
+        """Remember the last ``maxlen`` closed steps in :attr:`history` (off by default: a robot runs for days)."""
+        self.history = collections.deque(maxlen=maxlen)
+
+    def _closed(self, result: Optional[StepResult]) -> Optional[StepResult]:
+        if result is not None and self.history is not None:
+            self.history.append(result)
+        return result
 
     # The protocol's state, for callers that only hold the tracker.
     @property
@@ -435,11 +447,11 @@ class BeliefTracker:
 
     def on_action(self, name: str, now: float) -> Optional[StepResult]:
         """An action was taken at ``now``: opens a step (a queued input may close it at once)."""
-        return self.protocol.on_action(name, now)
+        return self._closed(self.protocol.on_action(name, now))
 
     def on_tick(self, now: float) -> Optional[StepResult]:
         """The clock reads ``now``: closes the step on its timeout."""
-        return self.protocol.on_tick(now)
+        return self._closed(self.protocol.on_tick(now))
 
     def on_input(self, key: str, data: str, now: float) -> InputOutcome:
         """One input message: ``key`` is ``speech``, ``touchscreen``, ``laser`` or ``reminder``.
@@ -457,7 +469,8 @@ class BeliefTracker:
             raise ValueError(f"unknown input {key!r}; inputs: {', '.join(INPUTS)}")
         if symbol is None:
             return InputOutcome(None, None, text, confidence)
-        return InputOutcome(symbol, self.protocol.on_observation(symbol, key, now, text, confidence), text, confidence)
+        closed = self._closed(self.protocol.on_observation(symbol, key, now, text, confidence))
+        return InputOutcome(symbol, closed, text, confidence)
 
     def take_events(self) -> List[Event]:
         return self.protocol.take_events()

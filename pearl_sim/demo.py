@@ -21,11 +21,11 @@ from pearl_pomdp.errors import PearlError
 from pearl_sim.scenario import Scenario, load_scenarios
 from pearl_sim.world import StepResult, World
 
-#: Features shown in the transcript and the plot (the ones a reader of Figure 4 follows).
+#: Features shown in the transcript (the ones a reader of Figure 4 follows).
 SHOWN_FEATURES = ("ReminderGoal", "UserPresent", "UserMotionGoal", "UserInfoGoal", "UserLocation")
 RECORDED_TOPICS = ["/clock", "/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder",
                    "/pearl/action", "/pearl/belief", "/pearl/belief_marginals", "/pearl/decision",
-                   "/pearl/say", "/pearl/display", "/pearl/nav_goal", "/pearl/pose", "/pearl/sim/said",
+                   "/pearl/say", "/pearl/display", "/goal_pose", "/pearl/pose", "/pearl/sim/said",
                    "/pearl/sim/truth"]
 
 
@@ -60,6 +60,9 @@ class DemoResult:
     bag_messages: int = 0
     seconds: float = 0.0
     tracker_counters: dict = field(default_factory=dict)
+    #: Whether the scenario wanted a guidance (a physiotherapy appointment): only then does
+    #: the outcome line say whether one was completed.
+    guidance_wanted: bool = True
 
     @property
     def clarifications(self) -> int:
@@ -67,9 +70,12 @@ class DemoResult:
 
     def outcome(self) -> str:
         m = self.metrics
-        guided = "guidance completed" if m["guidances_completed"] else "guidance NOT completed"
         ttg = f" in {m['time_to_goal'][0]:.0f} s" if m["time_to_goal"] else ""
-        return (f"outcome: {guided}{ttg}; {m['reminders_delivered']} reminder(s) delivered, "
+        if self.guidance_wanted:
+            guided = ("guidance completed" if m["guidances_completed"] else "guidance NOT completed") + ttg + "; "
+        else:
+            guided = "no guidance wanted; " if not m["guidances_started"] else "guided unasked; "
+        return (f"outcome: {guided}{m['reminders_delivered']} reminder(s) delivered, "
                 f"{m['questions_answered']} question(s) answered, {self.clarifications} clarification question(s), "
                 f"{m['wrong_actions']} wrong action(s); bag {self.bag} ({self.bag_messages} messages)")
 
@@ -102,37 +108,73 @@ def format_step(step: DemoStep, resident: str) -> str:
     return "\n".join(lines)
 
 
-def plot_belief(steps: List[DemoStep], path: Path, title: str) -> Path:
-    """A PNG of P(feature = its most interesting value) over sim time."""
+#: Feature values worth plotting for each thing a scenario can involve.
+INFO_VALUES = {"time": "wantTime", "weather": "wantWeather"}
+
+
+def plotted_features(scenario: Optional[Scenario]) -> List[tuple]:
+    """``(feature, value)`` series for the belief plot, chosen from what the scenario involves:
+    a reminder per appointment kind, the walk and arrival when there is a physiotherapy
+    appointment, each kind of question asked; contact always."""
+    series = [("UserPresent", "yes")]
+    if scenario is None:
+        kinds, asks = ["physio"], ["time", "weather"]
+    else:
+        kinds = list(dict.fromkeys(a.kind for a in scenario.appointments))
+        asks = list(dict.fromkeys(q.ask for q in scenario.questions))
+    series += [("ReminderGoal", kind) for kind in kinds]
+    if "physio" in kinds:
+        series += [("UserMotionGoal", "toPhysioWithRobot"), ("UserLocation", "physio")]
+    series += [("UserInfoGoal", INFO_VALUES[a]) for a in asks if a in INFO_VALUES]
+    return series
+
+
+def plot_belief(steps: List[DemoStep], path: Path, title: str, scenario: Optional[Scenario] = None) -> Path:
+    """A PNG: the belief in the scenario's features over sim time, and the actions below it.
+
+    Top: P(feature = value) for :func:`plotted_features`, with each clarification question
+    as a labelled red band. Bottom: a strip with every action at the time it started,
+    coloured by its domain category (Move, Communicate, Clarify, Other); waiting
+    (``DoNothing``) is drawn but not labelled.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    series = {
-        "P(ReminderGoal=physio)": ("ReminderGoal", "physio"),
-        "P(UserPresent=yes)": ("UserPresent", "yes"),
-        "P(UserMotionGoal=toPhysioWithRobot)": ("UserMotionGoal", "toPhysioWithRobot"),
-        "P(UserLocation=physio)": ("UserLocation", "physio"),
-        "P(UserInfoGoal=wantWeather)": ("UserInfoGoal", "wantWeather"),
-        "P(UserInfoGoal=wantTime)": ("UserInfoGoal", "wantTime"),
-    }
-    fig, ax = plt.subplots(figsize=(11, 5))
-    times = [s.time for s in steps if s.marginals]
-    for label, (f, v) in series.items():
-        ax.step(times, [s.marginals.get(f, {}).get(v, 0.0) for s in steps if s.marginals], where="post", label=label)
     from pearl_sim.scenario import default_domain
 
-    clarify = set(default_domain().actions_in("Clarify"))
-    for s in steps:
-        if s.action in clarify:
-            ax.axvline(s.time, color="grey", lw=0.6, ls=":")
-    ax.set_xlabel("simulated time (s)   (dotted: clarification questions)")
+    categories = default_domain().categories
+    colours = {"Move": "tab:blue", "Communicate": "tab:green", "Clarify": "tab:red", "Other": "tab:grey"}
+    fig, (ax, strip) = plt.subplots(2, 1, figsize=(12, 6.5), sharex=True,
+                                    gridspec_kw={"height_ratios": [3.2, 1.0], "hspace": 0.08})
+    shown = [s for s in steps if s.marginals]
+    times = [s.time for s in shown]
+    for feature, value in plotted_features(scenario):
+        ax.step(times, [s.marginals.get(feature, {}).get(value, 0.0) for s in shown], where="post",
+                lw=1.8, label=f"P({feature}={value})")
+    end = steps[-1].time + 5.0 if steps else 1.0
+    for k, s in enumerate(steps):
+        nxt = steps[k + 1].time if k + 1 < len(steps) else end
+        category = categories.get(s.action, "Other")
+        if category == "Clarify":
+            ax.axvspan(s.time, max(nxt, s.time + 1.0), color="tab:red", alpha=0.15, lw=0)
+            ax.text(s.time, 1.03, "?", color="tab:red", fontsize=11, ha="left", va="bottom", weight="bold")
+        strip.barh(0, max(nxt - s.time, 0.5), left=s.time, height=0.6, color=colours.get(category, "tab:grey"),
+                   alpha=0.35 if s.action == "DoNothing" else 0.9, edgecolor="white", lw=0.5)
+        if s.action != "DoNothing":
+            strip.text(s.time, 0.42, s.action, rotation=35, fontsize=7, ha="left", va="bottom")
     ax.set_ylabel("belief")
-    ax.set_ylim(-0.02, 1.02)
+    ax.set_ylim(-0.02, 1.12)
     ax.set_title(title)
     ax.legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8)
-    fig.tight_layout()
+    strip.set_yticks([])
+    strip.set_ylim(-0.5, 2.2)
+    strip.set_xlabel("simulated time (s)     red bands and ?: clarification questions")
+    handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in colours.values()]
+    strip.legend(handles, list(colours), loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8,
+                 title="action", title_fontsize=8)
+    fig.subplots_adjust(left=0.06, right=0.78, top=0.93, bottom=0.1)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -189,7 +231,8 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
     context = Context()
     rclpy.init(args=["--ros-args", "--log-level", "warn"], context=context, domain_id=domain_id,
                signal_handler_options=SignalHandlerOptions.NO)
-    result = DemoResult(scenario.name, out_dir)
+    result = DemoResult(scenario.name, out_dir,
+                        guidance_wanted=any(a.kind == "physio" for a in scenario.appointments))
     graph = None
     sim = None
     writer = None
@@ -242,7 +285,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
             latest = marginals[index] if len(marginals) > index else {}
             heard = step_result.messages + [m for w in waits for m in w.messages]
             msg = heard[0] if heard else None
-            sim.publish_truth(backend.now_ns * 1e-9, step_result)
+            sim.publish_truth(backend.now_ns * 1e-9, "end", step_result.action, step_result)
             step = DemoStep(index=index, time=step_result.start, action=step_result.action,
                             trace=decision.get("trace", []), modality=msg.modality if msg else None,
                             said=msg.said if msg else "", heard=msg.text if msg else "",
@@ -252,7 +295,9 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
             if echo is not None:
                 echo(format_step(step, scenario.resident.name))
 
-        run_episode(world, backend, on_action=on_action)
+        run_episode(world, backend, on_action=on_action,
+                    before_action=lambda action: sim.publish_truth(backend.now_ns * 1e-9, "start", action))
+        sim.publish_truth(backend.now_ns * 1e-9, "start")   # the state after the last action
         # The policy answers the last belief too: wait until that action is in the bag, or a
         # replay (which always sees the answer) would find one action more than recorded.
         graph.spin_until(lambda: recorder.counts.get("/pearl/action", 0) >= len(driver.actions),
@@ -283,7 +328,8 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
     result.transcript = out_dir / "transcript.txt"
     result.transcript.write_text("\n".join(format_step(s, scenario.resident.name) for s in result.steps)
                                  + "\n" + result.outcome() + "\n", encoding="utf-8")
-    result.plot = plot_belief(result.steps, out_dir / "belief.png", f"{scenario.name}: {scenario.description}")
+    result.plot = plot_belief(result.steps, out_dir / "belief.png", f"{scenario.name}: {scenario.description}",
+                              scenario)
     result.seconds = time.monotonic() - started
     (out_dir / "summary.json").write_text(json.dumps(summary_dict(result), indent=1), encoding="utf-8")
     return result

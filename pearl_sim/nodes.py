@@ -8,7 +8,7 @@ publishes its own modality, as a simulator's sensor plugins would:
 node                   publishes
 =====================  ===========================================================
 ``sim_navigation``     ``/pearl/laser`` (landmark reached), ``/pearl/pose``
-                       (geometry_msgs/PoseStamped); follows ``/pearl/nav_goal``
+                       (geometry_msgs/PoseStamped); follows ``/goal_pose`` (Nav2's topic)
 ``sim_user``           ``/pearl/touchscreen`` (the resident's screen presses) and
                        ``/pearl/sim/said`` (what she actually said, for transcripts)
 ``sim_speech``         ``/pearl/speech`` (recogniser text, with word errors)
@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import List
+from typing import List, Optional
 
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
@@ -54,7 +54,7 @@ def _stamp(seconds: float):
 
 
 class SimNavigationNode(Node):
-    """The robot base: landmarks on ``/pearl/laser``, pose on ``/pearl/pose``; logs ``/pearl/nav_goal``."""
+    """The robot base: landmarks on ``/pearl/laser``, pose on ``/pearl/pose``; logs ``/goal_pose``."""
 
     def __init__(self, context, world: World):
         super().__init__("sim_navigation", context=context, parameter_overrides=[])
@@ -62,7 +62,7 @@ class SimNavigationNode(Node):
         self.laser = self.create_publisher(String, MODALITY_TOPICS["Laser"], RELIABLE)
         self.pose = self.create_publisher(PoseStamped, "/pearl/pose", 10)
         self.goals: List[str] = []
-        self.create_subscription(PoseStamped, "/pearl/nav_goal", self._on_goal, RELIABLE)
+        self.create_subscription(PoseStamped, "/goal_pose", self._on_goal, RELIABLE)
 
     def _on_goal(self, msg: PoseStamped) -> None:
         self.goals.append(f"({msg.pose.position.x:.1f}, {msg.pose.position.y:.1f})")
@@ -125,12 +125,18 @@ class SimulatedHardware:
         self.publishers = {"Speech": self.speech.pub, "Touchscreen": self.user.touch,
                            "Laser": self.navigation.laser, "Reminder": self.reminder.pub}
 
-    def publish_truth(self, t: float, result: StepResult) -> None:
-        """The true state after an action (or a wait) on ``/pearl/sim/truth``, and the robot's pose."""
+    def publish_truth(self, t: float, phase: str, action: str = "", result: Optional[StepResult] = None) -> None:
+        """The true state on ``/pearl/sim/truth`` (JSON), and the robot's pose.
+
+        ``phase`` ``"start"``: the state an action starts in (``pearl fit`` counts transitions
+        between consecutive starts; one more follows the last action); ``"end"``: after the
+        action, with its events and whether it was wrong.
+        """
         self.navigation.publish_pose(t)
-        self.truth.publish(String(data=json.dumps({"time": self.world.time, "action": result.action,
-                                                    "state": self.world.truth(), "events": result.events,
-                                                    "wrong": result.wrong})))
+        body = {"time": self.world.time, "phase": phase, "action": action, "state": self.world.truth()}
+        if result is not None:
+            body.update(events=result.events, wrong=result.wrong)
+        self.truth.publish(String(data=json.dumps(body)))
 
     def destroy(self) -> None:
         for node in self.nodes:

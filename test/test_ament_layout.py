@@ -22,13 +22,13 @@ def test_colcon_style_install_layout(tmp_path):
                           "--single-version-externally-managed", "--record", str(build / "install.log")],
                          cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
-    for name in ("belief_tracker", "hierarchical_policy", "action_executor"):
+    for name in ("belief_tracker", "hierarchical_policy", "action_executor", "landmark_detector", "guide_pace"):
         exe = prefix / "lib" / "pearl_pomdp" / name
         assert exe.is_file() and os.access(exe, os.X_OK), name
         assert f"'console_scripts', '{name}'" in exe.read_text()
     share = prefix / "share" / "pearl_pomdp"
     for rel in ("package.xml", "launch/pearl.launch.xml", "config/pearl_nodes.yaml", "config/fastdds_profile.xml",
-                "config/pearl.domain.yaml"):
+                "config/pearl.domain.yaml", "config/foxglove/pearl.layout.json"):
         assert (share / rel).is_file(), rel
     assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "pearl_pomdp").is_file()
     # $(find-pkg-share pearl_pomdp) resolves through the ament index, as ros2 launch does.

@@ -50,3 +50,30 @@ def test_demo_bag_replays_to_the_same_actions(demo):
     replay = replay_bag(result.bag, domain_id=allocate_domain_id())
     assert replay.expected_actions[:len(result.steps)] == [s.action for s in result.steps]
     assert replay.match, f"first mismatch at {replay.to_dict().get('first_mismatch')}"
+
+
+def test_plotted_features_follow_the_scenario():
+    """The belief plot draws what the scenario involves (issue 16): table4's checklist reminder and
+    both questions, no walk; figure4's physio reminder, the walk and arrival, the weather."""
+    from pearl_sim.demo import plotted_features
+    from pearl_sim.scenario import load_scenarios
+
+    (table4,) = load_scenarios(REPO / "config/scenarios/table4_dialog.yaml")
+    (figure4,) = load_scenarios(REPO / "config/scenarios/figure4.yaml")
+    t4 = plotted_features(table4)
+    assert ("ReminderGoal", "checklist") in t4 and ("UserMotionGoal", "toPhysioWithRobot") not in t4
+    assert {("UserInfoGoal", "wantTime"), ("UserInfoGoal", "wantWeather")} <= set(t4)
+    f4 = plotted_features(figure4)
+    assert {("ReminderGoal", "physio"), ("UserMotionGoal", "toPhysioWithRobot"), ("UserLocation", "physio"),
+            ("UserInfoGoal", "wantWeather")} <= set(f4) and ("UserInfoGoal", "wantTime") not in f4
+
+
+def test_outcome_mentions_guidance_only_where_it_was_wanted():
+    from pearl_sim.demo import DemoResult
+
+    metrics = {"guidances_completed": 0, "guidances_started": 0, "time_to_goal": [], "reminders_delivered": 1,
+               "questions_answered": 2, "clarifications": 3, "wrong_actions": 0}
+    quiet = DemoResult("t", Path("."), metrics=metrics, guidance_wanted=False)
+    assert quiet.outcome().startswith("outcome: no guidance wanted; 1 reminder(s)")
+    wanted = DemoResult("t", Path("."), metrics=metrics, guidance_wanted=True)
+    assert wanted.outcome().startswith("outcome: guidance NOT completed; 1 reminder(s)")

@@ -23,7 +23,11 @@ def test_pearl_launch_file_graph():
     assert [(n.package, n.executable, n.name, n.output) for n in d.nodes] == [
         ("pearl_pomdp", "belief_tracker", "belief_tracker", "screen"),
         ("pearl_pomdp", "hierarchical_policy", "hierarchical_policy", "screen"),
-        ("pearl_pomdp", "action_executor", "action_executor", "screen")]
+        ("pearl_pomdp", "action_executor", "action_executor", "screen"),
+        ("pearl_pomdp", "landmark_detector", "landmark_detector", "screen"),
+        ("pearl_pomdp", "guide_pace", "guide_pace", "screen")]
+    assert [n.executable for n in parse_launch_file(LAUNCH, {"navigation": "false"}).nodes] == [
+        "belief_tracker", "hierarchical_policy", "action_executor"]
     assert package_share_dir("pearl_pomdp") == REPO  # editable install: the source tree
     params = str(REPO / "config" / "pearl_nodes.yaml")
     assert d.values["params_file"] == params and d.values["policy"] == "/plans/pearl"
@@ -31,7 +35,8 @@ def test_pearl_launch_file_graph():
         ("file", params), ("value", "domain", str(REPO / "config" / "pearl.domain.yaml")),
         ("value", "hierarchy", str(REPO / "config" / "pearl.hierarchy.yaml")),
         ("value", "policy", "/plans/pearl"), ("value", "use_sim_time", "false")]
-    assert set(d.arguments) == {"params_file", "domain", "hierarchy", "policy", "step_timeout", "use_sim_time"}
+    assert set(d.arguments) == {"params_file", "domain", "hierarchy", "policy", "step_timeout", "use_sim_time",
+                                "navigation"}
 
 
 def test_params_are_written_like_launch_ros(tmp_path):
@@ -135,10 +140,12 @@ def test_pearl_launch_print_shows_the_commands():
     nodes = json.loads(out.stdout)["nodes"]
     assert [n["command"][1:3] for n in nodes] == [["-m", "pearl_pomdp.nodes.belief_tracker"],
                                                   ["-m", "pearl_pomdp.nodes.hierarchical_policy"],
-                                                  ["-m", "pearl_pomdp.nodes.action_executor"]]
+                                                  ["-m", "pearl_pomdp.nodes.action_executor"],
+                                                  ["-m", "pearl_pomdp.nodes.landmark_detector"],
+                                                  ["-m", "pearl_pomdp.nodes.guide_pace"]]
     bad = subprocess.run([str(Path(sys.executable).parent / "pearl"), "launch", str(LAUNCH), "--print", "polcy:=/p"],
                          capture_output=True, text=True, timeout=60, cwd=REPO)
     assert bad.returncode == 2
     assert bad.stderr.strip().splitlines() == [
         f"pearl launch: error: {LAUNCH}: unknown launch argument(s) polcy (declared: domain, hierarchy, "
-        f"params_file, policy, step_timeout, use_sim_time)"]
+        f"navigation, params_file, policy, step_timeout, use_sim_time)"]

@@ -86,7 +86,7 @@ def _probe(graph):
     probe.listen("/pearl/decision", cv.TextMsg, EVENT_QOS)
     probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
     probe.listen("/pearl/display", cv.TextMsg, EVENT_QOS)
-    probe.listen("/pearl/nav_goal", cv.PoseMsg, LATCHED_QOS)
+    probe.listen("/goal_pose", cv.PoseMsg, LATCHED_QOS)
     probe.listen("/diagnostics", cv.DiagnosticsMsg, EVENT_QOS)
     probe.publisher("/clock", cv.ClockMsg, 10)
     for topic in ("speech", "touchscreen", "laser", "reminder"):
@@ -147,9 +147,9 @@ def test_tiger_dialogue_in_one_process(ros_context):
                                    [0.7225 / 0.745, 0.0225 / 0.745], rtol=1e-12)
         assert _actions(probe) == ["listen", "listen", "open-right"]
         # The executor: sentence with the sim time (130 s after the epoch is 00:02 UTC), goal pose.
-        assert g.spin_until(lambda: probe.received["/pearl/say"] and probe.received["/pearl/nav_goal"], 10.0)
+        assert g.spin_until(lambda: probe.received["/pearl/say"] and probe.received["/goal_pose"], 10.0)
         assert probe.received["/pearl/say"][-1].data == "opening the right door at 00:02"
-        pose = cv.msg_to_pose(probe.received["/pearl/nav_goal"][-1])
+        pose = cv.msg_to_pose(probe.received["/goal_pose"][-1])
         assert pose["x"] == 3.0 and pose["y"] == -1.0 and pose["frame_id"] == "map"
         assert pose["yaw"] == pytest.approx(np.pi / 2) and pose["stamp"] == pytest.approx(130.0)
 

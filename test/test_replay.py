@@ -127,3 +127,46 @@ def test_broken_bags_are_errors_naming_file_and_problem(tmp_path, capsys):
     with pytest.raises(PearlError, match=r"bare: custom_data has no 'pearl.domain': pass --domain"):
         replay_bag(bare)
     shutil.rmtree(cut)
+
+
+@pytest.mark.parametrize("name", ["table4_clarification", "figure4_guidance"])
+def test_explain_says_why_for_every_step(name, tmp_path):
+    """--explain: per step the input that closed it, the belief after it and the EXECUTE trace of the answer."""
+    from pearl_pomdp.model.factored import load_domain
+
+    configure_test_process(tmp_path)
+    bag = REPO / "bags" / name
+    result = replay_bag(bag, domain_id=allocate_domain_id(), explain=True)
+    assert result.match and result.divergence is None
+    steps = result.explanation
+    # One entry per decision: b0's, then one per closed step; each decision is the replayed action.
+    assert [s["decision"]["action"] for s in steps] == result.actions
+    assert steps[0]["closed_by"] is None
+    domain = load_domain(REPO / "bags" / "pearl" / "domain.yaml")
+    for s in steps[1:]:
+        c = s["closed_by"]
+        assert c["symbol"] in domain.observations and c["input"] in ("speech", "touchscreen", "laser", "reminder",
+                                                                       "timeout")
+        assert set(s["belief"]) == set(domain.feature_names)
+        assert all(0.0 <= p <= 1.0 for _, p in s["belief"].values())
+        trace = s["decision"]["trace"]
+        assert trace and trace[-1]["choice"] == s["decision"]["action"]   # root → … → the primitive
+    assert any(s["closed_by"] and s["closed_by"]["input"] == "timeout" for s in steps) or name == "figure4_guidance"
+
+
+def test_explain_shows_the_first_divergence(tmp_path, capsys):
+    from pearl_pomdp.cli import main
+
+    configure_test_process(tmp_path)
+    src = REPO / "bags" / "table4_clarification"
+    n_actions = BagReader(src).topics["/pearl/action"].message_count
+    bag = _copy_bag(src, tmp_path / "altered", action_override={n_actions - 3: "RingDoorBell"})
+    code = main(["replay", str(bag), "--json", "--explain", "--domain-id", str(allocate_domain_id())])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 1
+    d = out["divergence"]
+    assert d["action_index"] == n_actions - 3 and d["recorded"] == "RingDoorBell" and d["replayed"] != "RingDoorBell"
+    assert d["replayed_trace"][-1]["choice"] == d["replayed"] and d["closed_by"]["symbol"]
+    code = main(["replay", str(bag), "--explain", "--domain-id", str(allocate_domain_id())])
+    text = capsys.readouterr().out
+    assert f"first divergence at action {n_actions - 3}" in text and "why:" in text

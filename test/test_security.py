@@ -96,7 +96,7 @@ def test_every_yaml_reader_is_safe():
     assert calls, "expected YAML readers in the package"
     unsafe = [c for c in calls if c[1].split(".")[-1] in UNSAFE_YAML | {"load"}]
     assert not [c for c in unsafe if c[1] in ("yaml.unsafe_load", "yaml.full_load")], unsafe
-    from pearl_pomdp.model.factored import _Loader
+    from pearl_pomdp.yaml_lines import _Loader  # the one YAML loader (domain, hierarchy, scenario, params)
 
     import yaml
 

@@ -103,3 +103,18 @@ def test_no_timeout_actions_wait_for_an_input_however_long():
     assert p2.on_tick(2.0).source == "timeout"      # other actions still time out
     with pytest.raises(ValueError, match="no_timeout_actions names 'fly'"):
         StepProtocol(tiger(), step_timeout=2.0, timeout_observation="hear-right", no_timeout_actions=["fly"])
+
+
+def test_zero_likelihood_is_reported_once(caplog):
+    """The step loop reports a recovery as one event (the node logs it); the filter does not log it again."""
+    import logging
+
+    p = StepProtocol(tiger(impossible=True))
+    p.on_action("listen", 0.0)
+    p.on_observation("hear-left", "speech", 0.1)
+    p.on_action("listen", 1.0)
+    with caplog.at_level(logging.WARNING, logger="pearl_pomdp.belief"):
+        p.on_observation("hear-right", "speech", 1.1)  # impossible after a certain tiger-left
+    events = [e for e in p.take_events() if "zero likelihood" in e.text]
+    assert p.counters["zero_likelihood"] == 1 and len(events) == 1
+    assert "pearl_pomdp.belief" not in {r.name for r in caplog.records}

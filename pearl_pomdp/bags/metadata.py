@@ -99,9 +99,14 @@ class QosProfile:
             raise ValueError(str(err)) from None
 
     def brief(self) -> str:
-        """One line for ``bag-info``: ``reliable/volatile keep_last(10)``."""
+        """One line for ``bag-info``: ``reliable/volatile, history keep_last(10)``.
+
+        History is named because its value alone is ambiguous: a recorder learns each
+        publisher's QoS from DDS discovery, which carries no history or depth, so rosbag2
+        (and our recorder) store history ``unknown`` — shown as ``history unknown``.
+        """
         hist = f"{self.history}({self.depth})" if self.history == "keep_last" else self.history
-        return f"{self.reliability}/{self.durability} {hist}"
+        return f"{self.reliability}/{self.durability}, history {hist}"
 
 
 def qos_list_yaml(profiles: Sequence[QosProfile]) -> str:

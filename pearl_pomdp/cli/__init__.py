@@ -58,9 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"pearl {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module in _command_modules():
-        # argparse %-formats help texts: a literal "95%" would break `pearl --help`.
+        # argparse %-formats the one-line help (a literal "95%" would break `pearl --help`),
+        # but prints a description as it is: escaping it too would show "95%%".
         p = sub.add_parser(module.COMMAND, help=module.HELP.replace("%", "%%"),
-                           description=(getattr(module, "__doc__", None) or "").replace("%", "%%"),
+                           description=getattr(module, "__doc__", None) or "",
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         module.add_arguments(p)
         p.set_defaults(_run=module.run)

@@ -7,6 +7,10 @@ model); OUT ends in ``.pomdp`` or ``.pomdpx``. Floats are written losslessly, so
 the identical model (same fingerprint) unless names had to be rewritten to fit the format.
 The file is written atomically. ``--json`` prints one object: ``model``, ``out``, ``format``,
 ``states``, ``actions``, ``observations``, ``fingerprint``, ``seconds``.
+
+Examples:
+  pearl convert config/table4.domain.yaml table4.pomdpx
+  pearl convert table4.pomdpx table4.pomdp --json
 """
 from __future__ import annotations
 
@@ -39,6 +43,9 @@ def run(args: argparse.Namespace) -> int:
     src = Path(args.model)
     if src.resolve() == out.resolve():
         raise PearlError(f"{out}: output is the input file")
+    from pearl_pomdp.cli._inputs import require_file
+
+    require_file(src, "model file (.pomdp, .pomdpx or domain .yaml)")
     t0 = time.perf_counter()
     model = load_model(src)
     if suffix == ".pomdp":

@@ -1,12 +1,15 @@
 """Explain a decision: the EXECUTE trace (root → … → primitive) with each subtask's value.
 
-Example:
-  pearl explain config/pearl.domain.yaml policies/pearl \
-      --belief UserPresent=yes,ReminderGoal=physio:0.7|none:0.3
+Examples:
+  pearl plan config/pearl.domain.yaml       # once: saves out/policies/pearl
+  pearl explain config/pearl.domain.yaml --belief 'UserPresent=yes,ReminderGoal=physio:0.7|none:0.3'
+  pearl explain config/pearl.domain.yaml out/policies/pearl --belief UserLocation=physio --json
 
---belief gives per-feature marginals: `Feature=value` (certain) or
-`Feature=v1:p1|v2:p2` (a distribution). Features not given keep their start-belief
-marginal, and the belief is the product of the marginals.
+POLICY is a directory written by `pearl plan`; without it, the default one of `pearl plan
+DOMAIN` (out/policies/NAME) is used. --belief gives per-feature marginals: `Feature=value`
+(certain) or `Feature=v1:p1|v2:p2` (a distribution; quote it: `|` is the shell's pipe).
+Features not given keep their start-belief marginal, and the belief is the product of the
+marginals.
 """
 from __future__ import annotations
 
@@ -23,7 +26,8 @@ HELP = "print the EXECUTE trace of a planned hierarchical policy at a belief"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("domain", help="factored domain .yaml the policy was planned for")
-    parser.add_argument("policy", help="policy directory from `pearl plan --out DIR`")
+    parser.add_argument("policy", nargs="?", default=None,
+                        help="policy directory from `pearl plan` (default: out/policies/NAME, where it saves)")
     parser.add_argument("--belief", default="", help="Feature=value or Feature=v1:p1|v2:p2, comma separated")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -62,7 +66,8 @@ def belief_from_spec(domain, spec: str) -> np.ndarray:
 
 def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.cli import print_json
-    from pearl_pomdp.cli.plan import load_domain_any
+    from pearl_pomdp.cli.plan import default_policy_dir, load_domain_any
+    from pearl_pomdp.errors import PolicyError
     from pearl_pomdp.hierarchy import load_hierarchical_policy
 
     domain = load_domain_any(args.domain)
@@ -70,7 +75,11 @@ def run(args: argparse.Namespace) -> int:
 
     if not isinstance(domain, FactoredDomain):
         raise BeliefError("explain needs a factored domain (.yaml) to read --belief")
-    policy = load_hierarchical_policy(args.policy, domain)
+    policy_dir = args.policy or default_policy_dir(args.domain)
+    if not args.policy and not policy_dir.is_dir():
+        raise PolicyError(f"{policy_dir}: no policy planned for {args.domain} here; run `pearl plan {args.domain}` "
+                          f"first (it saves there), or give POLICY")
+    policy = load_hierarchical_policy(policy_dir, domain)
     b = belief_from_spec(domain, args.belief)
     decision = policy.execute(b)
     if args.json:

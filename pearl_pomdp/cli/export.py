@@ -10,9 +10,10 @@ the writers rewrite names that do not fit, keeping the order. With ``--out``, ``
 prints one object: ``domain``, ``out``, ``format``, ``states``, ``actions``,
 ``observations``, ``fingerprint``, ``seconds``.
 
-Example (the flat Pearl model for SARSOP)::
+Examples (the flat Pearl model for SARSOP; the Table 4 model on stdout)::
 
     pearl export config/pearl.domain.yaml --format pomdpx --out pearl.pomdpx
+    pearl export config/table4.domain.yaml | head -5
 """
 from __future__ import annotations
 
@@ -51,6 +52,9 @@ def run(args: argparse.Namespace) -> int:
     src = Path(args.domain)
     if out is not None and out.resolve() == src.resolve():
         raise PearlError(f"{out}: output is the input file")
+    from pearl_pomdp.cli._inputs import require_file
+
+    require_file(src, "domain file (.yaml, or a .pomdp)")
     t0 = time.perf_counter()
     model = load_model(src)
     if fmt == "pomdp":

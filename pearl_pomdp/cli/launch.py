@@ -12,8 +12,17 @@ to stop and every node exited cleanly; otherwise the first failing node's exit c
 (or 1), with one line naming it.
 
 Children get ``FASTRTPS_DEFAULT_PROFILES_FILE`` = the package's ``config/fastdds_profile.xml``
-(fast discovery) unless it is already set, and die with the launcher (``PR_SET_PDEATHSIG``).
+(fast discovery) unless it is already set, and die with the launcher: on Linux each child
+has ``PR_SET_PDEATHSIG`` = SIGTERM, so when the launcher is killed (even SIGKILL) every node
+gets SIGTERM from the kernel, and the package's nodes exit within their 1.5 s shutdown
+deadline (``pearl_pomdp.nodes.common.SHUTDOWN_DEADLINE``). A node's own children (a wrapper
+script's grandchildren) are not covered. Elsewhere there is no such signal: stop the
+launcher with SIGINT/SIGTERM.
 ``--print`` shows the commands as JSON instead of running them.
+
+Examples:
+  pearl launch launch/pearl.launch.xml --print
+  pearl launch launch/pearl.launch.xml policy:=out/policies/pearl     # until Ctrl-C
 """
 from __future__ import annotations
 
@@ -92,8 +101,25 @@ def _libc():
 _LIBC = _libc() if sys.platform.startswith("linux") else None
 
 
-def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
-    _LIBC.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG: the node gets SIGTERM if the launcher dies
+#: prctl(2) option: the signal this process gets when its parent thread ends.
+PR_SET_PDEATHSIG = 1
+
+
+def _die_with(launcher_pid: int):
+    """``preexec_fn`` for a node: SIGTERM when the launcher dies, however it dies (Linux).
+
+    The launcher starts nodes from its main thread, which lives as long as the launcher, so
+    the kernel sends the signal when the launcher process ends (SIGKILL included). SIGTERM,
+    not SIGKILL: our nodes then stop within ``SHUTDOWN_DEADLINE`` and release their DDS
+    shared memory. If the launcher died between fork and ``prctl``, no signal would ever
+    come: the child sees another parent and exits before running the node.
+    """
+    def preexec() -> None:  # pragma: no cover - runs in the child between fork and exec
+        _LIBC.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+        if os.getppid() != launcher_pid:
+            os._exit(1)
+
+    return preexec
 
 
 class _Child:
@@ -104,7 +130,7 @@ class _Child:
         self.last_err = ""
         self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      stdin=subprocess.DEVNULL, start_new_session=True,
-                                     preexec_fn=_die_with_parent if _LIBC is not None else None)
+                                     preexec_fn=_die_with(os.getpid()) if _LIBC is not None else None)
         screen = node.output in ("screen", "both")
         self.threads = [threading.Thread(target=self._pump, args=(self.proc.stdout, sys.stdout if screen else None,
                                                                   False), daemon=True),

@@ -1,13 +1,20 @@
 """Plan a hierarchical policy: PARAMETERIZE, abstract (eq. 18) and SOLVE every subtask bottom-up.
 
 Examples:
-  pearl plan config/pearl.domain.yaml --hierarchy config/pearl.hierarchy.yaml --out policies/pearl
-  pearl plan config/pearl.domain.yaml --json        # uses config/pearl.hierarchy.yaml beside the domain
+  pearl plan config/pearl.domain.yaml            # saves out/policies/pearl (explain/hierarchy find it)
+  pearl plan config/pearl.domain.yaml --hierarchy config/pearl.hierarchy.yaml --out my-policies/pearl
+  pearl plan config/pearl.domain.yaml --json --no-save
 
-Without --hierarchy, DOMAIN's sibling NAME.hierarchy.yaml is used (for NAME.domain.yaml or
-NAME.yaml), else the flat hierarchy (one root subtask over every primitive).
+Hierarchy: --hierarchy FILE, else DOMAIN's sibling NAME.hierarchy.yaml (for NAME.domain.yaml
+or NAME.yaml). When there is none, the domain is planned flat (one root subtask over every
+primitive) with a warning naming the file that was looked for; --flat plans flat on purpose
+(no warning). A flat plan of a large domain is slow and inexact: its solver hits its time limit.
+
+The policy is saved to --out DIR, by default out/policies/NAME under the current directory,
+where `pearl explain DOMAIN` and `pearl hierarchy DOMAIN` look for it; --no-save keeps nothing.
 The --json object has `subtasks` (name, states_full, states_abstract, observations_full,
-observations_abstract, actions, solver, alpha_vectors, seconds, ...) and `total_seconds`.
+observations_abstract, actions, solver, alpha_vectors, seconds, ...), `total_seconds`,
+`hierarchy_file` (null when flat) and `out` (the saved directory, null with --no-save).
 """
 from __future__ import annotations
 
@@ -16,38 +23,67 @@ import logging
 import sys
 from pathlib import Path
 
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
+
 COMMAND = "plan"
 HELP = "plan a hierarchical policy (PLAN/SOLVE with abstraction) for a factored domain"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("domain", help="factored domain .yaml (or a .pomdp model: no feature abstraction)")
-    parser.add_argument("--hierarchy", help="action hierarchy .yaml (default: NAME.hierarchy.yaml beside the domain)")
-    parser.add_argument("--out", help="directory to save the policy in (policy.npz + hierarchy.json)")
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--hierarchy", help="action hierarchy .yaml (default: NAME.hierarchy.yaml beside the domain)")
+    group.add_argument("--flat", action="store_true",
+                       help="plan flat (one root subtask over every primitive) without looking for a hierarchy")
+    save = parser.add_mutually_exclusive_group()
+    save.add_argument("--out", help="directory to save the policy in (policy.npz + hierarchy.json); "
+                                    "default out/policies/NAME")
+    save.add_argument("--no-save", action="store_true", help="do not save the policy")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     parser.add_argument("--no-abstraction", action="store_true", help="solve every subtask on the full state/observation sets")
     parser.add_argument("--solver", choices=["incprune", "pointbased"], help="override every subtask's solver")
     parser.add_argument("--seed", type=int, default=0, help="seed of the point-based solver")
     parser.add_argument("--strict", action="store_true", help="fail on a local reward assumption violation")
+    add_progress_arguments(parser)
+
+
+#: Where `pearl plan` saves a domain's policy when --out is not given (relative to the current
+#: directory, like the demo's out/demo-…), and where `explain` and `hierarchy` look for it.
+DEFAULT_POLICY_ROOT = Path("out") / "policies"
+
+_DOMAIN_SUFFIXES = (".domain.yaml", ".domain.yml", ".yaml", ".yml", ".pomdp", ".pomdpx")
+
+
+def domain_name(domain_path: Path) -> str:
+    """``pearl`` for ``pearl.domain.yaml`` / ``pearl.yaml`` / ``pearl.pomdp``: the NAME of the doc."""
+    name = Path(domain_path).name
+    for suffix in _DOMAIN_SUFFIXES:
+        if name.lower().endswith(suffix):
+            return name[: -len(suffix)]
+    return Path(domain_path).stem
+
+
+def hierarchy_candidate(domain_path: Path) -> Path:
+    """The hierarchy file looked for beside ``domain_path``: ``NAME.hierarchy.yaml``."""
+    return Path(domain_path).with_name(domain_name(domain_path) + ".hierarchy.yaml")
 
 
 def default_hierarchy(domain_path: Path):
     """``NAME.hierarchy.yaml`` beside ``NAME.domain.yaml`` / ``NAME.yaml``, or ``None``."""
-    stem = domain_path.name
-    for suffix in (".domain.yaml", ".domain.yml", ".yaml", ".yml", ".pomdp"):
-        if stem.endswith(suffix):
-            candidate = domain_path.with_name(stem[: -len(suffix)] + ".hierarchy.yaml")
-            if candidate.is_file():
-                return candidate
-            break
-    return None
+    candidate = hierarchy_candidate(domain_path)
+    return candidate if candidate.is_file() else None
+
+
+def default_policy_dir(domain_path) -> Path:
+    """``out/policies/NAME``: where `pearl plan DOMAIN` saves without --out."""
+    return DEFAULT_POLICY_ROOT / domain_name(Path(domain_path))
 
 
 def load_domain_any(path: str):
     """A FactoredDomain for .yaml, else the flat model from :func:`pearl_pomdp.model.load_model`."""
-    p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(2, "no such domain file", str(p))
+    from pearl_pomdp.cli._inputs import require_file
+
+    p = require_file(path, "domain file")
     if p.suffix.lower() in (".yaml", ".yml"):
         from pearl_pomdp.model.factored import load_domain
 
@@ -57,13 +93,40 @@ def load_domain_any(path: str):
     return load_model(p)
 
 
-def load_hierarchy_for(domain, domain_path: str, hierarchy_path):
+def resolve_hierarchy_path(domain_path: str, hierarchy_path, flat: bool = False, warn=None):
+    """The hierarchy file to plan with, or ``None`` for the flat hierarchy.
+
+    ``hierarchy_path`` if given; else ``NAME.hierarchy.yaml`` beside the domain; else ``None``,
+    calling ``warn`` (e.g. a print to stderr) with a line that names the file looked for —
+    unless ``flat`` asked for the flat hierarchy.
+    """
+    if flat:
+        return None
+    if hierarchy_path:
+        from pearl_pomdp.cli._inputs import require_file
+
+        return require_file(hierarchy_path, "hierarchy file (--hierarchy)")
+    found = default_hierarchy(Path(domain_path))
+    if found is None and warn is not None:
+        warn(f"no --hierarchy given and no {hierarchy_candidate(Path(domain_path))} beside the domain: "
+             f"planning flat (one root subtask over every primitive; slow and inexact for a large domain). "
+             f"Give --hierarchy FILE, or --flat to plan flat without this warning.")
+    return found
+
+
+def load_hierarchy_for(domain, domain_path: str, hierarchy_path, flat: bool = False, warn=None):
+    """The Hierarchy for :func:`resolve_hierarchy_path`'s file, or the flat hierarchy."""
     from pearl_pomdp.hierarchy import flat_hierarchy, load_hierarchy
 
-    path = Path(hierarchy_path) if hierarchy_path else default_hierarchy(Path(domain_path))
+    path = resolve_hierarchy_path(domain_path, hierarchy_path, flat=flat, warn=warn)
     if path is None:
         return flat_hierarchy(list(domain.actions))
     return load_hierarchy(path, domain)
+
+
+def warn_on_stderr(command: str):
+    """A ``warn`` callable printing ``pearl COMMAND: warning: …`` on stderr."""
+    return lambda text: print(f"pearl {command}: warning: {text}", file=sys.stderr, flush=True)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -73,12 +136,13 @@ def run(args: argparse.Namespace) -> int:
 
     logging.basicConfig(level=logging.WARNING, format="pearl plan: warning: %(message)s", stream=sys.stderr)
     domain = load_domain_any(args.domain)
-    hierarchy = load_hierarchy_for(domain, args.domain, args.hierarchy)
+    hierarchy_file = resolve_hierarchy_path(args.domain, args.hierarchy, flat=args.flat, warn=warn_on_stderr("plan"))
+    hierarchy = load_hierarchy_for(domain, args.domain, hierarchy_file, flat=hierarchy_file is None)
     policy = plan(domain, hierarchy, abstraction=not args.no_abstraction, solver=args.solver, seed=args.seed,
-                  progress=sys.stderr.isatty() and not args.json, strict_local_reward=args.strict)
+                  progress=show_progress(args), strict_local_reward=args.strict)
+    policy.report["hierarchy_file"] = None if hierarchy_file is None else str(hierarchy_file)
     report = dict(policy.report)
-    if args.out:
-        report["out"] = str(policy.save(args.out))
+    report["out"] = None if args.no_save else str(policy.save(args.out or default_policy_dir(args.domain)))
     if args.json:
         print_json(report)
         return 0
@@ -91,6 +155,6 @@ def run(args: argparse.Namespace) -> int:
               f" {r['seconds']:>7.2f}  {', '.join(r['relevant_features']) or '-'}")
         for w in r["warnings"]:
             print(f"  warning: {w}")
-    if args.out:
+    if report["out"]:
         print(f"saved to {report['out']}")
     return 0

@@ -9,7 +9,7 @@ Progress lines go to stderr ("subscribed /topic [type]" for each topic as it is 
 
 Examples:
   pearl record run1                                 # every topic, until Ctrl-C
-  pearl record run1 --topics /pearl/speech /pearl/action --duration 30
+  pearl record run1 --topics /pearl/speech /pearl/action --duration 3
   pearl record run1 --use-sim-time                  # log times follow /clock
 """
 from __future__ import annotations

@@ -11,14 +11,23 @@ Output: text, or with --json one object with "actions" (list), "expected_actions
 recorded), "match" (bool), "messages", "messages_per_second" (replay loop only). Exit code
 0 when the actions match, 1 when they do not, 2 on an unreadable bag.
 
+With --explain, why the robot did what it did: per step the input that closed it (topic,
+text, recognised symbol, recogniser confidence), the most probable value of each belief
+feature after the update, and the EXECUTE trace of the answer with the value of each
+choice; where replay and recording differ, the first divergence with both traces (when
+the bag recorded /pearl/decision). In --json these are "steps" and "divergence".
+
 Examples:
   pearl replay bags/table4_clarification
   pearl replay bags/figure4_guidance --json
+  pearl replay bags/table4_clarification --explain
 """
 from __future__ import annotations
 
 import argparse
 import os
+
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
 
 COMMAND = "replay"
 HELP = "replay a bag's inputs through tracker + policy under sim time; compare with the recorded actions"
@@ -32,7 +41,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--step-timeout", type=float, default=10.0, metavar="S",
                         help="wall seconds to wait for the graph's reaction to one message (default 10)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--progress", action="store_true", help="progress bar on stderr")
+    parser.add_argument("--explain", action="store_true",
+                        help="per step: what closed it, the belief after, the EXECUTE trace with values; "
+                             "the first divergence from the recording")
+    add_progress_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -43,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     if domain_id is None and os.environ.get("ROS_DOMAIN_ID", "").isdigit():
         domain_id = int(os.environ["ROS_DOMAIN_ID"])
     result = replay_bag(args.bag, domain=args.domain, policy=args.policy, domain_id=domain_id,
-                        step_timeout_s=args.step_timeout, progress=args.progress)
+                        step_timeout_s=args.step_timeout, progress=show_progress(args), explain=args.explain)
     if args.json:
         print_json(result.to_dict())
     else:
@@ -53,4 +65,41 @@ def run(args: argparse.Namespace) -> int:
         status = "yes" if result.match else f"NO (first difference at action {result.first_mismatch})"
         print(f"match:     {status}")
         print(f"messages:  {result.messages} in {result.seconds:.3f} s ({result.messages_per_second:.0f} msg/s)")
+        if result.explanation is not None:
+            print(format_explanation(result.explanation, result.divergence))
     return 0 if result.match else 1
+
+
+def _trace_text(trace) -> str:
+    parts = []
+    for t in trace or []:
+        value = t.get("value")
+        parts.append(f"{t.get('subtask')}→{t.get('choice')} ({'–' if value is None else f'{value:.2f}'})")
+    return "  ".join(parts)
+
+
+def format_explanation(steps, divergence) -> str:
+    """The --explain text: one block per step, then the first divergence."""
+    lines = ["", "why:"]
+    for s in steps:
+        d = s["decision"]
+        if s["closed_by"] is None:
+            lines.append(f"  [b0] → {d['action']}   {_trace_text(d['trace'])}")
+            continue
+        c = s["closed_by"]
+        heard = f"{c['input']} {c['text']!r} → {c['symbol']}"
+        if c["input"] == "speech" and c["confidence"] < 1.0:
+            heard += f" (confidence {c['confidence']:.2f})"
+        if c["zero_likelihood"]:
+            heard += " (zero likelihood: recovered)"
+        belief = ", ".join(f"{f}={v} {p:.2f}" for f, (v, p) in s["belief"].items())
+        lines.append(f"  [{s['step']:>3}] {s['time']:8.1f} s  after {s['action']}: {heard}")
+        lines.append(f"        belief {belief}")
+        lines.append(f"        → {d['action']}   {_trace_text(d['trace'])}")
+    if divergence:
+        lines.append(f"first divergence at action {divergence['action_index']}: replayed {divergence['replayed']}, "
+                     f"recorded {divergence['recorded']}")
+        lines.append(f"  replayed trace: {_trace_text(divergence['replayed_trace'])}")
+        recorded = divergence["recorded_trace"]
+        lines.append(f"  recorded trace: {_trace_text(recorded) if recorded else '(the bag has no /pearl/decision)'}")
+    return "\n".join(lines)

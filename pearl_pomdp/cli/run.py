@@ -3,10 +3,10 @@
 Everything after NODE is passed to the node (``--ros-args -p domain:=… --params-file …``).
 Exit code: 0 after SIGINT/SIGTERM, 2 when the node cannot start (one line on stderr).
 
-Examples::
+Examples (each runs until Ctrl-C; `pearl plan config/pearl.domain.yaml` saves out/policies/pearl)::
 
     pearl run belief_tracker --ros-args --params-file config/pearl_nodes.yaml
-    pearl run hierarchical_policy --ros-args -p policy:=plans/pearl -p use_sim_time:=true
+    pearl run hierarchical_policy --ros-args -p policy:=out/policies/pearl -p use_sim_time:=true
 """
 from __future__ import annotations
 
@@ -14,13 +14,15 @@ import argparse
 import importlib
 
 COMMAND = "run"
-HELP = "run one node (belief_tracker, hierarchical_policy, action_executor) with --ros-args"
+HELP = "run one node (belief_tracker, hierarchical_policy, action_executor, landmark_detector, guide_pace) with --ros-args"
 
 #: Node executables of this package → module holding their ``main``.
 NODES = {
     "belief_tracker": "pearl_pomdp.nodes.belief_tracker",
     "hierarchical_policy": "pearl_pomdp.nodes.hierarchical_policy",
     "action_executor": "pearl_pomdp.nodes.action_executor",
+    "landmark_detector": "pearl_pomdp.nodes.landmark_detector",
+    "guide_pace": "pearl_pomdp.nodes.guide_pace",
 }
 
 

@@ -9,10 +9,16 @@ Episodes start from b0, track the belief with eq. 5 and sum ``γ^t R[s_t, a_t]``
 --json prints one object: mean, ci95 (half width of the 95 % confidence interval of the
 mean, 1.96·s/√N), episodes, steps, seed, std, min, max, interval ([mean − ci95, mean + ci95]),
 seconds. Default --steps: until γ^T < 1e-3 (135 for γ = 0.95).
+
+Examples:
+  pearl solve config/table4.domain.yaml --time-limit 5 --out table4.npz
+  pearl simulate config/table4.domain.yaml table4.npz --episodes 200 --json
 """
 from __future__ import annotations
 
 import argparse
+
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
 
 COMMAND = "simulate"
 HELP = "mean discounted return of a saved policy, with a 95% confidence interval"
@@ -33,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="steps per episode (default: until γ^T < 1e-3)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
+    add_progress_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,10 +48,12 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.policy_io import load_policy
     from pearl_pomdp.simulate import simulate
 
-    model = load_model(args.model)
-    policy = load_policy(args.policy, model)
+    from pearl_pomdp.cli._inputs import require_file
+
+    model = load_model(require_file(args.model, "model file (.pomdp, .pomdpx or domain .yaml)"))
+    policy = load_policy(require_file(args.policy, "policy file (.npz from `pearl solve --out`)"), model)
     result = simulate(model, policy, episodes=args.episodes, steps=args.steps, seed=args.seed,
-                      progress=not args.quiet)
+                      progress=show_progress(args))
     result.pop("returns")
     result = {"model": model.name, "policy": str(args.policy), **result}
     if args.json:

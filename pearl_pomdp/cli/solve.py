@@ -18,7 +18,12 @@ Default method: incprune when --horizon is given or the model is tiny
 --json prints one object: states, actions, observations, method, value_at_start (the
 policy's value at b0; a lower bound for pointbased), upper_bound (null if none),
 alpha_vectors, iterations, seconds, converged, and for incprune vectors_per_epoch.
-Progress goes to stderr (tqdm); --quiet turns it off.
+Examples:
+  pearl solve config/table4.domain.yaml --time-limit 5 --out table4.npz
+  pearl solve config/table4.domain.yaml --method qmdp --json
+
+Progress (tqdm) goes to stderr when it is a terminal and --json is not given; --progress
+forces it, --quiet turns it off.
 """
 from __future__ import annotations
 
@@ -26,6 +31,7 @@ import argparse
 import math
 import sys
 
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.solvers.registry import solver_names
 
@@ -65,7 +71,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="POLICY", default=None,
                         help="save the policy: POLICY (.npz) plus its JSON header beside it")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
+    add_progress_arguments(parser)
 
 
 def default_method(model, horizon=None) -> str:
@@ -112,10 +118,12 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.cli import print_json
     from pearl_pomdp.model import load_model
 
-    model = load_model(args.model)
+    from pearl_pomdp.cli._inputs import require_file
+
+    model = load_model(require_file(args.model, "model file (.pomdp, .pomdpx or domain .yaml)"))
     method = args.method or default_method(model, args.horizon)
     result = solve(model, method, horizon=args.horizon, epsilon=args.epsilon, time_limit=args.time_limit,
-                   seed=args.seed, progress=not args.quiet)
+                   seed=args.seed, progress=show_progress(args))
     info = summary(model, result)
     if args.horizon is not None:
         info["horizon"] = args.horizon

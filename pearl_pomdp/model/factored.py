@@ -56,7 +56,7 @@ KEEP = "keep"
 ROW_TOLERANCE = 1e-6
 #: Top-level keys a domain file may have.
 TOP_KEYS = ("name", "discount", "description", "features", "start", "modalities", "keywords",
-            "defaults", "actions", "observations", "rewards", "horizon")
+            "defaults", "actions", "observations", "rewards", "horizon", "fitted")
 
 
 # ====================================================================== public data types
@@ -467,6 +467,8 @@ class _Builder:
             spec = actions_node[a]
             transitions.append(self.build_action(a, spec, actions_node, default_effects, categories))
         observations = self.build_observations(d["observations"], d)
+        if d.get("fitted") is not None:
+            self.apply_fitted(d["fitted"], d, transitions, observations)
         rewards = self.build_rewards(d["rewards"], d)
         start = self.build_start(d.get("start"), d)
         explicit = self.build_explicit_start(d.get("start"), d)
@@ -478,6 +480,53 @@ class _Builder:
             _transitions=transitions, _observations=observations, _start=start, _start_explicit=explicit, horizon=horizon,
             description=str(description or ""), categories=categories,
         )
+
+    def apply_fitted(self, node: Any, parent: Any, transitions: List[List[_Cpt]], observations: List[_Cpt]) -> None:
+        """``fitted:`` (written by ``pearl fit``): rows that replace rows of the tables above.
+
+        ``transitions: {Action: {Feature: {"v1,v2": {value: p}}}}`` and
+        ``observations: {Action: {"v1,v2": {symbol: p}}}``; a row key lists the values of the
+        table's parents in their order (``"*"`` for a table without parents).
+        """
+        node = self.need_map(node, "fitted", parent, "fitted")
+        for kind in node:
+            if kind not in ("transitions", "observations"):
+                raise self.fail(f"fitted.{kind}", "unknown key; expected transitions or observations", node, kind)
+        for kind, tables in node.items():
+            tables = self.need_map(tables, f"fitted.{kind}", node, kind)
+            for action, spec in tables.items():
+                where = f"fitted.{kind}.{action}"
+                if action not in self.actions:
+                    raise self.fail(where, f"unknown action {action!r}", tables, action)
+                a = self.actions.index(action)
+                spec = self.need_map(spec, where, tables, action)
+                if kind == "observations":
+                    observations[a] = self.fitted_rows(observations[a], spec, where, self.symbols, "observation symbol")
+                    continue
+                for feature, rows in spec.items():
+                    if feature not in self.fnames:
+                        raise self.fail(f"{where}.{feature}", f"unknown feature {feature!r}", spec, feature)
+                    f = self.fnames.index(feature)
+                    rows = self.need_map(rows, f"{where}.{feature}", spec, feature)
+                    transitions[a] = list(transitions[a])
+                    transitions[a][f] = self.fitted_rows(transitions[a][f], rows, f"{where}.{feature}",
+                                                         list(self.features[f].values), "value")
+
+    def fitted_rows(self, cpt: _Cpt, rows: dict, where: str, values: List[str], noun: str) -> _Cpt:
+        table = np.array(cpt.table, dtype=float)   # a copy: tables may be shared between actions
+        for key, dist in rows.items():
+            rwhere = f"{where}[{key}]"
+            parts = [] if str(key) == "*" else [p.strip() for p in str(key).split(",")]
+            if len(parts) != len(cpt.parents):
+                names = ", ".join(self.fnames[p] for p in cpt.parents) or "none (write \"*\")"
+                raise self.fail(rwhere, f"a row key lists one value per parent; parents: {names}", rows, key)
+            combo = []
+            for p, v in zip(cpt.parents, parts):
+                if v not in self.features[p].values:
+                    raise self.fail(rwhere, f"unknown value {v!r} of parent {self.fnames[p]}", rows, key)
+                combo.append(self.features[p].values.index(v))
+            table[tuple(combo)] = self.dist_row(dist, values, rwhere, rows, key, allow_keep=False, noun=noun)
+        return _Cpt(cpt.parents, table, cpt.why)
 
     def build_features(self, node: Any) -> List[StateFeature]:
         node = self.need_map(node, "features", self.data, "features")

@@ -234,8 +234,30 @@ class _Parser:
                 parts.append(":")
             else:
                 parts.append(t)
-        s = " ".join(parts).replace(" :", ":")
+        # "T: lisen" fails at "lisen": the field is "T", not "T:" (the message adds ": ").
+        s = " ".join(parts).replace(" :", ":").rstrip(":")
         return s if len(s) <= 80 else s[:77] + "..."
+
+    def row_token(self, k0: int, s: int, width: int) -> int:
+        """The first token of row ``s`` written by the T/O statement at token ``k0``.
+
+        ``T: a`` / ``O: a`` followed by numbers is a matrix whose row ``s`` starts ``s·width``
+        numbers in; ``T: a : s`` / ``O: a : s`` followed by numbers is that one row. Any other
+        form (points, ``uniform``, ``identity``) has no row of its own: its first token.
+        """
+        toks = self.toks
+        if k0 + 3 >= self.n:
+            return k0
+        if toks[k0 + 3] != ":":
+            first = k0 + 3
+            offset = s * width
+        elif k0 + 5 < self.n and toks[k0 + 5] != ":":
+            first, offset = k0 + 5, 0
+        else:
+            return k0
+        if toks[first][0] not in _DIGITS and toks[first][0] not in "+-.":
+            return k0
+        return min(first + offset, self.n - 1)
 
     def expect_colon(self, k0: int):
         if self.toks[self.i] != ":":
@@ -831,8 +853,9 @@ class _Parser:
             if last_seq < 0:
                 self.fail(None, where, f"row sums to 0: no {label} entries for this action and state "
                           f"({bad.size} such row{'s' if bad.size != 1 else ''} in all)")
-            self.fail(self.ev_tok[last_seq], where, f"row sums to {sums[r]:.9g}, expected 1 (tolerance {SUM_TOLERANCE:g}; "
-                      f"line of the last {label} statement for this row)")
+            self.fail(self.row_token(self.ev_tok[last_seq], s, K), where,
+                      f"row sums to {sums[r]:.9g}, expected 1 (tolerance {SUM_TOLERANCE:g}; "
+                      f"line of the row in the last {label} statement for it)")
         nz = val != 0.0
         key, val, row_of = key[nz], val[nz], row_of[nz]
         fix = np.abs(sums - 1.0) > RENORMALISE_ABOVE

@@ -1,8 +1,12 @@
 """The action executor node: primitive actions → speech, screen and navigation goals.
 
-What each action does is configuration (``config/pearl_nodes.yaml``), not code: per action a
-sentence to say, a text to display and a named navigation goal; the named locations are
-poses in the map frame.
+What each action does is configuration, not code: per action a sentence to say, a text to
+display and a named place to drive to; the places are poses in the map frame. The defaults
+of all of it come from the package's params file (``config/pearl_nodes.yaml``, see
+:mod:`pearl_pomdp.nodes.defaults`); this module names no action of any domain.
+
+A drive is a ``geometry_msgs/PoseStamped`` on ``/goal_pose``: what Nav2's BT navigator and
+RViz's "2D Goal Pose" use, so the executor drives a Nav2 robot unchanged.
 """
 from __future__ import annotations
 
@@ -10,19 +14,16 @@ import datetime
 import sys
 from typing import Dict, List, Optional
 
+from rclpy.parameter import Parameter
 
 from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS, NodeSetupError, Param, PearlNode, run_node
+from pearl_pomdp.nodes.defaults import FileDefaults
 
-__all__ = ["ActionExecutorNode", "PEARL_ACTIONS", "main"]
+__all__ = ["ActionExecutorNode", "ACTION_FIELDS", "main"]
 
-#: The 19 primitive actions of the Pearl domain (DESIGN.md §5), the default ``action_names``.
-PEARL_ACTIONS = [
-    "RemindPhysioAppt", "RemindVitamin", "UpdateChecklist", "CheckUserPresent", "TerminateGuidance",
-    "TellTime", "TellWeather", "ConfirmGuideToPhysio", "VerifyInfoRequest", "ConfirmWantTime",
-    "ConfirmWantWeather", "ConfirmGoHome", "ConfirmDone", "GotoPatientRoom", "GuideToPhysio", "GoHome",
-    "DoNothing", "RingDoorBell", "RechargeBattery",
-]
+#: What an action can do; ``actions.<Action>.<field>`` parameters.
+ACTION_FIELDS = ("say", "display", "goal")
 
 
 class _Template(dict):
@@ -33,8 +34,12 @@ class _Template(dict):
 class ActionExecutorNode(PearlNode):
     """Executes primitive actions by publishing what the robot says, shows and where it drives.
 
-    Parameters (read-only):
-        * ``action_names`` (str[]): the actions to configure (default: the 19 Pearl actions).
+    Parameters (read-only; defaults from ``defaults_file``, see :mod:`pearl_pomdp.nodes.defaults`):
+        * ``defaults_file`` (str): params file whose ``/**`` and ``action_executor`` sections
+          give the defaults below (default ``config/pearl_nodes.yaml``; ``''``: none, and
+          then nothing is configured unless given).
+        * ``action_names`` (str[]): the actions to configure; an action on ``/pearl/action``
+          that is not listed is counted and warned about, never executed.
         * ``actions.<Action>.say`` (str): sentence for speech synthesis; ``{time}`` is replaced
           by the node clock's time (HH:MM, UTC), ``{action}`` by the action name; empty: silent.
         * ``actions.<Action>.display`` (str): text for the touchscreen (same fields); empty: none.
@@ -42,7 +47,8 @@ class ActionExecutorNode(PearlNode):
         * ``location_names`` (str[]): named places; ``locations.<name>`` (double[3]) is x, y (m),
           yaw (rad) in ``frame_id``.
         * ``frame_id`` (str): frame of the goals (``map``).
-        * ``action_topic``, ``say_topic``, ``display_topic``, ``nav_goal_topic`` (str): topic names.
+        * ``action_topic``, ``say_topic``, ``display_topic``, ``goal_topic`` (str): topic names.
+        * ``diagnostics_period`` (double, 0.01–3600 s).
         * ``use_sim_time`` (bool): follow /clock (stamps of goals, ``{time}``).
 
     Subscribers:
@@ -51,59 +57,73 @@ class ActionExecutorNode(PearlNode):
 
     Publishers:
         * ``/pearl/say``, ``/pearl/display`` (std_msgs/String).
-        * ``/pearl/nav_goal`` (geometry_msgs/PoseStamped, TRANSIENT_LOCAL depth 1: navigation
-          started late still gets the current goal).
+        * ``/goal_pose`` (geometry_msgs/PoseStamped in ``frame_id``, reliable, TRANSIENT_LOCAL
+          depth 1: a navigator started late still gets the current goal; Nav2's volatile
+          subscription matches it).
         * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): executed and unknown actions.
 
     In-process use: ``ActionExecutorNode(context=ctx, parameter_overrides={"action_names": [...],
     "actions.Go.goal": "home", ...})``. :attr:`executed` counts actions per name.
 
     Raises:
-        NodeSetupError: a goal names an unknown location, or a location is not [x, y, yaw].
+        NodeSetupError: a goal names an unknown location, a location is not [x, y, yaw], the
+            defaults file has a value of the wrong type or an ``actions.<A>.<field>`` other
+            than say/display/goal.
     """
 
     DEFAULT_NAME = "action_executor"
     PARAMETERS = (
-        Param("action_names", list(PEARL_ACTIONS), "Primitive actions this executor is configured for"),
-        Param("location_names", ["home", "room", "physio"], "Named navigation goals (see locations.<name>)"),
+        Param("action_names", [], "Primitive actions this executor is configured for",
+              type=Parameter.Type.STRING_ARRAY),
+        Param("location_names", [], "Named navigation goals (see locations.<name>)", type=Parameter.Type.STRING_ARRAY),
         Param("frame_id", "map", "Frame of the navigation goals"),
         Param("action_topic", "/pearl/action", "Primitive action input (std_msgs/String)"),
         Param("say_topic", "/pearl/say", "Sentences to speak (std_msgs/String)"),
         Param("display_topic", "/pearl/display", "Touchscreen text (std_msgs/String)"),
-        Param("nav_goal_topic", "/pearl/nav_goal", "Navigation goals (geometry_msgs/PoseStamped)"),
+        Param("goal_topic", "/goal_pose", "Navigation goals (geometry_msgs/PoseStamped, Nav2's goal topic)"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
     )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self.params = p = self.declare_table(self.PARAMETERS)
+        defaults = FileDefaults(self)
+        self.params = p = self.declare_table(defaults.apply(self.PARAMETERS))
         self.locations: Dict[str, List[float]] = {}
         for name in p["location_names"]:
-            pose = self.declare_table([Param(f"locations.{name}", [0.0, 0.0, 0.0],
-                                             f"Pose of {name}: x, y (m), yaw (rad) in frame_id")])[f"locations.{name}"]
+            table = [Param(f"locations.{name}", [0.0, 0.0, 0.0], f"Pose of {name}: x, y (m), yaw (rad) in frame_id")]
+            pose = self.declare_table(defaults.apply(table))[f"locations.{name}"]
             if len(pose) != 3:
                 raise NodeSetupError(f"parameter locations.{name}: expected [x, y, yaw], got {list(pose)}")
             self.locations[name] = [float(v) for v in pose]
+        for key in defaults.under("actions"):
+            action, _, field = key.rpartition(".")
+            if field not in ACTION_FIELDS:
+                raise NodeSetupError(f"{defaults.path}: {defaults.section}.actions.{key}: unknown field {field!r} "
+                                     f"(expected one of {', '.join(ACTION_FIELDS)})")
         self.behaviour: Dict[str, Dict[str, str]] = {}
         for action in p["action_names"]:
             table = [Param(f"actions.{action}.say", "", f"What the robot says for {action}"),
                      Param(f"actions.{action}.display", "", f"What the screen shows for {action}"),
                      Param(f"actions.{action}.goal", "", f"Location the robot drives to for {action}")]
-            values = self.declare_table(table)
+            values = self.declare_table(defaults.apply(table))
             goal = values[f"actions.{action}.goal"]
             if goal and goal not in self.locations:
                 raise NodeSetupError(f"parameter actions.{action}.goal: unknown location {goal!r} "
                                      f"(location_names: {', '.join(self.locations) or 'none'})")
-            self.behaviour[action] = {k: values[f"actions.{action}.{k}"] for k in ("say", "display", "goal")}
+            self.behaviour[action] = {k: values[f"actions.{action}.{k}"] for k in ACTION_FIELDS}
         self.executed: Dict[str, int] = {}
         self.unknown = 0
         self.say_pub = self.create_publisher(cv.TextMsg, p["say_topic"], EVENT_QOS)
         self.display_pub = self.create_publisher(cv.TextMsg, p["display_topic"], EVENT_QOS)
-        self.goal_pub = self.create_publisher(cv.PoseMsg, p["nav_goal_topic"], LATCHED_QOS)
+        self.goal_pub = self.create_publisher(cv.PoseMsg, p["goal_topic"], LATCHED_QOS)
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self.create_subscription(cv.TextMsg, p["action_topic"], self._on_action, EVENT_QOS)
         self.create_timer(p["diagnostics_period"], self.publish_diagnostics)
-        self.get_logger().info(f"executing {len(self.behaviour)} actions; locations: {', '.join(self.locations)}")
+        if not self.behaviour:
+            self.get_logger().warning("no action configured (action_names is empty): every action will be "
+                                      "counted as unknown")
+        self.get_logger().info(f"executing {len(self.behaviour)} actions; locations: "
+                               f"{', '.join(self.locations) or 'none'}; goals on {p['goal_topic']}")
 
     def _fields(self, action: str) -> _Template:
         now = datetime.datetime.fromtimestamp(self.now_s(), tz=datetime.timezone.utc)
@@ -114,8 +134,10 @@ class ActionExecutorNode(PearlNode):
         spec = self.behaviour.get(action)
         if spec is None:
             self.unknown += 1
+            # At most one line a second: a stream of foreign actions must not become a log flood
+            # (every one is counted on /diagnostics).
             self.get_logger().warning(f"unknown action {action!r}: not in action_names; nothing executed "
-                                      f"(unknown actions: {self.unknown})")
+                                      f"(unknown actions: {self.unknown})", throttle_duration_sec=1.0)
             self.publish_diagnostics()
             return
         self.executed[action] = self.executed.get(action, 0) + 1

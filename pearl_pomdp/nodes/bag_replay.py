@@ -48,6 +48,7 @@ from pearl_pomdp.errors import PearlError
 
 INPUT_TOPICS = ("/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder")
 ACTION_TOPIC = "/pearl/action"
+DECISION_TOPIC = "/pearl/decision"
 #: custom_data keys of a replayable bag.
 KEY_DOMAIN, KEY_POLICY, KEY_TRACKER = "pearl.domain", "pearl.policy", "pearl.tracker_params"
 
@@ -80,13 +81,19 @@ class ReplayResult:
     first_mismatch: Optional[int] = None
     counters: Dict[str, int] = field(default_factory=dict)
     clock_skipped: int = 0
+    explanation: Optional[List[Dict[str, Any]]] = None
+    divergence: Optional[Dict[str, Any]] = None
 
     def to_dict(self) -> Dict[str, Any]:
-        return {"bag": self.bag, "match": self.match, "actions": self.actions,
-                "expected_actions": self.expected_actions, "first_mismatch": self.first_mismatch,
-                "messages": self.messages, "fed": self.fed, "seconds": round(self.seconds, 6),
-                "messages_per_second": round(self.messages_per_second, 1), "clock_skipped": self.clock_skipped,
-                "counters": self.counters}
+        out = {"bag": self.bag, "match": self.match, "actions": self.actions,
+               "expected_actions": self.expected_actions, "first_mismatch": self.first_mismatch,
+               "messages": self.messages, "fed": self.fed, "seconds": round(self.seconds, 6),
+               "messages_per_second": round(self.messages_per_second, 1), "clock_skipped": self.clock_skipped,
+               "counters": self.counters}
+        if self.explanation is not None:
+            out["steps"] = self.explanation
+            out["divergence"] = self.divergence
+        return out
 
 
 def _string_data(data: bytes) -> str:
@@ -171,9 +178,56 @@ def _graph_options() -> Dict[str, Any]:
     return {"parameter_services": False} if "parameter_services" in inspect.signature(PearlGraph).parameters else {}
 
 
+def _recorded_decisions(reader: BagReader) -> List[Dict[str, Any]]:
+    """The ``/pearl/decision`` JSON messages of the bag (empty when not recorded or unreadable)."""
+    if DECISION_TOPIC not in reader.topics:
+        return []
+    out = []
+    for m in reader.read_messages([DECISION_TOPIC]):
+        try:
+            out.append(json.loads(_string_data(m.data)))
+        except (ValueError, UnicodeDecodeError):
+            out.append({})
+    return out
+
+
+def _top_marginals(marginals: Dict[str, Dict[str, float]]) -> Dict[str, List[Any]]:
+    """Per feature its most probable value and that probability."""
+    out = {}
+    for feature, values in marginals.items():
+        value, p = max(values.items(), key=lambda kv: kv[1])
+        out[feature] = [value, round(float(p), 4)]
+    return out
+
+
+def explain_steps(history, decisions: List[Dict[str, Any]], marginals_of) -> List[Dict[str, Any]]:
+    """Why each action was taken: per closed step, what closed it, the belief after, and the
+    EXECUTE trace (with values) of the decision that answered that belief.
+
+    Args:
+        history: the tracker's closed :class:`~pearl_pomdp.tracking.StepResult` s, in order.
+        decisions: the policy's ``/pearl/decision`` objects (decision 0 answers ``b0``).
+        marginals_of: belief → ``{feature: {value: p}}``.
+    """
+    steps = []
+    if decisions:
+        steps.append({"step": 0, "closed_by": None, "belief": None,
+                      "decision": {"action": decisions[0].get("action"), "trace": decisions[0].get("trace", [])}})
+    for k, r in enumerate(history, start=1):
+        d = decisions[k] if k < len(decisions) else {}
+        steps.append({
+            "step": k, "time": round(r.time, 6), "action": r.action,
+            "closed_by": {"input": r.source, "text": r.text, "symbol": r.observation,
+                          "confidence": r.confidence, "zero_likelihood": r.zero_likelihood},
+            "belief": _top_marginals(marginals_of(r.belief)),
+            "decision": {"action": d.get("action"), "trace": d.get("trace", [])},
+        })
+    return steps
+
+
 def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: Optional[str] = None,
                domain_id: Optional[int] = None, step_timeout_s: float = 10.0, progress: bool = False,
-               coalesce_clock: bool = True) -> ReplayResult:
+               coalesce_clock: bool = True, explain: bool = False) -> ReplayResult:
     """Replay ``path`` (bag directory or .mcap) and compare the actions; see the module doc.
 
     Args:
@@ -184,6 +238,9 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
         coalesce_clock: skip a /clock that is followed by another /clock before any input
             and before the next node timer falls due (see the module doc); ``False`` feeds
             every /clock.
+        explain: also say why (:func:`explain_steps`: per step the input that closed it, the
+            belief after, the EXECUTE trace with its values) and where replay and recording
+            first differ, with both traces when the bag recorded ``/pearl/decision``.
 
     Raises:
         BagError / PearlError: unreadable, truncated or wrong-typed bag; missing configuration.
@@ -213,6 +270,10 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
         driver = SimClockDriver(graph, wait_s=step_timeout_s)
         actions = driver.actions
         node = driver.node
+        decisions: List[Dict[str, Any]] = []
+        if explain:
+            graph.tracker.core.keep_history()
+            node.create_subscription(String, DECISION_TOPIC, lambda m: decisions.append(json.loads(m.data)), 1000)
         pubs = {t: node.create_publisher(String, t, EVENT_QOS) for t in INPUT_TOPICS if t in reader.topics}
         driver.wait_until_matched(list(pubs.values()))
 
@@ -259,6 +320,10 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
             driver.set_time(pending[1], raw=pending[0])
             fed += 1
         tracker = graph.tracker
+        explanation = None
+        if explain:
+            driver.wait(lambda: len(decisions) >= graph.policy.decisions, "the decision traces")
+            explanation = explain_steps(list(tracker.core.history or []), decisions, tracker.core.marginals)
         seconds = time.perf_counter() - start
         if bar is not None:
             bar.close()
@@ -268,7 +333,19 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
     mismatch = next((i for i, (a, b) in enumerate(zip(actions, expected)) if a != b), None)
     if mismatch is None and len(actions) != len(expected):
         mismatch = min(len(actions), len(expected))
+    divergence = None
+    if explain and mismatch is not None:
+        recorded = _recorded_decisions(reader)
+        divergence = {"action_index": mismatch,
+                      "replayed": actions[mismatch] if mismatch < len(actions) else None,
+                      "recorded": expected[mismatch] if mismatch < len(expected) else None,
+                      "replayed_trace": (explanation[mismatch]["decision"]["trace"]
+                                         if explanation and mismatch < len(explanation) else None),
+                      "recorded_trace": (recorded[mismatch].get("trace") if mismatch < len(recorded) else None),
+                      "closed_by": (explanation[mismatch]["closed_by"]
+                                    if explanation and mismatch < len(explanation) else None)}
     return ReplayResult(bag=str(path), actions=actions, expected_actions=expected, match=actions == expected,
                         messages=messages, fed=fed, seconds=seconds,
                         messages_per_second=messages / seconds if seconds > 0 else 0.0,
-                        first_mismatch=mismatch, counters=counters, clock_skipped=skipped)
+                        first_mismatch=mismatch, counters=counters, clock_skipped=skipped,
+                        explanation=explanation, divergence=divergence)

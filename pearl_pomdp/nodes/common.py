@@ -6,7 +6,7 @@
   checks types and ranges of ``--ros-args -p`` / ``--params-file`` overrides.
 * :func:`run_node` — the body of every node's ``main``: init, build the node (a bad
   parameter or a missing file prints **one line** ``<node>: error: …`` and exits 2), spin,
-  and exit 0 on SIGINT and SIGTERM.
+  and exit 0 on SIGINT and SIGTERM within :data:`SHUTDOWN_DEADLINE` s, in every phase.
 * :func:`resolve_path` — a relative file parameter is looked up in the working directory,
   then in the package's share directory (``config/pearl.domain.yaml`` works from the source
   tree, from a pip install and from a colcon install).
@@ -17,7 +17,10 @@ Nodes built in one process (tests, replay, ``pearl_pomdp.nodes.graph``) pass
 """
 from __future__ import annotations
 
+import os
+import signal
 import sys
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Type
@@ -27,13 +30,14 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.utilities import get_default_context
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.launch_xml import package_share_dir
 
 __all__ = ["Param", "PearlNode", "NodeSetupError", "run_node", "resolve_path", "load_domain_and_model",
-           "LATCHED_QOS", "EVENT_QOS", "INPUT_QOS"]
+           "LATCHED_QOS", "EVENT_QOS", "INPUT_QOS", "SHUTDOWN_DEADLINE"]
 
 #: Reliable, keep-last 1, TRANSIENT_LOCAL: the latest belief / action reaches a late joiner
 #: (the policy started after the tracker published b0; a test probe started late).
@@ -182,42 +186,176 @@ def _one_line(err: BaseException) -> str:
     return " ".join(text.split())
 
 
+#: Seconds from the first SIGINT/SIGTERM to the end of the process, whatever it is doing then
+#: (starting up, spinning, or stuck in rclpy/Fast DDS clean-up). See :func:`run_node`.
+SHUTDOWN_DEADLINE = 1.5
+#: Extra seconds before the kernel ends the process (SIGALRM) when the Python watchdog thread
+#: cannot run because the main thread holds the interpreter in C code.
+SHUTDOWN_BACKSTOP = 0.3
+#: Exit code of a node whose clean-up did not finish within :data:`SHUTDOWN_DEADLINE`.
+EXIT_FORCED = 1
+
+
+class _StopSignals:
+    """SIGINT/SIGTERM handling for :func:`run_node`: a stop request with a deadline.
+
+    Installed *before* ``rclpy.init``: rclpy's own handlers (which shut the context down and
+    wake the executor) chain to these Python handlers. The first signal
+
+    * arms a watchdog: after :data:`SHUTDOWN_DEADLINE` s a thread writes one line and calls
+      ``os._exit(EXIT_FORCED)``; :data:`SHUTDOWN_BACKSTOP` s later ``SIGALRM`` (default
+      action: terminate) ends the process from the kernel, in case the main thread holds the
+      GIL in C code and the thread never runs;
+    * during start-up, raises ``KeyboardInterrupt`` in the main thread, so a long start-up
+      (planning a policy) stops at once instead of finishing first. While the executor
+      spins it raises nothing: rclpy's handler has shut the context down and woken the
+      executor, and ``spin()`` returns by itself (an exception raised inside rclpy's
+      executor machinery leaves half-built objects behind, e.g. a ``Task`` whose
+      ``__del__`` then prints a traceback).
+
+    Later signals are ignored: the clean-up that is running is not interrupted (the watchdog
+    bounds it).
+    """
+
+    def __init__(self, prog: str):
+        self.prog = prog
+        self.signum: Optional[int] = None
+        self.cleaning_up = False
+        self.spinning = False
+        self._timer: Optional[threading.Timer] = None
+        self._previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+        for s in self._previous:
+            signal.signal(s, self._on_signal)
+
+    def _on_signal(self, signum, _frame) -> None:
+        if self.signum is not None:
+            return
+        self.signum = signum
+        self._arm()
+        if not (self.cleaning_up or self.spinning):
+            raise KeyboardInterrupt
+
+    def _arm(self) -> None:
+        if self._timer is not None:
+            return
+        self._timer = threading.Timer(SHUTDOWN_DEADLINE, self._force_exit)
+        self._timer.daemon = True
+        self._timer.start()
+        signal.signal(signal.SIGALRM, signal.SIG_DFL)
+        signal.setitimer(signal.ITIMER_REAL, SHUTDOWN_DEADLINE + SHUTDOWN_BACKSTOP)
+
+    def _force_exit(self) -> None:  # pragma: no cover - runs only when clean-up hangs
+        why = signal.Signals(self.signum).name if self.signum else "shutdown"
+        line = (f"{self.prog}: error: clean-up did not finish within {SHUTDOWN_DEADLINE} s of {why}; "
+                f"exiting without it (exit code {EXIT_FORCED})\n")
+        try:
+            os.write(2, line.encode())
+        finally:
+            os._exit(EXIT_FORCED)
+
+    def begin_cleanup(self) -> None:
+        """Clean-up starts: from now on it is bounded by the deadline, signal or not."""
+        self.cleaning_up = True
+        self._arm()
+
+    def close(self) -> None:
+        """Clean-up finished in time: stop the watchdog thread and restore the previous handlers.
+
+        After a stop signal the SIGALRM backstop stays armed until :func:`run_node` ends the
+        process. Without a signal (a start-up error, an in-process caller) it is disarmed.
+        """
+        if self.signum is None:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+        if self._timer is not None:
+            self._timer.cancel()
+        for s, handler in self._previous.items():
+            signal.signal(s, handler)
+
+
 def run_node(node_class: Type[PearlNode], args: Optional[List[str]] = None) -> int:
     """``main`` of a node: ``rclpy.init(args)``, build, spin; returns the exit code.
 
-    * 0 after SIGINT or SIGTERM (rclpy's handlers shut the context down; spin returns).
+    * 0 after SIGINT or SIGTERM, also during start-up (a policy being planned stops at once).
     * 2 when the node cannot start: one line ``<node>: error: <what and where>`` on stderr.
+    * Shutdown is bounded: the executor is shut down *before* the node is destroyed (an
+      executor that still holds the node's entities makes ``Node.destroy_node`` spin in
+      ``destroy_when_not_in_use``), and the whole clean-up must finish within
+      :data:`SHUTDOWN_DEADLINE` s of the signal — otherwise one line on stderr and exit code
+      :data:`EXIT_FORCED` (1), or SIGALRM :data:`SHUTDOWN_BACKSTOP` s later.
+    * After a stop signal this function does not return: once the clean-up is done it ends
+      the process (``os._exit`` with the exit code, stdout/stderr flushed), skipping the
+      interpreter's finalisation. Without a signal (a start-up error) it returns the code.
     """
     args = list(sys.argv if args is None else args)
     prog = node_class.DEFAULT_NAME
+    stop = _StopSignals(prog)
+    try:
+        code = _init_spin_and_clean_up(node_class, args, prog, stop)
+    finally:
+        stop.close()
+    if stop.signum is not None:
+        # Stopped by a signal and cleaned up (node, context and DDS participant destroyed):
+        # end the process here. The interpreter's finalisation has nothing left that matters
+        # and, on a loaded machine, can take longer than the rest of the shutdown.
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
+    return code
+
+
+def _init_spin_and_clean_up(node_class: Type[PearlNode], args: List[str], prog: str, stop: _StopSignals) -> int:
     try:
         rclpy.init(args=args)
+    except KeyboardInterrupt:
+        return 0
     except Exception as err:  # bad --ros-args syntax: rcl explains it in one line
         print(f"{prog}: error: {_one_line(err)}", file=sys.stderr)
         return 2
     node = None
+    executor = None
     try:
         # The executor exists before the node, so a signal during a long start-up (planning)
-        # meets a complete setup; rclpy's handlers shut the context down and spin() returns.
+        # meets a complete setup; the signal raises KeyboardInterrupt in the start-up code.
         executor = SingleThreadedExecutor()
         try:
             node = node_class()
         except (PearlError, rclpy.exceptions.ParameterException, ValueError, OSError) as err:
-            if not rclpy.ok():
+            if not rclpy.ok() or stop.signum is not None:
                 return 0  # stopped while starting; the error is a consequence
             print(f"{prog}: error: {_one_line(err)}", file=sys.stderr)
             return 2
         executor.add_node(node)
-        executor.spin()
+        if stop.signum is None:  # a signal between the node's last line and here: do not spin
+            stop.spinning = True
+            executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
-        if rclpy.ok():
+        if rclpy.ok() and stop.signum is None:
             raise
         # SIGINT/SIGTERM arrived between two start-up steps and invalidated the context:
         # a normal stop, not an error.
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        stop.begin_cleanup()
+        try:
+            if executor is not None:
+                executor.shutdown(timeout_sec=0.5)  # releases the entities it was waiting on
+            if node is not None:
+                node.destroy_node()
+            context = get_default_context()
+            rclpy.try_shutdown()
+            # After a signal rclpy's handler has shut the context down, so try_shutdown() did
+            # not finalise logging: do it (flushes the log file), as Context.shutdown would.
+            logging_fini = getattr(context, "_logging_fini", None)
+            if logging_fini is not None and getattr(context, "_logging_initialized", False):
+                with context._lock:
+                    logging_fini()
+            # Delete the DDS participant now, inside the bounded clean-up (peers see the node
+            # leave at once), not later in the interpreter's finalisation.
+            context.destroy()
+        except KeyboardInterrupt:  # pragma: no cover - a signal from outside rclpy's handlers
+            pass
     return 0

@@ -23,6 +23,10 @@ Wire formats (all message types come from common_interfaces):
   the beliefs this policy node answered before (0 for ``b0``), ``latency_s`` is belief
   received → action published (wall clock).
 * **nav goal** — ``geometry_msgs/PoseStamped`` (position x, y; orientation from yaw).
+* **localised pose** — ``geometry_msgs/PoseWithCovarianceStamped`` (``/amcl_pose``) or
+  ``nav_msgs/Odometry`` (``/odom``): planar x, y, yaw and the x/y standard deviation.
+* **velocity** — ``geometry_msgs/Twist`` (``/cmd_vel_nav``, ``/cmd_vel``): linear.x, angular.z.
+* **person** — ``geometry_msgs/PointStamped`` in the robot's base frame (x forward, y left).
 * **diagnostics** — ``diagnostic_msgs/DiagnosticArray`` with one ``DiagnosticStatus``
   whose ``values`` are the node's counters.
 """
@@ -37,6 +41,8 @@ import numpy as np
 from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Twist
+from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
@@ -231,3 +237,77 @@ def msg_to_diagnostics(msg: DiagnosticArray) -> Dict[str, dict]:
         out[st.name] = {"level": level, "message": st.message,
                         "values": {kv.key: kv.value for kv in st.values}}
     return out
+
+
+# --------------------------------------------- localisation, velocity, people (issue 14)
+#: ``/amcl_pose`` (Nav2 AMCL), ``/odom``, ``/cmd_vel_nav`` → ``/cmd_vel``, people tracker.
+LocalisedPoseMsg = PoseWithCovarianceStamped
+OdometryMsg = Odometry
+TwistMsg = Twist
+PointMsg = PointStamped
+__all__ += ["LocalisedPoseMsg", "OdometryMsg", "TwistMsg", "PointMsg", "localised_pose_to_msg",
+            "msg_to_planar_pose", "twist_to_msg", "msg_to_twist", "point_to_msg", "msg_to_point"]
+
+
+def _yaw(q) -> float:
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def localised_pose_to_msg(x: float, y: float, yaw: float, frame_id: str, stamp_s: float,
+                          stddev: float = 0.0) -> PoseWithCovarianceStamped:
+    """A planar pose as AMCL publishes it; ``stddev`` (m) on x and y, the rest of the covariance 0."""
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = seconds_to_time(stamp_s)
+    msg.pose.pose.position.x = float(x)
+    msg.pose.pose.position.y = float(y)
+    msg.pose.pose.orientation.z = math.sin(yaw / 2.0)
+    msg.pose.pose.orientation.w = math.cos(yaw / 2.0)
+    cov = [0.0] * 36
+    cov[0] = cov[7] = float(stddev) ** 2
+    msg.pose.covariance = cov
+    return msg
+
+
+def msg_to_planar_pose(msg) -> Dict[str, float]:
+    """``{"x", "y", "yaw", "frame_id", "stamp", "stddev"}`` of a PoseWithCovarianceStamped or Odometry.
+
+    ``stddev`` is the larger standard deviation of x and y (m) from the covariance
+    (row-major 6×6: x, y, z, roll, pitch, yaw); NaN when the covariance is negative or NaN.
+    """
+    pose = msg.pose.pose  # both messages hold a PoseWithCovariance in .pose
+    cov = msg.pose.covariance
+    var = max(float(cov[0]), float(cov[7]))
+    stddev = math.sqrt(var) if var >= 0 else float("nan")
+    return {"x": pose.position.x, "y": pose.position.y, "yaw": _yaw(pose.orientation),
+            "frame_id": msg.header.frame_id, "stamp": time_to_seconds(msg.header.stamp), "stddev": stddev}
+
+
+def twist_to_msg(linear_x: float, angular_z: float, linear_y: float = 0.0) -> Twist:
+    """A planar velocity command (m/s forward, m/s left, rad/s about z)."""
+    msg = Twist()
+    msg.linear.x = float(linear_x)
+    msg.linear.y = float(linear_y)
+    msg.angular.z = float(angular_z)
+    return msg
+
+
+def msg_to_twist(msg: Twist) -> Dict[str, float]:
+    """``{"linear_x", "linear_y", "angular_z"}`` of a Twist (other components are not used by a planar base)."""
+    return {"linear_x": msg.linear.x, "linear_y": msg.linear.y, "angular_z": msg.angular.z}
+
+
+def point_to_msg(x: float, y: float, frame_id: str, stamp_s: float) -> PointStamped:
+    """A person's position (m) in ``frame_id`` (the robot's base frame: x forward, y left)."""
+    msg = PointStamped()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = seconds_to_time(stamp_s)
+    msg.point.x = float(x)
+    msg.point.y = float(y)
+    return msg
+
+
+def msg_to_point(msg: PointStamped) -> Dict[str, float]:
+    """``{"x", "y", "frame_id", "stamp"}`` of a PointStamped."""
+    return {"x": msg.point.x, "y": msg.point.y, "frame_id": msg.header.frame_id,
+            "stamp": time_to_seconds(msg.header.stamp)}

@@ -87,10 +87,12 @@ class PearlGraph:
                 from pearl_pomdp.params import node_params
 
                 path = None if params_file == "default" else params_file
-                for name in ("belief_tracker", "hierarchical_policy"):
-                    # Scalars and lists only: nested tables are dotted parameters the node reads itself.
+                for name, cls in (("belief_tracker", BeliefTrackerNode), ("hierarchical_policy", HierarchicalPolicyNode)):
+                    # The parameters the node declares (the shared /** section also holds the
+                    # executor's places); the domain is loaded once for all nodes, above.
+                    declared = {p.name for p in cls.PARAMETERS}
                     from_file[name] = {k: v for k, v in node_params(name, path).items()
-                                       if not isinstance(v, dict) and k != "domain"}
+                                       if k in declared and k != "domain"}
 
             def params(name: str) -> Dict[str, Any]:
                 return {**from_file.get(name, {}), **shared, **dict(overrides.get(name, {}))}

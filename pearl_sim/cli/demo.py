@@ -3,6 +3,10 @@
 The Pearl nodes and simulated hardware run in one process under simulated time;
 prints a transcript, writes a bag, the transcript and a belief plot into --out,
 and ends with a one-line outcome.
+
+Examples:
+  pearl demo --scenario config/scenarios/table4_dialog.yaml --seed 3
+  pearl plan config/pearl.domain.yaml && pearl demo --policy out/policies/pearl --json
 """
 from __future__ import annotations
 
@@ -27,7 +31,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", default=_share("config/scenarios/figure4.yaml"), help="scenario file")
     parser.add_argument("--domain", default=_share("config/pearl.domain.yaml"), help="factored domain")
     parser.add_argument("--hierarchy", default=_share("config/pearl.hierarchy.yaml"), help="action hierarchy")
-    parser.add_argument("--policy", default="", help="planned policy folder (pearl plan --out); default: plan now")
+    parser.add_argument("--policy", default="",
+                        help="planned policy folder (`pearl plan` saves out/policies/pearl); default: plan now")
     parser.add_argument("--out", default=None, help="output folder (default: out/demo-<scenario>-<time>)")
     parser.add_argument("--seed", type=int, default=None, help="override the scenario's seed")
     parser.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID of the in-process graph")
@@ -38,7 +43,21 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.cli import print_json
     from pearl_sim.demo import run_demo, summary_dict
 
+    from pearl_pomdp.cli._inputs import require_dir, require_file
+    from pearl_pomdp.errors import PearlError
+    from pearl_sim.scenario import load_scenarios
+
+    # Check every input before planning or starting the graph (a typo fails at once).
+    require_file(args.scenario, "scenario file (--scenario)")
+    require_file(args.domain, "domain file (--domain)")
+    if args.policy:
+        require_dir(args.policy, "policy directory (--policy, from `pearl plan`)")
+    else:
+        require_file(args.hierarchy, "hierarchy file (--hierarchy)")
+    load_scenarios(args.scenario)  # parse errors name the file and field
     out = Path(args.out) if args.out else Path("out") / f"demo-{Path(args.scenario).stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+    if (out / "bag").is_dir() and any((out / "bag").iterdir()):
+        raise PearlError(f"{out / 'bag'}: already holds a bag; choose another --out folder")
     echo = None if args.json else (lambda text: print(text, flush=True))
     if not args.json:
         print(f"pearl demo: scenario {args.scenario}; planning the policy and starting the graph…", flush=True)

@@ -9,6 +9,12 @@ clarifications per goal, unprompted questions, wrong actions and return with 95 
 the PAIRED per-episode differences against the behaviour tree; the issue's acceptance goal
 is evaluated. Writes ``study.json``, ``episodes.csv`` and ``study.png`` into ``--out``.
 Protocol and reading of the numbers: ``docs/study.md``.
+
+`pearl experiment` with the defaults runs every policy on 12 residents × 3 tasks × 4 noise
+levels × 2 seeds (minutes, with a 30 s flat solve); a quick look at the cheap policies:
+
+Examples:
+  pearl experiment --policies qmdp,behaviour_tree --residents generated:1 --episodes 1 --noise 0,0.5
 """
 from __future__ import annotations
 
@@ -16,6 +22,9 @@ import argparse
 import sys
 import time
 from pathlib import Path
+
+from pearl_pomdp.cli._inputs import require_file
+from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
 
 COMMAND = "experiment"
 HELP = "run the guidance study (policies × residents × speech noise) on the core executive"
@@ -27,8 +36,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--study", default=_share("config/scenarios/study.yaml"),
                         help="study file: the paper's residents and the shared scenario fields")
-    parser.add_argument("--domain", default=_share("config/pearl.domain.yaml"))
-    parser.add_argument("--hierarchy", default=_share("config/pearl.hierarchy.yaml"))
+    parser.add_argument("--domain", default=_share("config/pearl.domain.yaml"),
+                        help="factored domain the policies are planned for (default: the Pearl domain)")
+    parser.add_argument("--hierarchy", default=_share("config/pearl.hierarchy.yaml"),
+                        help="action hierarchy of the hierarchical policy (default: the Pearl hierarchy)")
     parser.add_argument("--residents", default="paper,generated:6",
                         help="'paper' (the six of the study file), 'generated:N' (seeded profiles), or both, comma-separated")
     parser.add_argument("--seed", type=int, default=0, help="seed of the resident generator (default 0)")
@@ -42,6 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=int, default=1, help="worker processes for the episodes (default 1)")
     parser.add_argument("--out", default=None, help="folder for study.json, episodes.csv, study.png (default out/study-<time>)")
     parser.add_argument("--json", action="store_true", help="print one JSON object (without the per-episode rows)")
+    add_progress_arguments(parser)
 
 
 def _validate(args):
@@ -54,6 +66,8 @@ def _validate(args):
         raise SpecError("<command line>", "--episodes", f"{args.episodes}: at least 1 seed per cell is needed")
     if args.jobs < 1:
         raise SpecError("<command line>", "--jobs", f"{args.jobs}: at least 1 process")
+    if not args.flat_time_limit > 0:
+        raise SpecError("<command line>", "--flat-time-limit", f"must be > 0 seconds, got {args.flat_time_limit}")
     policies = [p.strip() for p in args.policies.split(",") if p.strip()]
     unknown = [p for p in policies if p not in POLICY_NAMES]
     if unknown:
@@ -69,6 +83,10 @@ def _validate(args):
     bad = [x for x in noise if not 0.0 <= x <= 1.0]
     if bad:
         raise SpecError("<command line>", "--noise", f"{bad[0]} is not a word error rate in [0, 1]")
+    require_file(args.study, "study file (--study)")
+    require_file(args.domain, "domain file (--domain)")
+    if "hierarchical" in policies:
+        require_file(args.hierarchy, "hierarchy file (--hierarchy)")
     profiles = parse_population(args.residents, args.study, seed=args.seed)
     cases = resident_scenarios(study_template(args.study), profiles, source=args.study)
     return policies, sorted(set(noise)), profiles, cases
@@ -88,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / f"study-{time.strftime('%Y%m%d-%H%M%S')}"
     out.mkdir(parents=True, exist_ok=True)
     log = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
-    terminal = sys.stderr.isatty()
+    terminal = show_progress(args)
     domain = load_domain(args.domain)
     agents = build_agents(domain, args.hierarchy, flat_time_limit=args.flat_time_limit, policies=policies,
                           log=log if terminal else None)

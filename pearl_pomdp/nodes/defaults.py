@@ -1,0 +1,111 @@
+"""Parameter defaults from the package's params file (``config/pearl_nodes.yaml``).
+
+Nodes whose configuration is a table — what each action says and where it drives, where
+each place is and which landmark it is — keep no such table in code: they declare a
+``defaults_file`` parameter (default ``config/pearl_nodes.yaml``, looked up like every file
+parameter: working directory, then the package share directory), read the ``/**`` and
+``<node default name>`` sections of it (:func:`pearl_pomdp.params.node_parameters`)
+and declare each parameter with the file's value as its default. So
+
+* ``ros2 run pearl_pomdp action_executor`` with no parameters behaves as the launch file;
+* ``--params-file`` and ``-p`` still override every value (they are overrides in rclpy);
+* ``-p defaults_file:=''`` starts from the code's empty defaults (nothing configured).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any, Dict, List, Mapping, Sequence
+
+from pearl_pomdp.errors import SpecError
+from pearl_pomdp.nodes.common import NodeSetupError, Param, PearlNode, resolve_path
+from pearl_pomdp.params import node_parameters
+
+__all__ = ["DEFAULTS_FILE", "FileDefaults"]
+
+#: The params file the package ships; its sections hold every node's defaults.
+DEFAULTS_FILE = "config/pearl_nodes.yaml"
+
+
+def _type_name(value: Any) -> str:
+    if isinstance(value, bool):
+        return "a bool"
+    if isinstance(value, (int, float)):
+        return "a number" if isinstance(value, float) else "an integer"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "a list of numbers" if value and isinstance(value[0], (int, float)) else "a list of strings"
+    return type(value).__name__
+
+
+def _fits(value: Any, default: Any) -> Any:
+    """``value`` converted to the type of ``default``, or raise ``TypeError``."""
+    if isinstance(default, bool) or isinstance(value, bool):
+        if isinstance(default, bool) and isinstance(value, bool):
+            return value
+        raise TypeError
+    if isinstance(default, float) and isinstance(value, (int, float)):
+        return float(value)
+    if isinstance(default, int) and isinstance(value, int):
+        return value
+    if isinstance(default, str) and isinstance(value, str):
+        return value
+    if isinstance(default, list) and isinstance(value, list):
+        if default and isinstance(default[0], float):
+            if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+                return [float(v) for v in value]
+            raise TypeError
+        if all(isinstance(v, str) for v in value):
+            return list(value)
+    raise TypeError
+
+
+class FileDefaults:
+    """The defaults a node reads from its ``defaults_file`` (see the module doc).
+
+    Args:
+        node: the node; its ``defaults_file`` parameter is declared here.
+
+    Attributes:
+        path: the file read (``None`` when ``defaults_file`` is empty).
+        values: ``{dotted name: value}`` from the file's ``/**`` and node sections.
+    """
+
+    PARAM = Param("defaults_file", DEFAULTS_FILE,
+                  "Params file whose '/**' and node sections give this node's defaults ('': none)")
+
+    def __init__(self, node: PearlNode):
+        value = node.declare_table([self.PARAM])["defaults_file"]
+        self.section = node.DEFAULT_NAME
+        self.path = resolve_path(value, "defaults_file") if value else None
+        self.values: Dict[str, Any] = {}
+        if self.path is not None:
+            try:
+                self.values = node_parameters(self.path, self.section)
+            except SpecError as err:
+                raise NodeSetupError(f"parameter defaults_file: {err}") from None
+
+    def apply(self, params: Sequence[Param]) -> List[Param]:
+        """``params`` with each default replaced by the file's value, where the file has one.
+
+        Raises:
+            NodeSetupError: a file value has another type than the parameter (the message
+                names the file, the section and the parameter).
+        """
+        out = []
+        for p in params:
+            if p.name in self.values:
+                try:
+                    value = _fits(self.values[p.name], p.default)
+                    # A non-empty list fixes the ROS type itself (an explicit type is for []).
+                    p = replace(p, default=value, type=p.type if value == [] else None)
+                except TypeError:
+                    raise NodeSetupError(f"{self.path}: {self.section}.{p.name}: expected {_type_name(p.default)}, "
+                                         f"got {self.values[p.name]!r}") from None
+            out.append(p)
+        return out
+
+    def under(self, prefix: str) -> Mapping[str, Any]:
+        """The file's values whose names start with ``prefix`` + ``.``, prefix removed."""
+        start = prefix + "."
+        return {k[len(start):]: v for k, v in self.values.items() if k.startswith(start)}
