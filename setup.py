@@ -26,7 +26,14 @@ NODES = {
     "action_executor": "pearl_pomdp.nodes.action_executor:main",
     "landmark_detector": "pearl_pomdp.nodes.landmark_detector:main",
     "guide_pace": "pearl_pomdp.nodes.guide_pace:main",
+    "speech_recognizer": "pearl_pomdp.nodes.speech_recognizer:main",
+    "speech_synthesizer": "pearl_pomdp.nodes.speech_synthesizer:main",
 }
+
+#: Real speech (pearl_pomdp.asr): CMU Sphinx with its en-us model in the wheel, and
+#: libespeak-ng with its voice data; nothing downloads at run time. A microphone or
+#: speaker additionally needs PortAudio (sounddevice, which pocketsphinx pulls in).
+SPEECH = ["pocketsphinx>=5,<6", "espeakng-loader>=0.2"]
 
 setup(
     name=PACKAGE,
@@ -42,7 +49,7 @@ setup(
         (f"share/{PACKAGE}/config/foxglove", glob("config/foxglove/*.json")),
     ],
     python_requires=">=3.10",
-    install_requires=["numpy>=1.24", "scipy>=1.11", "PyYAML>=6", "tqdm>=4.60"],
+    install_requires=["numpy>=1.24", "scipy>=1.11", "highspy>=1.7", "PyYAML>=6", "tqdm>=4.60"],
     extras_require={
         "ros": [
             "ros-jazzy-rclpy",
@@ -53,9 +60,13 @@ setup(
             "matplotlib>=3.6",
             "foxglove-sdk>=0.30",  # pearl_pomdp/live_view.py: the Foxglove WebSocket server, schemas included
             "py_trees>=2.2",   # the behaviour-tree baseline (pearl_sim/behaviour_tree.py, bt_node)
-        ],
+        ]
+        + SPEECH,
+        "speech": SPEECH,
         "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6", "py_trees>=2.2",
-                 "websockets>=12"],  # a real WebSocket client for test/test_live_view.py
+                 "websockets>=12",  # a real WebSocket client for test/test_live_view.py
+                 "mypy>=1.8"]  # .ci/run type-checks the core (mypy.ini)
+        + SPEECH,
     },
     zip_safe=True,
     maintainer="Pearl POMDP developers",
@@ -68,6 +79,7 @@ setup(
         # The behaviour-tree baseline, in place of hierarchical_policy (the core never imports pearl_sim).
         + ["pearl_bt = pearl_sim.bt_node:main"],
         # Subcommands other packages add to `pearl` (the core never imports the simulator).
-        "pearl.commands": ["demo = pearl_sim.cli.demo", "experiment = pearl_sim.cli.experiment"],
+        "pearl.commands": ["demo = pearl_sim.cli.demo", "experiment = pearl_sim.cli.experiment",
+                           "calibrate-speech = pearl_sim.cli.calibrate_speech"],
     },
 )

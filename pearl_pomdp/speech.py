@@ -27,7 +27,7 @@ import re
 from collections import deque
 from typing import Deque, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
-__all__ = ["KeywordFilter", "normalise", "parse_speech_message", "tokens"]
+__all__ = ["KeywordFilter", "normalise", "tokens", "parse_speech_message", "speech_message"]
 
 _QUOTES = str.maketrans({"\u2019": "'", "\u2018": "'", "\u02bc": "'", "`": "'"})
 _BREAK = re.compile(r"[^0-9a-z']+")
@@ -42,27 +42,38 @@ def normalise(text: str) -> str:
 
 
 def parse_speech_message(data: str) -> Tuple[str, float]:
-    """``(text, confidence)`` of a ``/pearl/speech`` message's data.
+    """``(text, confidence)`` of a ``/pearl/speech`` message's data; never raises.
 
-    Plain text has confidence 1.0. A recogniser that knows its confidence sends a JSON
-    object ``{"text": "...", "confidence": 0.83}`` (confidence in [0, 1]). Anything else —
-    JSON that is not such an object, a confidence out of range — is taken as plain text,
-    so this never raises.
+    The recogniser node sends a JSON object ``{"text": "...", "confidence": 0.83}``; any
+    other sender may send plain text, which means confidence 1.0. Data counts as the JSON
+    form only when it is an object with a string ``text`` and a number ``confidence`` in
+    [0, 1] (not a bool); anything else — other JSON, a malformed object, a confidence out
+    of range — is taken as plain text with confidence 1.0, so nothing a person could have
+    said is lost.
     """
-    stripped = str(data).strip()
-    if stripped.startswith("{") and stripped.endswith("}"):
-        import json
-        import math
+    import json
+    import math
 
+    text = data if isinstance(data, str) else str(data)
+    stripped = text.strip()
+    if stripped.startswith("{") and stripped.endswith("}"):
         try:
             obj = json.loads(stripped)
-        except ValueError:
-            return str(data), 1.0
+        except (ValueError, RecursionError):
+            return text, 1.0
         if isinstance(obj, dict) and isinstance(obj.get("text"), str):
-            c = obj.get("confidence", 1.0)
-            if isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) and 0.0 <= c <= 1.0:
-                return obj["text"], float(c)
-    return str(data), 1.0
+            conf = obj.get("confidence")
+            if (isinstance(conf, (int, float)) and not isinstance(conf, bool) and math.isfinite(conf)
+                    and 0.0 <= conf <= 1.0):
+                return obj["text"], float(conf)
+    return text, 1.0
+
+
+def speech_message(text: str, confidence: float) -> str:
+    """The JSON data the recogniser node publishes (inverse of :func:`parse_speech_message`)."""
+    import json
+
+    return json.dumps({"text": str(text), "confidence": round(min(1.0, max(0.0, float(confidence))), 4)})
 
 
 def tokens(text: str) -> List[str]:

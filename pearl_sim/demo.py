@@ -40,6 +40,7 @@ class DemoStep:
     modality: Optional[str]
     said: str
     heard: str
+    meant: str
     observation: Optional[str]
     marginals: Dict[str, Dict[str, float]]
     events: List[str]
@@ -95,7 +96,13 @@ def format_step(step: DemoStep, resident: str) -> str:
     trace = " → ".join([step.trace[0]["subtask"]] + [t["choice"] for t in step.trace]) if step.trace else step.action
     lines = [f"[{step.time:7.1f} s] action {step.action:<22} trace {trace}"]
     if step.modality == "Speech":
-        lines.append(f"           {resident} said \"{step.said}\" → recognised \"{step.heard}\" → {step.observation}")
+        from pearl_pomdp.speech import parse_speech_message
+
+        text, confidence = parse_speech_message(step.heard)
+        conf = f" ({confidence:.2f})" if confidence < 1.0 else ""
+        meant = f" (meaning {step.meant})" if step.meant else ""
+        lines.append(f"           {resident} said \"{step.said}\"{meant} → recognised \"{text}\"{conf} → "
+                     f"{step.observation}")
     elif step.modality is not None:
         who = f"{resident} " if step.modality == "Touchscreen" else ""
         lines.append(f"           {who}{step.modality.lower()}: {step.heard} → {step.observation}")
@@ -288,7 +295,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
             sim.publish_truth(backend.now_ns * 1e-9, "end", step_result.action, step_result)
             step = DemoStep(index=index, time=step_result.start, action=step_result.action,
                             trace=decision.get("trace", []), modality=msg.modality if msg else None,
-                            said=msg.said if msg else "", heard=msg.text if msg else "",
+                            said=msg.said if msg else "", heard=msg.text if msg else "", meant=msg.meant if msg else "",
                             observation=latest.get("observation"), marginals=latest.get("marginals", {}),
                             events=step_result.events + [e for w in waits for e in w.events], wrong=step_result.wrong)
             result.steps.append(step)

@@ -50,6 +50,8 @@ class Resident:
         touchscreen: fraction of her answers given on the touchscreen (the rest by voice).
         lose_distance: metres behind the robot at which she loses it and gives up following.
         word_error_rate: her speech's error rate; overrides ``speech.word_error_rate`` when set.
+        voice: her espeak-ng voice on the real speech channel (a preset of
+            :data:`pearl_pomdp.asr.synthesizer.VOICES`: clear, slow, quiet, slurred).
         hearing: probability she hears a sentence the robot says to her (else it is as if
             she were not listening: a reminder is not delivered, a question not answered).
         responsiveness: probability she answers a question or prompt she heard.
@@ -67,6 +69,7 @@ class Resident:
     touchscreen: float = 0.2
     lose_distance: float = 15.0
     word_error_rate: Optional[float] = None
+    voice: str = "clear"
     hearing: float = 1.0
     responsiveness: float = 1.0
     forgets: float = 0.0
@@ -106,6 +109,9 @@ class Scenario:
     pace_adaptation: bool = True
     battery_seconds: float = 7200.0
     word_error_rate: float = 0.2
+    #: The ``speech:`` mapping for :func:`pearl_sim.speech_channel.make_speech_channel`
+    #: (channel recogniser | measured | word_error, snr_db, noise, measured).
+    speech: Dict[str, object] = field(default_factory=dict)
     resident: Resident = field(default_factory=Resident)
     appointments: List[Appointment] = field(default_factory=list)
     questions: List[Question] = field(default_factory=list)
@@ -245,6 +251,12 @@ class _Fields:
         return str(value)
 
 
+def _voice_presets() -> Tuple[str, ...]:
+    from pearl_pomdp.asr.synthesizer import VOICES
+
+    return tuple(VOICES)
+
+
 def _build(data: dict, source: str, prefix: str) -> Scenario:
     top = _Fields(data, source, prefix, ("name", "seed", "description", "step_timeout", "max_steps", "map", "robot",
                                           "speech", "resident", "appointments", "questions"))
@@ -277,12 +289,24 @@ def _build(data: dict, source: str, prefix: str) -> Scenario:
     scenario.robot_speed = robot.number("speed", 0.6, 0.05, 2.0, "m/s", "Pearl drives at walking pace")
     scenario.pace_adaptation = robot.boolean("pace_adaptation", True)
     scenario.battery_seconds = robot.number("battery_seconds", 7200.0, 60.0, 86400.0, "s")
-    speech = _Fields(data.get("speech", {}), source, f"{prefix}speech.", ("word_error_rate",))
+    speech = _Fields(data.get("speech", {}), source, f"{prefix}speech.",
+                     ("word_error_rate", "channel", "snr_db", "noise", "measured"))
     scenario.word_error_rate = speech.number("word_error_rate", 0.2, 0.0, 1.0)
+    channel = speech.choice("channel", "word_error", ("recogniser", "measured", "word_error"))
+    scenario.speech = {"channel": channel, "word_error_rate": scenario.word_error_rate}
+    if channel != "word_error":
+        scenario.speech["snr_db"] = speech.number("snr_db", 20.0, -20.0, 60.0, "dB")
+        scenario.speech["noise"] = speech.choice("noise", "white", ("white", "babble"))
+        if channel == "measured":
+            measured = speech.text("measured", "")
+            if not measured:
+                raise SpecError(source, f"{prefix}speech.measured",
+                                "channel: measured needs the file of `pearl calibrate-speech --out`")
+            scenario.speech["measured"] = measured
     res = _Fields(data.get("resident", {}), source, f"{prefix}resident.",
                   ("name", "walking_speed", "rest_probability", "rest_seconds", "willingness", "answers_door",
-                   "touchscreen", "lose_distance", "word_error_rate", "hearing", "responsiveness", "forgets",
-                   "changes_mind"))
+                   "touchscreen", "lose_distance", "word_error_rate", "voice", "hearing", "responsiveness",
+                   "forgets", "changes_mind"))
     scenario.resident = Resident(
         name=res.text("name", "resident"),
         walking_speed=res.number("walking_speed", 0.5, 0.05, 1.0, "m/s",
@@ -295,6 +319,7 @@ def _build(data: dict, source: str, prefix: str) -> Scenario:
         lose_distance=res.number("lose_distance", 15.0, 1.0, 100.0, "m"),
         word_error_rate=(res.number("word_error_rate", 0.0, 0.0, 1.0)
                          if data.get("resident", {}).get("word_error_rate") is not None else None),
+        voice=res.choice("voice", "clear", _voice_presets()),
         hearing=res.number("hearing", 1.0, 0.0, 1.0),
         responsiveness=res.number("responsiveness", 1.0, 0.0, 1.0),
         forgets=res.number("forgets", 0.0, 0.0, 1.0, "per action"),

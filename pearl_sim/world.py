@@ -86,6 +86,7 @@ class Message:
     modality: str
     text: str
     said: str = ""
+    meant: str = ""   # the resident's intent (yes, time, go, chatter …), for transcripts
 
 
 @dataclass
@@ -151,6 +152,16 @@ class World:
         resident = scenario.resident
         wer = scenario.word_error_rate if resident.word_error_rate is None else resident.word_error_rate
         self.asr = SpeechRecogniser(word_error_rate=wer, seed=self.seed + 7919)
+        # The real speech channel (espeak-ng → noise → the domain's pocketsphinx recogniser, or
+        # a calibrated sample of it) when the scenario asks for it; its own random stream, so
+        # every other draw of the world stays as with the word-error model.
+        self.speech_channel = None
+        if scenario.speech.get("channel", "word_error") != "word_error":
+            from pearl_sim.speech_channel import make_speech_channel
+
+            self.speech_channel = make_speech_channel(scenario.speech, domain.keywords, source=scenario.source,
+                                                      seed=self.seed + 7919)
+            self.speech_rng = np.random.default_rng(self.seed + 104729)
         self.time = 0.0
         self.robot_at = "home"
         self.battery = 1.0
@@ -492,8 +503,14 @@ class World:
         options = UTTERANCES[intent]
         said = options[self.rng.integers(len(options))]
         if intent in TOUCH and self.rng.random() < self.scenario.resident.touchscreen:
-            return Message(self.time, "Touchscreen", TOUCH[intent], said=f"(touches '{TOUCH[intent]}')")
-        return Message(self.time, "Speech", self.asr.recognise(said), said=said)
+            return Message(self.time, "Touchscreen", TOUCH[intent], said=f"(touches '{TOUCH[intent]}')", meant=intent)
+        if self.speech_channel is not None:
+            from pearl_pomdp.speech import speech_message
+
+            heard = self.speech_channel.hear(intent, said, self.scenario.resident.voice, self.speech_rng)
+            text = heard.text if heard.confidence >= 1.0 else speech_message(heard.text, heard.confidence)
+            return Message(self.time, "Speech", text, said=said, meant=intent)
+        return Message(self.time, "Speech", self.asr.recognise(said), said=said, meant=intent)
 
     def _finish(self, action: str, wrong: Optional[str], events: List[str]) -> None:
         if wrong:

@@ -124,3 +124,38 @@ def test_undiscounted_model_is_rejected():
     m.discount = 1.0
     with pytest.raises(ValueError, match="discount"):
         solve_point_based(m, time_limit=1.0)
+
+
+# ------------------------------------------------------------------ settings
+def test_settings_are_validated_with_the_field_named():
+    from pearl_pomdp.solvers.point_based import PointBasedSettings
+
+    for bad, field in [({"trial_kappa": ()}, "trial_kappa"), ({"trial_kappa": (0.5, 1.5)}, "trial_kappa"),
+                       ({"explore_every": 1}, "explore_every"), ({"perseus_share": -1.0}, "perseus_share"),
+                       ({"sweep_ratio": float("nan")}, "sweep_ratio"), ({"sweep_max_flops": "big"}, "sweep_max_flops"),
+                       ({"prune_keeps_successors": 1}, "prune_keeps_successors"),
+                       ({"max_gamma_entries": 0}, "max_gamma_entries")]:
+        with pytest.raises(ValueError, match=f"PointBasedSettings.{field} must be"):
+            PointBasedSettings(**bad)
+    assert PointBasedSettings(trial_kappa=[0.3]).trial_kappa == (0.3,)
+
+
+def test_settings_object_and_attributes_are_the_same_knobs():
+    from pearl_pomdp.solvers.point_based import PointBasedSettings, PointBasedSolver, solve_point_based
+
+    model = tiger()
+    solver = PointBasedSolver(model, settings=PointBasedSettings(perseus_share=0.0, sweep_ratio=0.0))
+    assert solver.perseus_share == 0.0 and solver.settings.sweep_ratio == 0.0
+    with pytest.raises(ValueError, match="perseus_share"):
+        solver.perseus_share = -2.0  # an assignment is validated too
+    assert solver.perseus_share == 0.0
+    solver.trial_kappa = (0.5,)  # one arm: the bandit's arrays follow
+    assert len(solver._arm_gain) == 1
+    res = solver.run(time_limit=20.0, epsilon=1e-3)
+    assert res.converged and solver.perseus_backups == 0 and solver.sweeps == 0
+    # The defaults are the solver's defaults: same search, same bounds.
+    a = solve_point_based(model, time_limit=20.0, epsilon=1e-3)
+    b = solve_point_based(model, time_limit=20.0, epsilon=1e-3, settings=PointBasedSettings())
+    assert (a.value_at_start, a.upper_bound, a.iterations) == (b.value_at_start, b.upper_bound, b.iterations)
+    with pytest.raises(TypeError, match="PointBasedSettings"):
+        PointBasedSolver(model, settings={"perseus_share": 1.0})

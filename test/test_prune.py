@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from pearl_pomdp.solvers.prune import PruneStats, _WitnessLP, pointwise_dominated, prune
+from pearl_pomdp.solvers.prune import DEFAULT_TOL, PruneStats, _WitnessLP, pointwise_dominated, prune
 
 
 def envelope(alphas, beliefs):
@@ -117,3 +117,52 @@ def test_bad_input_is_rejected_with_a_reason(bad, msg):
 def test_negative_tolerance_is_rejected():
     with pytest.raises(ValueError, match="tol must be >= 0"):
         prune(np.eye(2), tol=-1.0)
+
+
+def test_scipys_bundled_highs_is_the_fallback_when_highspy_is_missing(monkeypatch):
+    import sys
+
+    import pearl_pomdp.solvers.prune as prune_module
+
+    rng = np.random.default_rng(11)
+    alphas = rng.normal(size=(60, 5))
+    with_highspy = prune(alphas, use_lp_core=True).tolist()
+    monkeypatch.setitem(sys.modules, "highspy._core", None)  # `import highspy._core` now fails
+    monkeypatch.setattr(prune_module, "_HAVE_HIGHS_CORE", None)
+    monkeypatch.setattr(prune_module, "_highs_core", None)
+    assert prune_module._load_highs()
+    assert prune_module._highs_core.__name__.startswith("scipy.")
+    assert prune(alphas, use_lp_core=True).tolist() == with_highspy
+
+
+def test_the_solvers_import_no_lp_solver_until_the_first_lp():
+    """Start-up: a two-state model (closed-form LPs) or `pearl --help` never pays for HiGHS/scipy.optimize."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "import pearl_pomdp.solvers.incremental_pruning as ip\n"
+            "from pearl_pomdp.solvers.prune import prune\n"
+            "import numpy as np\n"
+            "prune(np.random.default_rng(0).normal(size=(30, 2)))\n"
+            "print(sorted(m for m in ('scipy.optimize', 'highspy') if m in sys.modules))\n"
+            "prune(np.random.default_rng(0).normal(size=(30, 3)))\n"
+            "print('highspy' in sys.modules or 'scipy.optimize' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "[]" and out[1] == "True"
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_two_state_batched_filter_matches_the_lp_loop(seed):
+    """Two states: the round-wise closed-form filter keeps what the one-LP-per-candidate loop keeps."""
+    rng = np.random.default_rng(seed)
+    base = rng.normal(size=(6, 2))
+    alphas = np.vstack([rng.normal(size=(60, 2)), np.round(rng.normal(size=(40, 2)), 1),
+                        base[rng.integers(0, 6, 40)] + rng.normal(scale=3e-7, size=(40, 2))])
+    for tol in (DEFAULT_TOL, 1e-9, 1e-3):
+        batched, w1 = prune(alphas, tol=tol, return_witnesses=True)
+        looped, w2 = prune(alphas, tol=tol, return_witnesses=True, use_lp_core=False)  # linprog, one LP each
+        assert batched.tolist() == looped.tolist()
+        # each witness is a belief where its vector is best
+        V = (w1 @ alphas.T).max(axis=1)
+        assert np.all((w1 * alphas[batched]).sum(axis=1) >= V - tol)

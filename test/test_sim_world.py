@@ -146,3 +146,33 @@ def test_world_is_deterministic_for_a_seed():
         return out
     assert run(3) == run(3)
     assert any(run(3) != run(s) for s in range(4, 10))
+
+
+def test_resident_speaks_through_the_real_recogniser_channel():
+    """speech: {channel: recogniser}: espeak-ng in her voice, noise at the SNR, the domain's pocketsphinx;
+    the message carries the recogniser's confidence, which the tracker parses (issue 13)."""
+    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.speech import parse_speech_message
+    from pearl_pomdp.tracking import BeliefTracker, StepSettings
+
+    sc = parse_scenarios("name: r\nspeech: {channel: recogniser, snr_db: 30}\nresident: {voice: slow}\n")[0]
+    assert sc.speech == {"channel": "recogniser", "word_error_rate": 0.2, "snr_db": 30.0, "noise": "white"}
+    domain = load_domain(REPO / "config" / "pearl.domain.yaml")
+    w = World(sc, seed=1, domain=domain)
+    m = w._say("weather")
+    text, confidence = parse_speech_message(m.text)
+    assert m.modality == "Speech" and m.meant == "weather" and 0.0 <= confidence <= 1.0 and text
+    tracker = BeliefTracker(domain.compile(), domain, StepSettings(step_timeout=5.0))
+    assert tracker.on_input("speech", m.text, 0.0).symbol == "weather"
+
+
+@pytest.mark.parametrize("text, where, problem", [
+    ("name: x\nspeech: {channel: sphinx}", "speech.channel", "'sphinx' is not one of recogniser"),
+    ("name: x\nspeech: {channel: recogniser, snr_db: 99}", "speech.snr_db", "outside [-20.0, 60.0]"),
+    ("name: x\nspeech: {channel: measured}", "speech.measured", "needs the file of `pearl calibrate-speech"),
+    ("name: x\nresident: {voice: robotic}", "resident.voice", "'robotic' is not one of clear, slow"),
+])
+def test_speech_channel_errors_name_the_field(text, where, problem):
+    with pytest.raises(SpecError) as info:
+        parse_scenarios(text, source="scen.yaml")
+    assert where in str(info.value) and problem in str(info.value)

@@ -15,10 +15,12 @@ from __future__ import annotations
 
 import argparse
 import math
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from pearl_pomdp.errors import BeliefError
+
+if TYPE_CHECKING:  # numpy itself is imported where it is used, not when `pearl --help` loads this module
+    import numpy as np
 
 COMMAND = "explain"
 HELP = "print the EXECUTE trace of a planned hierarchical policy at a belief"
@@ -34,6 +36,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def belief_from_spec(domain, spec: str) -> np.ndarray:
     """The product-of-marginals belief described by ``spec`` (see the command help)."""
+    import numpy as np  # here, not at module top: `pearl --help` imports every command module
+
     b0 = domain.compile().b0
     marginals = domain.feature_marginals(b0)
     names = [f.name for f in domain.features]
@@ -65,6 +69,8 @@ def belief_from_spec(domain, spec: str) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from pearl_pomdp.cli import print_json
     from pearl_pomdp.cli.plan import default_policy_dir, load_domain_any
     from pearl_pomdp.errors import PolicyError

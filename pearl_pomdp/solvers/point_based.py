@@ -51,7 +51,10 @@ which exactly tied observations are considered.
 """
 from __future__ import annotations
 
+import dataclasses
+import math
 import time
+from dataclasses import dataclass
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
@@ -61,7 +64,93 @@ from ..model.pomdp import Pomdp
 from .base import AlphaVectorPolicy, SolveResult
 from .mdp import blind_lower_bound, fib_q
 
-__all__ = ["solve_point_based", "PointBasedSolver"]
+__all__ = ["solve_point_based", "PointBasedSolver", "PointBasedSettings"]
+
+
+@dataclass(frozen=True)
+class PointBasedSettings:
+    """The tuning knobs of :class:`PointBasedSolver`, checked when built.
+
+    None of them changes what the bounds mean (the lower bound is always the value
+    of a policy, the upper bound always above the optimum); they decide where the
+    work goes. The defaults are the ones the benchmarks were tuned with.
+
+    Legend (the short names of the module docstring and of :meth:`PointBasedSolver.trial`):
+
+    ========================== ======= ==================================================
+    field                      symbol  meaning
+    ========================== ======= ==================================================
+    ``trial_kappa``            κ       a trial stops where the width UB − LB is within
+                                       ``ε_t γ^{-d}``, ``ε_t = max(ε, κ·gap(b0))``; one
+                                       arm of the bandit per value (large κ: shallow
+                                       trials that refine b0; small κ: deep ones that
+                                       carry distant rewards back)
+    ``explore_every``          —       every ``explore_every``-th trial plays another arm
+                                       than the best (by LB(b0) gain per backup)
+    ``perseus_share``          —       Perseus backups over the visited beliefs per trial
+                                       backup (0: none)
+    ``sweep_ratio``            —       a synchronous PBVI sweep over all visited beliefs
+                                       after this many trial backups per visited belief
+                                       since the last sweep (0: never)
+    ``sweep_max_flops``        —       ... only when a sweep's products cost at most this
+                                       many multiply-adds (else Perseus is used)
+    ``prune_keeps_successors`` —       pruning keeps vectors maximal at a successor of a
+                                       visited belief too (TagAvoid's search stalls
+                                       without them)
+    ``max_gamma_entries``      K·S     above this many entries of Γ (8 bytes each) pruning
+                                       keeps only vectors maximal at visited beliefs
+    ========================== ======= ==================================================
+
+    Raises:
+        ValueError: a field is out of range (the message names it and its value).
+    """
+
+    trial_kappa: Tuple[float, ...] = (0.5, 0.2)
+    explore_every: int = 4
+    perseus_share: float = 1.0
+    sweep_ratio: float = 0.5
+    sweep_max_flops: float = 4e8
+    prune_keeps_successors: bool = True
+    max_gamma_entries: int = 40_000_000
+
+    def __post_init__(self) -> None:
+        kappa = tuple(float(k) for k in self.trial_kappa) if isinstance(self.trial_kappa, (tuple, list)) else None
+        if not kappa or not all(0.0 < k <= 1.0 for k in kappa):
+            raise ValueError(f"PointBasedSettings.trial_kappa must be a non-empty sequence of numbers in (0, 1], "
+                             f"got {self.trial_kappa!r}")
+        object.__setattr__(self, "trial_kappa", kappa)
+        checks = [
+            ("explore_every", isinstance(self.explore_every, int) and not isinstance(self.explore_every, bool)
+             and self.explore_every >= 2, "an integer >= 2"),
+            ("perseus_share", _finite(self.perseus_share) and self.perseus_share >= 0, "a number >= 0"),
+            ("sweep_ratio", _finite(self.sweep_ratio) and self.sweep_ratio >= 0, "a number >= 0"),
+            ("sweep_max_flops", _finite(self.sweep_max_flops) and self.sweep_max_flops >= 0, "a number >= 0"),
+            ("prune_keeps_successors", isinstance(self.prune_keeps_successors, bool), "True or False"),
+            ("max_gamma_entries", isinstance(self.max_gamma_entries, int)
+             and not isinstance(self.max_gamma_entries, bool) and self.max_gamma_entries >= 1, "an integer >= 1"),
+        ]
+        for name, ok, what in checks:
+            if not ok:
+                raise ValueError(f"PointBasedSettings.{name} must be {what}, got {getattr(self, name)!r}")
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _setting(name: str) -> property:
+    """A solver attribute that reads ``settings.<name>``; assigning it re-validates the settings."""
+
+    def get(self):
+        return getattr(self.settings, name)
+
+    def set_(self, value):
+        self.settings = dataclasses.replace(self.settings, **{name: value})
+        if name == "trial_kappa" and len(self._arm_gain) != len(self.settings.trial_kappa):
+            self._arm_gain = np.zeros(len(self.settings.trial_kappa))
+            self._arm_cost = np.zeros(len(self.settings.trial_kappa))
+
+    return property(get, set_, doc=f"``settings.{name}`` (see :class:`PointBasedSettings`).")
 
 #: Keep T dense (as one S × A·S array) up to this many entries (40 MB).
 _DENSE_ENTRIES = 5_000_000
@@ -95,10 +184,24 @@ class PointBasedSolver:
     """The state of an anytime point-based solve (see the module docstring).
 
     Use :func:`solve_point_based` unless you want to continue a solve
-    (``run`` may be called repeatedly with more time).
+    (``run`` may be called repeatedly with more time). The tuning knobs are a
+    :class:`PointBasedSettings` (``settings``); each is also readable and
+    assignable as an attribute of the same name, which re-validates them.
     """
 
-    def __init__(self, model: Pomdp, seed: int = 0, fib_time: float = 5.0) -> None:
+    trial_kappa = _setting("trial_kappa")
+    explore_every = _setting("explore_every")
+    perseus_share = _setting("perseus_share")
+    sweep_ratio = _setting("sweep_ratio")
+    sweep_max_flops = _setting("sweep_max_flops")
+    prune_keeps_successors = _setting("prune_keeps_successors")
+    max_gamma_entries = _setting("max_gamma_entries")
+
+    def __init__(self, model: Pomdp, seed: int = 0, fib_time: float = 5.0,
+                 settings: Optional[PointBasedSettings] = None) -> None:
+        if settings is not None and not isinstance(settings, PointBasedSettings):
+            raise TypeError(f"settings must be a PointBasedSettings, got {type(settings).__name__}")
+        self.settings = settings if settings is not None else PointBasedSettings()
         if not model.discount < 1.0:
             raise ValueError("the point-based solver needs a discount below 1 (got %g)" % model.discount)
         self.model = model
@@ -113,7 +216,9 @@ class PointBasedSolver:
         # T as one S × (A·S) block: the successors of a belief under all actions are one
         # gather over the rows of its support. Dense only when T really is dense and small;
         # otherwise raw CSR arrays (scipy's row slicing costs more than the work here).
-        nnz = sum((t.nnz if sp.issparse(t) else np.count_nonzero(t)) for t in model.T)
+        nnz = 0
+        for t in model.T:
+            nnz += int(t.nnz) if sp.issparse(t) else int(np.count_nonzero(t))
         dense = not model.is_sparse and A * S * S <= _DENSE_ENTRIES and nnz > _DENSE_FRACTION * A * S * S
         if dense:
             self.Tall = np.hstack([np.asarray(t) for t in model.T])
@@ -170,27 +275,15 @@ class PointBasedSolver:
         self.pruned = 0
         self._last_prune_K = self.K
         self.seconds = 0.0
-        #: Γ is pruned by usage only above this many entries (K·S; 40 M = 320 MB).
-        self.max_gamma_entries = 40_000_000
-        #: Keep vectors maximal at successors of visited beliefs when pruning (see ``prune``).
-        self.prune_keeps_successors = True
-        #: Trials stop at width ε_t γ^{-d} with ε_t = max(ε, κ · gap(b0)). Shallow trials
-        #: (large κ) refine the bounds near b0 (hallway2 gains most), deep ones carry distant
-        #: rewards back (TagAvoid's chase needs them), so κ is picked per trial by a small
-        #: bandit: the arm with the best recent LB(b0) gain per backup, every
-        #: ``explore_every``-th trial the other arm (deterministic: costs are counted in backups).
-        self.trial_kappa = (0.5, 0.2)
-        self.explore_every = 4
-        #: Perseus rounds (Spaan & Vlassis 2005) over the beliefs the trials visited, to spread
-        #: lower-bound gains between trials: this many LB-only backups per trial backup.
-        self.perseus_share = 1.0
+        # The knobs are in self.settings (PointBasedSettings, with their legend). Shallow
+        # trials (large κ) refine the bounds near b0 (hallway2 gains most), deep ones carry
+        # distant rewards back (TagAvoid's chase needs them), so κ is picked per trial by a
+        # small bandit: the arm with the best recent LB(b0) gain per backup, every
+        # explore_every-th trial another arm (deterministic: costs are counted in backups).
+        # Perseus rounds (Spaan & Vlassis 2005) and PBVI sweeps spread lower-bound gains
+        # over the visited beliefs between trials.
         self.perseus_backups = 0
-        self._p_todo = None
-        #: Batched synchronous sweeps (PBVI) over all visited beliefs: one sweep after the
-        #: trials have done ``sweep_ratio`` backups per visited belief since the last one, when
-        #: the sweep's products are small enough (``sweep_max_flops``); else Perseus.
-        self.sweep_ratio = 0.5
-        self.sweep_max_flops = 4e8
+        self._p_todo: Optional[np.ndarray] = None
         self.sweeps = 0
         self.sweep_backups = 0
         self._trial_backups_at_sweep = 0
@@ -626,7 +719,7 @@ class PointBasedSolver:
             if self._p_todo is None or not self._p_todo.any():
                 if not self._perseus_start():
                     return
-            todo = np.flatnonzero(self._p_todo)
+            todo = np.flatnonzero(self._p_todo)  # type: ignore[arg-type]  # set by _perseus_start above
             i = int(todo[self.rng.integers(todo.size)])
             self._p_todo[i] = False
             node = self._p_nodes[i]
@@ -656,6 +749,33 @@ class PointBasedSolver:
         return best
 
     def trial(self, eps_t: float) -> None:
+        """One HSVI2/SARSOP trial from ``b0`` with target width ``eps_t``, then the backups on its path.
+
+        **Down.** At belief ``b`` of depth ``d`` the trial stops when the width there,
+        ``u − l``, is within ``eps_t γ^{-d}`` (or at the depth where discounting makes any
+        width irrelevant, or at an impossible observation). Otherwise it takes the action
+        ``a`` with the largest upper-bound Q-value and the observation ``o`` with the largest
+        weighted excess uncertainty ``P(o|b,a)·(UB(b^{a,o}) − LB(b^{a,o}) − eps_t γ^{-(d+1)})``
+        (ties broken by the seeded ``z_jitter``), creating the successor node on first visit.
+
+        **Up.** Deepest first, each parent's cached successor upper bound is lowered to the
+        child's, and :meth:`_update` backs up the lower bound (a new α-vector when it gains)
+        and lowers the upper bound at the node.
+
+        Legend of the local names:
+
+        ``g`` γ; ``Z`` number of observations; ``d`` depth, ``max_d`` its cap
+        (:meth:`_max_depth`); ``path`` the visited ``(node, a·Z + o or −1 at the end, U, C,
+        live, seen)``; ``U`` the states reachable from ``b`` in one step; ``C`` ``[A·Z, |U|]``
+        the successor beliefs ``b^{a,o}`` on ``U`` (unnormalised zero rows where
+        ``P(o|b,a) = 0``); ``live`` the flat indices of the possible ``(a, o)``; ``lb``,
+        ``best`` ``[A, Z]`` the lower bound at each successor and the index of its maximising
+        α-vector; ``seen`` those plus ``LB(b)`` and ``|Γ|`` (``_update`` then reads only
+        vectors added since); ``Qu`` / ``Ql`` ``[A]`` the upper / lower bound Q-values
+        ``R_b(a) + γ Σ_o P(o|b,a) bound(b^{a,o})``; ``u``, ``l`` the bounds at ``b`` (``l`` a
+        one-step look-ahead of the lower bound); ``thr`` the successor's target width
+        ``eps_t γ^{-(d+1)}``; ``score`` ``[Z]`` the weighted excess uncertainty.
+        """
         g, Z = self.g, self.Z
         node = self.root
         path: list = []
@@ -775,7 +895,7 @@ class PointBasedSolver:
 
 
 def solve_point_based(model: Pomdp, time_limit: float = 60.0, epsilon: float = 1e-3, seed: int = 0,
-                      progress: bool = False) -> SolveResult:
+                      progress: bool = False, settings: Optional[PointBasedSettings] = None) -> SolveResult:
     """Anytime point-based solve with bounds (HSVI2/SARSOP style; see the module docstring).
 
     Args:
@@ -784,6 +904,7 @@ def solve_point_based(model: Pomdp, time_limit: float = 60.0, epsilon: float = 1
         epsilon: stop when ``UB(b0) − LB(b0) ≤ epsilon``.
         seed: fixes the Perseus order and tie-breaking among observations.
         progress: show LB/UB/gap on a tqdm line (stderr).
+        settings: the tuning knobs (:class:`PointBasedSettings`); default: its defaults.
 
     Returns:
         :class:`SolveResult` with method ``"pointbased"``: the lower-bound α-vectors as the
@@ -794,7 +915,7 @@ def solve_point_based(model: Pomdp, time_limit: float = 60.0, epsilon: float = 1
         about every 0.5 s).
     """
     t0 = time.perf_counter()
-    solver = PointBasedSolver(model, seed=seed, fib_time=max(0.5, 0.1 * time_limit))
+    solver = PointBasedSolver(model, seed=seed, fib_time=max(0.5, 0.1 * time_limit), settings=settings)
     setup = time.perf_counter() - t0
     solver.setup_seconds = setup
     res = solver.run(time_limit=max(0.0, time_limit - setup), epsilon=epsilon, progress=progress)

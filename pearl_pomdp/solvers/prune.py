@@ -40,9 +40,11 @@ The LPs are solved by HiGHS, the solver behind ``scipy.optimize.linprog(
 method="highs")``. Only the objective changes from one candidate to the next
 and ``K`` only grows, so one HiGHS model is kept per prune and warm-started
 (rows are appended, the cost vector is swapped): about 7x less overhead per
-LP than a fresh ``linprog`` call. The incremental model uses scipy's bundled
-HiGHS bindings (``scipy.optimize._highspy``); if a scipy release lacks them,
-every LP goes through ``linprog(method="highs")`` instead, with the same result.
+LP than a fresh ``linprog`` call. The incremental model uses HiGHS's own
+``highspy`` bindings, or scipy's bundled copy (``scipy.optimize._highspy``)
+when ``highspy`` is not installed, imported on the first LP; if neither is
+there, every LP goes through ``linprog(method="highs")`` instead, with the
+same result.
 
 Array convention: ``alphas`` is ``[K, S]``, one vector per row.
 """
@@ -53,13 +55,33 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-try:  # the incremental HiGHS model (scipy's own bindings; private, hence the fallback)
-    from scipy.optimize._highspy import _core as _highs_core
+_highs_core = None  # the HiGHS bindings, imported on first use (see _load_highs)
+_HAVE_HIGHS_CORE: Optional[bool] = None  # unknown until _load_highs has run
 
-    _HAVE_HIGHS_CORE = hasattr(_highs_core, "_Highs")
-except Exception:  # pragma: no cover - depends on the scipy build
-    _highs_core = None
-    _HAVE_HIGHS_CORE = False
+
+def _load_highs() -> bool:
+    """Import HiGHS's Python bindings on first use; True when an incremental model is available.
+
+    ``highspy`` (HiGHS's own package) imports in ~50 ms; scipy's bundled copy
+    (``scipy.optimize._highspy``, private, hence the fallback order) drags in all
+    of ``scipy.optimize`` (~0.3 s), which a two-state model — solved in closed
+    form — or a command that never prunes should not pay. Both expose the same
+    raw ``_Highs`` class (the ``highspy.Highs`` wrapper prints a banner on stdout).
+    """
+    global _highs_core, _HAVE_HIGHS_CORE
+    if _HAVE_HIGHS_CORE is None:
+        _HAVE_HIGHS_CORE = False
+        for name in ("highspy._core", "scipy.optimize._highspy._core"):
+            try:
+                import importlib
+
+                core = importlib.import_module(name)
+            except Exception:  # pragma: no cover - depends on what is installed
+                continue
+            if hasattr(core, "_Highs"):
+                _highs_core, _HAVE_HIGHS_CORE = core, True
+                break
+    return bool(_HAVE_HIGHS_CORE)
 
 #: A vector must win by at least this much somewhere (pomdp-solve's effective threshold, see above).
 DEFAULT_TOL = 5.01e-7
@@ -105,11 +127,12 @@ class _WitnessLP:
         # unless plain linprog was asked for.
         self.exact_2 = use_core is not False
         self._bp: Optional[tuple] = None
-        self.use_core = _HAVE_HIGHS_CORE if use_core is None else (use_core and _HAVE_HIGHS_CORE)
         self.rows: List[np.ndarray] = []
         self._col_index = np.arange(num_states + 1, dtype=np.int32)
         if self.S == 2 and self.exact_2:
             self.use_core = False  # solved in closed form, no LP model needed
+        else:
+            self.use_core = use_core is not False and _load_highs()
         if self.use_core:
             h = _highs_core._Highs()
             h.setOptionValue("output_flag", False)
@@ -149,12 +172,34 @@ class _WitnessLP:
             den = slope[i] - slope[j]
             ok = den != 0.0
             p = (a0[j][ok] - a0[i][ok]) / den[ok]
-            p = np.concatenate([[0.0, 1.0], p[(p > 0.0) & (p < 1.0)]])
+            inside = (p > 0.0) & (p < 1.0)
+            ii, p = i[ok][inside], p[inside]
+            p = np.concatenate([[0.0, 1.0], p])
             V = (a0[None, :] + slope[None, :] * p[:, None]).max(axis=1)
-            # only points on the upper envelope matter (its breakpoints)
+            # Only the envelope's breakpoints matter: a crossing below the envelope is a
+            # point where V is linear, so c·b − V there never beats both neighbouring vertices.
             on = np.ones(p.size, dtype=bool)
+            on[2:] = a0[ii] + slope[ii] * p[2:] >= V[2:] - 1e-12 * (1.0 + np.abs(V[2:]))
             self._bp = (p[on], V[on], len(self.rows))
         return self._bp[0], self._bp[1]
+
+    @property
+    def closed_form(self) -> bool:
+        """True when the LPs are solved exactly at the envelope's breakpoints (two states)."""
+        return self.S == 2 and self.exact_2
+
+    def solve_many(self, C: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """Two states only: :meth:`solve` for every row of ``C [N, 2]`` at once (same arithmetic).
+
+        Returns ``(δ* [N], b* [N, 2])``.
+        """
+        if not (self.closed_form and self.rows):
+            raise RuntimeError("solve_many needs two states and at least one kept vector")
+        p, V = self._breakpoints_2()
+        g = C[:, 0:1] + (C[:, 1:2] - C[:, 0:1]) * p[None, :] - V[None, :]
+        k = np.argmax(g, axis=1)
+        pk = p[k]
+        return g[np.arange(C.shape[0]), k], np.stack([1.0 - pk, pk], axis=1)
 
     def solve(self, c: np.ndarray, need_below: Optional[float] = None) -> Tuple[float, Optional[np.ndarray]]:
         """Return ``(δ*, b*)``: the largest advantage of ``c`` over the kept set and where it is.
@@ -238,6 +283,41 @@ def _best_index(alphas: np.ndarray, idx: np.ndarray, b: np.ndarray, tol: float,
     rows = alphas[tied]
     order = np.lexsort(rows.T[::-1])  # primary key: state 0
     return int(tied[order[-1]]), float(m)
+
+
+_EYE: dict = {}
+_RANDOM_BELIEFS: dict = {}
+_RANDOM_BELIEFS_SIZE = 0  # floats held by _RANDOM_BELIEFS
+
+
+def _eye(S: int) -> np.ndarray:
+    """``np.eye(S)``, read-only (witnesses are views of its rows), made once per small size."""
+    e = _EYE.get(S)
+    if e is None:
+        e = np.eye(S)
+        e.flags.writeable = False
+        if S <= 512:  # (a large identity is cheap to build next to that prune's work)
+            _EYE[S] = e
+    return e
+
+
+def _random_beliefs(seed: int, S: int, n: int) -> np.ndarray:
+    """``n`` Dirichlet(1) beliefs from ``default_rng(seed)``, cached: the same numbers
+    for the same arguments (a prune's result must not depend on earlier calls), without
+    paying a new generator per prune."""
+    key = (seed, S, n)
+    P = _RANDOM_BELIEFS.get(key)
+    if P is None:
+        P = np.random.default_rng(seed).dirichlet(np.ones(S), n)
+        if P.size <= 65_536:  # only small sets are worth keeping (large S: the draw is not the cost)
+            global _RANDOM_BELIEFS_SIZE
+            if _RANDOM_BELIEFS_SIZE + P.size > 4_000_000:  # at most ~32 MB cached
+                _RANDOM_BELIEFS.clear()
+                _RANDOM_BELIEFS_SIZE = 0
+            P.flags.writeable = False
+            _RANDOM_BELIEFS[key] = P
+            _RANDOM_BELIEFS_SIZE += P.size
+    return P
 
 
 def _lex_order(alphas: np.ndarray) -> np.ndarray:
@@ -340,7 +420,7 @@ def prune(
         kept_order.append(i)
         witness[i] = b
 
-    eye = np.eye(S)
+    eye = _eye(S)
     for s, i in enumerate(_best_at_corners(A, cand, tol, lexrank)):
         if not is_kept[i]:
             keep(int(i), eye[s])
@@ -349,8 +429,8 @@ def prune(
     n_random = int(min(max(4 * S, 64), max(0, random_budget // max(1, cand.size))))
     P_parts = [] if points is None or not len(points) else [np.asarray(points, dtype=float)]
     if n_random > 0 and cand.size > max(S, len(kept_order) + sum(len(p) for p in P_parts)):
-        P_parts.append(np.random.default_rng(cand.size).dirichlet(np.ones(S), n_random))
-    if P_parts:
+        P_parts.append(_random_beliefs(cand.size, S, n_random))
+    if P_parts and len(kept_order) < cand.size:  # (nothing left to find when all are kept)
         P = np.vstack(P_parts)
         vals = A[cand] @ P.T  # [C, P]
         if cand.size >= 2:
@@ -384,6 +464,10 @@ def prune(
         alive[rem] = True
         filtered_upto = nk  # kept rows already used by the pointwise filter
         pos = 0
+        if lp.closed_form:
+            # Two states: every candidate's LP at once (same arithmetic, same order of events).
+            _lark_two_states(A, queue, alive, lp, KA, nk, tol, lexrank, keep, stats, deadline)
+            queue = []
         while pos < len(queue):
             c = queue[pos]
             pos += 1
@@ -405,7 +489,7 @@ def prune(
             if delta < tol:
                 alive[c] = False
                 continue
-            b = np.clip(b, 0.0, None)
+            b = np.clip(b, 0.0, None)  # type: ignore[arg-type]  # the LP returned a witness (not None) here
             b = b / b.sum()
             j, vbest = _best_index(A, np.flatnonzero(alive), b, tol, lexrank)
             # The LP's witness must hold up in plain arithmetic; otherwise no witness.
@@ -430,6 +514,57 @@ def prune(
     return kept
 
 
+def _lark_two_states(A, queue, alive, lp, KA, nk, tol, lexrank, keep, stats, deadline) -> None:
+    """Lark's filter of :func:`prune` for two states, with each round's LPs solved together.
+
+    The sequential loop takes the queue in order: a candidate with ``δ* < tol``
+    is dropped, the first with ``δ* ≥ tol`` yields a witness (and the kept set
+    grows). Between two witnesses the kept set is fixed, so the LPs of all
+    waiting candidates are solved at once (closed form, :meth:`_WitnessLP.solve_many`);
+    those before the first witness-giving one are dropped, exactly as the loop
+    would, and the rest wait for the grown set. The pointwise re-filter runs at
+    the same moments as in the loop, so the kept vectors (and their order) are
+    the loop's.
+    """
+    filtered_upto = nk
+    rest = [c for c in queue if alive[c]]
+    while rest:
+        if deadline is not None and time.perf_counter() > deadline:
+            raise PruneTimeout()
+        if nk - filtered_upto >= max(1, nk // 8):
+            live = np.flatnonzero(alive)
+            dom = pointwise_dominated(A[live], KA[filtered_upto:nk], slack=tol)
+            alive[live[dom]] = False
+            filtered_upto = nk
+            rest = [c for c in rest if alive[c]]
+            if not rest:
+                break
+        delta, where = lp.solve_many(A[rest])
+        hits = np.flatnonzero(delta >= tol)
+        first = int(hits[0]) if hits.size else len(rest)
+        if stats is not None:
+            stats.lps += min(first + 1, len(rest))  # the LPs the sequential loop would solve
+        alive[rest[:first]] = False
+        if first == len(rest):
+            break
+        c = rest[first]
+        b = where[first]
+        j, vbest = _best_index(A, np.flatnonzero(alive), b, tol, lexrank)
+        tail = rest[first + 1:]
+        if vbest - float(np.max(KA[:nk] @ b)) <= 0.0:  # the witness must hold up in plain arithmetic
+            alive[c] = False
+            rest = tail
+            continue
+        if stats is not None:
+            stats.lp_witnesses += 1
+        alive[j] = False
+        keep(j, b)
+        KA[nk] = A[j]
+        nk += 1
+        lp.add(A[j])
+        rest = [x for x in tail if alive[x]] + ([c] if j != c else [])
+
+
 def _dominated_within(B: np.ndarray, chunk_elems: int = 4_000_000) -> np.ndarray:
     """Mask of rows of ``B`` (distinct rows) weakly dominated by another row of ``B``.
 
@@ -440,9 +575,11 @@ def _dominated_within(B: np.ndarray, chunk_elems: int = 4_000_000) -> np.ndarray
     N, S = B.shape
     # With two states the LP is solved in closed form, so a cheap dominator set is enough.
     if N * N * S <= (200_000 if S == 2 else 10_000_000):
-        by = B
-    else:
-        by = B[np.unique(np.argmax(B, axis=0))]
+        # Every row against every row: the only exact self-match of a row is itself.
+        ge: np.ndarray = np.asarray((B[None, :, :] >= B[:, None, :]).all(axis=2))  # ge[i, j]: row j ≥ row i everywhere
+        np.fill_diagonal(ge, False)
+        return np.asarray(ge.any(axis=1))
+    by = B[np.unique(np.argmax(B, axis=0))]
     out = np.zeros(N, dtype=bool)
     step = max(1, chunk_elems // max(1, by.shape[0] * S))
     for i in range(0, N, step):
