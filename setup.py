@@ -59,10 +59,11 @@ setup(
             "mcap-ros2-support>=0.5",
             "matplotlib>=3.6",
             "foxglove-sdk>=0.30",  # pearl_pomdp/live_view.py: the Foxglove WebSocket server, schemas included
+            "py_trees>=2.2",   # the behaviour-tree baseline (pearl_sim/behaviour_tree.py, bt_node)
         ]
         + SPEECH,
         "speech": SPEECH,
-        "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6",
+        "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6", "py_trees>=2.2",
                  "websockets>=12",  # a real WebSocket client for test/test_live_view.py
                  "mypy>=1.8"]  # .ci/run type-checks the core (mypy.ini)
         + SPEECH,
@@ -74,7 +75,9 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": ["pearl = pearl_pomdp.cli:main"]
-        + [f"{name} = {target}" for name, target in NODES.items()],
+        + [f"{name} = {target}" for name, target in NODES.items()]
+        # The behaviour-tree baseline, in place of hierarchical_policy (the core never imports pearl_sim).
+        + ["pearl_bt = pearl_sim.bt_node:main"],
         # Subcommands other packages add to `pearl` (the core never imports the simulator).
         "pearl.commands": ["demo = pearl_sim.cli.demo", "experiment = pearl_sim.cli.experiment",
                            "calibrate-speech = pearl_sim.cli.calibrate_speech"],

@@ -6,9 +6,10 @@ queueing, drives, low-confidence speech) for all of them, as on the robot:
 
 * the POMDP policies (hierarchical, flat point-based, QMDP, most-likely state) decide
   from the belief;
-* :class:`ScriptedAgent`, the baseline a hand-written state machine encodes, is an
+* :class:`ScriptedAgent`, a hand-written state machine (kept by name: ``scripted``), is an
   :class:`~pearl_pomdp.interfaces.ObservingDecider`: it ignores the belief and reacts to
-  the last observation the tracker closed a step with.
+  the last observation the tracker closed a step with. The study's main non-POMDP baseline
+  is the py_trees behaviour tree, :class:`pearl_sim.behaviour_tree.PearlBehaviourTree`.
 
 :class:`Controller` pairs a name with a decider; the experiment builds a fresh executive
 for it per episode (the scenario sets the step timeout).

@@ -52,6 +52,12 @@ class Resident:
         word_error_rate: her speech's error rate; overrides ``speech.word_error_rate`` when set.
         voice: her espeak-ng voice on the real speech channel (a preset of
             :data:`pearl_pomdp.asr.synthesizer.VOICES`: clear, slow, quiet, slurred).
+        hearing: probability she hears a sentence the robot says to her (else it is as if
+            she were not listening: a reminder is not delivered, a question not answered).
+        responsiveness: probability she answers a question or prompt she heard.
+        forgets: chance per robot action that she forgets an unanswered question (memory).
+        changes_mind: chance per robot action that a wish to be walked over, not yet
+            started, is given up.
     """
 
     name: str = "resident"
@@ -64,6 +70,10 @@ class Resident:
     lose_distance: float = 15.0
     word_error_rate: Optional[float] = None
     voice: str = "clear"
+    hearing: float = 1.0
+    responsiveness: float = 1.0
+    forgets: float = 0.0
+    changes_mind: float = 0.0
 
 
 @dataclass
@@ -295,7 +305,8 @@ def _build(data: dict, source: str, prefix: str) -> Scenario:
             scenario.speech["measured"] = measured
     res = _Fields(data.get("resident", {}), source, f"{prefix}resident.",
                   ("name", "walking_speed", "rest_probability", "rest_seconds", "willingness", "answers_door",
-                   "touchscreen", "lose_distance", "word_error_rate", "voice"))
+                   "touchscreen", "lose_distance", "word_error_rate", "voice", "hearing", "responsiveness",
+                   "forgets", "changes_mind"))
     scenario.resident = Resident(
         name=res.text("name", "resident"),
         walking_speed=res.number("walking_speed", 0.5, 0.05, 1.0, "m/s",
@@ -309,6 +320,10 @@ def _build(data: dict, source: str, prefix: str) -> Scenario:
         word_error_rate=(res.number("word_error_rate", 0.0, 0.0, 1.0)
                          if data.get("resident", {}).get("word_error_rate") is not None else None),
         voice=res.choice("voice", "clear", _voice_presets()),
+        hearing=res.number("hearing", 1.0, 0.0, 1.0),
+        responsiveness=res.number("responsiveness", 1.0, 0.0, 1.0),
+        forgets=res.number("forgets", 0.0, 0.0, 1.0, "per action"),
+        changes_mind=res.number("changes_mind", 0.0, 0.0, 1.0, "per action"),
     )
     appts = data.get("appointments", [])
     if not isinstance(appts, list):

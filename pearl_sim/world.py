@@ -222,11 +222,19 @@ class World:
             self._finish(action, wrong, events)
             return StepResult(action, start, self.time, [message], events, wrong)
         self._advance(SPEAK_SECONDS, events)
+        resident = self.scenario.resident
+        self._lapses(resident, events)
         listening = self.engaged and self._near()
+        if listening and resident.hearing < 1.0 and action != "RingDoorBell" and self.rng.random() >= resident.hearing:
+            listening = False          # she did not hear the sentence (a draw only for a hard-of-hearing resident)
+            events.append(f"{resident.name} did not hear the robot")
         handler = getattr(self, f"_act_{action}", None)
         if handler is None:
             raise ValueError(f"the simulated world does not know action {action!r}")
         reply, wrong = handler(listening, events)
+        if (reply is not None and listening and action != "RingDoorBell" and resident.responsiveness < 1.0
+                and self.rng.random() >= resident.responsiveness):
+            reply = None               # heard it but does not answer
         messages: List[Message] = []
         if reply is not None:
             self._advance(ANSWER_SECONDS, events)
@@ -250,6 +258,16 @@ class World:
             queued = self._scheduler_queue.pop(0)
             messages.append(Message(self.time, queued.modality, queued.text, queued.said))
         return StepResult("", start, self.time, messages, events, None)
+
+    def _lapses(self, resident, events: List[str]) -> None:
+        """Memory and changing her mind (draws only when the resident has them)."""
+        if resident.forgets > 0.0 and self.info_goal is not None and self.rng.random() < resident.forgets:
+            events.append(f"{resident.name} forgets she wanted the {self.info_goal}")
+            self.info_goal = None
+        if (resident.changes_mind > 0.0 and self.wants_guidance and self._follower is None
+                and self.resident_at == "room" and self.rng.random() < resident.changes_mind):
+            events.append(f"{resident.name} changes her mind about the walk")
+            self.wants_guidance = False
 
     # ------------------------------------------------------------ action effects
     def _act_DoNothing(self, listening, events):

@@ -1,0 +1,101 @@
+"""The behaviour-tree baseline as a ROS 2 node, in place of the POMDP policy node.
+
+``pearl_bt`` (console script) runs :class:`~pearl_sim.behaviour_tree.PearlBehaviourTree`
+in the Pearl graph: it listens to the belief tracker's ``/pearl/belief_marginals`` (JSON
+``std_msgs/String`` with the ``step``, the ``action`` that opened the closed step and the
+``observation`` that closed it; :func:`pearl_pomdp.nodes.conversions.marginals_to_msg`) and
+publishes the tree's action on ``/pearl/action`` (``std_msgs/String``, the policy node's
+latched QoS, so the tracker opens the next step with it). The tracker, the executor and
+the hardware are unchanged: start the graph with this node instead of
+``hierarchical_policy``.
+
+The tree ignores the marginals (it has no belief); it keeps its own memory on its
+blackboard. A message for a step already answered (a latched re-delivery) is ignored; a
+message that is not the tracker's JSON is logged and counted (``rejected``) and never
+stops the node. Step 0 (the tracker's ``b0``, no action yet) resets the tree.
+
+It lives in ``pearl_sim`` because the core never imports the simulator, and the tree is
+the simulator study's baseline.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from typing import List, Optional
+
+from pearl_pomdp.nodes import conversions as cv
+from pearl_pomdp.nodes.common import LATCHED_QOS, Param, PearlNode, resolve_path, run_node
+
+__all__ = ["BehaviourTreeNode", "main"]
+
+
+class BehaviourTreeNode(PearlNode):
+    """The py_trees Pearl tree as the action source of the graph.
+
+    Parameters (read-only):
+        * ``domain`` (str): the domain whose action names the tree may publish.
+        * ``marginals_topic`` (str): the tracker's per-step JSON (default ``/pearl/belief_marginals``).
+        * ``action_topic`` (str): where the action goes (default ``/pearl/action``).
+
+    Subscribers:
+        * ``/pearl/belief_marginals`` (std_msgs/String JSON, TRANSIENT_LOCAL depth 1).
+
+    Publishers:
+        * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL depth 1).
+    """
+
+    DEFAULT_NAME = "behaviour_tree"
+    PARAMETERS = (
+        Param("domain", "config/pearl.domain.yaml", "Factored domain (.yaml): the action names"),
+        Param("marginals_topic", "/pearl/belief_marginals", "Tracker's per-step JSON (std_msgs/String)"),
+        Param("action_topic", "/pearl/action", "Primitive action output (std_msgs/String)"),
+    )
+
+    def __init__(self, *, actions: Optional[List[str]] = None, **kwargs):
+        super().__init__(**kwargs)
+        self.params = p = self.declare_table(self.PARAMETERS)
+        if actions is None:
+            from pearl_pomdp.model.factored import load_domain
+
+            actions = list(load_domain(resolve_path(p["domain"], "domain")).actions)
+        from pearl_sim.behaviour_tree import PearlBehaviourTree
+
+        self.tree = PearlBehaviourTree("behaviour_tree", actions)
+        self.last_step: Optional[int] = None
+        self.decisions = 0
+        self.rejected = 0
+        self.action_pub = self.create_publisher(cv.TextMsg, p["action_topic"], LATCHED_QOS)
+        self.create_subscription(cv.TextMsg, p["marginals_topic"], self._on_step, LATCHED_QOS)
+        self.get_logger().info(f"behaviour tree ready; listening on {p['marginals_topic']}")
+
+    def _on_step(self, msg) -> None:
+        try:
+            body = cv.msg_to_marginals(msg)
+            step = int(body["step"])
+            action, observation = body.get("action"), body.get("observation")
+            if step > 0 and not (isinstance(action, str) and isinstance(observation, str)):
+                raise ValueError("a closed step needs string 'action' and 'observation'")
+        except (ValueError, KeyError, TypeError, json.JSONDecodeError) as err:
+            self.rejected += 1
+            self.get_logger().error(f"rejected message on {self.params['marginals_topic']}: {err}")
+            return
+        restarted = step == 0 and bool(self.last_step)
+        if self.last_step is not None and step <= self.last_step and not restarted:
+            return          # already answered (a latched re-delivery)
+        if step == 0:
+            self.tree.reset()
+        else:
+            self.tree.observe(action, observation)
+        self.last_step = step
+        decision = self.tree.execute(None)
+        self.action_pub.publish(cv.action_to_msg(decision.action_name))
+        self.decisions += 1
+
+
+def main(args: Optional[List[str]] = None) -> int:
+    """Console script ``pearl_bt``."""
+    return run_node(BehaviourTreeNode, args)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

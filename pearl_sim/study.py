@@ -1,0 +1,278 @@
+"""The guidance study: policies × residents × tasks × noise × seeds, with paired statistics.
+
+Protocol (``docs/study.md``): every policy meets every *cell* — a resident
+(:mod:`pearl_sim.residents`) on a task, at a noise level (the recogniser's word error
+rate, combined with the resident's articulation), with a seed — and the same cell gives the
+same world (same seed, same resident, same noise) to every policy, so the per-episode
+differences against the behaviour tree are **paired**. Each episode runs through
+:func:`pearl_sim.experiment.run_episode` (the core executive: the robot's step loop).
+
+Episodes are spread over processes with ``jobs`` (``multiprocessing`` with the *fork*
+start method: the planned policies are built once in the parent and inherited). Every
+episode is seeded by its cell alone and results are collected in cell order, so the
+numbers do not depend on ``jobs`` (``test/test_study.py`` checks ``jobs=2`` against ``jobs=1``).
+"""
+from __future__ import annotations
+
+import csv
+import math
+import multiprocessing
+from dataclasses import dataclass, replace
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from pearl_sim.experiment import EpisodeResult, mean_ci, proportion_ci, run_episode
+from pearl_sim.residents import StudyCase, effective_word_error_rate
+
+__all__ = ["Cell", "StudyEpisode", "cells", "run_cells", "per_policy", "paired", "acceptance", "write_csv",
+           "plot_study", "BASELINE", "PAIRED_METRICS"]
+
+#: The policy every other one is compared with, episode by episode.
+BASELINE = "behaviour_tree"
+#: Per-episode metrics whose paired differences are reported.
+PAIRED_METRICS = ("success", "wrong_actions", "discounted_return", "clarifications", "unprompted_questions",
+                  "time_to_goal")
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One world: case index (resident × task), noise level, seed index."""
+
+    case: int
+    noise: float
+    k: int
+
+
+@dataclass
+class StudyEpisode:
+    """An episode's scores and the cell it ran in."""
+
+    policy: str
+    resident: str
+    task: str
+    noise: float
+    word_error_rate: float
+    seed: int
+    result: EpisodeResult
+
+    def row(self) -> dict:
+        r = self.result
+        return {"policy": self.policy, "resident": self.resident, "task": self.task, "noise": self.noise,
+                "word_error_rate": round(self.word_error_rate, 6), "seed": self.seed,
+                "guidance_completed": int(r.guidance_completed), "time_to_goal_s": r.time_to_goal,
+                "clarifications": r.clarifications, "unprompted_questions": r.unprompted_questions,
+                "goals_achieved": r.goals_achieved, "wrong_actions": r.wrong_actions,
+                "residents_lost": r.residents_lost, "discounted_return": r.discounted_return, "steps": r.steps}
+
+
+def cells(n_cases: int, noise_levels: Sequence[float], seeds: int) -> List[Cell]:
+    """Every case × noise level × seed, in a fixed order."""
+    return [Cell(c, float(n), k) for n in noise_levels for c in range(n_cases) for k in range(seeds)]
+
+
+# The work a forked worker inherits (set by run_cells before the pool starts).
+_WORK: dict = {}
+
+
+def _run_one(job) -> StudyEpisode:
+    policy, cell = job
+    domain, agents, cases = _WORK["domain"], _WORK["agents"], _WORK["cases"]
+    case: StudyCase = cases[cell.case]
+    sc = case.scenario
+    wer = effective_word_error_rate(cell.noise, case.articulation_wer)
+    sc = replace(sc, word_error_rate=wer, resident=replace(sc.resident, word_error_rate=None))
+    seed = sc.seed + 1000 * cell.k
+    result = run_episode(sc, agents[policy], domain, seed=seed)
+    result.actions = []            # not kept: the CSV/JSON carry the scores
+    return StudyEpisode(policy, case.resident, case.task, cell.noise, wer, seed, result)
+
+
+def run_cells(domain, agents: Dict[str, object], cases: Sequence[StudyCase], grid: Sequence[Cell],
+              jobs: int = 1, progress: bool = False) -> List[StudyEpisode]:
+    """Every policy in every cell; ``jobs`` worker processes (1: this process)."""
+    from tqdm import tqdm
+
+    work = [(policy, cell) for cell in grid for policy in agents]
+    _WORK.update(domain=domain, agents=agents, cases=list(cases))
+    try:
+        bar = tqdm(total=len(work), desc="study", disable=not progress, leave=False)
+        out: List[StudyEpisode] = []
+        if jobs <= 1:
+            for job in work:
+                out.append(_run_one(job))
+                bar.update()
+        else:
+            ctx = multiprocessing.get_context("fork")
+            with ctx.Pool(processes=int(jobs)) as pool:
+                for episode in pool.imap(_run_one, work, chunksize=max(1, len(work) // (jobs * 16))):
+                    out.append(episode)
+                    bar.update()
+        bar.close()
+        return out
+    finally:
+        _WORK.clear()
+
+
+# ---------------------------------------------------------------- statistics
+def _value(e: StudyEpisode, metric: str) -> Optional[float]:
+    r = e.result
+    if metric == "success":
+        return float(r.guidance_completed)
+    if metric == "time_to_goal":
+        return r.time_to_goal
+    return float(getattr(r, metric))
+
+
+def t_ci(values: Sequence[float]) -> dict:
+    """Mean and 95 % half-width from Student's t (0 for fewer than two values)."""
+    from scipy import stats
+
+    x = np.asarray([v for v in values if v is not None], dtype=float)
+    if x.size == 0:
+        return {"mean": None, "ci95": None, "low": None, "high": None, "n": 0}
+    half = float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
+    m = float(x.mean())
+    return {"mean": m, "ci95": half, "low": m - half, "high": m + half, "n": int(x.size)}
+
+
+def per_policy(episodes: Sequence[StudyEpisode]) -> Dict[str, Dict[str, dict]]:
+    """policy → noise level → scores with 95 % CIs."""
+    groups: Dict[str, Dict[float, List[StudyEpisode]]] = {}
+    for e in episodes:
+        groups.setdefault(e.policy, {}).setdefault(e.noise, []).append(e)
+    out: Dict[str, Dict[str, dict]] = {}
+    for policy, by_noise in groups.items():
+        out[policy] = {}
+        for noise, es in sorted(by_noise.items()):
+            rs = [e.result for e in es]
+            goals = sum(r.goals_achieved for r in rs)
+            out[policy][f"{noise:g}"] = {
+                "episodes": len(rs),
+                "guidance_success": proportion_ci(sum(r.guidance_completed for r in rs), len(rs)),
+                "time_to_goal_s": mean_ci([r.time_to_goal for r in rs if r.time_to_goal is not None]),
+                "clarifications_per_goal": (sum(r.clarifications for r in rs) / goals) if goals else None,
+                "clarifications_per_episode": mean_ci([r.clarifications for r in rs]),
+                "unprompted_questions_per_episode": mean_ci([r.unprompted_questions for r in rs]),
+                "wrong_actions_per_episode": mean_ci([r.wrong_actions for r in rs]),
+                "residents_lost": int(sum(r.residents_lost for r in rs)),
+                "discounted_return": mean_ci([r.discounted_return for r in rs]),
+            }
+    return out
+
+
+def paired(episodes: Sequence[StudyEpisode], baseline: str = BASELINE) -> Dict[str, Dict[str, dict]]:
+    """policy → noise → metric → mean and 95 % CI of (policy − baseline) over matched cells.
+
+    Cells are matched on (resident, task, noise, seed). ``time_to_goal`` pairs only cells
+    where both completed the guidance.
+    """
+    index = {(e.policy, e.resident, e.task, e.noise, e.seed): e for e in episodes}
+    policies = sorted({e.policy for e in episodes} - {baseline})
+    noises = sorted({e.noise for e in episodes})
+    out: Dict[str, Dict[str, dict]] = {}
+    for policy in policies:
+        out[policy] = {}
+        for noise in noises:
+            diffs: Dict[str, List[float]] = {m: [] for m in PAIRED_METRICS}
+            for (p, resident, task, n, seed), e in index.items():
+                if p != policy or n != noise:
+                    continue
+                base = index.get((baseline, resident, task, n, seed))
+                if base is None:
+                    continue
+                for m in PAIRED_METRICS:
+                    a, b = _value(e, m), _value(base, m)
+                    if a is not None and b is not None:
+                        diffs[m].append(a - b)
+            out[policy][f"{noise:g}"] = {m: t_ci(v) for m, v in diffs.items()}
+    return out
+
+
+def acceptance(table: Dict[str, Dict[str, dict]], diffs: Dict[str, Dict[str, dict]], policy: str = "hierarchical",
+               baseline: str = BASELINE) -> Optional[dict]:
+    """The issue's goal, evaluated (``None`` when the policy or the baseline was not run).
+
+    Quietest level: ``policy``'s success rate lies inside the baseline's Wilson 95 % CI and
+    its mean return inside the baseline's 95 % CI. Two noisiest levels: the paired 95 % CI of
+    wrong actions (policy − baseline) lies below 0, and the mean paired success difference is
+    ≥ 0 (at least equal success).
+    """
+    if policy not in table or baseline not in table or policy not in diffs:
+        return None
+    levels = sorted(table[baseline], key=float)
+    quiet = levels[0]
+    b, p = table[baseline][quiet], table[policy][quiet]
+    bs, br = b["guidance_success"], b["discounted_return"]
+    tol = 1e-9   # the Wilson bound of a 100 % rate is 1 up to rounding
+    success_within = bs["low"] - tol <= p["guidance_success"]["rate"] <= bs["high"] + tol
+    return_within = br["mean"] - br["ci95"] - tol <= p["discounted_return"]["mean"] <= br["mean"] + br["ci95"] + tol
+    noisy = {}
+    for level in levels[-2:] if len(levels) >= 2 else levels:
+        d = diffs[policy][level]
+        noisy[level] = {"fewer_wrong_actions": d["wrong_actions"]["n"] > 1 and d["wrong_actions"]["high"] < 0,
+                        "at_least_equal_success": d["success"]["mean"] is not None and d["success"]["mean"] >= 0,
+                        "wrong_actions_diff": d["wrong_actions"], "success_diff": d["success"]}
+    met = success_within and return_within and all(v["fewer_wrong_actions"] and v["at_least_equal_success"]
+                                                   for v in noisy.values())
+    return {"quietest_level": quiet, "success_within_baseline_ci": success_within,
+            "return_within_baseline_ci": return_within, "noisiest_levels": noisy, "met": bool(met)}
+
+
+# ---------------------------------------------------------------- outputs
+def write_csv(episodes: Sequence[StudyEpisode], path) -> None:
+    """One row per episode."""
+    rows = [e.row() for e in episodes]
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["policy"])
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def plot_study(table: Dict[str, Dict[str, dict]], diffs: Dict[str, Dict[str, dict]], path,
+               baseline: str = BASELINE) -> None:
+    """PNG, three panels vs noise, one line per policy with its 95 % CI band: guidance success
+    (Wilson), wrong actions per episode, and the paired wrong-action difference to ``baseline``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    for policy, by_noise in table.items():
+        xs = sorted(by_noise, key=float)
+        x = [float(v) for v in xs]
+        s = [by_noise[v]["guidance_success"] for v in xs]
+        line, = axes[0].plot(x, [g["rate"] for g in s], marker="o", label=policy)
+        axes[0].fill_between(x, [g["low"] for g in s], [g["high"] for g in s], alpha=0.15, color=line.get_color())
+        w = [by_noise[v]["wrong_actions_per_episode"] for v in xs]
+        axes[1].plot(x, [m["mean"] for m in w], marker="o", label=policy, color=line.get_color())
+        axes[1].fill_between(x, [m["mean"] - m["ci95"] for m in w], [m["mean"] + m["ci95"] for m in w], alpha=0.15,
+                             color=line.get_color())
+        if policy in diffs:
+            d = [diffs[policy][v]["wrong_actions"] for v in xs]
+            axes[2].plot(x, [m["mean"] for m in d], marker="o", label=f"{policy} − {baseline}", color=line.get_color())
+            axes[2].fill_between(x, [m["low"] for m in d], [m["high"] for m in d], alpha=0.15, color=line.get_color())
+    axes[2].axhline(0.0, color="black", linewidth=0.8)
+    # Symmetric log above 0.1: a policy with ~3 wrong actions per episode must not flatten the
+    # others' 0–0.2 onto the axis (linear below 0.1, so 0 and differences of either sign show).
+    for ax in axes[1:]:
+        ax.set_yscale("symlog", linthresh=0.1)
+        ax.grid(True, which="both", alpha=0.3)
+    for ax, title, ylabel in ((axes[0], "Guidance success (Wilson 95 % CI)", "success rate"),
+                              (axes[1], "Wrong actions (95 % CI)", "wrong actions per episode"),
+                              (axes[2], f"Paired difference to {baseline} (95 % CI)", "Δ wrong actions per episode")):
+        ax.set_title(title)
+        ax.set_xlabel("word error rate (noise level)")
+        ax.set_ylabel(ylabel)
+        ax.legend(fontsize=8)
+    axes[0].set_ylim(-0.02, 1.02)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def episodes_json(episodes: Sequence[StudyEpisode]) -> List[dict]:
+    """JSON-ready rows (the CSV's)."""
+    return [e.row() for e in episodes]
+
