@@ -145,10 +145,7 @@ def with_word_error_rate(scenario: Scenario, wer: float) -> Scenario:
 
 
 # --------------------------------------------------------------------- the study
-POLICY_NAMES = ("hierarchical", "flat_pointbased", "qmdp", "most_likely_state", "behaviour_tree", "scripted")
-#: The study's default comparison: the behaviour tree is the main non-POMDP baseline
-#: (``scripted`` stays available by name).
-DEFAULT_POLICIES = ("hierarchical", "flat_pointbased", "qmdp", "most_likely_state", "behaviour_tree")
+from pearl_sim.policies import DEFAULT_POLICIES, POLICY_NAMES  # noqa: E402,F401  (re-exported)
 
 
 def build_agents(domain, hierarchy_path, flat_time_limit: float = 30.0, policies: Sequence[str] = POLICY_NAMES,

@@ -14,7 +14,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 GOOD_SETUP = ('from setuptools import setup\n'
               'setup(name="ci_scratch_pkg", version="0.1", packages=["ci_scratch_pkg"],\n'
-              '      extras_require={"ros": [], "test": ["pytest"]})\n')
+              '      extras_require={"ros": [], "test": ["pytest", "mypy"]})\n')
 
 
 def _ci(repo: Path) -> subprocess.CompletedProcess:
@@ -32,6 +32,7 @@ def test_ci_run_fails_on_a_broken_install_instead_of_testing_a_stale_venv(tmp_pa
     (repo / "test").mkdir()
     (repo / "test" / "test_ok.py").write_text("def test_ok():\n    assert 1 + 1 == 2\n")
     (repo / "setup.py").write_text(GOOD_SETUP)
+    (repo / "mypy.ini").write_text("[mypy]\nfiles = ci_scratch_pkg\n")   # .ci/run type-checks what mypy.ini names
 
     good = _ci(repo)
     assert good.returncode == 0, good.stdout + good.stderr

@@ -32,7 +32,7 @@ HELP = "run the guidance study (policies × residents × speech noise) on the co
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pearl_sim.cli.demo import _share
-    from pearl_sim.experiment import DEFAULT_POLICIES, POLICY_NAMES
+    from pearl_sim.policies import DEFAULT_POLICIES, POLICY_NAMES
 
     parser.add_argument("--study", default=_share("config/scenarios/study.yaml"),
                         help="study file: the paper's residents and the shared scenario fields")
@@ -59,7 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _validate(args):
     """Every input checked before any planning or episode (one clear error)."""
     from pearl_pomdp.errors import SpecError
-    from pearl_sim.experiment import POLICY_NAMES
+    from pearl_sim.policies import POLICY_NAMES
     from pearl_sim.residents import parse_population, resident_scenarios, study_template
 
     if args.episodes < 1:
