@@ -151,7 +151,7 @@ def test_help_texts_print_percent_signs_as_written(capsys):
     with pytest.raises(SystemExit):
         main(["experiment", "--help"])
     out = capsys.readouterr().out
-    assert "95% CIs" in out and "%%" not in out
+    assert "95 % CIs" in out and "%%" not in out
     for name in _subparsers():
         with pytest.raises(SystemExit):
             main([name, "--help"])
@@ -164,18 +164,20 @@ def test_every_option_of_every_command_has_help():
     assert missing == []
 
 
-def test_experiment_prints_the_sweep_numbers_in_its_table(tmp_path, capsys):
-    assert main(["experiment", "--policies", "qmdp,scripted", "--episodes", "1", "--sweep-episodes", "1",
-                 "--wer", "0,0.5", "--out", str(tmp_path)]) == 0
+def test_experiment_prints_the_noise_numbers_in_its_table(tmp_path, capsys):
+    """The study's per-noise numbers are in the text table, not only in the PNG (issue 16 item 5)."""
+    assert main(["experiment", "--policies", "qmdp,behaviour_tree", "--residents", "generated:1", "--episodes", "1",
+                 "--noise", "0,0.5", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    report = json.loads((tmp_path / "experiment.json").read_text())
-    lines = out.splitlines()
-    head = lines.index("word error rate sweep: guidance success rate / wrong actions per episode")
-    assert lines[head + 1].split() == ["policy", "WER", "0", "WER", "0.5"]
-    for k, name in enumerate(("qmdp", "scripted")):
-        sweep = report["wer_sweep"]["per_policy"][name]
-        expected = [f"{s:.2f}/{w:.2f}" for s, w in zip(sweep["success"], sweep["wrong"])]
-        assert lines[head + 2 + k].split() == [name, *expected]
+    report = json.loads((tmp_path / "study.json").read_text())
+    rows = {(line.split()[0], line.split()[1]): line for line in out.splitlines()
+            if line.split() and line.split()[0] in ("qmdp", "behaviour_tree")}
+    for name in ("qmdp", "behaviour_tree"):
+        for level in ("0", "0.5"):
+            s = report["per_policy"][name][level]
+            g = s["guidance_success"]
+            assert f"{g['successes']}/{g['n']}" in rows[(name, level)]
+            assert f"{s['discounted_return']['mean']:.1f}" in rows[(name, level)]
 
 
 # ------------------------------------------------------------------ item 6
@@ -184,8 +186,8 @@ def test_experiment_prints_the_sweep_numbers_in_its_table(tmp_path, capsys):
     (["demo", "--scenario", "/"], "/: is a directory, expected a scenario file (--scenario)"),
     (["demo", "--policy", "/nonexistent"], "/nonexistent: no such policy directory (--policy, from `pearl plan`)"),
     (["solve", "/"], "/: is a directory, expected a model file (.pomdp, .pomdpx or domain .yaml)"),
-    (["experiment", "--wer", "0,x"], "<command line>: --wer: '0,x' is not a comma-separated list of numbers"),
-    (["experiment", "--scenarios", "/nonexistent.yaml"], "/nonexistent.yaml: no such scenario file (--scenarios)"),
+    (["experiment", "--noise", "0,x"], "<command line>: --noise: '0,x': expected comma-separated numbers"),
+    (["experiment", "--study", "/nonexistent.yaml"], "/nonexistent.yaml: no such study file (--study)"),
     (["experiment", "--policies", "telepathy"], "--policies: unknown policy 'telepathy'"),
 ])
 def test_bad_inputs_fail_at_once_before_any_work(argv, message, tmp_path, monkeypatch, capsys):
