@@ -46,6 +46,7 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.xml")),
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml")),
         (f"share/{PACKAGE}/config/scenarios", glob("config/scenarios/*.yaml")),
+        (f"share/{PACKAGE}/config/speech", glob("config/speech/*.json")),
         (f"share/{PACKAGE}/config/foxglove", glob("config/foxglove/*.json")),
     ],
     python_requires=">=3.10",

@@ -80,8 +80,16 @@ def _run_one(job) -> StudyEpisode:
     domain, agents, cases = _WORK["domain"], _WORK["agents"], _WORK["cases"]
     case: StudyCase = cases[cell.case]
     sc = case.scenario
-    wer = effective_word_error_rate(cell.noise, case.articulation_wer)
-    sc = replace(sc, word_error_rate=wer, resident=replace(sc.resident, word_error_rate=None))
+    channel = _WORK.get("channel")
+    if channel:
+        # SNR axis: the room's SNR through the measured recogniser channel (pooled over the
+        # calibration's voices); her articulation is not applied on this axis.
+        wer = float("nan")
+        sc = replace(sc, speech={"channel": "measured", "snr_db": float(cell.noise), "measured": str(channel),
+                                 "word_error_rate": sc.word_error_rate})
+    else:
+        wer = effective_word_error_rate(cell.noise, case.articulation_wer)
+        sc = replace(sc, word_error_rate=wer, resident=replace(sc.resident, word_error_rate=None))
     seed = sc.seed + 1000 * cell.k
     result = run_episode(sc, agents[policy], domain, seed=seed)
     result.actions = []            # not kept: the CSV/JSON carry the scores
@@ -89,12 +97,16 @@ def _run_one(job) -> StudyEpisode:
 
 
 def run_cells(domain, agents: Dict[str, object], cases: Sequence[StudyCase], grid: Sequence[Cell],
-              jobs: int = 1, progress: bool = False) -> List[StudyEpisode]:
-    """Every policy in every cell; ``jobs`` worker processes (1: this process)."""
+              jobs: int = 1, progress: bool = False, channel: Optional[str] = None) -> List[StudyEpisode]:
+    """Every policy in every cell; ``jobs`` worker processes (1: this process).
+
+    ``channel``: a calibrated speech channel (``pearl calibrate-speech --out``); the cells'
+    noise levels are then SNRs in dB through it, else word error rates.
+    """
     from tqdm import tqdm
 
     work = [(policy, cell) for cell in grid for policy in agents]
-    _WORK.update(domain=domain, agents=agents, cases=list(cases))
+    _WORK.update(domain=domain, agents=agents, cases=list(cases), channel=channel)
     try:
         bar = tqdm(total=len(work), desc="study", disable=not progress, leave=False)
         out: List[StudyEpisode] = []
@@ -190,7 +202,7 @@ def paired(episodes: Sequence[StudyEpisode], baseline: str = BASELINE) -> Dict[s
 
 
 def acceptance(table: Dict[str, Dict[str, dict]], diffs: Dict[str, Dict[str, dict]], policy: str = "hierarchical",
-               baseline: str = BASELINE) -> Optional[dict]:
+               baseline: str = BASELINE, snr: bool = False) -> Optional[dict]:
     """The issue's goal, evaluated (``None`` when the policy or the baseline was not run).
 
     Quietest level: ``policy``'s success rate lies inside the baseline's Wilson 95 % CI and
@@ -200,7 +212,8 @@ def acceptance(table: Dict[str, Dict[str, dict]], diffs: Dict[str, Dict[str, dic
     """
     if policy not in table or baseline not in table or policy not in diffs:
         return None
-    levels = sorted(table[baseline], key=float)
+    # Quietest first: the lowest word error rate, or the highest SNR.
+    levels = sorted(table[baseline], key=float, reverse=snr)
     quiet = levels[0]
     b, p = table[baseline][quiet], table[policy][quiet]
     bs, br = b["guidance_success"], b["discounted_return"]
@@ -230,7 +243,7 @@ def write_csv(episodes: Sequence[StudyEpisode], path) -> None:
 
 
 def plot_study(table: Dict[str, Dict[str, dict]], diffs: Dict[str, Dict[str, dict]], path,
-               baseline: str = BASELINE) -> None:
+               baseline: str = BASELINE, snr: bool = False) -> None:
     """PNG, three panels vs noise, one line per policy with its 95 % CI band: guidance success
     (Wilson), wrong actions per episode, and the paired wrong-action difference to ``baseline``."""
     import matplotlib
@@ -263,7 +276,9 @@ def plot_study(table: Dict[str, Dict[str, dict]], diffs: Dict[str, Dict[str, dic
                               (axes[1], "Wrong actions (95 % CI)", "wrong actions per episode"),
                               (axes[2], f"Paired difference to {baseline} (95 % CI)", "Δ wrong actions per episode")):
         ax.set_title(title)
-        ax.set_xlabel("word error rate (noise level)")
+        ax.set_xlabel("SNR (dB), measured recogniser channel" if snr else "word error rate (noise level)")
+        if snr:
+            ax.invert_xaxis()   # noisier to the right, as on the word-error-rate axis
         ax.set_ylabel(ylabel)
         ax.legend(fontsize=8)
     axes[0].set_ylim(-0.02, 1.02)

@@ -59,3 +59,20 @@ def test_jobs_2_gives_the_numbers_of_jobs_1(tmp_path):
     assert [e.row() for e in one] == [e.row() for e in two]
     study.write_csv(one, tmp_path / "e.csv")
     assert (tmp_path / "e.csv").read_text().count("\n") == 9
+
+
+def test_snr_axis_runs_through_the_measured_recogniser_channel(tmp_path, capsys):
+    """--snr: the noise axis is the room's SNR through the shipped calibrated channel
+    (config/speech/pearl_channel.json, from `pearl calibrate-speech`); quietest = highest SNR."""
+    import json
+
+    from pearl_pomdp.cli import main
+
+    assert main(["experiment", "--policies", "qmdp,behaviour_tree", "--residents", "generated:1", "--episodes", "1",
+                 "--snr", "30,5", "--out", str(tmp_path), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["protocol"]["noise_axis"] == "snr_db" and report["protocol"]["channel"].endswith("pearl_channel.json")
+    assert set(report["per_policy"]["qmdp"]) == {"30", "5"}
+    assert report["acceptance"] is None or report["acceptance"]["quietest_level"] == "30"
+    assert main(["experiment", "--snr", "99", "--out", str(tmp_path / "x")]) == 2
+    assert "--snr: 99.0 dB is outside [-20, 60]" in capsys.readouterr().err

@@ -46,6 +46,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episodes", type=int, default=2, help="seeds per resident, task and noise level (default 2)")
     parser.add_argument("--noise", "--wer", dest="noise", default="0,0.2,0.4,0.6",
                         help="recogniser word error rates (noise levels), comma-separated")
+    parser.add_argument("--snr", default=None, metavar="DB,…",
+                        help="noise axis in SNR (dB) through the measured recogniser channel (--channel) instead "
+                             "of word error rates, e.g. 30,20,10,5")
+    parser.add_argument("--channel", default=_share("config/speech/pearl_channel.json"),
+                        help="calibrated speech channel for --snr (`pearl calibrate-speech --out`)")
     parser.add_argument("--policies", default=",".join(DEFAULT_POLICIES),
                         help=f"comma-separated subset of {', '.join(POLICY_NAMES)}")
     parser.add_argument("--flat-time-limit", type=float, default=30.0,
@@ -74,15 +79,22 @@ def _validate(args):
         raise SpecError("<command line>", "--policies", f"unknown policy {unknown[0]!r}; known: {', '.join(POLICY_NAMES)}")
     if not policies:
         raise SpecError("<command line>", "--policies", "no policy given")
+    option, text = ("--snr", args.snr) if args.snr is not None else ("--noise", args.noise)
     try:
-        noise = [float(x) for x in args.noise.split(",") if x.strip()]
+        noise = [float(x) for x in text.split(",") if x.strip()]
     except ValueError:
-        raise SpecError("<command line>", "--noise", f"{args.noise!r}: expected comma-separated numbers") from None
+        raise SpecError("<command line>", option, f"{text!r}: expected comma-separated numbers") from None
     if not noise:
-        raise SpecError("<command line>", "--noise", "no noise level given")
-    bad = [x for x in noise if not 0.0 <= x <= 1.0]
-    if bad:
-        raise SpecError("<command line>", "--noise", f"{bad[0]} is not a word error rate in [0, 1]")
+        raise SpecError("<command line>", option, "no noise level given")
+    if args.snr is not None:
+        bad = [x for x in noise if not -20.0 <= x <= 60.0]
+        if bad:
+            raise SpecError("<command line>", "--snr", f"{bad[0]} dB is outside [-20, 60]")
+        require_file(args.channel, "speech channel file (--channel, from `pearl calibrate-speech --out`)")
+    else:
+        bad = [x for x in noise if not 0.0 <= x <= 1.0]
+        if bad:
+            raise SpecError("<command line>", "--noise", f"{bad[0]} is not a word error rate in [0, 1]")
     require_file(args.study, "study file (--study)")
     require_file(args.domain, "domain file (--domain)")
     if "hierarchical" in policies:
@@ -116,18 +128,22 @@ def run(args: argparse.Namespace) -> int:
     # thousands of episodes they drown the progress bar (the counters stay in each tracker).
     logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
     t0 = time.perf_counter()
-    episodes = study.run_cells(domain, agents, cases, grid, jobs=args.jobs, progress=terminal)
+    snr = args.snr is not None
+    channel = str(Path(args.channel).resolve()) if snr else None
+    episodes = study.run_cells(domain, agents, cases, grid, jobs=args.jobs, progress=terminal, channel=channel)
     episode_seconds = time.perf_counter() - t0
     table = study.per_policy(episodes)
     diffs = study.paired(episodes) if study.BASELINE in agents else {}
-    goal = study.acceptance(table, diffs)
+    goal = study.acceptance(table, diffs, snr=snr)
     png = out / "study.png"
-    study.plot_study(table, diffs, png)
+    study.plot_study(table, diffs, png, snr=snr)
     csv_path = out / "episodes.csv"
     study.write_csv(episodes, csv_path)
     report = {
         "protocol": {"residents": [p.name for p in profiles], "resident_spec": args.residents, "resident_seed": args.seed,
-                     "tasks": sorted({c.task for c in cases}), "noise_levels": noise, "seeds_per_cell": args.episodes,
+                     "tasks": sorted({c.task for c in cases}), "noise_levels": noise,
+                     "noise_axis": "snr_db" if snr else "word_error_rate", "channel": channel,
+                     "seeds_per_cell": args.episodes,
                      "policies": policies, "baseline": study.BASELINE, "episodes": len(episodes),
                      "jobs": args.jobs},
         "plan_seconds": plan_seconds,
