@@ -270,18 +270,23 @@ def test_a_node_stopped_while_planning_exits_at_once(tmp_path, sig):
 #: backtracks for minutes), to check both the watchdog thread and the SIGALRM backstop.
 HANGING_NODE = textwrap.dedent("""
     import re, sys, time
+    import rclpy
     from pearl_pomdp.nodes.common import PearlNode, run_node
     class Hanging(PearlNode):
         DEFAULT_NAME = "hanging_node"
         def __init__(self, **kw):
             super().__init__(**kw)
             self.get_logger().info("ready")
-        def destroy_node(self):
-            if sys.argv[1] == "python":
-                time.sleep(60)
-            else:
-                re.match(r"(a+)+$", "a" * 40 + "b")
-            super().destroy_node()
+    # The clean-up after a stop signal shuts the context down: make that step hang, in
+    # Python (sleep) or in C holding the GIL (a catastrophic regex).
+    real_try_shutdown = rclpy.try_shutdown
+    def hanging_try_shutdown(*args, **kwargs):
+        if sys.argv[1] == "python":
+            time.sleep(60)
+        else:
+            re.match(r"(a+)+$", "a" * 40 + "b")
+        return real_try_shutdown(*args, **kwargs)
+    rclpy.try_shutdown = hanging_try_shutdown
     sys.exit(run_node(Hanging, ["hanging_node"]))
 """)
 

@@ -277,9 +277,10 @@ def run_node(node_class: Type[PearlNode], args: Optional[List[str]] = None) -> i
 
     * 0 after SIGINT or SIGTERM, also during start-up (a policy being planned stops at once).
     * 2 when the node cannot start: one line ``<node>: error: <what and where>`` on stderr.
-    * Shutdown is bounded: the executor is shut down *before* the node is destroyed (an
-      executor that still holds the node's entities makes ``Node.destroy_node`` spin in
-      ``destroy_when_not_in_use``), and the whole clean-up must finish within
+    * Shutdown is bounded: the executor is shut down first; after a stop signal the DDS
+      entities are left to the process's end (their one-by-one deletion can stall in Fast
+      DDS with the GIL held; peers see the node leave when its lease ends); and the whole
+      clean-up must finish within
       :data:`SHUTDOWN_DEADLINE` s of the signal — otherwise one line on stderr and exit code
       :data:`EXIT_FORCED` (1), or SIGALRM :data:`SHUTDOWN_BACKSTOP` s later.
     * After a stop signal this function does not return: once the clean-up is done it ends
@@ -343,19 +344,30 @@ def _init_spin_and_clean_up(node_class: Type[PearlNode], args: List[str], prog: 
         try:
             if executor is not None:
                 executor.shutdown(timeout_sec=0.5)  # releases the entities it was waiting on
-            if node is not None:
+            # After a stop signal the process ends right after this clean-up, so the node's
+            # DDS entities are not destroyed one by one: with several participants leaving at
+            # once, Fast DDS can block an entity's deletion for seconds *holding the GIL*
+            # (measured: about 1 trial in 8 of five nodes stopped together under a flood), which
+            # no watchdog thread can cut. Peers see the node leave when its lease ends
+            # (10 s, config/fastdds_profile.xml). Without a signal (an in-process caller, a
+            # start-up error) everything is destroyed as before.
+            if node is not None and stop.signum is None:
                 node.destroy_node()
             context = get_default_context()
             rclpy.try_shutdown()
             # After a signal rclpy's handler has shut the context down, so try_shutdown() did
             # not finalise logging: do it (flushes the log file), as Context.shutdown would.
+            # (Not after a stop signal: finalising logging also deletes the /rosout writer, the
+            # same Fast DDS stall; stderr is flushed by run_node, the log file may miss its tail.)
             logging_fini = getattr(context, "_logging_fini", None)
-            if logging_fini is not None and getattr(context, "_logging_initialized", False):
+            if (logging_fini is not None and getattr(context, "_logging_initialized", False)
+                    and stop.signum is None):
                 with context._lock:
                     logging_fini()
-            # Delete the DDS participant now, inside the bounded clean-up (peers see the node
-            # leave at once), not later in the interpreter's finalisation.
-            context.destroy()
+            # Without a signal: delete the DDS participant now, inside the bounded clean-up
+            # (peers see the node leave at once), not later in the interpreter's finalisation.
+            if stop.signum is None:
+                context.destroy()
         except KeyboardInterrupt:  # pragma: no cover - a signal from outside rclpy's handlers
             pass
     return 0
