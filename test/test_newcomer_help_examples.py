@@ -58,7 +58,9 @@ UNTIL_CTRL_C = {
     "pearl record run1": "recording into",
     "pearl run belief_tracker": "tracking pearl",
     "pearl run hierarchical_policy": "policy ready",
-    "pearl launch launch/pearl.launch.xml policy:=": "policy ready",
+    # Every node of the launch file up (the stop during start-up is test_shutdown's business).
+    "pearl launch launch/pearl.launch.xml policy:=": ("tracking pearl", "policy ready", "executing", "landmarks",
+                                                      "guide pace"),
 }
 
 
@@ -87,14 +89,20 @@ def _newcomer_dir(root: Path, pearl_policy: Path) -> Path:
     return work
 
 
-def _run_until_ctrl_c(text: str, ready: str, env, work: Path, logs: Path, name: str) -> None:
+def _run_until_ctrl_c(text: str, ready, env, work: Path, logs: Path, name: str) -> None:
+    markers = ready if isinstance(ready, tuple) else (ready,)
     proc = Proc(["bash", "-c", "exec " + text], env, logs, name, cwd=work)
+
+    def up_or_gone() -> bool:
+        output = proc.stdout() + proc.stderr()
+        return all(m in output for m in markers) or proc.returncode is not None
+
     try:
-        up = wait_for(lambda: ready in proc.stdout() + proc.stderr() or proc.returncode is not None, timeout=60)
+        up = wait_for(up_or_gone, timeout=60)
     finally:
         code = proc.stop(timeout=15)
     output = proc.stdout() + proc.stderr()
-    assert up and ready in output, f"$ {text}\n{output[-3000:]}"
+    assert up and all(m in output for m in markers), f"$ {text}\n{output[-3000:]}"
     assert code == 0, f"$ {text}\nexit {code} after SIGINT\n{output[-3000:]}"
     return output
 
