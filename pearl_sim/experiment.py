@@ -145,7 +145,7 @@ def with_word_error_rate(scenario: Scenario, wer: float) -> Scenario:
 
 
 # --------------------------------------------------------------------- the study
-from pearl_sim.policies import DEFAULT_POLICIES, POLICY_NAMES  # noqa: E402,F401  (re-exported)
+from pearl_sim.policies import POLICY_NAMES  # noqa: E402  (one list, cheap to import: pearl --help)
 
 
 def build_agents(domain, hierarchy_path, flat_time_limit: float = 30.0, policies: Sequence[str] = POLICY_NAMES,
