@@ -112,3 +112,17 @@ def test_bad_model_line(capsys, tmp_path):
 def test_horizon_only_for_incprune(capsys, benchmarks_dir):
     line = run_error(capsys, "solve", str(benchmarks_dir / "tiger.95.POMDP"), "--method", "qmdp", "--horizon", "5")
     assert line == "pearl solve: error: --horizon applies to incprune only, not to qmdp"
+
+
+def test_trial_budget_pointbased(capsys, benchmarks_dir):
+    first = run_json(capsys, "solve", str(benchmarks_dir / "tiger.95.POMDP"), "--method", "pointbased", "--trials", "3",
+                     "--epsilon", "1e-12")
+    again = run_json(capsys, "solve", str(benchmarks_dir / "tiger.95.POMDP"), "--method", "pointbased", "--trials", "3",
+                     "--epsilon", "1e-12")
+    assert first["iterations"] == 3 and not first["converged"]
+    assert (first["value_at_start"], first["upper_bound"]) == (again["value_at_start"], again["upper_bound"])
+
+
+def test_trials_only_for_pointbased(capsys, benchmarks_dir):
+    line = run_error(capsys, "solve", str(benchmarks_dir / "tiger.95.POMDP"), "--method", "incprune", "--trials", "5")
+    assert line == "pearl solve: error: --trials applies to pointbased only, not to incprune"

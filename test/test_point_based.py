@@ -119,6 +119,36 @@ def test_deterministic_for_a_seed():
     assert runs[0] == runs[1]
 
 
+def test_a_trial_budget_gives_the_same_policy_beside_a_cpu_burner(benchmarks_dir):
+    """The study's budget: no clock anywhere, so machine load cannot change the policy."""
+    import subprocess
+    import sys
+
+    from pearl_pomdp.solvers.registry import solve
+
+    m = read(benchmarks_dir / "hallway.POMDP")
+
+    def run():
+        r = solve(m, "pointbased", trials=12, seed=3)
+        return r.value_at_start, r.upper_bound, r.iterations, r.policy.alphas.tobytes(), r.policy.actions.tobytes()
+
+    quiet = run()
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(3)]
+    try:
+        busy = run()
+    finally:
+        for p in burners:
+            p.kill()
+            p.wait(timeout=10)
+    assert quiet[2] == 12
+    assert busy == quiet
+
+
+def test_trial_budget_is_checked():
+    with pytest.raises(ValueError, match="max_trials"):
+        solve_point_based(tiger(), max_trials=0)
+
+
 def test_undiscounted_model_is_rejected():
     m = tiger()
     m.discount = 1.0

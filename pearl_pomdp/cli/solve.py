@@ -67,6 +67,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="incprune: pruning/stop tolerance (default 1e-9); pointbased: target gap at b0 (default 1e-3)")
     parser.add_argument("--time-limit", type=_positive_float, default=None, metavar="S",
                         help="stop after S seconds (pointbased default 60; incprune default none)")
+    parser.add_argument("--trials", type=_positive_int, default=None, metavar="N",
+                        help="pointbased: stop after N trials, a budget that does not depend on the machine's "
+                             "speed (alone: no time limit; the same seed gives the same policy anywhere)")
     parser.add_argument("--seed", type=int, default=0, help="pointbased: random seed (default 0)")
     parser.add_argument("--out", metavar="POLICY", default=None,
                         help="save the policy: POLICY (.npz) plus its JSON header beside it")
@@ -82,14 +85,16 @@ def default_method(model, horizon=None) -> str:
     return "incprune" if size <= TINY_MODEL else "pointbased"
 
 
-def solve(model, method: str, horizon=None, epsilon=None, time_limit=None, seed=0, progress=False):
+def solve(model, method: str, horizon=None, epsilon=None, time_limit=None, seed=0, progress=False, trials=None):
     """Run ``method`` on ``model`` (looked up in :mod:`pearl_pomdp.solvers.registry`)."""
     from pearl_pomdp.solvers.registry import solve as registry_solve
 
     if horizon is not None and method != "incprune":
         raise PearlError(f"--horizon applies to incprune only, not to {method}")
+    if trials is not None and method != "pointbased":
+        raise PearlError(f"--trials applies to pointbased only, not to {method}")
     return registry_solve(model, method, horizon=horizon, epsilon=epsilon, time_limit=time_limit, seed=seed,
-                          progress=progress, where="--method")
+                          progress=progress, trials=trials, where="--method")
 
 
 def summary(model, result) -> dict:
@@ -123,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(require_file(args.model, "model file (.pomdp, .pomdpx or domain .yaml)"))
     method = args.method or default_method(model, args.horizon)
     result = solve(model, method, horizon=args.horizon, epsilon=args.epsilon, time_limit=args.time_limit,
-                   seed=args.seed, progress=show_progress(args))
+                   seed=args.seed, progress=show_progress(args), trials=args.trials)
     info = summary(model, result)
     if args.horizon is not None:
         info["horizon"] = args.horizon
@@ -132,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
 
         meta = {k: info[k] for k in ("method", "value_at_start", "upper_bound", "seconds", "iterations", "converged")}
         meta.update({"horizon": args.horizon, "epsilon": args.epsilon, "time_limit": args.time_limit,
-                     "source": str(args.model)})
+                     "trials": args.trials, "source": str(args.model)})
         if "vectors_per_epoch" in info:
             meta["vectors_per_epoch"] = info["vectors_per_epoch"]
         path = save_policy(args.out, result.policy, model, meta)
@@ -146,6 +151,8 @@ def run(args: argparse.Namespace) -> int:
           f"{model.num_observations} observations ({gamma})")
     if result.converged:
         stop = f"horizon {args.horizon} reached" if args.horizon is not None else "converged"
+    elif args.trials is not None and result.iterations >= args.trials:
+        stop = f"stopped after {args.trials} trials before converging"
     elif args.time_limit is not None or result.method == "pointbased":
         stop = "stopped by the time limit before converging"
     else:

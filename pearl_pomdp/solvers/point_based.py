@@ -197,7 +197,7 @@ class PointBasedSolver:
     prune_keeps_successors = _setting("prune_keeps_successors")
     max_gamma_entries = _setting("max_gamma_entries")
 
-    def __init__(self, model: Pomdp, seed: int = 0, fib_time: float = 5.0,
+    def __init__(self, model: Pomdp, seed: int = 0, fib_time: Optional[float] = 5.0,
                  settings: Optional[PointBasedSettings] = None) -> None:
         if settings is not None and not isinstance(settings, PointBasedSettings):
             raise TypeError(f"settings must be a PointBasedSettings, got {type(settings).__name__}")
@@ -894,17 +894,23 @@ class PointBasedSolver:
         )
 
 
-def solve_point_based(model: Pomdp, time_limit: float = 60.0, epsilon: float = 1e-3, seed: int = 0,
-                      progress: bool = False, settings: Optional[PointBasedSettings] = None) -> SolveResult:
+def solve_point_based(model: Pomdp, time_limit: Optional[float] = 60.0, epsilon: float = 1e-3, seed: int = 0,
+                      progress: bool = False, settings: Optional[PointBasedSettings] = None,
+                      max_trials: Optional[int] = None) -> SolveResult:
     """Anytime point-based solve with bounds (HSVI2/SARSOP style; see the module docstring).
 
     Args:
         model: the POMDP (``γ < 1``).
-        time_limit: wall-clock seconds for the search (FIB initialisation included).
+        time_limit: wall-clock seconds for the search (FIB initialisation included);
+            ``None``: no clock limit (then ``max_trials`` or ``epsilon`` ends the search).
         epsilon: stop when ``UB(b0) − LB(b0) ≤ epsilon``.
         seed: fixes the Perseus order and tie-breaking among observations.
         progress: show LB/UB/gap on a tqdm line (stderr).
         settings: the tuning knobs (:class:`PointBasedSettings`); default: its defaults.
+        max_trials: stop after this many trials. A budget that is not wall-clock time:
+            with ``time_limit=None`` the FIB initialisation runs to convergence and the
+            search to this count, so the same seed gives the same policy on a busy and a
+            quiet machine (the study plans the flat policy this way).
 
     Returns:
         :class:`SolveResult` with method ``"pointbased"``: the lower-bound α-vectors as the
@@ -914,11 +920,19 @@ def solve_point_based(model: Pomdp, time_limit: float = 60.0, epsilon: float = 1
         ``pruned``, ``fib_iterations``, ``setup_seconds`` and ``history`` (``[seconds, LB, UB]``
         about every 0.5 s).
     """
+    if max_trials is not None and (isinstance(max_trials, bool) or not isinstance(max_trials, int) or max_trials < 1):
+        raise ValueError(f"solve_point_based: max_trials must be an integer >= 1, got {max_trials!r}")
+    if time_limit is None and max_trials is None and not epsilon > 0:
+        raise ValueError("solve_point_based: with time_limit=None give max_trials or an epsilon > 0")
     t0 = time.perf_counter()
-    solver = PointBasedSolver(model, seed=seed, fib_time=max(0.5, 0.1 * time_limit), settings=settings)
+    # Without a clock limit FIB runs to its own convergence (deterministic), else it
+    # gets a tenth of the budget.
+    fib_time = None if time_limit is None else max(0.5, 0.1 * time_limit)
+    solver = PointBasedSolver(model, seed=seed, fib_time=fib_time, settings=settings)
     setup = time.perf_counter() - t0
     solver.setup_seconds = setup
-    res = solver.run(time_limit=max(0.0, time_limit - setup), epsilon=epsilon, progress=progress)
+    search_time = math.inf if time_limit is None else max(0.0, time_limit - setup)
+    res = solver.run(time_limit=search_time, epsilon=epsilon, progress=progress, max_trials=max_trials)
     res.seconds = time.perf_counter() - t0
     res.extra["setup_seconds"] = setup
     return res

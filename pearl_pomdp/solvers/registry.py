@@ -24,7 +24,9 @@ from pearl_pomdp.errors import PearlError
 __all__ = ["SOLVERS", "solve", "solver_names"]
 
 
-def _incprune(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False):
+def _incprune(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False, trials=None):
+    if trials is not None:
+        raise PearlError("a trial budget applies to pointbased only, not to incprune")
     from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
 
     kwargs: Dict[str, Any] = {"horizon": horizon, "time_limit": time_limit, "progress": progress}
@@ -33,19 +35,23 @@ def _incprune(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, 
     return solve_incremental_pruning(model, **kwargs)
 
 
-def _pointbased(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False):
+def _pointbased(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False, trials=None):
     from pearl_pomdp.solvers.point_based import solve_point_based
 
     if horizon is not None:
         raise PearlError("a finite horizon applies to incprune only, not to pointbased")
-    kwargs: Dict[str, Any] = {"time_limit": 60.0 if time_limit is None else time_limit,
-                              "seed": 0 if seed is None else seed, "progress": progress}
+    # A trial budget alone is deterministic (no clock); neither given: 60 s.
+    default_time = None if trials is not None else 60.0
+    kwargs: Dict[str, Any] = {"time_limit": default_time if time_limit is None else time_limit,
+                              "seed": 0 if seed is None else seed, "progress": progress, "max_trials": trials}
     if epsilon is not None:
         kwargs["epsilon"] = epsilon
     return solve_point_based(model, **kwargs)
 
 
-def _qmdp(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False):
+def _qmdp(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False, trials=None):
+    if trials is not None:
+        raise PearlError("a trial budget applies to pointbased only, not to qmdp")
     from pearl_pomdp.solvers.mdp import solve_qmdp
 
     if horizon is not None:
@@ -64,10 +70,12 @@ def solver_names():
 
 def solve(model, name: str, *, horizon: Optional[int] = None, epsilon: Optional[float] = None,
           time_limit: Optional[float] = None, seed: Optional[int] = None, progress: bool = False,
-          where: str = "solver"):
+          trials: Optional[int] = None, where: str = "solver"):
     """Run the solver called ``name`` on ``model``.
 
     Args:
+        trials: pointbased only: stop after this many trials, a budget that does not
+            depend on the machine's speed (with no ``time_limit``, no clock is involved).
         where: how the caller names the field in errors (``--method``, ``subtask 'Act': solver``).
 
     Raises:
@@ -79,6 +87,7 @@ def solve(model, name: str, *, horizon: Optional[int] = None, epsilon: Optional[
     except KeyError:
         raise PearlError(f"{where}: unknown solver {name!r}; choose one of {', '.join(SOLVERS)}") from None
     try:
-        return solver(model, horizon=horizon, epsilon=epsilon, time_limit=time_limit, seed=seed, progress=progress)
+        return solver(model, horizon=horizon, epsilon=epsilon, time_limit=time_limit, seed=seed, progress=progress,
+                      trials=trials)
     except ImportError as err:
         raise PearlError(f"{where}: solver {name} is not available in this installation ({err})") from None
