@@ -113,12 +113,13 @@ def test_abstract_value_equals_full_value(pearl, name):
 
 
 def test_inform_keeps_only_user_info_goal_exact_to_horizon_3(pearl):
-    """The paper: Inform 'required only the UserInfoGoal state feature' (+ speech/touch symbols)."""
+    """The paper: Inform 'required only the UserInfoGoal state feature' (+ speech/touch symbols).
+    Ours also reads UserPresent (nobody answers an absent resident): 3 × 2 states."""
     domain, model, h = pearl
     sub = parameterize(model, h.subtasks["Inform"], {}, StateFactors.from_domain(domain))
     ab = abstract_subtask(sub, StateFactors.from_domain(domain), domain)
-    assert ab.relevant == ["UserInfoGoal"]
-    assert ab.model.num_states == 3
+    assert ab.relevant == ["UserPresent", "UserInfoGoal"]
+    assert ab.model.num_states == 6
     assert not any(o.startswith(("at", "g_")) for o in ab.model.observations)  # laser/reminder dropped
     assert ab.model.num_observations < model.num_observations
     rng = np.random.default_rng(3)

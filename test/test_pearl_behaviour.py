@@ -61,8 +61,9 @@ def names(decisions):
 
 
 def test_clear_touchscreen_request_is_answered_without_confirming(pearl):
-    """She touches 'time' (the touchscreen is reliable): the robot tells the time right away."""
-    ds = run(pearl, ["g_none", "t_yes", "t_time"], stop=lambda d: d.action_name == "TellTime")
+    """A reminder brings the robot to her; she touches 'time' (the touchscreen is reliable): the robot
+    tells the time right away (without a reminder due the robot has no reason to call on her)."""
+    ds = run(pearl, ["g_vitamin", "t_yes", "t_time"], stop=lambda d: d.action_name == "TellTime")
     seq = names(ds)
     assert seq[-1] == "TellTime", seq
     before = seq[seq.index("RingDoorBell"):]
