@@ -362,3 +362,22 @@ def test_nodes_of_a_sigkilled_pearl_launch_exit(tmp_path, pearl_policy, when):
             proc.kill()
         proc.wait(10)
         out.close()
+
+
+@pytest.mark.parametrize("delay", [0.03, 0.1, 0.25])
+def test_a_node_interrupted_while_importing_exits_quietly(tmp_path, delay):
+    """SIGINT before run_node installs its handlers (a launch stopping while a node starts):
+    exit 0 and no KeyboardInterrupt traceback. Under load the old code printed one (test_node_params)."""
+    env = ros_env(allocate_domain_id(), tmp_path)
+    proc = subprocess.Popen([sys.executable, "-m", "pearl_pomdp.nodes.hierarchical_policy"], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO)
+    try:
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=5)
+    assert "Traceback" not in err, err
+    assert proc.returncode == 0, err
