@@ -145,19 +145,23 @@ def with_word_error_rate(scenario: Scenario, wer: float) -> Scenario:
 
 
 # --------------------------------------------------------------------- the study
-from pearl_sim.policies import POLICY_NAMES  # noqa: E402  (one list, cheap to import: pearl --help)
+from pearl_sim.policies import DEFAULT_FLAT_TRIALS, POLICY_NAMES  # noqa: E402  (one list, cheap to import: pearl --help)
 
 
-def build_agents(domain, hierarchy_path, flat_time_limit: float = 30.0, policies: Sequence[str] = POLICY_NAMES,
-                 seed: int = 0, log: Optional[Callable[[str], None]] = None) -> Dict[str, object]:
+
+
+def build_agents(domain, hierarchy_path, flat_time_limit: Optional[float] = None, policies: Sequence[str] = POLICY_NAMES,
+                 seed: int = 0, log: Optional[Callable[[str], None]] = None,
+                 flat_trials: Optional[int] = DEFAULT_FLAT_TRIALS) -> Dict[str, object]:
     """Plan every compared controller once; returns name → agent.
 
     Args:
         domain: the Pearl FactoredDomain.
         hierarchy_path: the action hierarchy for the hierarchical POMDP.
-        flat_time_limit: seconds for the flat point-based solve. ``solve_point_based`` offers
-            only this wall-clock budget (no backup or iteration cap), so that policy depends on
-            the machine's speed; the other policies are planned exactly.
+        flat_trials: trials of the flat point-based solve (deterministic for a seed).
+        flat_time_limit: instead, seconds of wall clock for it (then the flat policy depends on
+            the machine's speed and load; given alone it replaces the trial budget). The other
+            policies are planned exactly.
         policies: which of :data:`POLICY_NAMES` to build.
     """
     import time as _time
@@ -180,7 +184,8 @@ def build_agents(domain, hierarchy_path, flat_time_limit: float = 30.0, policies
 
             decider = plan(domain, load_hierarchy(hierarchy_path, domain), seed=seed)
         elif name == "flat_pointbased":
-            decider = FlatPolicyDecider(solve(model, "pointbased", time_limit=flat_time_limit, seed=seed).policy, model)
+            budget = {"trials": flat_trials} if flat_time_limit is None else {"time_limit": flat_time_limit}
+            decider = FlatPolicyDecider(solve(model, "pointbased", seed=seed, **budget).policy, model)
         elif name == "qmdp":
             decider = FlatPolicyDecider(solve(model, "qmdp").policy, model)
         elif name == "most_likely_state":

@@ -92,7 +92,6 @@ def _run_one(job) -> StudyEpisode:
         sc = replace(sc, word_error_rate=wer, resident=replace(sc.resident, word_error_rate=None))
     seed = sc.seed + 1000 * cell.k
     result = run_episode(sc, agents[policy], domain, seed=seed)
-    result.actions = []            # not kept: the CSV/JSON carry the scores
     return StudyEpisode(policy, case.resident, case.task, cell.noise, wer, seed, result)
 
 
@@ -288,6 +287,34 @@ def plot_study(table: Dict[str, Dict[str, dict]], diffs: Dict[str, Dict[str, dic
 
 
 def episodes_json(episodes: Sequence[StudyEpisode]) -> List[dict]:
-    """JSON-ready rows (the CSV's)."""
-    return [e.row() for e in episodes]
+    """JSON-ready rows: the CSV's, plus the episode's action sequence (``actions``)."""
+    return [dict(e.row(), actions=list(e.result.actions)) for e in episodes]
+
+
+def per_scenario(episodes: Sequence[StudyEpisode]) -> Dict[str, Dict[str, dict]]:
+    """Scenario (``resident-task``) → policy → its scores there, over every noise level and seed.
+
+    What a reader needs to see where a policy fails (a slow resident, the task with a question)
+    that the pooled table hides: guidance success (of the episodes that needed one), unprompted
+    questions, wrong actions, clarifications and the discounted return, as means.
+    """
+    cells: Dict[str, Dict[str, List[StudyEpisode]]] = {}
+    for e in episodes:
+        cells.setdefault(f"{e.resident}-{e.task}", {}).setdefault(e.policy, []).append(e)
+    out: Dict[str, Dict[str, dict]] = {}
+    for name in sorted(cells):
+        out[name] = {}
+        for policy, es in cells[name].items():
+            rs = [e.result for e in es]
+            needed = [r for r in rs if r.guidance_needed]
+            n = len(rs)
+            out[name][policy] = {
+                "episodes": n,
+                "guidance_success": (sum(r.guidance_completed for r in needed) / len(needed)) if needed else None,
+                "unprompted_questions_per_episode": sum(r.unprompted_questions for r in rs) / n,
+                "wrong_actions_per_episode": sum(r.wrong_actions for r in rs) / n,
+                "clarifications_per_episode": sum(r.clarifications for r in rs) / n,
+                "discounted_return": sum(r.discounted_return for r in rs) / n,
+            }
+    return out
 

@@ -28,6 +28,47 @@ def test_experiment_json_reports_policies_pairs_and_files(tmp_path, capsys):
     rows = Path(report["files"]["csv"]).read_text().splitlines()
     assert len(rows) == 1 + 18 and rows[0].startswith("policy,resident,task,noise")
     assert json.loads((tmp_path / "study.json").read_text())["per_policy"] == table
+    # Per scenario (resident-task) and policy, and every episode's action sequence.
+    scenarios = report["per_scenario"]
+    assert sorted(scenarios) == ["G01-walk", "G01-walk+time", "G01-walk+weather"]
+    for by_policy in scenarios.values():
+        assert set(by_policy) == {"qmdp", "most_likely_state", "behaviour_tree"}
+        assert all(s["episodes"] == 2 and s["unprompted_questions_per_episode"] >= 0 for s in by_policy.values())
+    assert len(report["episodes"]) == 18
+    for e in report["episodes"]:
+        assert e["steps"] == len(e["actions"]) > 0 and set(e["actions"]) <= set(_pearl_actions())
+        assert e["unprompted_questions"] <= sum(a.startswith(("Confirm", "Verify")) for a in e["actions"])
+
+
+def _pearl_actions():
+    from pearl_pomdp.model.factored import load_domain
+
+    return load_domain(Path(__file__).resolve().parents[1] / "config" / "pearl.domain.yaml").actions
+
+
+def test_flat_policy_budget_gives_the_same_study_beside_a_cpu_burner(tmp_path, capsys):
+    """The flat point-based policy is planned with a trial budget, not the clock: the same seed
+    gives the same episodes on a quiet machine and beside three busy processes."""
+    import subprocess
+    import sys
+
+    def study(out):
+        code = main(["experiment", "--policies", "flat_pointbased", "--residents", "generated:1", "--episodes", "1",
+                     "--noise", "0.25", "--flat-trials", "3", "--out", str(out), "--json", "--quiet"])
+        assert code == 0
+        report = json.loads(capsys.readouterr().out)
+        return report["per_policy"], [(e["task"], e["actions"]) for e in report["episodes"]]
+
+    quiet = study(tmp_path / "quiet")
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(3)]
+    try:
+        busy = study(tmp_path / "busy")
+    finally:
+        for p in burners:
+            p.kill()
+            p.wait(timeout=10)
+    assert busy == quiet
+    assert len(quiet[1]) == 3 and all(actions for _task, actions in quiet[1])
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -37,6 +78,8 @@ def test_experiment_json_reports_policies_pairs_and_files(tmp_path, capsys):
     (["--residents", "nobody"], "--residents: 'nobody' is not"),
     (["--noise", "0,1.5"], "--noise: 1.5 is not a word error rate"),
     (["--jobs", "0"], "--jobs: 0"),
+    (["--flat-trials", "0"], "--flat-trials: must be at least 1"),
+    (["--flat-trials", "5", "--flat-time-limit", "3"], "--flat-trials: give --flat-trials or --flat-time-limit"),
 ])
 def test_bad_input_is_one_clear_error_before_any_work(tmp_path, capsys, argv, message):
     out = tmp_path / "out"

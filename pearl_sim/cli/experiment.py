@@ -32,7 +32,7 @@ HELP = "run the guidance study (policies × residents × speech noise) on the co
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pearl_sim.cli.demo import _share
-    from pearl_sim.policies import DEFAULT_POLICIES, POLICY_NAMES
+    from pearl_sim.policies import DEFAULT_FLAT_TRIALS, DEFAULT_POLICIES, POLICY_NAMES
 
     parser.add_argument("--study", default=_share("config/scenarios/study.yaml"),
                         help="study file: the paper's residents and the shared scenario fields")
@@ -53,11 +53,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="calibrated speech channel for --snr (`pearl calibrate-speech --out`)")
     parser.add_argument("--policies", default=",".join(DEFAULT_POLICIES),
                         help=f"comma-separated subset of {', '.join(POLICY_NAMES)}")
-    parser.add_argument("--flat-time-limit", type=float, default=30.0,
-                        help="seconds for the flat point-based solve (wall clock: the solver has no other budget)")
+    parser.add_argument("--flat-trials", type=int, default=None, metavar="N",
+                        help="trials of the flat point-based solve (default %d): the same policy on any machine"
+                             % DEFAULT_FLAT_TRIALS)
+    parser.add_argument("--flat-time-limit", type=float, default=None, metavar="S",
+                        help="instead of --flat-trials, S seconds of wall clock (the policy then depends on the "
+                             "machine's speed and load)")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes for the episodes (default 1)")
     parser.add_argument("--out", default=None, help="folder for study.json, episodes.csv, study.png (default out/study-<time>)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object (without the per-episode rows)")
+    parser.add_argument("--json", action="store_true",
+                        help="print one JSON object (with per_scenario and every episode's actions, as study.json)")
     add_progress_arguments(parser)
 
 
@@ -71,8 +76,12 @@ def _validate(args):
         raise SpecError("<command line>", "--episodes", f"{args.episodes}: at least 1 seed per cell is needed")
     if args.jobs < 1:
         raise SpecError("<command line>", "--jobs", f"{args.jobs}: at least 1 process")
-    if not args.flat_time_limit > 0:
+    if args.flat_time_limit is not None and not args.flat_time_limit > 0:
         raise SpecError("<command line>", "--flat-time-limit", f"must be > 0 seconds, got {args.flat_time_limit}")
+    if args.flat_trials is not None and args.flat_trials < 1:
+        raise SpecError("<command line>", "--flat-trials", f"must be at least 1, got {args.flat_trials}")
+    if args.flat_trials is not None and args.flat_time_limit is not None:
+        raise SpecError("<command line>", "--flat-trials", "give --flat-trials or --flat-time-limit, not both")
     policies = [p.strip() for p in args.policies.split(",") if p.strip()]
     unknown = [p for p in policies if p not in POLICY_NAMES]
     if unknown:
@@ -109,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
     import logging
 
     from pearl_pomdp.cli import print_json
+    from pearl_sim.policies import DEFAULT_FLAT_TRIALS
     from pearl_pomdp.model.factored import load_domain
     from pearl_sim import study
     from pearl_sim.experiment import build_agents
@@ -120,7 +130,9 @@ def run(args: argparse.Namespace) -> int:
     log = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
     terminal = show_progress(args)
     domain = load_domain(args.domain)
-    agents = build_agents(domain, args.hierarchy, flat_time_limit=args.flat_time_limit, policies=policies,
+    flat_trials = None if args.flat_time_limit is not None else (args.flat_trials or DEFAULT_FLAT_TRIALS)
+    agents = build_agents(domain, args.hierarchy, flat_time_limit=args.flat_time_limit, flat_trials=flat_trials,
+                          policies=policies,
                           log=log if terminal else None)
     plan_seconds = dict(build_agents.timings)
     grid = study.cells(len(cases), noise, args.episodes)
@@ -148,14 +160,15 @@ def run(args: argparse.Namespace) -> int:
                      "jobs": args.jobs},
         "plan_seconds": plan_seconds,
         "per_policy": table,
+        "per_scenario": study.per_scenario(episodes),
         "paired_vs_baseline": diffs,
         "acceptance": goal,
         "files": {"png": str(png), "csv": str(csv_path), "json": str(out / "study.json")},
         "episode_seconds": round(episode_seconds, 1),
         "seconds": round(time.perf_counter() - started, 1),
     }
-    (out / "study.json").write_text(json.dumps(dict(report, episodes=study.episodes_json(episodes)), indent=1),
-                                    encoding="utf-8")
+    report["episodes"] = study.episodes_json(episodes)
+    (out / "study.json").write_text(json.dumps(report, indent=1), encoding="utf-8")
     if args.json:
         print_json(report)
         return 0
