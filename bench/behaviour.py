@@ -45,16 +45,19 @@ def main() -> int:
         for sc in load_scenarios(path):
             rows = []
             for seed in range(args.seeds):
-                habits = {"doorbell_away": 0}
+                habits = {"doorbell_away": 0, "questions_raised": 0}
 
                 def on_step(world, result, waits, executive, habits=habits):
                     if result.action == "RingDoorBell" and world.robot_at != world.resident_at:
                         habits["doorbell_away"] += 1
+                    for part in [result, *(waits or [])]:
+                        habits["questions_raised"] += sum("wants to know the" in e for e in part.events)
 
                 r = run_episode(sc, controller, domain, seed=sc.seed + 1000 * seed, on_step=on_step)
                 rows.append({"unprompted": r.unprompted_questions,
                              "offers": r.actions.count("ConfirmGuideToPhysio"),
                              "doorbell_away": habits["doorbell_away"], "wrong": r.wrong_actions,
+                             "raised": habits["questions_raised"], "answered": r.questions_answered,
                              "guided": r.guidance_completed, "needed": r.guidance_needed,
                              "ends_home": _ends_home(r.actions)})
             n = len(rows)
@@ -66,6 +69,8 @@ def main() -> int:
                 "doorbell_away_per_episode": sum(x["doorbell_away"] for x in rows) / n,
                 "wrong_per_episode": sum(x["wrong"] for x in rows) / n,
                 "ends_at_home": sum(x["ends_home"] for x in rows) / n,
+                "questions_raised_per_episode": sum(x["raised"] for x in rows) / n,
+                "questions_answered_per_episode": sum(x["answered"] for x in rows) / n,
                 "guidance_success": (sum(x["guided"] for x in needed) / len(needed)) if needed else None,
             }
     json.dump(out, sys.stdout)

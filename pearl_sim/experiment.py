@@ -43,6 +43,8 @@ class EpisodeResult:
     residents_lost: int
     walking_speed: float
     actions: List[str] = field(default_factory=list)
+    questions_answered: int = 0
+    reminders_delivered: int = 0
 
 
 def episode_executive(controller, domain, scenario: Scenario, model=None):
@@ -93,6 +95,7 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
         goals_achieved=m.reminders_delivered + m.questions_answered + m.guidances_completed,
         wrong_actions=m.wrong_actions, residents_lost=m.residents_lost,
         walking_speed=scenario.resident.walking_speed, actions=list(trace.actions),
+        questions_answered=m.questions_answered, reminders_delivered=m.reminders_delivered,
     )
 
 
