@@ -105,8 +105,12 @@ def test_hand_checked_transitions(pearl):
     guide = m.actions.index("GuideToPhysio")
     willing = s(d, RobotLocation="room", UserPresent="yes", UserMotionGoal="toPhysioWithRobot")
     arrived = s(d, RobotLocation="physio", UserLocation="physio", UserPresent="yes", UserMotionGoal="toPhysioWithRobot")
-    # Both walk over; she stays engaged (0.98); no reminder (0.994), no question (0.98); battery drains while driving (0.95).
-    assert T[guide, willing, arrived] == pytest.approx(0.98 * 0.994 * 0.98 * 0.95)
+    # Both walk over; she stays engaged (0.98); no reminder (0.994); no question on arrival half of the
+    # time (0.5: the paper's study, half of the guidances were followed by one); battery drains while driving (0.95).
+    assert T[guide, willing, arrived] == pytest.approx(0.98 * 0.994 * 0.5 * 0.95)
+    asks = s(d, RobotLocation="physio", UserLocation="physio", UserPresent="yes", UserMotionGoal="toPhysioWithRobot",
+             UserInfoGoal="wantWeather")
+    assert T[guide, willing, asks] == pytest.approx(0.98 * 0.994 * 0.25 * 0.95)
     remind = m.actions.index("RemindPhysioAppt")
     due = s(d, RobotLocation="room", UserPresent="yes", ReminderGoal="physio")
     accepted = s(d, RobotLocation="room", UserPresent="yes", UserMotionGoal="toPhysioWithRobot")

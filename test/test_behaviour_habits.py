@@ -1,0 +1,75 @@
+"""Habits a nurse would object to, over 50 seeds per scenario in the simulated world (issue 11).
+
+The planned hierarchical Pearl policy runs through the study's step loop (the robot's own
+tracker rules, the world of ``pearl_sim``) on the paper's scenarios and on held-out ones
+written before any policy ran on them (``test/data/scenarios``). Checked:
+
+* no unprompted offers of the walk where the resident never wants to go (<= 0.1 per episode);
+* no RingDoorBell where the resident is not (the robot rings only at her door);
+* after the Figure 4 scenario (and the held-out walk) the robot drives home (Figure 4(f));
+* the walks that are wanted are completed.
+"""
+from pathlib import Path
+
+import pytest
+
+from pearl_pomdp.hierarchy import load_hierarchy, plan
+from pearl_pomdp.model.factored import load_domain
+from pearl_sim.agents import Controller
+from pearl_sim.experiment import run_episode
+from pearl_sim.scenario import load_scenarios
+
+REPO = Path(__file__).resolve().parents[1]
+SEEDS = 50
+NO_WALK = ["test/data/scenarios/no_walk_questions.yaml", "test/data/scenarios/checklist_quiet.yaml",
+           "config/scenarios/info_request.yaml", "config/scenarios/table4_dialog.yaml"]
+WALK = ["config/scenarios/figure4.yaml", "test/data/scenarios/walk_then_time.yaml"]
+
+
+@pytest.fixture(scope="module")
+def pearl():
+    domain = load_domain(REPO / "config/pearl.domain.yaml")
+    policy = plan(domain, load_hierarchy(REPO / "config/pearl.hierarchy.yaml", domain))
+    return domain, Controller("hierarchical", policy)
+
+
+def episodes(pearl, path):
+    """Every seed of the scenario: (result, rings away from her, offers while she has no wish)."""
+    domain, controller = pearl
+    scenario = load_scenarios(REPO / path)[0]
+    out = []
+    for k in range(SEEDS):
+        habits = {"rings_away": 0, "unwanted_offers": 0}
+
+        def on_step(world, result, waits, executive, habits=habits):
+            if result.action == "RingDoorBell" and world.robot_at != world.resident_at:
+                habits["rings_away"] += 1
+            if result.action == "ConfirmGuideToPhysio" and any("unprompted question" in e for e in result.events):
+                habits["unwanted_offers"] += 1
+
+        result = run_episode(scenario, controller, domain, seed=scenario.seed + 1000 * k, on_step=on_step)
+        out.append((result, habits["rings_away"], habits["unwanted_offers"]))
+    return out
+
+
+@pytest.mark.parametrize("path", NO_WALK)
+def test_no_unprompted_walk_offers_where_she_never_wants_to_go(pearl, path):
+    runs = episodes(pearl, path)
+    offers = sum(o for _r, _rings, o in runs) / len(runs)
+    assert offers <= 0.1, f"{path}: {offers:.2f} unprompted walk offers per episode"
+    assert sum(r.wrong_actions for r, _rings, _o in runs) / len(runs) <= 0.1
+    assert all(rings == 0 for _r, rings, _o in runs), f"{path}: RingDoorBell away from her"
+
+
+@pytest.mark.parametrize("path", WALK)
+def test_wanted_walks_are_completed_and_the_robot_goes_home(pearl, path):
+    runs = episodes(pearl, path)
+    assert all(rings == 0 for _r, rings, _o in runs), f"{path}: RingDoorBell away from her"
+    completed = sum(r.guidance_completed for r, _rings, _o in runs) / len(runs)
+    assert completed >= 0.95, f"{path}: {completed:.2f} of the wanted walks completed"
+    home = 0
+    for r, _rings, _o in runs:
+        drives = [a for a in r.actions if a in ("GotoPatientRoom", "GuideToPhysio", "GoHome")]
+        home += bool(drives) and drives[-1] == "GoHome" and "GuideToPhysio" in drives
+    assert home / len(runs) >= 0.95, f"{path}: the robot drove home after the task in {home}/{len(runs)} episodes"
+    assert sum(o for _r, _rings, o in runs) / len(runs) <= 0.1
