@@ -76,9 +76,21 @@ class DemoResult:
             guided = ("guidance completed" if m["guidances_completed"] else "guidance NOT completed") + ttg + "; "
         else:
             guided = "no guidance wanted; " if not m["guidances_started"] else "guided unasked; "
-        return (f"outcome: {guided}{m['reminders_delivered']} reminder(s) delivered, "
-                f"{m['questions_answered']} question(s) answered, {self.clarifications} clarification question(s), "
-                f"{m['wrong_actions']} wrong action(s); bag {self.bag} ({self.bag_messages} messages)")
+        # Only what the scenario asked for is scored: x/y of the reminders that fell due and of
+        # the questions she came to have; nothing is said about a task the scenario never set.
+        parts = [f"{m['reminders_delivered']}/{m['reminders_due']} reminder(s) delivered" if m.get("reminders_due") else "",
+                 f"{m['questions_answered']}/{m['questions_raised']} question(s) answered"
+                 if m.get("questions_raised") else "",
+                 f"{self.clarifications} clarification question(s)",
+                 f"{m['unprompted_questions']} unprompted", f"{m['wrong_actions']} wrong action(s)",
+                 "ended at home" if self.ended_home else "ended away from home"]
+        return (f"outcome: {guided}" + ", ".join(p for p in parts if p)
+                + f"; bag {self.bag} ({self.bag_messages} messages)")
+
+    @property
+    def ended_home(self) -> bool:
+        """The robot is back at its station (``home``) when the episode ends."""
+        return self.metrics.get("robot_at_end", "home") == "home"
 
 
 def _top(marginals: Dict[str, Dict[str, float]]) -> str:
@@ -332,7 +344,8 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
                       "guidances_started": m.guidances_started, "guidances_completed": m.guidances_completed,
                       "residents_lost": m.residents_lost, "questions_answered": m.questions_answered,
                       "clarifications": m.clarifications, "unprompted_questions": m.unprompted_questions,
-                      "wrong_actions": m.wrong_actions,
+                      "wrong_actions": m.wrong_actions, "reminders_due": m.reminders_due,
+                      "questions_raised": m.questions_raised, "robot_at_end": world.robot_at,
                       "time_to_goal": m.time_to_goal, "wrong": m.wrong}
     result.bag = bag_dir
     result.transcript = out_dir / "transcript.txt"

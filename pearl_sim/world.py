@@ -116,6 +116,10 @@ class Metrics:
     guidances_completed: int = 0
     residents_lost: int = 0
     questions_answered: int = 0
+    #: What the scenario asked for (counted, no effect on the world): reminders that fell due
+    #: and questions the resident came to have, so an outcome scores only those.
+    reminders_due: int = 0
+    questions_raised: int = 0
     clarifications: int = 0
     #: Offers or confirmations about a goal the resident does not have at that moment
     #: ("Shall we walk to physiotherapy?" to a resident who does not want to go).
@@ -459,6 +463,8 @@ class World:
             events.append(f"{resident.name} arrives at physiotherapy")
             for q in self._physio_questions:
                 self.info_goal = q.ask
+                self.metrics.questions_raised += 1
+                events.append(f"{resident.name} wants to know the {self.info_goal}")
             self._physio_questions = []
 
     def _near(self) -> bool:
@@ -489,6 +495,7 @@ class World:
             kind = self._appointments.pop(0).kind
             if kind not in self.due:
                 self.due.append(kind)
+                self.metrics.reminders_due += 1
                 events.append(f"{kind} reminder falls due")
         for kind in self.due:
             last = self._last_announce.get(kind)
@@ -497,6 +504,7 @@ class World:
                 self._scheduler_queue.append(Message(self.time, "Reminder", f"g_{kind}"))
         while self._questions and self._questions[0].at <= self.time:
             self.info_goal = self._questions.pop(0).ask
+            self.metrics.questions_raised += 1
             events.append(f"{self.scenario.resident.name} wants to know the {self.info_goal}")
 
     def _say(self, intent: str) -> Message:

@@ -68,12 +68,20 @@ def test_plotted_features_follow_the_scenario():
             ("UserInfoGoal", "wantWeather")} <= set(f4) and ("UserInfoGoal", "wantTime") not in f4
 
 
-def test_outcome_mentions_guidance_only_where_it_was_wanted():
+def test_outcome_scores_only_what_the_scenario_asked_for():
     from pearl_sim.demo import DemoResult
 
     metrics = {"guidances_completed": 0, "guidances_started": 0, "time_to_goal": [], "reminders_delivered": 1,
-               "questions_answered": 2, "clarifications": 3, "wrong_actions": 0}
+               "reminders_due": 1, "questions_answered": 1, "questions_raised": 2, "clarifications": 3,
+               "unprompted_questions": 1, "wrong_actions": 0, "robot_at_end": "room"}
     quiet = DemoResult("t", Path("."), metrics=metrics, guidance_wanted=False)
-    assert quiet.outcome().startswith("outcome: no guidance wanted; 1 reminder(s)")
+    assert quiet.outcome().startswith("outcome: no guidance wanted; 1/1 reminder(s) delivered, 1/2 question(s) "
+                                      "answered, 3 clarification question(s), 1 unprompted, 0 wrong action(s), "
+                                      "ended away from home; bag")
     wanted = DemoResult("t", Path("."), metrics=metrics, guidance_wanted=True)
-    assert wanted.outcome().startswith("outcome: guidance NOT completed; 1 reminder(s)")
+    assert wanted.outcome().startswith("outcome: guidance NOT completed; 1/1 reminder(s)")
+    # No question was raised and no reminder fell due: the line says nothing about them.
+    idle = DemoResult("t", Path("."), metrics=dict(metrics, reminders_due=0, questions_raised=0, robot_at_end="home"),
+                      guidance_wanted=False)
+    assert idle.outcome().startswith("outcome: no guidance wanted; 3 clarification question(s), 1 unprompted, "
+                                     "0 wrong action(s), ended at home")
