@@ -1,7 +1,7 @@
 """`pearl replay`: every recorded scenario in bags/ reproduces its recorded actions.
 
-The bags were recorded from the live multi-process graph (bags/record_scenarios.py); the
-replay feeds their inputs and /clock through the tracker and policy in one process under
+The bags were recorded from the simulated world through the live nodes over DDS
+(bags/record_scenarios.py, `pearl demo`); the replay feeds their inputs and /clock through the tracker and policy in one process under
 sim time. A bag whose recorded actions were altered must be reported as a mismatch, and a
 damaged or wrong-typed bag as an error naming the file and what is wrong.
 """
@@ -47,8 +47,8 @@ def test_replay_matches_recorded_actions(bag, tmp_path):
     # every input (and every silence, closed by the tracker's sim-time step timeout) closed
     # one step, and each step got one answer
     assert result.counters["updates"] == inputs + result.counters["timeouts"] == len(expected) - 1
-    if bag.name == "table4_clarification":
-        assert result.counters["timeouts"] == 1  # the silence: /clock drove the tracker's timer
+    # the silences were closed by the tracker's step timeout, driven by the recorded /clock
+    assert result.counters["timeouts"] >= 1
     assert result.messages == reader.message_count and result.messages_per_second > 0
 
 
