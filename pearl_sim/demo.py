@@ -247,7 +247,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
     sim = None
     writer = None
     try:
-        tracker_params = {"step_timeout": float(scenario.step_timeout)}
+        tracker_params = scenario.tracker_parameters()
         graph = PearlGraph(context=context, shared={"domain": str(out_dir / "domain.yaml")},
                            domain=domain, model=domain.compile(), decider=decider,
                            overrides={"belief_tracker": {**tracker_params, "diagnostics_period": 60.0},

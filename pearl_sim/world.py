@@ -17,6 +17,12 @@ distance to her (an exponential average of her progress per second, as a people
 tracker on the laser would give) and drives no faster than that, stopping when she
 is more than ``FOLLOW_GAP`` metres behind.
 
+Blocked corridors (scenario ``blocked:``). A drive through one never arrives: the robot
+stops at the obstacle, no landmark is reported, and the scheduler keeps quiet (the robot
+is still busy driving) until the manager gives the drive up at its deadline
+(``navFailed``, :mod:`pearl_pomdp.tracking`) and takes its next action. The robot is then
+taken to be back where it started.
+
 The world counts what an experimenter scores: reminders delivered, guidances
 completed and their duration, clarification questions, and *wrong actions*
 (reminding with nothing due, answering a question nobody asked, guiding a
@@ -55,11 +61,11 @@ def action_roles(domain) -> Dict[str, Dict[str, str]]:
     """What the world needs to know of the domain's actions, from its ``category:`` tags.
 
     Returns ``{"moves": {action: place}, "clarifications": {action: category}}``: a move is a
-    ``category: Move`` action and its destination the value it sets on :data:`ROBOT_PLACE`;
+    ``category: Move`` action and its destination the value it most likely sets on :data:`ROBOT_PLACE`;
     a clarification is a ``category: Clarify`` action (a question asked to resolve uncertainty).
     """
     moves = {a: place for a in domain.actions if domain.categories.get(a) == "Move"
-             and (place := domain.deterministic_effect(a, ROBOT_PLACE)) is not None}
+             and (place := domain.intended_effect(a, ROBOT_PLACE)) is not None}
     clarifications = {a: "Clarify" for a in domain.actions if domain.categories.get(a) == "Clarify"}
     return {"moves": moves, "clarifications": clarifications}
 
@@ -121,6 +127,8 @@ class Metrics:
     #: ("Shall we walk to physiotherapy?" to a resident who does not want to go).
     unprompted_questions: int = 0
     wrong_actions: int = 0
+    #: Drives stopped by a blocked corridor (scenario ``blocked:``).
+    blocked_drives: int = 0
     time_to_goal: List[float] = field(default_factory=list)
     wrong: List[str] = field(default_factory=list)
 
@@ -178,6 +186,7 @@ class World:
         self._guidance_due_at: Optional[float] = None
         self._follower: Optional[dict] = None   # a resident walking behind/after the robot
         self._return_at: Optional[float] = None  # a lost resident gets back to her room then
+        self._stuck = False              # a drive stopped by a blocked corridor is still under way
         self.metrics = Metrics()
         self._advance(0.0, [])
 
@@ -212,6 +221,7 @@ class World:
         start = self.time
         events: List[str] = []
         wrong: Optional[str] = None
+        self._stuck = False
         self.metrics.steps += 1
         if action in self.clarifications:
             self.metrics.clarifications += 1
@@ -220,7 +230,7 @@ class World:
             if self._was_guide and not self._follower_started:
                 wrong = "guided a resident who did not want to go" if not self._was_willing else None
             self._finish(action, wrong, events)
-            return StepResult(action, start, self.time, [message], events, wrong)
+            return StepResult(action, start, self.time, [message] if message is not None else [], events, wrong)
         self._advance(SPEAK_SECONDS, events)
         resident = self.scenario.resident
         self._lapses(resident, events)
@@ -251,10 +261,11 @@ class World:
         """
         start = self.time
         events: List[str] = []
-        while not self._scheduler_queue and self.time < until - 1e-9:
+        # A robot stuck at a blocked corridor is not idle: the scheduler waits for it too.
+        while (self._stuck or not self._scheduler_queue) and self.time < until - 1e-9:
             self._advance(min(1.0, until - self.time), events)
         messages: List[Message] = []
-        if self._scheduler_queue:
+        if self._scheduler_queue and not self._stuck:
             queued = self._scheduler_queue.pop(0)
             messages.append(Message(self.time, queued.modality, queued.text, queued.said))
         return StepResult("", start, self.time, messages, events, None)
@@ -383,7 +394,7 @@ class World:
         return "chatter" if self.rng.random() < 0.2 else None
 
     # -------------------------------------------------------------------- moving
-    def _move(self, goal: str, action: str, events: List[str]) -> Message:
+    def _move(self, goal: str, action: str, events: List[str]) -> Optional[Message]:
         origin = self.robot_at
         distance = self.scenario.distance(origin, goal)
         together = self.engaged and self._near() and self.resident_at == origin
@@ -391,6 +402,8 @@ class World:
         self._follower_started = False
         # A guidance is the drive to the department, where the resident's appointment is.
         self._was_guide = goal == "physio"
+        if self.scenario.is_blocked(origin, goal, self.time):
+            return self._drive_blocked(origin, goal, distance, together, events)
         if self._was_guide and together and self.wants_guidance and goal != origin:
             self._follower_started = True
             self.metrics.guidances_started += 1
@@ -406,6 +419,19 @@ class World:
             self._advance(distance / self.scenario.robot_speed, events, moving=True)
         self.robot_at = goal
         return Message(self.time, "Laser", LANDMARKS[goal])
+
+    def _drive_blocked(self, origin: str, goal: str, distance: float, together: bool,
+                       events: List[str]) -> None:
+        """The corridor from ``origin`` to ``goal`` is blocked: the robot drives up to the obstacle
+        (half way) and stops there; nothing is reported. The step stays open until the
+        manager's drive deadline; the robot counts as back at ``origin`` afterwards."""
+        self.metrics.blocked_drives += 1
+        events.append(f"the corridor from {origin} to {goal} is blocked: the robot stops at the obstacle")
+        if self.engaged and not (together and self._was_guide and self.wants_guidance):
+            self.engaged = False     # it drove off without her, as any drive does
+        self._advance(0.5 * distance / self.scenario.robot_speed, events, moving=True)
+        self._stuck = True
+        return None
 
     def _drive_guided(self, distance: float, events: List[str]) -> None:
         """Drive ``distance`` metres with the resident following, one second at a time."""

@@ -92,7 +92,8 @@ class PearlGraph:
                     # executor's places); the domain is loaded once for all nodes, above.
                     declared = {p.name for p in cls.PARAMETERS}
                     from_file[name] = {k: v for k, v in node_params(name, path).items()
-                                       if k in declared and k != "domain"}
+                                       if (k in declared or (name == "belief_tracker" and k.startswith("locations.")))
+                                       and k != "domain"}
 
             def params(name: str) -> Dict[str, Any]:
                 return {**from_file.get(name, {}), **shared, **dict(overrides.get(name, {}))}
