@@ -110,7 +110,7 @@ class PearlGraph:
             if executor:
                 exec_params = {k: v for k, v in params("action_executor").items() if k != "domain"}
                 exec_params.setdefault("action_names", list(model.actions))
-                self.executor_node = ActionExecutorNode(parameter_overrides=exec_params, **common)
+                self.executor_node = ActionExecutorNode(parameter_overrides=exec_params, **managed)
                 self.nodes.append(self.executor_node)
             self.executor = SingleThreadedExecutor(context=context)
             for node in self.nodes:
