@@ -65,6 +65,13 @@ class GuidePaceConfig:
     pace_time_constant: float = 3.0
     lost_timeout: float = 60.0
 
+    @classmethod
+    def from_params(cls, params, **overrides) -> "GuidePaceConfig":
+        """From a parameter table (the ``guide_pace`` section of ``config/pearl_nodes.yaml``);
+        keys that are not settings are ignored, ``overrides`` win."""
+        names = cls.__dataclass_fields__
+        return cls(**{**{k: float(v) for k, v in dict(params).items() if k in names}, **overrides})
+
     def __post_init__(self):
         for name in ("cruise_speed", "follow_gap", "gain", "pace_time_constant", "lost_timeout"):
             value = getattr(self, name)

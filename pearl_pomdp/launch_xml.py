@@ -259,7 +259,7 @@ class _Scope:
 _TRUE = {"true", "1"}
 _FALSE = {"false", "0"}
 _NODE_ATTRS = {"pkg", "exec", "name", "namespace", "output", "args", "ros_args", "if", "unless",
-               "respawn", "respawn_delay", "emulate_tty", "exec_name"}
+               "respawn", "respawn_delay", "emulate_tty", "exec_name", "on_exit"}
 
 
 def _condition(scope: _Scope, el: _Element) -> bool:
@@ -377,6 +377,9 @@ def _node(el: _Element, scope: _Scope, namespace: Optional[str]) -> LaunchNode:
                       name=scope.attr(el, "name"), output=scope.attr(el, "output", default="log"), line=el.line)
     if node.output not in ("screen", "log", "both"):
         raise scope.error(el, "output", f"must be screen, log or both, got {node.output!r}")
+    # ros2 launch ends the launch when such a node exits; pearl launch always does.
+    if "on_exit" in el.attrib and scope.attr(el, "on_exit") != "shutdown":
+        raise scope.error(el, "on_exit", f"only 'shutdown' is supported, got {scope.attr(el, 'on_exit')!r}")
     own_ns = scope.attr(el, "namespace")
     if own_ns and own_ns.startswith("/"):
         node.namespace = own_ns

@@ -27,12 +27,14 @@ raises ImportError naming the package.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from typing import Any, Dict, Mapping, Optional, Sequence
 
 try:
     import foxglove
     from foxglove.channels import LogChannel, PoseInFrameChannel, SceneUpdateChannel
+    from foxglove.websocket import ServerListener
     from foxglove.messages import (Color, Log, LogLevel, Pose, PoseInFrame, Quaternion, SceneEntity, SceneUpdate,
                                    SpherePrimitive, TextPrimitive, Timestamp, Vector3)
 except ImportError as err:  # pragma: no cover - depends on the environment
@@ -81,6 +83,23 @@ def _stamp(seconds: float) -> Timestamp:
     return Timestamp(sec, int(round((seconds - sec) * 1e9)) % 1_000_000_000)
 
 
+class _Subscriptions(ServerListener):
+    """Counts the clients subscribed to each topic (so a caller can wait for a viewer)."""
+
+    def __init__(self):
+        super().__init__()
+        self.lock = threading.Lock()
+        self.by_topic: Dict[str, int] = {}
+
+    def on_subscribe(self, client, channel) -> None:
+        with self.lock:
+            self.by_topic[channel.topic] = self.by_topic.get(channel.topic, 0) + 1
+
+    def on_unsubscribe(self, client, channel) -> None:
+        with self.lock:
+            self.by_topic[channel.topic] = max(0, self.by_topic.get(channel.topic, 0) - 1)
+
+
 def _pose(x: float, y: float, yaw: float) -> Pose:
     return Pose(position=Vector3(x=float(x), y=float(y), z=0.0),
                 orientation=Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0)))
@@ -111,7 +130,9 @@ class LiveView:
                 self._channels[topic] = PoseInFrameChannel(topic, context=self._context)
             else:
                 self._channels[topic] = SceneUpdateChannel(topic, context=self._context)
-        self._server = foxglove.start_server(name=name, host=host, port=port, context=self._context)
+        self._subscriptions = _Subscriptions()
+        self._server = foxglove.start_server(name=name, host=host, port=port, context=self._context,
+                                             server_listener=self._subscriptions)
         self.published: Dict[str, int] = {topic: 0 for topic in CHANNELS}
 
     @property
@@ -123,6 +144,20 @@ class LiveView:
     def url(self) -> str:
         """``ws://127.0.0.1:PORT`` (what to enter in Foxglove's "Open connection")."""
         return f"ws://127.0.0.1:{self.port}"
+
+    def subscribers(self, topic: str) -> int:
+        """How many clients are subscribed to ``topic`` now."""
+        with self._subscriptions.lock:
+            return self._subscriptions.by_topic.get(topic, 0)
+
+    def wait_for_subscribers(self, topics: Sequence[str], timeout: float) -> bool:
+        """Wait up to ``timeout`` s until every topic of ``topics`` has a subscriber; True if so."""
+        deadline = time.monotonic() + max(0.0, timeout)
+        while not all(self.subscribers(t) for t in topics):
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.05)
+        return True
 
     def publish(self, topic: str, value: Any, stamp_s: Optional[float] = None) -> None:
         """Send ``value`` on ``topic`` (one of :data:`CHANNELS`, in the form the module doc gives).

@@ -9,6 +9,10 @@
   circle therefore reports nothing more: hysteresis of ``exit_radius − entry_radius``.
 * :class:`DriveDeadline` — how long a drive may take before the manager calls it failed:
   ``margin + slack · path_factor · distance / speed``, capped at ``max_seconds``.
+* :class:`DriveTimer` — the deadline of each of a domain's drives (``category: Move``
+  actions): from the place the robot most likely is to the place the drive sets. The
+  belief tracker (:mod:`pearl_pomdp.tracking`) closes a drive that misses it with the
+  ``navFailed`` observation — on the robot, in the demo and in the study alike.
 """
 from __future__ import annotations
 
@@ -16,7 +20,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
-__all__ = ["Place", "Landmark", "LandmarkDetector", "DriveDeadline", "places_from_parameters"]
+__all__ = ["Place", "Landmark", "LandmarkDetector", "DriveDeadline", "DriveTimer", "places_from_parameters"]
 
 
 @dataclass(frozen=True)
@@ -162,6 +166,69 @@ class DriveDeadline:
     def between(self, start: Place, goal: Place, speed: Optional[float] = None) -> float:
         """Seconds allowed to drive from ``start`` to ``goal`` (straight-line distance × factors)."""
         return self.seconds(start.distance_to(goal.x, goal.y), speed)
+
+
+@dataclass(frozen=True)
+class DriveTimer:
+    """Seconds each drive may take: :class:`DriveDeadline` over the distance from origin to goal.
+
+    Attributes:
+        goals: drive action → the place it drives to.
+        places: place name → :class:`Place` (the map).
+        deadline: the time rule.
+        guide_actions: drives that walk a resident along; they are timed at ``guide_speed``.
+        guide_speed: m/s, the slowest pace (rests included) the manager still guides.
+    """
+
+    goals: Dict[str, str]
+    places: Dict[str, Place]
+    deadline: DriveDeadline = DriveDeadline()
+    guide_actions: Tuple[str, ...] = ()
+    guide_speed: float = 0.03
+
+    def __post_init__(self):
+        missing = sorted({g for g in self.goals.values() if g not in self.places})
+        if missing:
+            drive = next(a for a, g in self.goals.items() if g == missing[0])
+            raise ValueError(f"location_names: drive {drive} goes to {missing[0]!r}, which has no pose "
+                             f"(places: {', '.join(self.places) or 'none'})")
+        if not (math.isfinite(self.guide_speed) and self.guide_speed > 0):
+            raise ValueError(f"guide_speed must be > 0 m/s, got {self.guide_speed}")
+
+    @classmethod
+    def for_domain(cls, domain, drives: Iterable[str], places: Dict[str, Place], deadline: DriveDeadline,
+                   place_feature: str = "RobotLocation", guide_actions: Iterable[str] = (),
+                   guide_speed: float = 0.03) -> Optional["DriveTimer"]:
+        """The timer of ``drives`` in ``domain``: each one's goal is the value it (most likely) sets
+        on ``place_feature``. Drives without such a value are left out (never timed);
+        ``None`` when no drive is left.
+
+        Raises:
+            ValueError: ``place_feature`` is not a feature of the domain, or a goal has no pose.
+        """
+        if place_feature not in domain.feature_names:
+            raise ValueError(f"place_feature {place_feature!r} is not a feature of {domain.name} "
+                             f"(features: {', '.join(domain.feature_names)})")
+        goals = {a: g for a in drives if (g := domain.intended_effect(a, place_feature)) is not None}
+        if not goals:
+            return None
+        return cls(goals, dict(places), deadline, tuple(a for a in guide_actions if a), float(guide_speed))
+
+    def seconds(self, action: str, origin: Optional[str] = None) -> Optional[float]:
+        """Seconds allowed for ``action`` started at place ``origin``; ``None`` if it is not a timed drive.
+
+        An unknown ``origin`` (``None`` or not a place) is taken as the farthest place from the goal.
+        """
+        goal_name = self.goals.get(action)
+        if goal_name is None:
+            return None
+        goal = self.places[goal_name]
+        if origin in self.places:
+            distance = self.places[origin].distance_to(goal.x, goal.y)
+        else:
+            distance = max(p.distance_to(goal.x, goal.y) for p in self.places.values())
+        speed = self.guide_speed if action in self.guide_actions else None
+        return self.deadline.seconds(distance, speed)
 
 
 def places_from_parameters(names: Iterable[str], poses: Dict[str, Sequence[float]]) -> Dict[str, Place]:

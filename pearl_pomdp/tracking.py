@@ -31,8 +31,17 @@ with thousands of episodes — so a change to the rules below shows up in both.
   carries no more information than unrecognised speech). :meth:`StepProtocol.deadline`
   says when; the node arms a one-shot timer for that instant, the simulator jumps its
   clock to it. Counter ``timeouts``. Actions listed in ``no_timeout_actions`` (by
-  default the domain's ``category: Move`` actions) are never timed out: a drive takes as
-  long as it takes and navigation ends it with a landmark.
+  default the domain's ``category: Move`` actions) are not closed by ``step_timeout``:
+  a drive takes as long as it takes and navigation ends it with a landmark.
+* *A drive that never arrives* (a blocked corridor, lost localisation). With
+  ``drive_speed > 0`` each drive gets its own deadline from
+  :class:`~pearl_pomdp.navigation.DriveTimer`: the distance from the place the robot most
+  likely is (the belief's ``place_feature`` marginal when the drive starts) to the drive's
+  goal, at ``drive_speed`` (``guide_speed`` for ``guide_actions``), through
+  :class:`~pearl_pomdp.navigation.DriveDeadline`. When it passes without an observation
+  the step closes with ``nav_failed_observation`` (``navFailed``, a Laser symbol of the
+  domain whose rows say the robot is most likely still where it started), counter
+  ``nav_failures``, a warning; the policy decides what next (retry, ask, go home).
 * *Observation before any action / several in one step.* Inputs have no header, so
   arrival order is the only order there is. An observation while no step is open is
   *queued* (FIFO, at most ``max_pending``; on overflow the oldest is dropped — counter
@@ -65,7 +74,7 @@ __all__ = ["BeliefTracker", "ObservationMapper", "StepProtocol", "StepResult", "
            "COUNTERS", "SYMBOL_INPUTS", "drive_actions"]
 
 #: Names of the counters of :class:`StepProtocol` (reported on /diagnostics).
-COUNTERS = ("updates", "timeouts", "queued", "dropped_stale", "dropped_overflow",
+COUNTERS = ("updates", "timeouts", "nav_failures", "queued", "dropped_stale", "dropped_overflow",
             "replaced_actions", "unknown_actions", "zero_likelihood")
 
 #: Symbol inputs: input name → the domain modality (lower-cased) whose symbols it carries.
@@ -96,6 +105,17 @@ class StepSettings:
         max_pending: observations that may wait for the next action.
         stale_after: seconds after which a waiting observation is dropped; ``0`` never.
         confidence_floor: speech recognised with a lower confidence counts as ``unknown``.
+        drive_speed: m/s a drive is timed at (:class:`~pearl_pomdp.navigation.DriveDeadline`);
+            ``0`` gives drives no deadline (only an observation closes them).
+        guide_speed: m/s a guidance (``guide_actions``) is timed at: the slowest pace, rests
+            included, of a resident the robot still guides.
+        guide_actions: drives that walk the resident along.
+        drive_path_factor, drive_slack, drive_margin, drive_max_seconds: the other fields of
+            :class:`~pearl_pomdp.navigation.DriveDeadline`.
+        nav_failed_observation: the symbol that closes a drive at its deadline.
+        place_feature: the state feature whose values are the places (the drives set it).
+        places: ``(name, x, y)`` of each place, metres in the map frame (the params file's
+            ``location_names`` / ``locations.<name>``).
     """
 
     step_timeout: float = 10.0
@@ -104,6 +124,16 @@ class StepSettings:
     max_pending: int = 8
     stale_after: float = 0.0
     confidence_floor: float = 0.0
+    drive_speed: float = 0.0
+    guide_speed: float = 0.03
+    guide_actions: Tuple[str, ...] = ()
+    drive_path_factor: float = 1.4
+    drive_slack: float = 1.5
+    drive_margin: float = 10.0
+    drive_max_seconds: float = 1800.0
+    nav_failed_observation: str = "navFailed"
+    place_feature: str = "RobotLocation"
+    places: Tuple[Tuple[str, float, float], ...] = ()
 
     @classmethod
     def from_params(cls, params: Dict[str, Any]) -> "StepSettings":
@@ -114,7 +144,38 @@ class StepSettings:
             given = kwargs["no_timeout_actions"]
             # An empty list in a params file means "not given" (ROS cannot express None).
             kwargs["no_timeout_actions"] = tuple(given) if given else None
+        if "guide_actions" in kwargs:
+            kwargs["guide_actions"] = tuple(a for a in kwargs["guide_actions"] if a)
+        names_given = [n for n in params.get("location_names", ()) if n]
+        if names_given and "places" not in params:
+            places = []
+            for name in names_given:
+                pose = params.get(f"locations.{name}")
+                if pose is None or len(pose) < 2:
+                    raise ValueError(f"locations.{name}: expected [x, y, yaw] for location {name!r}, got {pose!r}")
+                places.append((name, float(pose[0]), float(pose[1])))
+            kwargs["places"] = tuple(places)
         return cls(**kwargs)
+
+    def drive_timer(self, domain, drives: Sequence[str]):
+        """The :class:`~pearl_pomdp.navigation.DriveTimer` of these settings, or ``None`` (off,
+        no domain, or no drive with a place goal).
+
+        Raises:
+            ValueError: a field is out of range or a drive's goal has no pose (names the parameter).
+        """
+        if self.drive_speed <= 0 or domain is None:
+            return None
+        from pearl_pomdp.navigation import DriveDeadline, DriveTimer, Place
+
+        deadline = DriveDeadline(speed=self.drive_speed, path_factor=self.drive_path_factor, slack=self.drive_slack,
+                                 margin=self.drive_margin, max_seconds=self.drive_max_seconds)
+        places = {name: Place(name, x, y) for name, x, y in self.places}
+        if not places:
+            raise ValueError("location_names: drive deadlines (drive_speed > 0) need the places' poses "
+                             "(location_names and locations.<name>)")
+        return DriveTimer.for_domain(domain, drives, places, deadline, self.place_feature, self.guide_actions,
+                                     self.guide_speed)
 
 
 @dataclass
@@ -177,7 +238,7 @@ class StepProtocol:
 
     def __init__(self, model: Pomdp, *, step_timeout: float = 0.0, timeout_observation: str = "unknown",
                  no_timeout_actions: Sequence[str] = (), max_pending: int = 8, stale_after: float = 0.0,
-                 belief_filter: Optional[BeliefFilter] = None):
+                 belief_filter: Optional[BeliefFilter] = None, nav_failed_observation: Optional[str] = None):
         if step_timeout < 0:
             raise ValueError(f"step_timeout must be >= 0 s, got {step_timeout}")
         if stale_after < 0:
@@ -187,6 +248,12 @@ class StepProtocol:
         if step_timeout > 0 and timeout_observation not in model.observations:
             raise ValueError(f"timeout_observation {timeout_observation!r} is not an observation of "
                              f"{model.name} (valid: {', '.join(model.observations)})")
+        if nav_failed_observation is not None and nav_failed_observation not in model.observations:
+            raise ValueError(f"nav_failed_observation {nav_failed_observation!r} is not an observation of "
+                             f"{model.name} (add it to the domain's Laser modality, or set drive_speed 0 "
+                             f"to give drives no deadline)")
+        #: The symbol a drive is closed with at its deadline (``None``: drives have none).
+        self.nav_failed_observation = nav_failed_observation
         unknown = sorted(set(no_timeout_actions) - set(model.actions))
         if unknown:
             raise ValueError(f"no_timeout_actions names {unknown[0]!r}, which is not an action of {model.name}")
@@ -210,6 +277,10 @@ class StepProtocol:
         self.step = 0
         self.current_action: Optional[str] = None
         self.opened_at: Optional[float] = None
+        #: Seconds the open drive may take (``None``: not a timed drive).
+        self.drive_limit: Optional[float] = None
+        #: Why the last drive failed (for /diagnostics); empty until one did.
+        self.last_nav_failure = ""
         self.pending: Deque[_Pending] = collections.deque()
         self.counters = {name: 0 for name in COUNTERS}
         self.events: List[Event] = []
@@ -220,9 +291,15 @@ class StepProtocol:
         return self.current_action is not None
 
     def deadline(self) -> Optional[float]:
-        """When the open step times out (clock seconds), or ``None`` (no open step, no timeout, a drive)."""
-        if (not self.step_open or self.step_timeout <= 0 or self.opened_at is None
-                or self.current_action in self.no_timeout_actions):
+        """When the open step times out (clock seconds), or ``None`` (no open step, no timeout,
+        a drive without a deadline). A drive's deadline is ``opened_at + drive_limit``."""
+        if not self.step_open or self.opened_at is None:
+            return None
+        if self.current_action in self.no_timeout_actions:
+            if self.drive_limit is None or self.nav_failed_observation is None:
+                return None
+            return self.opened_at + self.drive_limit
+        if self.step_timeout <= 0:
             return None
         return self.opened_at + self.step_timeout
 
@@ -232,9 +309,11 @@ class StepProtocol:
         return events
 
     # --------------------------------------------------------------- inputs
-    def on_action(self, name: str, now: float) -> Optional[StepResult]:
+    def on_action(self, name: str, now: float, drive_limit: Optional[float] = None) -> Optional[StepResult]:
         """An action was published at time ``now`` (s): open a step.
 
+        ``drive_limit``: seconds a drive (an action of ``no_timeout_actions``) may take before
+        it is closed with ``nav_failed_observation``; ``None``: no deadline.
         Returns the closed step when a queued observation closes it at once.
         """
         if name not in self._action_index:
@@ -247,6 +326,7 @@ class StepProtocol:
                                              f"which no observation closed"))
         self.current_action = name
         self.opened_at = float(now)
+        self.drive_limit = None if drive_limit is None else float(drive_limit)
         while self.pending:
             item = self.pending.popleft()
             if self.stale_after > 0 and now - item.stamp > self.stale_after:
@@ -293,6 +373,14 @@ class StepProtocol:
         deadline = self.deadline()
         if deadline is not None and now >= deadline - _DEADLINE_SLACK:
             assert self.opened_at is not None  # deadline() is None otherwise
+            if self.current_action in self.no_timeout_actions:
+                assert self.nav_failed_observation is not None  # a drive has a deadline only then
+                self.counters["nav_failures"] += 1
+                self.last_nav_failure = (f"{self.current_action} did not arrive within its deadline of "
+                                         f"{self.drive_limit:.1f} s (opened at {self.opened_at:.3f} s)")
+                self.events.append(Event("warn", f"{self.last_nav_failure}: closing the step with "
+                                                 f"{self.nav_failed_observation!r}"))
+                return self._close(self.nav_failed_observation, "nav_deadline", now)
             self.counters["timeouts"] += 1
             self.events.append(Event("info", f"nothing heard {now - self.opened_at:.3f} s after "
                                              f"{self.current_action!r}: closing the step with "
@@ -315,6 +403,7 @@ class StepProtocol:
         self.step += 1
         self.current_action = None
         self.opened_at = None
+        self.drive_limit = None
         return StepResult(self.step, action, symbol, source, self.belief, zero, float(now), text or symbol,
                           confidence)
 
@@ -410,10 +499,23 @@ class BeliefTracker:
             no_timeout = drive_actions(domain) if domain is not None else []
         else:
             no_timeout = [a for a in settings.no_timeout_actions if a in model.actions]
+        #: Deadlines of the drives (:class:`~pearl_pomdp.navigation.DriveTimer`), or ``None``.
+        self.drive_timer = settings.drive_timer(domain, no_timeout)
+        missing_symbol = self.drive_timer is not None and settings.nav_failed_observation not in model.observations
+        if missing_symbol:
+            # A domain written before navFailed existed (a recorded bag's copy): drives keep no
+            # deadline, as when it was recorded; said once at start.
+            self.drive_timer = None
         self.protocol = StepProtocol(model, step_timeout=settings.step_timeout,
                                      timeout_observation=settings.timeout_observation,
                                      no_timeout_actions=no_timeout, max_pending=settings.max_pending,
-                                     stale_after=settings.stale_after)
+                                     stale_after=settings.stale_after,
+                                     nav_failed_observation=(settings.nav_failed_observation
+                                                             if self.drive_timer is not None else None))
+        if missing_symbol:
+            self.protocol.events.append(Event("warn", f"drives have no deadline: nav_failed_observation "
+                                                      f"{settings.nav_failed_observation!r} is not an observation of "
+                                                      f"{model.name} (add it to the domain's Laser modality)"))
         self.mapper = ObservationMapper(model, domain, keyword_filter, settings.confidence_floor)
         self._marginal_index: Optional[list] = None
         #: The last closed steps, oldest first, when :meth:`keep_history` was called (replay --explain).
@@ -446,8 +548,21 @@ class BeliefTracker:
         self.protocol.reset()
 
     def on_action(self, name: str, now: float) -> Optional[StepResult]:
-        """An action was taken at ``now``: opens a step (a queued input may close it at once)."""
-        return self._closed(self.protocol.on_action(name, now))
+        """An action was taken at ``now``: opens a step (a queued input may close it at once).
+
+        A drive gets its deadline here, from the place the robot most likely is now.
+        """
+        limit = None
+        if self.drive_timer is not None and name in self.drive_timer.goals:
+            limit = self.drive_timer.seconds(name, self.likely_place())
+        return self._closed(self.protocol.on_action(name, now, limit))
+
+    def likely_place(self) -> Optional[str]:
+        """The most likely value of ``place_feature`` under the current belief (``None`` without a drive timer)."""
+        if self.drive_timer is None:
+            return None
+        marginal = self.marginals().get(self.settings.place_feature, {})
+        return max(marginal, key=lambda v: marginal[v]) if marginal else None
 
     def on_tick(self, now: float) -> Optional[StepResult]:
         """The clock reads ``now``: closes the step on its timeout."""
@@ -485,10 +600,11 @@ class BeliefTracker:
         return out
 
     def warnings(self) -> int:
-        """How many inputs were dropped, invalid or recovered (the /diagnostics WARN condition)."""
+        """How many inputs were dropped, invalid or recovered, plus the drives that missed their
+        deadline (the /diagnostics WARN condition)."""
         c = self.counters()
         return (c["dropped_stale"] + c["dropped_overflow"] + c["replaced_actions"] + c["unknown_actions"]
-                + c["zero_likelihood"] + sum(c[f"invalid_{k}"] for k in INPUTS))
+                + c["zero_likelihood"] + c["nav_failures"] + sum(c[f"invalid_{k}"] for k in INPUTS))
 
     def marginals(self, belief: Optional[np.ndarray] = None) -> Dict[str, Dict[str, float]]:
         """``{feature: {value: P}}`` of ``belief`` (default: the current one); a flat model

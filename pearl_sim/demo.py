@@ -201,7 +201,8 @@ def plot_belief(steps: List[DemoStep], path: Path, title: str, scenario: Optiona
 
 def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy_path: Path,
              policy: str = "", seed: Optional[int] = None, domain_id: Optional[int] = None,
-             echo: Optional[Callable[[str], None]] = None, wall_timeout: float = 30.0) -> DemoResult:
+             echo: Optional[Callable[[str], None]] = None, wall_timeout: float = 30.0,
+             live_view=None) -> DemoResult:
     """Run the scenario's first episode through the Pearl graph and the simulated hardware.
 
     Args:
@@ -212,6 +213,9 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
         domain_id: ROS domain of the in-process graph (default: ``ROS_DOMAIN_ID`` or 0).
         echo: called with each transcript block as it happens (e.g. ``print``).
         wall_timeout: wall seconds to wait for the graph's answer in one step before failing.
+        live_view: a :class:`pearl_pomdp.live_view.LiveView` to stream to (``--foxglove``):
+            belief marginals, actions, EXECUTE traces, the transcript and the robot's pose,
+            stamped with sim time.
     """
     import rclpy
     from rclpy.context import Context
@@ -259,7 +263,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
     sim = None
     writer = None
     try:
-        tracker_params = {"step_timeout": float(scenario.step_timeout)}
+        tracker_params = scenario.tracker_parameters()
         graph = PearlGraph(context=context, shared={"domain": str(out_dir / "domain.yaml")},
                            domain=domain, model=domain.compile(), decider=decider,
                            overrides={"belief_tracker": {**tracker_params, "diagnostics_period": 60.0},
@@ -274,12 +278,28 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
         decisions: List[dict] = []
         marginals: List[dict] = []
         listener = graph.add_node(rclpy.create_node("demo_listener", context=context))
-        listener.create_subscription(String, "/pearl/decision", lambda m: decisions.append(json.loads(m.data)), 50)
+        sim_now = {"s": 0.0}   # sim time of the last /clock step, for the live view's stamps
+
+        def shown(topic: str, value) -> None:
+            if live_view is not None:
+                live_view.publish(topic, value, sim_now["s"])
+
+        def on_decision(msg) -> None:
+            decisions.append(json.loads(msg.data))
+            shown("/pearl/decision", decisions[-1])
+
+        def on_marginals(msg) -> None:
+            marginals.append(json.loads(msg.data))
+            shown("/pearl/belief_marginals", marginals[-1])
+
+        listener.create_subscription(String, "/pearl/decision", on_decision, 50)
         from rclpy.qos import DurabilityPolicy, QoSProfile
 
         latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        listener.create_subscription(String, "/pearl/belief_marginals",
-                                     lambda m: marginals.append(json.loads(m.data)), latched)
+        listener.create_subscription(String, "/pearl/belief_marginals", on_marginals, latched)
+        if live_view is not None:
+            listener.create_subscription(String, "/pearl/action", lambda m: shown("/pearl/action", m.data), latched)
+            live_view.publish_places({name: [x, y, 0.0] for name, (x, y) in scenario.map.items()}, 0.0)
         rec_node = graph.add_node(rclpy.create_node("demo_recorder", context=context,
                                                     parameter_overrides=[rclpy.parameter.Parameter(
                                                         "use_sim_time", rclpy.parameter.Parameter.Type.BOOL, True)]))
@@ -301,6 +321,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
                              f"subscribers within {wall_timeout} s")
 
         def on_action(step_result: StepResult, waits: List[StepResult]) -> None:
+            sim_now["s"] = backend.now_ns * 1e-9
             index = len(result.steps) + 1
             graph.spin_until(lambda: len(decisions) >= index and len(marginals) > index, timeout_sec=wall_timeout)
             decision = decisions[index - 1] if len(decisions) >= index else {"trace": []}
@@ -314,6 +335,15 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
                             observation=latest.get("observation"), marginals=latest.get("marginals", {}),
                             events=step_result.events + [e for w in waits for e in w.events], wrong=step_result.wrong)
             result.steps.append(step)
+            if live_view is not None:
+                x, y = scenario.map[world.robot_at]
+                shown("/pearl/pose", {"x": x, "y": y, "yaw": 0.0})
+                shown("/pearl/transcript", {"speaker": "Pearl", "text": f"[{step.index}] {step.action}"})
+                if msg is not None:
+                    shown("/pearl/transcript", {"speaker": scenario.resident.name if msg.said else msg.modality,
+                                                "text": msg.said or msg.text})
+                for event in step.events:
+                    shown("/pearl/transcript", {"speaker": "world", "text": event})
             if echo is not None:
                 echo(format_step(step, scenario.resident.name))
 

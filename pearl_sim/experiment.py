@@ -49,11 +49,12 @@ class EpisodeResult:
 
 def episode_executive(controller, domain, scenario: Scenario, model=None):
     """The robot's loop for one episode: the controller's decider in an Executive with the
-    belief tracker's parameters from ``config/pearl_nodes.yaml`` and the scenario's step timeout."""
+    belief tracker's parameters from ``config/pearl_nodes.yaml`` and the scenario's step timeout
+    and map (:meth:`~pearl_sim.scenario.Scenario.tracker_parameters`: drive deadlines)."""
     from pearl_pomdp.executive import Executive
     from pearl_pomdp.params import step_settings
 
-    settings = step_settings(step_timeout=float(scenario.step_timeout))
+    settings = step_settings(**scenario.tracker_parameters())
     return Executive(model if model is not None else domain.compile(), controller.decider, domain=domain,
                      settings=settings)
 

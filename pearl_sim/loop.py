@@ -128,6 +128,11 @@ def run_episode(world: World, backend: Backend, max_steps: Optional[int] = None,
         trace.results.append(result)
         answered: List[str] = []
         for message in result.messages:
+            # The robot's clock passes an open step's deadline before a later message arrives
+            # (a drive's deadline before a slow arrival): tell the backend first, as /clock would.
+            deadline = backend.deadline()
+            if deadline is not None and clock_ns(message.time) > clock_ns(deadline):
+                answered += backend.tick(clock_ns(deadline))
             answered += backend.deliver(message)
         waits: List[StepResult] = []
         while not answered and not queue:

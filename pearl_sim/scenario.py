@@ -14,6 +14,12 @@ A scenario file (YAML, ``config/scenarios/*.yaml``) describes one or more
     resident: {name: Mrs B, walking_speed: 0.15, willingness: 0.9, ...}
     appointments: [{at: 20, kind: physio}]
     questions: [{when: at_physio, ask: weather}]
+    blocked: [{between: [home, room], from: 0, until: 300}]   # a corridor no drive gets through
+
+``blocked`` (optional) lists corridors that are impassable from ``from`` (default 0) until
+``until`` seconds (default: never cleared): a drive between the two places (either way)
+that starts then never arrives — the robot stops at the obstacle and no landmark is
+reported, so only the manager's drive deadline closes the step (``navFailed``).
 
 Every value is range-checked; an error names the file and the field path, e.g.
 ``config/scenarios/study.yaml: episodes[3].resident.walking_speed: 0.01 m/s is
@@ -94,6 +100,22 @@ class Question:
 
 
 @dataclass
+class Blockage:
+    """A corridor no drive gets through: between places ``a`` and ``b`` (either way), from
+    ``start`` until ``end`` seconds (``None``: never cleared)."""
+
+    a: str
+    b: str
+    start: float = 0.0
+    end: Optional[float] = None
+
+    def blocks(self, origin: str, goal: str, t: float) -> bool:
+        """Whether a drive from ``origin`` to ``goal`` started at ``t`` is stopped by this blockage."""
+        return ({origin, goal} == {self.a, self.b} and t >= self.start
+                and (self.end is None or t < self.end))
+
+
+@dataclass
 class Scenario:
     """One simulated episode (see the module docstring for the file format)."""
 
@@ -115,7 +137,21 @@ class Scenario:
     resident: Resident = field(default_factory=Resident)
     appointments: List[Appointment] = field(default_factory=list)
     questions: List[Question] = field(default_factory=list)
+    #: Corridors the navigation cannot pass (:class:`Blockage`).
+    blocked: List[Blockage] = field(default_factory=list)
     source: str = "<scenario>"
+
+    def is_blocked(self, origin: str, goal: str, t: float) -> bool:
+        """Whether a drive from ``origin`` to ``goal`` started at ``t`` never arrives."""
+        return origin != goal and any(b.blocks(origin, goal, t) for b in self.blocked)
+
+    def tracker_parameters(self) -> Dict[str, object]:
+        """The belief tracker's parameters for this scenario: its step timeout and its map's
+        places (drive deadlines are computed from the distances the simulated robot drives)."""
+        params: Dict[str, object] = {"step_timeout": float(self.step_timeout), "location_names": list(self.map)}
+        for name, (x, y) in self.map.items():
+            params[f"locations.{name}"] = [float(x), float(y), 0.0]
+        return params
 
     def distance(self, a: str, b: str) -> float:
         """Straight-line distance in metres between two named places."""
@@ -259,7 +295,7 @@ def _voice_presets() -> Tuple[str, ...]:
 
 def _build(data: dict, source: str, prefix: str) -> Scenario:
     top = _Fields(data, source, prefix, ("name", "seed", "description", "step_timeout", "max_steps", "map", "robot",
-                                          "speech", "resident", "appointments", "questions"))
+                                          "speech", "resident", "appointments", "questions", "blocked"))
     if "name" not in data:
         raise SpecError(source, f"{prefix}name", "missing: every scenario has a name")
     scenario = Scenario(
@@ -340,4 +376,19 @@ def _build(data: dict, source: str, prefix: str) -> Scenario:
         scenario.questions.append(Question(ask=f.choice("ask", None, QUESTION_KINDS),
                                            when=f.choice("when", "at_time", QUESTION_WHEN),
                                            at=f.number("at", 0.0, 0.0, 1e6, "s")))
+    blocked = data.get("blocked", [])
+    if not isinstance(blocked, list):
+        raise SpecError(source, f"{prefix}blocked", "must be a list of {between: [place, place], from, until}")
+    for i, item in enumerate(blocked):
+        f = _Fields(item, source, f"{prefix}blocked[{i}].", ("between", "from", "until"))
+        pair = item.get("between")
+        if (not isinstance(pair, list) or len(pair) != 2 or any(p not in LOCATIONS for p in pair)
+                or pair[0] == pair[1]):
+            raise SpecError(source, f"{prefix}blocked[{i}].between",
+                            f"must be two different places of {', '.join(LOCATIONS)}, got {pair!r}")
+        start = f.number("from", 0.0, 0.0, 1e6, "s")
+        end = f.number("until", 1e6, 0.0, 1e6, "s") if "until" in item else None
+        if end is not None and end <= start:
+            raise SpecError(source, f"{prefix}blocked[{i}].until", f"{end} s is not after from ({start} s)")
+        scenario.blocked.append(Blockage(str(pair[0]), str(pair[1]), start, end))
     return scenario

@@ -12,10 +12,19 @@ Guidance and walking pace (the paper's open problem). With
 ``pace_adaptation: false`` the robot drives to physiotherapy at its cruise speed,
 as Pearl did in the paper's trials; a slow resident falls behind and, past
 ``lose_distance``, gives up and walks back to her room. With
-``pace_adaptation: true`` the navigation estimates her pace from the measured
-distance to her (an exponential average of her progress per second, as a people
-tracker on the laser would give) and drives no faster than that, stopping when she
-is more than ``FOLLOW_GAP`` metres behind.
+``pace_adaptation: true`` the world does not decide the pace: the simulated resident
+produces what a people tracker reports (her distance behind the robot, every
+:data:`CONTROL_PERIOD` s) and the robot's speed comes from the manager's
+:class:`pearl_pomdp.guide_pace.GuidePace` — the class the ``guide_pace`` node runs on a
+robot, with the settings of ``config/pearl_nodes.yaml``'s ``guide_pace`` section. When
+GuidePace declares her lost the world reports Laser ``userLost`` (as the node does) and
+the navigation drives on alone.
+
+Blocked corridors (scenario ``blocked:``). A drive through one never arrives: the robot
+stops at the obstacle, no landmark is reported, and the scheduler keeps quiet (the robot
+is still busy driving) until the manager gives the drive up at its deadline
+(``navFailed``, :mod:`pearl_pomdp.tracking`) and takes its next action. The robot is then
+taken to be back where it started.
 
 The world counts what an experimenter scores: reminders delivered, guidances
 completed and their duration, clarification questions, and *wrong actions*
@@ -24,6 +33,7 @@ resident who did not want to go, ending a guidance before the department).
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional
 
@@ -32,8 +42,9 @@ import numpy as np
 from pearl_sim.asr import SpeechRecogniser
 from pearl_sim.scenario import Scenario
 
-#: Metres the adaptive robot lets the resident fall behind before it waits.
-FOLLOW_GAP = 2.0
+#: Seconds between the simulated people tracker's reports and GuidePace's control steps
+#: during a guidance (the guide_pace node runs at 20 Hz; 0.5 s keeps the study fast).
+CONTROL_PERIOD = 0.5
 #: Metres within which the resident hears the robot and answers it.
 EARSHOT = 3.0
 #: Seconds a spoken action (say + display) takes before the answer.
@@ -51,15 +62,26 @@ ROBOT_PLACE = "RobotLocation"
 LANDMARKS = {"home": "atHome", "room": "atRoom", "physio": "atPhysio"}
 
 
+@functools.lru_cache(maxsize=1)
+def default_guide_pace():
+    """``(GuidePaceConfig, lost_symbol)`` from ``config/pearl_nodes.yaml``'s ``guide_pace`` section
+    (the settings the guide_pace node runs with), read once per process."""
+    from pearl_pomdp.guide_pace import GuidePaceConfig
+    from pearl_pomdp.params import node_params
+
+    params = node_params("guide_pace")
+    return GuidePaceConfig.from_params(params), str(params.get("lost_symbol", "userLost"))
+
+
 def action_roles(domain) -> Dict[str, Dict[str, str]]:
     """What the world needs to know of the domain's actions, from its ``category:`` tags.
 
     Returns ``{"moves": {action: place}, "clarifications": {action: category}}``: a move is a
-    ``category: Move`` action and its destination the value it sets on :data:`ROBOT_PLACE`;
+    ``category: Move`` action and its destination the value it most likely sets on :data:`ROBOT_PLACE`;
     a clarification is a ``category: Clarify`` action (a question asked to resolve uncertainty).
     """
     moves = {a: place for a in domain.actions if domain.categories.get(a) == "Move"
-             and (place := domain.deterministic_effect(a, ROBOT_PLACE)) is not None}
+             and (place := domain.intended_effect(a, ROBOT_PLACE)) is not None}
     clarifications = {a: "Clarify" for a in domain.actions if domain.categories.get(a) == "Clarify"}
     return {"moves": moves, "clarifications": clarifications}
 
@@ -125,6 +147,12 @@ class Metrics:
     #: ("Shall we walk to physiotherapy?" to a resident who does not want to go).
     unprompted_questions: int = 0
     wrong_actions: int = 0
+    #: Guidances in which GuidePace declared the resident lost (``userLost`` reported).
+    lost_reports: int = 0
+    #: Per guidance, the robot's mean speed from start to arrival (m/s), door wait excluded.
+    guide_speeds: List[float] = field(default_factory=list)
+    #: Drives stopped by a blocked corridor (scenario ``blocked:``).
+    blocked_drives: int = 0
     time_to_goal: List[float] = field(default_factory=list)
     wrong: List[str] = field(default_factory=list)
 
@@ -141,7 +169,7 @@ class World:
     """
 
     def __init__(self, scenario: Scenario, seed: Optional[int] = None, pace_adaptation: Optional[bool] = None,
-                 domain=None):
+                 domain=None, guide_pace=None):
         self.scenario = scenario
         if domain is None:
             from pearl_sim.scenario import default_domain
@@ -153,6 +181,8 @@ class World:
         self.seed = scenario.seed if seed is None else int(seed)
         self.rng = np.random.default_rng(self.seed)
         self.pace_adaptation = scenario.pace_adaptation if pace_adaptation is None else bool(pace_adaptation)
+        # The manager's pace filter settings (GuidePaceConfig), the guide_pace node's own.
+        self.guide_pace_config, self.lost_symbol = guide_pace if guide_pace is not None else default_guide_pace()
         resident = scenario.resident
         wer = scenario.word_error_rate if resident.word_error_rate is None else resident.word_error_rate
         self.asr = SpeechRecogniser(word_error_rate=wer, seed=self.seed + 7919)
@@ -182,6 +212,7 @@ class World:
         self._guidance_due_at: Optional[float] = None
         self._follower: Optional[dict] = None   # a resident walking behind/after the robot
         self._return_at: Optional[float] = None  # a lost resident gets back to her room then
+        self._stuck = False              # a drive stopped by a blocked corridor is still under way
         self.metrics = Metrics()
         self._advance(0.0, [])
 
@@ -216,15 +247,16 @@ class World:
         start = self.time
         events: List[str] = []
         wrong: Optional[str] = None
+        self._stuck = False
         self.metrics.steps += 1
         if action in self.clarifications:
             self.metrics.clarifications += 1
         if action in self.moves:
-            message = self._move(self.moves[action], action, events)
+            moved = self._move(self.moves[action], action, events)
             if self._was_guide and not self._follower_started:
                 wrong = "guided a resident who did not want to go" if not self._was_willing else None
             self._finish(action, wrong, events)
-            return StepResult(action, start, self.time, [message], events, wrong)
+            return StepResult(action, start, self.time, moved, events, wrong)
         self._advance(SPEAK_SECONDS, events)
         resident = self.scenario.resident
         self._lapses(resident, events)
@@ -255,10 +287,11 @@ class World:
         """
         start = self.time
         events: List[str] = []
-        while not self._scheduler_queue and self.time < until - 1e-9:
+        # A robot stuck at a blocked corridor is not idle: the scheduler waits for it too.
+        while (self._stuck or not self._scheduler_queue) and self.time < until - 1e-9:
             self._advance(min(1.0, until - self.time), events)
         messages: List[Message] = []
-        if self._scheduler_queue:
+        if self._scheduler_queue and not self._stuck:
             queued = self._scheduler_queue.pop(0)
             messages.append(Message(self.time, queued.modality, queued.text, queued.said))
         return StepResult("", start, self.time, messages, events, None)
@@ -387,7 +420,9 @@ class World:
         return "chatter" if self.rng.random() < 0.2 else None
 
     # -------------------------------------------------------------------- moving
-    def _move(self, goal: str, action: str, events: List[str]) -> Message:
+    def _move(self, goal: str, action: str, events: List[str]) -> List[Message]:
+        """Drive to ``goal``: the messages the navigation produced (the landmark; ``userLost``
+        first when the guide lost her; none when the corridor is blocked)."""
         origin = self.robot_at
         distance = self.scenario.distance(origin, goal)
         together = self.engaged and self._near() and self.resident_at == origin
@@ -395,13 +430,19 @@ class World:
         self._follower_started = False
         # A guidance is the drive to the department, where the resident's appointment is.
         self._was_guide = goal == "physio"
+        if self.scenario.is_blocked(origin, goal, self.time):
+            self._drive_blocked(origin, goal, distance, together, events)
+            return []
+        messages: List[Message] = []
         if self._was_guide and together and self.wants_guidance and goal != origin:
             self._follower_started = True
             self.metrics.guidances_started += 1
             self._follower = {"pos": 0.0, "length": distance, "rest_until": -1.0, "origin": origin}
             self.resident_at = "corridor"
             events.append(f"guiding {self.scenario.resident.name} to physiotherapy")
-            self._drive_guided(distance, events)
+            lost = self._drive_guided(distance, events)
+            if lost is not None:
+                messages.append(lost)
         else:
             if self.engaged and goal != origin:
                 self.engaged = False
@@ -409,31 +450,63 @@ class World:
                     events.append("the robot drives off without the resident")
             self._advance(distance / self.scenario.robot_speed, events, moving=True)
         self.robot_at = goal
-        return Message(self.time, "Laser", LANDMARKS[goal])
+        return messages + [Message(self.time, "Laser", LANDMARKS[goal])]
 
-    def _drive_guided(self, distance: float, events: List[str]) -> None:
-        """Drive ``distance`` metres with the resident following, one second at a time."""
-        robot_pos, estimate = 0.0, self.scenario.robot_speed
-        follower = self._follower
+    def _drive_blocked(self, origin: str, goal: str, distance: float, together: bool,
+                       events: List[str]) -> None:
+        """The corridor from ``origin`` to ``goal`` is blocked: the robot drives up to the obstacle
+        (half way) and stops there; nothing is reported. The step stays open until the
+        manager's drive deadline; the robot counts as back at ``origin`` afterwards."""
+        self.metrics.blocked_drives += 1
+        events.append(f"the corridor from {origin} to {goal} is blocked: the robot stops at the obstacle")
+        if self.engaged and not (together and self._was_guide and self.wants_guidance):
+            self.engaged = False     # it drove off without her, as any drive does
+        self._advance(0.5 * distance / self.scenario.robot_speed, events, moving=True)
+        self._stuck = True
+        return None
+
+    def _drive_guided(self, distance: float, events: List[str]) -> Optional[Message]:
+        """Drive ``distance`` metres with the resident following; returns the ``userLost`` message, if any.
+
+        Fixed pace: cruise speed. Adaptive: every :data:`CONTROL_PERIOD` s the simulated people
+        tracker gives her distance behind the robot (``None`` once she has given up and left)
+        and the manager's :class:`~pearl_pomdp.guide_pace.GuidePace` turns the navigation's
+        cruise speed into the speed driven — no pace logic of its own here.
+        """
+        from pearl_pomdp.guide_pace import GuidePace
+
         vmax = self.scenario.robot_speed
-        seconds = 0
+        guide = GuidePace(self.guide_pace_config) if self.pace_adaptation else None
+        robot_pos, seconds, lost = 0.0, 0.0, None
         while robot_pos < distance - 1e-9 and seconds < 100_000:
-            previous = follower["pos"] if follower is not None else None
-            if self.pace_adaptation and follower is not None:
-                gap = robot_pos - follower["pos"]
-                speed = 0.0 if gap > FOLLOW_GAP else min(vmax, max(estimate, 0.02))
+            if guide is not None:
+                speed = guide.step(CONTROL_PERIOD, robot_pos, self._people_tracker(robot_pos), nav_speed=vmax)
+                if guide.became_lost:
+                    # Reported once, as the guide_pace node does; the manager's next action ends
+                    # the guidance filter, and the navigation drives on at its own speed.
+                    lost = Message(self.time, "Laser", self.lost_symbol)
+                    self.metrics.lost_reports += 1
+                    events.append(f"guide_pace lost {self.scenario.resident.name}: {self.lost_symbol} reported")
+                    guide = None
             else:
                 speed = vmax
-            robot_pos = min(distance, robot_pos + speed)
-            self._advance(1.0, events, moving=True, robot_pos=robot_pos)
-            follower = self._follower
-            if follower is not None and previous is not None:
-                estimate = 0.8 * estimate + 0.2 * max(follower["pos"] - previous, 0.0)
-            seconds += 1
+            robot_pos = min(distance, robot_pos + speed * CONTROL_PERIOD)
+            self._advance(CONTROL_PERIOD, events, moving=True, robot_pos=robot_pos)
+            seconds += CONTROL_PERIOD
+        if seconds > 0:
+            self.metrics.guide_speeds.append(distance / seconds)
         # An adaptive guide waits at the door until she is in; a fixed-pace robot reports arrival at once.
-        while self.pace_adaptation and self._follower is not None and seconds < 100_000:
+        while self.pace_adaptation and lost is None and self._follower is not None and seconds < 100_000:
             self._advance(1.0, events, moving=False, robot_pos=distance)
             seconds += 1
+        return lost
+
+    def _people_tracker(self, robot_pos: float) -> Optional[float]:
+        """What a people tracker on the robot reports: her distance behind it (m), ``None`` when
+        she is not following any more."""
+        if self._follower is None:
+            return None
+        return max(0.0, robot_pos - self._follower["pos"])
 
     def _walk_follower(self, dt: float, robot_pos: Optional[float], events: List[str]) -> None:
         f = self._follower

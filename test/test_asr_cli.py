@@ -58,6 +58,6 @@ def test_calibrate_speech_writes_the_channel(tmp_path):
     from pearl_pomdp.model.factored import load_domain
 
     assert summary["observation_table"]["snr_db"] == 30.0
-    assert load_domain(tmp_path / "fitted.yaml").compile().num_observations == 18
+    assert load_domain(tmp_path / "fitted.yaml").compile().num_observations == 20   # 18 + navFailed, userLost
     bad = pearl("calibrate-speech", str(DOMAIN), "--snr", "loud", env=env)
     assert bad.returncode == 2 and "--snr" in bad.stderr

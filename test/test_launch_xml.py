@@ -121,6 +121,8 @@ def test_empty_value_is_the_empty_string():
     ('<launch>\n<node pkg="p" exec="x"\n</launch>', {}, r"<string>:3: not well-formed XML"),
     ('<node pkg="p" exec="x"/>', {}, r"root element must be <launch>"),
     ('<launch><node pkg="p" exec="x" if="maybe"/></launch>', {}, r"condition must be true/false/1/0"),
+    ('<launch><node pkg="p" exec="x" on_exit="restart"/></launch>', {},
+     r"<node>\.on_exit: only 'shutdown' is supported, got 'restart'"),
 ])
 def test_errors_name_file_line_and_problem(text, arguments, message):
     with pytest.raises(SpecError, match=message):

@@ -117,3 +117,69 @@ def test_lifecycle_over_dds(tmp_path, pearl_policy):
         rclpy.try_shutdown(context=context)
         codes = [tracker.stop(5.0), policy.stop(5.0)]
     assert codes == [0, 0], tracker.stderr()[-2000:] + policy.stderr()[-2000:]
+
+
+def test_action_executor_lifecycle_over_dds(tmp_path):
+    """The executor as a managed node in its own process: nothing is said, shown or driven
+    before activate and after deactivate (counted), it acts while active, and shuts down."""
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from pearl_pomdp.nodes.common import EVENT_QOS
+
+    configure_test_process(tmp_path)
+    domain_id = allocate_domain_id()
+    env = ros_env(domain_id, tmp_path)
+    executor_proc = Proc([str(BIN / "action_executor"), "--ros-args", "-p", "autostart:=false"], env, tmp_path,
+                         "executor")
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    executor = SingleThreadedExecutor(context=context)
+    node = rclpy.create_node("executor_probe", context=context)
+    executor.add_node(node)
+    name = "action_executor"
+    try:
+        probe = Probe(node)
+        said = probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
+        goals = probe.listen("/goal_pose", cv.PoseMsg, LATCHED_QOS)
+        action = probe.publisher("/pearl/action", cv.TextMsg, EVENT_QOS)
+
+        def act_and_count(text):
+            before = (len(said), len(goals))
+            action.publish(cv.TextMsg(data=text))
+            return before
+
+        assert state(node, executor, name) == "unconfigured"
+        assert transition(node, executor, name, Transition.TRANSITION_CONFIGURE)
+        assert state(node, executor, name) == "inactive"
+        # The action subscription exists once configured: wait until it matches the probe.
+        assert wait_for(lambda: action.get_subscription_count() >= 1, DISCOVERY_TIMEOUT, executor)
+        act_and_count("TellTime")
+        act_and_count("GoHome")
+        assert not wait_for(lambda: said or goals, 1.0, executor), "an inactive executor acted"
+        assert transition(node, executor, name, Transition.TRANSITION_ACTIVATE)
+        assert wait_for(lambda: not probe.unmatched(), DISCOVERY_TIMEOUT, executor)
+        act_and_count("TellTime")
+        assert wait_for(lambda: said, DISCOVERY_TIMEOUT, executor), "no sentence after activate"
+        assert said[0].data.startswith("It is ")
+        act_and_count("GoHome")
+        assert wait_for(lambda: goals, DISCOVERY_TIMEOUT, executor), "no goal pose after activate"
+        assert (goals[0].pose.position.x, goals[0].pose.position.y) == (0.0, 0.0)   # home in the params file
+        assert transition(node, executor, name, Transition.TRANSITION_DEACTIVATE)
+        n_said, n_goals = len(said), len(goals)
+        act_and_count("TellWeather")
+        act_and_count("GotoPatientRoom")
+        assert not wait_for(lambda: len(said) > n_said or len(goals) > n_goals, 1.5, executor)
+        assert transition(node, executor, name, Transition.TRANSITION_ACTIVATE)
+        act_and_count("TellWeather")
+        assert wait_for(lambda: len(said) > n_said, DISCOVERY_TIMEOUT, executor)
+        assert said[-1].data == "Here is today's weather forecast."
+        assert transition(node, executor, name, Transition.TRANSITION_ACTIVE_SHUTDOWN)
+        assert state(node, executor, name) == "finalized"
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        code = executor_proc.stop(5.0)
+    assert code == 0, executor_proc.stderr()[-2000:]

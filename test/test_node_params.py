@@ -41,8 +41,8 @@ BAD = [
      "'DOUBLE': step_timeout"),
     (["belief_tracker", "--ros-args", "-p", "timeout_observation:=silence"],
      "belief_tracker: error: parameter timeout_observation 'silence' is not an observation of pearl (valid: yes, "
-     "no, time, weather, go, unknown, t_yes, t_no, t_time, t_weather, t_go, atRoom, atPhysio, atHome, g_none, "
-     "g_physio, g_vitamin, g_checklist)"),
+     "no, time, weather, go, unknown, t_yes, t_no, t_time, t_weather, t_go, atRoom, atPhysio, atHome, navFailed, "
+     "userLost, g_none, g_physio, g_vitamin, g_checklist)"),
     (["hierarchical_policy", "--ros-args", "-p", "policy:=/no/such/plan"],
      "hierarchical_policy: error: parameter policy: no such policy file or directory: /no/such/plan"),
     (["action_executor", "--ros-args", "-p", "actions.TellTime.goal:=moon"],

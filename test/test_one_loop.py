@@ -71,7 +71,7 @@ def on_graph(domain, model, decider, scenario, seed, tmp_path):
     sim = None
     try:
         graph = PearlGraph(context=context, domain=domain, model=model, decider=decider, parameter_services=False,
-                           overrides={"belief_tracker": {"step_timeout": float(scenario.step_timeout)}})
+                           overrides={"belief_tracker": scenario.tracker_parameters()})
         world = World(scenario, seed=seed, domain=domain)
         sim = SimulatedHardware(context, world)
         for node in sim.nodes:

@@ -18,7 +18,8 @@ def pearl():
 
 def test_sizes_features_and_symbols_as_in_the_paper(pearl):
     d, m = pearl
-    assert (m.num_states, m.num_observations, m.num_actions) == (576, 18, 19)
+    # 18 symbols of the paper's modalities plus the manager's navFailed and userLost (issue 14).
+    assert (m.num_states, m.num_observations, m.num_actions) == (576, 20, 19)
     assert {f.name: list(f.values) for f in d.features} == {
         "RobotLocation": ["home", "room", "physio"], "UserLocation": ["room", "physio"], "UserPresent": ["yes", "no"],
         "ReminderGoal": ["none", "physio", "vitamin", "checklist"], "UserMotionGoal": ["none", "toPhysioWithRobot"],
@@ -26,7 +27,7 @@ def test_sizes_features_and_symbols_as_in_the_paper(pearl):
     assert d.modalities == {
         "Speech": ["yes", "no", "time", "weather", "go", "unknown"],
         "Touchscreen": ["t_yes", "t_no", "t_time", "t_weather", "t_go"],
-        "Laser": ["atRoom", "atPhysio", "atHome"],
+        "Laser": ["atRoom", "atPhysio", "atHome", "navFailed", "userLost"],
         "Reminder": ["g_none", "g_physio", "g_vitamin", "g_checklist"]}
     by_category = {}
     for a in d.actions:
@@ -138,7 +139,20 @@ def test_hand_checked_observations(pearl):
     assert O[wait, wants_walk, z("go")] == pytest.approx(0.6 * 0.25)     # the user source closes 60% of steps
     assert O[wait, wants_walk, z("g_none")] == pytest.approx(0.4 * 0.1)
     go = m.actions.index("GoHome")
-    assert O[go, s(d), z("atHome")] == pytest.approx(0.96)
+    assert O[go, s(d), z("atHome")] == pytest.approx(0.99 * 0.96)   # arrived: 1% the deadline passes first
+    # A drive that did not arrive (the robot is not at its goal) is closed by its deadline: navFailed.
+    goto = m.actions.index("GotoPatientRoom")
+    assert O[goto, s(d), z("navFailed")] == pytest.approx(0.9)
+    assert O[goto, s(d, RobotLocation="room"), z("navFailed")] == pytest.approx(0.01)
+    # ...and the drive may fail: 3% the robot stays where it was.
+    T = m.T[goto].toarray() if hasattr(m.T[goto], "toarray") else m.T[goto]
+    stay = sum(T[s(d), s(d, Battery=b)] for b in ("ok", "low"))
+    assert stay == pytest.approx(0.03 * 0.994 * 0.94)   # with the defaults' reminder/question drift
+    # guide_pace's userLost says she is not following: only likely when UserPresent is no.
+    guide = m.actions.index("GuideToPhysio")
+    lost = O[guide, :, z("userLost")]
+    assert lost[s(d, RobotLocation="physio", UserPresent="no")] == pytest.approx(0.35)
+    assert lost[s(d, RobotLocation="physio", UserPresent="yes")] == pytest.approx(0.005)
     # the touchscreen is reliable: a 't_time' is only ever produced by a user who wants the time
     assert O[:, :, z("t_time")][:, d.states_matching({"UserInfoGoal": ["none", "wantWeather"]})].max() == 0
     # 'go' is ambiguous: chatter and the recogniser produce it too, and a wish for the walk is

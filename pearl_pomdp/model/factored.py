@@ -191,6 +191,20 @@ class FactoredDomain:
             return None
         return self.feature(feature).values[int(first.argmax())]
 
+    def intended_effect(self, action: str, feature: str) -> Optional[str]:
+        """The value ``action`` gives ``feature`` most likely from every state (p > 0.5), or ``None``.
+
+        A drive's destination when the drive may fail: ``GotoPatientRoom`` sets
+        ``RobotLocation`` to ``room`` with 0.97 and keeps it with 0.03; the intended effect is
+        ``room``. Equals :meth:`deterministic_effect` when that is not ``None``.
+        """
+        cpt = self._transitions[self.actions.index(action)][self.feature_index(feature)]
+        rows = cpt.table.reshape(-1, cpt.table.shape[-1])
+        best = rows.argmax(axis=1)
+        if not np.all(best == best[0]) or not np.all(rows[:, best[0]] > 0.5):
+            return None
+        return self.feature(feature).values[int(best[0])]
+
     @property
     def state_values(self) -> np.ndarray:
         """``[S, F]`` int array: ``state_values[s, f]`` is the value index of feature ``f`` in state ``s``."""

@@ -7,6 +7,12 @@ of all of it come from the package's params file (``config/pearl_nodes.yaml``, s
 
 A drive is a ``geometry_msgs/PoseStamped`` on ``/goal_pose``: what Nav2's BT navigator and
 RViz's "2D Goal Pose" use, so the executor drives a Nav2 robot unchanged.
+
+It is a managed (lifecycle) node like the tracker and the policy
+(:mod:`pearl_pomdp.nodes.managed`): configure validates the tables and creates the topics,
+activate starts executing, deactivate stops (actions are counted ``inactive_actions``,
+nothing is said, shown or driven), cleanup releases the topics. ``autostart`` (default
+true) does configure + activate at start-up.
 """
 from __future__ import annotations
 
@@ -17,8 +23,9 @@ from typing import Dict, List, Optional
 from rclpy.parameter import Parameter
 
 from pearl_pomdp.nodes import conversions as cv
-from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS, NodeSetupError, Param, PearlNode, run_node
+from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS, NodeSetupError, Param, run_node
 from pearl_pomdp.nodes.defaults import FileDefaults
+from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
 
 __all__ = ["ActionExecutorNode", "ACTION_FIELDS", "main"]
 
@@ -31,7 +38,7 @@ class _Template(dict):
         return "{" + key + "}"
 
 
-class ActionExecutorNode(PearlNode):
+class ActionExecutorNode(ManagedPearlNode):
     """Executes primitive actions by publishing what the robot says, shows and where it drives.
 
     Parameters (read-only; defaults from ``defaults_file``, see :mod:`pearl_pomdp.nodes.defaults`):
@@ -50,6 +57,8 @@ class ActionExecutorNode(PearlNode):
         * ``action_topic``, ``say_topic``, ``display_topic``, ``goal_topic`` (str): topic names.
         * ``diagnostics_period`` (double, 0.01–3600 s).
         * ``use_sim_time`` (bool): follow /clock (stamps of goals, ``{time}``).
+        * ``autostart`` (bool, default true): configure and activate at start-up; false: wait
+          for ``ros2 lifecycle set /action_executor configure`` / ``activate``.
 
     Subscribers:
         * ``/pearl/action`` (std_msgs/String, volatile — a restarted executor does not repeat an
@@ -82,16 +91,39 @@ class ActionExecutorNode(PearlNode):
         Param("display_topic", "/pearl/display", "Touchscreen text (std_msgs/String)"),
         Param("goal_topic", "/goal_pose", "Navigation goals (geometry_msgs/PoseStamped, Nav2's goal topic)"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
+        AUTOSTART,
     )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        defaults = FileDefaults(self)
+        # Every parameter is declared here (read-only); configure checks the tables.
+        self._defaults = defaults = FileDefaults(self)
         self.params = p = self.declare_table(defaults.apply(self.PARAMETERS))
-        self.locations: Dict[str, List[float]] = {}
+        self._poses: Dict[str, List[float]] = {}
         for name in p["location_names"]:
             table = [Param(f"locations.{name}", [0.0, 0.0, 0.0], f"Pose of {name}: x, y (m), yaw (rad) in frame_id")]
-            pose = self.declare_table(defaults.apply(table))[f"locations.{name}"]
+            self._poses[name] = list(self.declare_table(defaults.apply(table))[f"locations.{name}"])
+        self._tables: Dict[str, Dict[str, str]] = {}
+        for action in p["action_names"]:
+            table = [Param(f"actions.{action}.say", "", f"What the robot says for {action}"),
+                     Param(f"actions.{action}.display", "", f"What the screen shows for {action}"),
+                     Param(f"actions.{action}.goal", "", f"Location the robot drives to for {action}")]
+            values = self.declare_table(defaults.apply(table))
+            self._tables[action] = {k: values[f"actions.{action}.{k}"] for k in ACTION_FIELDS}
+        self.locations: Dict[str, List[float]] = {}
+        self.behaviour: Dict[str, Dict[str, str]] = {}
+        self.executed: Dict[str, int] = {}
+        self.unknown = 0
+        self.inactive_actions = 0  # actions that arrived while the node was not active (not executed)
+        self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
+        self.start(p["autostart"])
+
+    # ----------------------------------------------------------- lifecycle
+    def configure_node(self) -> None:
+        """Check the places and the action table; create the topics and the diagnostics timer."""
+        p, defaults = self.params, self._defaults
+        self.locations = {}
+        for name, pose in self._poses.items():
             if len(pose) != 3:
                 raise NodeSetupError(f"parameter locations.{name}: expected [x, y, yaw], got {list(pose)}")
             self.locations[name] = [float(v) for v in pose]
@@ -100,25 +132,18 @@ class ActionExecutorNode(PearlNode):
             if field not in ACTION_FIELDS:
                 raise NodeSetupError(f"{defaults.path}: {defaults.section}.actions.{key}: unknown field {field!r} "
                                      f"(expected one of {', '.join(ACTION_FIELDS)})")
-        self.behaviour: Dict[str, Dict[str, str]] = {}
-        for action in p["action_names"]:
-            table = [Param(f"actions.{action}.say", "", f"What the robot says for {action}"),
-                     Param(f"actions.{action}.display", "", f"What the screen shows for {action}"),
-                     Param(f"actions.{action}.goal", "", f"Location the robot drives to for {action}")]
-            values = self.declare_table(defaults.apply(table))
-            goal = values[f"actions.{action}.goal"]
+        self.behaviour = {}
+        for action, spec in self._tables.items():
+            goal = spec["goal"]
             if goal and goal not in self.locations:
                 raise NodeSetupError(f"parameter actions.{action}.goal: unknown location {goal!r} "
                                      f"(location_names: {', '.join(self.locations) or 'none'})")
-            self.behaviour[action] = {k: values[f"actions.{action}.{k}"] for k in ACTION_FIELDS}
-        self.executed: Dict[str, int] = {}
-        self.unknown = 0
-        self.say_pub = self.create_publisher(cv.TextMsg, p["say_topic"], EVENT_QOS)
-        self.display_pub = self.create_publisher(cv.TextMsg, p["display_topic"], EVENT_QOS)
-        self.goal_pub = self.create_publisher(cv.PoseMsg, p["goal_topic"], LATCHED_QOS)
-        self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
-        self.create_subscription(cv.TextMsg, p["action_topic"], self._on_action, EVENT_QOS)
-        self.create_timer(p["diagnostics_period"], self.publish_diagnostics)
+            self.behaviour[action] = dict(spec)
+        self.say_pub = self.lifecycle_publisher(cv.TextMsg, p["say_topic"], EVENT_QOS)
+        self.display_pub = self.lifecycle_publisher(cv.TextMsg, p["display_topic"], EVENT_QOS)
+        self.goal_pub = self.lifecycle_publisher(cv.PoseMsg, p["goal_topic"], LATCHED_QOS)
+        self.managed_subscription(cv.TextMsg, p["action_topic"], self._on_action, EVENT_QOS)
+        self.managed_timer(p["diagnostics_period"], self.publish_diagnostics)
         if not self.behaviour:
             self.get_logger().warning("no action configured (action_names is empty): every action will be "
                                       "counted as unknown")
@@ -130,6 +155,9 @@ class ActionExecutorNode(PearlNode):
         return _Template(time=now.strftime("%H:%M"), action=action)
 
     def _on_action(self, msg) -> None:
+        if not self.active:
+            self.inactive_actions += 1   # a deactivated executor does not act
+            return
         action = cv.msg_to_action(msg)
         spec = self.behaviour.get(action)
         if spec is None:
@@ -153,6 +181,7 @@ class ActionExecutorNode(PearlNode):
     def publish_diagnostics(self) -> None:
         """Publish executed/unknown action counts on /diagnostics."""
         values = {"executed": sum(self.executed.values()), "unknown_actions": self.unknown,
+                  "inactive_actions": self.inactive_actions,
                   **{f"executed_{k}": v for k, v in sorted(self.executed.items())}}
         level = cv.DIAG_WARN if self.unknown else cv.DIAG_OK
         self.diag_pub.publish(cv.diagnostics_to_msg(f"pearl: {self.get_name()}", "pearl", level,

@@ -42,6 +42,15 @@ class BeliefTrackerNode(ManagedPearlNode):
           counts as ``unknown`` (see :mod:`pearl_pomdp.tracking`).
         * ``max_pending`` (int, 0–1000): observations that may wait for the next action.
         * ``stale_after`` (double, s, ≥ 0): drop a waiting observation older than this; 0 never.
+        * ``drive_speed`` (double, 0–5 m/s): drives get a deadline at this speed
+          (:class:`~pearl_pomdp.navigation.DriveTimer`) and are closed with
+          ``nav_failed_observation`` when it passes; 0: drives have no deadline.
+        * ``guide_speed`` (double, 0.005–3 m/s), ``guide_actions`` (str[]): guidances are timed
+          at the slowest resident's pace.
+        * ``drive_path_factor`` (≥ 1), ``drive_slack`` (≥ 1), ``drive_margin`` (s),
+          ``drive_max_seconds`` (s): the rest of :class:`~pearl_pomdp.navigation.DriveDeadline`.
+        * ``nav_failed_observation`` (str, ``navFailed``), ``place_feature`` (str, ``RobotLocation``).
+        * ``location_names`` (str[]), ``locations.<name>`` (double[3]): the places (shared ``/**``).
         * ``diagnostics_period`` (double, s, > 0): period of the /diagnostics summary.
         * ``speech_topic``, ``touchscreen_topic``, ``laser_topic``, ``reminder_topic``,
           ``action_topic``, ``belief_topic``, ``marginals_topic`` (str): topic names.
@@ -92,6 +101,19 @@ class BeliefTrackerNode(ManagedPearlNode):
                                   "changeable at run time)", range=(0.0, 3600.0), read_only=False),
         Param("confidence_floor", 0.0, "Speech recognised with a lower confidence counts as unknown "
                                        "(changeable at run time)", range=(0.0, 1.0), read_only=False),
+        Param("drive_speed", 0.0, "Drives get a deadline from distance at this speed (m/s) and are closed "
+                                  "with nav_failed_observation when it passes; 0: no drive deadline",
+              range=(0.0, 5.0)),
+        Param("guide_speed", 0.03, "Speed (m/s) guide_actions are timed at: the slowest pace, rests included, "
+                                   "of a resident the robot still guides", range=(0.005, 3.0)),
+        Param("guide_actions", [""], "Drives that walk the resident along (timed at guide_speed)"),
+        Param("drive_path_factor", 1.4, "Path length over straight-line distance", range=(1.0, 10.0)),
+        Param("drive_slack", 1.5, "Multiplier on a drive's expected time", range=(1.0, 10.0)),
+        Param("drive_margin", 10.0, "Seconds added to every drive's deadline", range=(0.0, 3600.0)),
+        Param("drive_max_seconds", 1800.0, "No drive deadline is longer than this (s)", range=(1.0, 86400.0)),
+        Param("nav_failed_observation", "navFailed", "Observation symbol that closes a drive at its deadline"),
+        Param("place_feature", "RobotLocation", "State feature whose values are the places the drives go to"),
+        Param("location_names", [""], "Named places (locations.<name> = [x, y, yaw] in the map frame)"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
         Param("speech_topic", "/pearl/speech", "Recognised speech text (std_msgs/String)"),
         Param("touchscreen_topic", "/pearl/touchscreen", "Touchscreen symbols (std_msgs/String)"),
@@ -107,6 +129,9 @@ class BeliefTrackerNode(ManagedPearlNode):
     def __init__(self, *, domain=None, model=None, keyword_filter=None, **kwargs):
         super().__init__(**kwargs)
         self.params = p = self.declare_table(self.PARAMETERS)
+        for name in [n for n in p["location_names"] if n]:
+            p.update(self.declare_table([Param(f"locations.{name}", [0.0, 0.0, 0.0],
+                                               f"Pose of {name}: x, y (m), yaw (rad) in the map frame")]))
         self._preloaded = (domain, model, keyword_filter)
         self.core = None
         self._reported_warnings = 0
@@ -133,7 +158,8 @@ class BeliefTrackerNode(ManagedPearlNode):
         self.domain, self.model = domain, model
         try:
             given = [name for name in p["no_timeout_actions"] if name]
-            settings = StepSettings.from_params({**p, "no_timeout_actions": given})
+            settings = StepSettings.from_params({**p, "no_timeout_actions": given,
+                                                 "location_names": [n for n in p["location_names"] if n]})
             self.core = BeliefTracker(model, domain, settings, keyword_filter)
         except ValueError as err:
             raise NodeSetupError(f"parameter {str(err)}") from None
@@ -152,8 +178,9 @@ class BeliefTrackerNode(ManagedPearlNode):
         # step_timeout after its action, as in the core loop the simulator runs.
         self._deadline_timer = None
         self._armed_for = None
-        if p["step_timeout"] > 0:
-            self._deadline_timer = self.managed_timer(p["step_timeout"], self._on_tick)
+        self._configured_timeout = p["step_timeout"] > 0
+        if p["step_timeout"] > 0 or self.core.drive_timer is not None:
+            self._deadline_timer = self.managed_timer(p["step_timeout"] or 1.0, self._on_tick)
             self._deadline_timer.cancel()
         self.managed_timer(p["diagnostics_period"], self.publish_diagnostics)
         # Warnings held back by the 0.1 s limit go out within 0.1 s of wall time (even when
@@ -164,8 +191,11 @@ class BeliefTrackerNode(ManagedPearlNode):
         from std_srvs.srv import Trigger
 
         self._reset_srv = self.create_service(Trigger, p["reset_service"], self._on_reset)
+        drives = self.core.drive_timer
         self.get_logger().info(f"tracking {model.name}: {model.num_states} states, {model.num_observations} "
-                               f"observations; step_timeout {p['step_timeout']} s → {p['timeout_observation']!r}")
+                               f"observations; step_timeout {p['step_timeout']} s → {p['timeout_observation']!r}; "
+                               + (f"drives {', '.join(drives.goals)} timed at {p['drive_speed']} m/s → "
+                                  f"{p['nav_failed_observation']!r}" if drives is not None else "drives have no deadline"))
 
     def activate_node(self) -> None:
         """Publish the current belief (b0 at first): the policy answers it and the loop runs."""
@@ -203,7 +233,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         from rcl_interfaces.msg import SetParametersResult
 
         for param in params:
-            if param.name == "step_timeout" and self.core is not None and self._deadline_timer is None \
+            if param.name == "step_timeout" and self.core is not None and not self._configured_timeout \
                     and param.value > 0:
                 return SetParametersResult(successful=False, reason="step_timeout: this node was configured "
                                            "without a timeout (0); set it before configure")
@@ -215,17 +245,9 @@ class BeliefTrackerNode(ManagedPearlNode):
                 continue
             if param.name == "step_timeout":
                 self.core.protocol.step_timeout = float(param.value)
-                if self._deadline_timer is not None:
-                    # rcl timers keep their period: a new one-shot timer for the new timeout.
-                    old = self._deadline_timer
-                    self._managed_timers.remove(old)
-                    self.destroy_timer(old)
-                    self._deadline_timer = None
-                    if param.value > 0:
-                        self._deadline_timer = self.managed_timer(float(param.value), self._on_tick)
-                        self._deadline_timer.cancel()
-                    self._armed_for = None
-                    self._arm_deadline()
+                # The one-shot timer is re-armed for the open step's new deadline.
+                self._armed_for = None
+                self._arm_deadline()
             elif param.name == "stale_after":
                 self.core.protocol.stale_after = float(param.value)
             elif param.name == "confidence_floor":
@@ -327,7 +349,11 @@ class BeliefTrackerNode(ManagedPearlNode):
         if deadline is None:
             timer.cancel()
         else:
-            timer.reset()  # next call = now + step_timeout: the deadline changes only when a step opens
+            # One timer for step timeouts and drive deadlines: its period is set to fire exactly at
+            # the deadline's nanosecond (as /clock carries it), then it is restarted from now.
+            now_ns = self.get_clock().now().nanoseconds
+            timer.timer_period_ns = max(1, int(round(deadline * 1e9)) - now_ns)
+            timer.reset()
 
     def _flush_diagnostics(self) -> None:
         if self._warning_total() > self._reported_warnings:
@@ -369,8 +395,13 @@ class BeliefTrackerNode(ManagedPearlNode):
         self._last_diag = time.monotonic()
         step, open_action, pending = self.protocol.snapshot()
         values = {"step": step, "open_action": open_action or "", "pending": pending, **self.counters()}
+        if self.protocol.last_nav_failure:
+            values["last_nav_failure"] = self.protocol.last_nav_failure
         level = cv.DIAG_WARN if warnings else cv.DIAG_OK
         text = f"{warnings} input(s) dropped, invalid or recovered" if warnings else "tracking"
+        nav = self.protocol.counters.get("nav_failures", 0)
+        if nav:
+            text = f"{text}; {nav} drive(s) missed their deadline (last: {self.protocol.last_nav_failure})"
         self.diag_pub.publish(cv.diagnostics_to_msg(f"pearl: {self.get_name()}", self.model.name, level, text,
                                                     values, self.now_s()))
 

@@ -92,7 +92,8 @@ class PearlGraph:
                     # executor's places); the domain is loaded once for all nodes, above.
                     declared = {p.name for p in cls.PARAMETERS}
                     from_file[name] = {k: v for k, v in node_params(name, path).items()
-                                       if k in declared and k != "domain"}
+                                       if (k in declared or (name == "belief_tracker" and k.startswith("locations.")))
+                                       and k != "domain"}
 
             def params(name: str) -> Dict[str, Any]:
                 return {**from_file.get(name, {}), **shared, **dict(overrides.get(name, {}))}
@@ -109,7 +110,7 @@ class PearlGraph:
             if executor:
                 exec_params = {k: v for k, v in params("action_executor").items() if k != "domain"}
                 exec_params.setdefault("action_names", list(model.actions))
-                self.executor_node = ActionExecutorNode(parameter_overrides=exec_params, **common)
+                self.executor_node = ActionExecutorNode(parameter_overrides=exec_params, **managed)
                 self.nodes.append(self.executor_node)
             self.executor = SingleThreadedExecutor(context=context)
             for node in self.nodes:

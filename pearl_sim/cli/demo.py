@@ -4,7 +4,10 @@ The Pearl nodes and simulated hardware run in one process under simulated time;
 prints a transcript, writes a bag, the transcript and a belief plot into --out,
 and ends with a one-line outcome. The policy is the one `pearl plan` saved in
 out/policies/NAME when it fits the domain (else the demo plans; --replan forces it); a copy
-goes beside the bag so that `pearl replay` needs nothing else.
+goes beside the bag so that `pearl replay` needs nothing else. With --foxglove the demo
+serves a live view (belief marginals, actions, EXECUTE traces, transcript, robot pose) on
+ws://127.0.0.1:8765 for Foxglove (layout: config/foxglove/pearl.layout.json) and waits up to
+--foxglove-wait s for a client to subscribe before the episode starts.
 
 Examples:
   pearl demo --scenario config/scenarios/table4_dialog.yaml --seed 3
@@ -43,6 +46,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=None, help="override the scenario's seed")
     parser.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID of the in-process graph")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the transcript")
+    parser.add_argument("--foxglove", action="store_true",
+                        help="serve a live view over the Foxglove WebSocket protocol (belief marginals, actions, "
+                             "EXECUTE traces, transcript, robot pose; layout config/foxglove/pearl.layout.json)")
+    parser.add_argument("--foxglove-port", type=int, default=8765, help="port of the live view (default 8765; 0: any)")
+    parser.add_argument("--foxglove-wait", type=float, default=30.0,
+                        help="seconds to wait for a Foxglove client to subscribe before the episode starts "
+                             "(default 30; 0: start at once)")
+    parser.add_argument("--foxglove-linger", type=float, default=0.0,
+                        help="seconds the live view stays up after the episode (default 0)")
 
 
 def _saved_policy(args: argparse.Namespace) -> str:
@@ -91,11 +103,52 @@ def run(args: argparse.Namespace) -> int:
     if (out / "bag").is_dir() and any((out / "bag").iterdir()):
         raise PearlError(f"{out / 'bag'}: already holds a bag; choose another --out folder")
     echo = None if args.json else (lambda text: print(text, flush=True))
+    view = _start_live_view(args) if getattr(args, "foxglove", False) else None
+    try:
+        return _run(args, out, echo, view)
+    finally:
+        if view is not None:
+            if args.foxglove_linger > 0:
+                time.sleep(args.foxglove_linger)
+            view.stop()
+
+
+def _start_live_view(args: argparse.Namespace):
+    """The Foxglove server, up before planning so a viewer can connect; waits for one (--foxglove-wait)."""
+    from pearl_pomdp.errors import PearlError
+
+    if not 0 <= args.foxglove_port <= 65535:
+        raise PearlError(f"--foxglove-port {args.foxglove_port}: not a TCP port (0-65535)")
+    try:
+        from pearl_pomdp.live_view import LiveView
+    except ImportError as err:
+        raise PearlError(f"--foxglove: {err}") from None
+    try:
+        view = LiveView(port=args.foxglove_port)
+    except Exception as err:   # the SDK raises its own error type when the port is taken
+        raise PearlError(f"--foxglove-port {args.foxglove_port}: cannot serve the live view: {err}") from None
+    # On stderr: with --json, stdout holds only the JSON object.
+    print(f"pearl demo: live view on {view.url} (Foxglove: Open connection → Foxglove WebSocket; "
+          f"layout config/foxglove/pearl.layout.json)", file=sys.stderr, flush=True)
+    if args.foxglove_wait > 0:
+        wanted = ("/pearl/belief_marginals", "/pearl/action")
+        if view.wait_for_subscribers(wanted, args.foxglove_wait):
+            print("pearl demo: a Foxglove client subscribed; starting", file=sys.stderr, flush=True)
+        else:
+            print(f"pearl demo: no Foxglove client subscribed within {args.foxglove_wait:g} s; starting anyway",
+                  file=sys.stderr, flush=True)
+    return view
+
+
+def _run(args: argparse.Namespace, out: Path, echo, view) -> int:
+    from pearl_pomdp.cli import print_json
+    from pearl_sim.demo import run_demo, summary_dict
+
     if not args.json:
         what = "starting the graph" if args.policy else "planning the policy and starting the graph"
         print(f"pearl demo: scenario {args.scenario}; {what}…", flush=True)
     result = run_demo(Path(args.scenario), out, domain_path=Path(args.domain), hierarchy_path=Path(args.hierarchy),
-                      policy=args.policy, seed=args.seed, domain_id=args.domain_id, echo=echo)
+                      policy=args.policy, seed=args.seed, domain_id=args.domain_id, echo=echo, live_view=view)
     if args.json:
         print_json(summary_dict(result))
     else:

@@ -1,0 +1,236 @@
+"""The simulated nursing home as one ROS node, for ``launch/pearl_sim.launch.xml``.
+
+``pearl_sim_world`` runs a scenario's :class:`~pearl_sim.world.World` (the resident, the
+scheduler, the robot base) against the Pearl nodes running as *separate processes*, the way
+a simulator runs against a robot's stack: it owns the clock (``/clock``, the manager nodes
+run with ``use_sim_time:=true``), carries out every action the policy publishes on
+``/pearl/action`` and publishes what the world produces — speech, touchscreen, Laser
+landmarks, reminders — when the clock reaches each message's time. When the world is idle it
+lets time pass (:meth:`World.wait`), so the belief tracker's own timers close silent steps
+and drives that never arrive (``navFailed``). When the scenario's ``max_steps`` actions are
+done it prints one line ``pearl_sim_world: finished SCENARIO: …`` with the world's scores (JSON)
+and exits 0, which ends the launch.
+
+Time runs ``rate`` times faster than the wall clock, in ``/clock`` ticks every
+``clock_period`` wall seconds (a message or a deadline lands on the first tick at or after
+its time). Unlike ``pearl demo`` (one process, lock-step ``/clock``) the run is therefore not
+bit-identical to the fast path, only the same scenario under the same rules.
+
+Parameters: ``scenario`` (str, a scenario file; relative paths also in the package share
+directory), ``seed`` (int, −1: the scenario's), ``rate`` (double, 1–1000, default 10),
+``clock_period`` (double, 0.005–1 s, default 0.02), ``start_timeout`` (double, s, default 120:
+the manager must publish its first action within this, or the node exits 1),
+``wall_timeout`` (double, s, default 600: the episode must end within this, else exit 1).
+
+Publishers: ``/clock`` (rosgraph_msgs/Clock), ``/pearl/speech``, ``/pearl/touchscreen``,
+``/pearl/laser``, ``/pearl/reminder`` (std_msgs/String, reliable), ``/pearl/pose``
+(geometry_msgs/PoseStamped, the robot's place in the scenario's map).
+Subscriber: ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL like the policy's publisher).
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections import deque
+from typing import Deque, List, Optional
+
+__all__ = ["SimWorldNode", "main"]
+
+
+def _make_node_class():
+    from rclpy.node import Node
+
+    from pearl_pomdp.nodes.common import LATCHED_QOS
+
+    class SimWorldNode(Node):
+        """See the module doc."""
+
+        def __init__(self, **kwargs):
+            super().__init__("pearl_sim_world", **kwargs)
+            from geometry_msgs.msg import PoseStamped
+            from rosgraph_msgs.msg import Clock
+            from std_msgs.msg import String
+
+            from pearl_pomdp.nodes.common import resolve_path
+            from pearl_sim.nodes import MODALITY_TOPICS, RELIABLE
+            from pearl_sim.scenario import load_scenarios
+            from pearl_sim.world import World
+
+            declare = self.declare_parameter
+            scenario_path = declare("scenario", "config/scenarios/figure4.yaml").value
+            seed = int(declare("seed", -1).value)
+            self.rate = float(declare("rate", 10.0).value)
+            self.clock_period = float(declare("clock_period", 0.02).value)
+            self.start_timeout = float(declare("start_timeout", 120.0).value)
+            self.wall_timeout = float(declare("wall_timeout", 600.0).value)
+            for name, value, lo, hi in (("rate", self.rate, 1.0, 1000.0), ("clock_period", self.clock_period, 0.005, 1.0),
+                                        ("start_timeout", self.start_timeout, 1.0, 86400.0),
+                                        ("wall_timeout", self.wall_timeout, 1.0, 86400.0)):
+                if not lo <= value <= hi:
+                    raise ValueError(f"parameter {name}: {value} is outside [{lo}, {hi}]")
+            path = resolve_path(scenario_path, "scenario")
+            self.scenario = load_scenarios(path)[0]
+            self.world = World(self.scenario, seed=None if seed < 0 else seed)
+            self._String, self._Clock, self._Pose = String, Clock, PoseStamped
+            self.clock_pub = self.create_publisher(Clock, "/clock", 10)
+            self.publishers_by_modality = {m: self.create_publisher(String, t, RELIABLE)
+                                           for m, t in MODALITY_TOPICS.items()}
+            self.pose_pub = self.create_publisher(PoseStamped, "/pearl/pose", 10)
+            self.create_subscription(String, "/pearl/action", self._on_action, LATCHED_QOS)
+            # The tracker's step count: a step it closed is answered by the policy; while that
+            # answer is in flight the clock stands still (as the lock-step driver of pearl demo
+            # does), so no time passes that the fast path would not have.
+            self.create_subscription(String, "/pearl/belief_marginals", self._on_marginals, LATCHED_QOS)
+            self.closed_steps = 0
+            self.actions: Deque[str] = deque()
+            self.pending: Deque = deque()    # world messages not yet due
+            self.taken: List[str] = []
+            self.now = 0.0
+            self.started = False
+            self.finished = False
+            self.failed: Optional[str] = None
+            self.t0 = time.monotonic()
+            self.create_timer(self.clock_period, self._tick)
+            self.get_logger().info(f"simulating {self.scenario.name} (seed {self.world.seed}) at {self.rate:g}x; "
+                                   f"waiting for the manager's first action")
+
+        # --------------------------------------------------------------- inputs
+        def _on_action(self, msg) -> None:
+            self.actions.append(msg.data)
+
+        def _on_marginals(self, msg) -> None:
+            try:
+                self.closed_steps = max(self.closed_steps, int(json.loads(msg.data).get("step", 0)))
+            except (ValueError, TypeError, AttributeError):
+                pass   # not the tracker's message: ignored
+
+        def _publish(self, message) -> None:
+            self.publishers_by_modality[message.modality].publish(self._String(data=message.text))
+
+        def _publish_clock(self) -> None:
+            msg = self._Clock()
+            ns = int(round(self.now * 1e9))
+            msg.clock.sec, msg.clock.nanosec = ns // 1_000_000_000, ns % 1_000_000_000
+            self.clock_pub.publish(msg)
+
+        def _publish_pose(self) -> None:
+            x, y = self.scenario.map[self.world.robot_at]
+            pose = self._Pose()
+            pose.header.frame_id = "map"
+            ns = int(round(self.now * 1e9))
+            pose.header.stamp.sec, pose.header.stamp.nanosec = ns // 1_000_000_000, ns % 1_000_000_000
+            pose.pose.position.x, pose.pose.position.y = float(x), float(y)
+            pose.pose.orientation.w = 1.0
+            self.pose_pub.publish(pose)
+
+        # ----------------------------------------------------------------- loop
+        def _ready(self) -> bool:
+            """The manager answered b0 and our inputs reach its tracker."""
+            return bool(self.actions) and all(p.get_subscription_count() > 0
+                                              for p in self.publishers_by_modality.values())
+
+        def _tick(self) -> None:
+            if self.finished:
+                return
+            wall = time.monotonic() - self.t0
+            if not self.started:
+                if self._ready():
+                    self.started = True
+                    self.t0 = time.monotonic()
+                    self.get_logger().info("the manager is up: starting the clock")
+                elif wall > self.start_timeout:
+                    self._finish(f"no first action on /pearl/action within {self.start_timeout:g} s")
+                else:
+                    self._publish_clock()   # time 0 until the manager is up
+                return
+            if wall > self.wall_timeout:
+                self._finish(f"the episode did not end within {self.wall_timeout:g} wall seconds")
+                return
+            answered = self.closed_steps >= len(self.taken)   # every step taken is closed
+            if answered and len(self.taken) >= self.scenario.max_steps:
+                self._finish(None)
+                return
+            if answered and not self.actions:
+                return   # the policy is deciding: hold the clock until its action arrives
+            self.now += self.rate * self.clock_period
+            self._publish_clock()
+            # Messages that fell due: the world produced them at these times.
+            while self.pending and self.pending[0].time <= self.now + 1e-9:
+                self._publish(self.pending.popleft())
+            if self.pending:
+                return
+            if self.actions and answered:
+                action = self.actions.popleft()
+                if self.world.time < self.now:
+                    self._idle(self.now)       # the time the manager took to answer
+                try:
+                    result = self.world.act(action)
+                except ValueError as err:
+                    self._finish(f"/pearl/action {action!r}: {err}")
+                    return
+                self.taken.append(action)
+                self._publish_pose()
+                self.pending.extend(result.messages)
+                while self.pending and self.pending[0].time <= self.now + 1e-9:
+                    self._publish(self.pending.popleft())
+            elif self.world.time < self.now:
+                self._idle(self.now)
+
+        def _idle(self, until: float) -> None:
+            """The robot waits: the world lives on (the scheduler may speak) until ``until``."""
+            waited = self.world.wait(until)
+            for message in waited.messages:
+                self._publish(message)
+
+        def _finish(self, failure: Optional[str]) -> None:
+            self.finished = True
+            self.failed = failure
+
+        def summary(self) -> dict:
+            m = self.world.metrics
+            return {"scenario": self.scenario.name, "seed": self.world.seed, "actions": len(self.taken),
+                    "sim_seconds": round(self.now, 3), "guidances_started": m.guidances_started,
+                    "guidances_completed": m.guidances_completed, "residents_lost": m.residents_lost,
+                    "blocked_drives": m.blocked_drives, "reminders_delivered": m.reminders_delivered,
+                    "wrong_actions": m.wrong_actions, "first_actions": self.taken[:12]}
+
+    return SimWorldNode
+
+
+def main(args: Optional[List[str]] = None) -> int:
+    """Console script ``pearl_sim_world``: 0 when the episode ended, 1 on a timeout, 2 on a bad parameter."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from pearl_pomdp.errors import PearlError
+    from pearl_pomdp.nodes.common import NodeSetupError
+
+    rclpy.init(args=args if args is not None else sys.argv)
+    node = None
+    executor = SingleThreadedExecutor()
+    try:
+        try:
+            node = _make_node_class()()
+        except (ValueError, PearlError, NodeSetupError, OSError) as err:
+            print(f"pearl_sim_world: error: {err}", file=sys.stderr, flush=True)
+            return 2
+        executor.add_node(node)
+        while rclpy.ok() and not node.finished:
+            executor.spin_once(timeout_sec=0.1)
+        if node.failed:
+            print(f"pearl_sim_world: error: {node.failed}", file=sys.stderr, flush=True)
+            return 1
+        print(f"pearl_sim_world: finished {node.scenario.name}: {json.dumps(node.summary())}", flush=True)
+        return 0
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
