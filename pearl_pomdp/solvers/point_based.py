@@ -152,6 +152,13 @@ def _setting(name: str) -> property:
 
     return property(get, set_, doc=f"``settings.{name}`` (see :class:`PointBasedSettings`).")
 
+#: Probe states per sawtooth point (its most likely ones) for the branch-and-bound bound.
+_PROBES = 4
+#: Support bitsets for the sawtooth's containment test up to this many states ...
+_BITSET_MAX_STATES = 4096
+#: ... and when one test costs at most this many word operations.
+_BITSET_MAX_OPS = 4_000_000
+
 #: Keep T dense (as one S × A·S array) up to this many entries (40 MB).
 _DENSE_ENTRIES = 5_000_000
 #: ... and when at least this fraction of T's entries is non-zero.
@@ -248,6 +255,12 @@ class PointBasedSolver:
         self.pt_len = np.zeros(self.pt_cap, dtype=np.int64)
         self.pt_key = np.zeros(self.pt_cap, dtype=np.int64)   # the point's most likely state k_i
         self.pt_kval = np.ones(self.pt_cap)                      # b_i(k_i)
+        # Probe states (the point's _PROBES most likely) and 1/b_i there: λ_i(c) ≤ min over
+        # probes of c(s)/b_i(s). Support bitsets (small S only) tell whether supp b_i ⊆ supp c.
+        self.pt_probe = np.zeros((self.pt_cap, _PROBES), dtype=np.int64)
+        self.pt_pinv = np.zeros((self.pt_cap, _PROBES))
+        self.bit_words = (S + 63) // 64 if S <= _BITSET_MAX_STATES else 0
+        self.pt_bits = np.zeros((self.pt_cap, self.bit_words), dtype=np.uint64)
         self.pt_v = np.zeros(self.pt_cap)
         self.pt_delta = np.zeros(self.pt_cap)
         # Versions: a point's stamp is the version at which its value last fell; a cached
@@ -379,7 +392,13 @@ class PointBasedSolver:
             if n_c == 0:
                 return ub
             delta = self.pt_delta[cand]
-            bound = C[:, kl] * (delta / self.pt_kval[cand])               # [M, n_c], <= λ δ
+            pl = pos[self.pt_probe[cand]]                                  # [n_c, P]; -1: not in U
+            ratio = np.where(pl[None] >= 0, C[:, np.maximum(pl, 0)], 0.0) * self.pt_pinv[cand][None]
+            bound = ratio.min(axis=2) * delta                              # [M, n_c], <= λ δ
+            if self.bit_words and M * n_c * self.bit_words <= _BITSET_MAX_OPS:
+                rows_bits = self._bits(U[None, :].repeat(M, axis=0), C > 0.0)        # [M, W]
+                outside = (self.pt_bits[cand][None, :, :] & ~rows_bits[:, None, :]).any(axis=2)
+                bound[outside] = 0.0                                       # supp b_i ⊄ supp c: λ = 0
             corr = np.zeros(M)
             k = 2
             while True:
@@ -409,6 +428,14 @@ class PointBasedSolver:
             pos[U] = -1
         return np.minimum(ub, base + corr)
 
+    def _bits(self, states: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """``[M, W]`` uint64 bitsets of the states ``states[m][mask[m]]`` (``states``, ``mask`` ``[M, n]``)."""
+        M = states.shape[0]
+        full = np.zeros((M, self.bit_words * 64), dtype=bool)
+        r, c = np.nonzero(mask)
+        full[r, states[r, c]] = True
+        return np.packbits(full, axis=1, bitorder="little").view(np.uint64)
+
     def upper(self, idx: np.ndarray, val: np.ndarray) -> float:
         """Upper bound at the belief ``val`` on states ``idx``."""
         return float(self._upper_batch(idx, val[None, :])[0])
@@ -435,8 +462,12 @@ class PointBasedSolver:
             return  # no better than the corners: the point would never bind
         if self.pt_n == self.pt_cap:
             self.pt_cap *= 2
-            for name in ("pt_start", "pt_len", "pt_key", "pt_kval", "pt_v", "pt_delta", "pt_stamp"):
-                setattr(self, name, np.resize(getattr(self, name), self.pt_cap))
+            for name in ("pt_start", "pt_len", "pt_key", "pt_kval", "pt_v", "pt_delta", "pt_stamp",
+                         "pt_probe", "pt_pinv", "pt_bits"):
+                old = getattr(self, name)
+                new = np.zeros((self.pt_cap,) + old.shape[1:], dtype=old.dtype)
+                new[: old.shape[0]] = old
+                setattr(self, name, new)
         m = idx.shape[0]
         while self.ent_n + m > self.ent_cap:
             self.ent_cap *= 2
@@ -447,6 +478,11 @@ class PointBasedSolver:
         self.ent_val[self.ent_n: self.ent_n + m] = val
         top = int(np.argmax(val))
         self.pt_start[i], self.pt_len[i], self.pt_key[i], self.pt_kval[i] = self.ent_n, m, idx[top], val[top]
+        probes = np.argsort(-val, kind="stable")[:_PROBES]
+        probes = np.concatenate([probes, np.full(_PROBES - probes.size, top)])
+        self.pt_probe[i], self.pt_pinv[i] = idx[probes], 1.0 / val[probes]
+        if self.bit_words:
+            self.pt_bits[i] = self._bits(idx[None, :], np.ones((1, m), dtype=bool))[0]
         self.pt_v[i], self.pt_delta[i] = v, delta
         self.ub_version += 1
         self.pt_stamp[i] = self.ub_version
