@@ -51,13 +51,13 @@ print(json.dumps({
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", type=Path, default=REPO / "config" / "pearl.domain.yaml")
-    ap.add_argument("--trials", default="50", help="comma-separated trial budgets (default 50)")
+    ap.add_argument("--trials", default="50", help="comma-separated trial budgets (default 50; 0: none, e.g. with --time-limit)")
     ap.add_argument("--time-limit", type=float, default=0.0, help="also one clock-limited run of this many seconds")
     ap.add_argument("--repo", type=Path, default=REPO, help="checkout whose solver to run (default: this one)")
     args = ap.parse_args()
     if not (args.repo / "pearl_pomdp" / "solvers" / "point_based.py").is_file():
         raise SystemExit(f"bench/flat_model.py: --repo {args.repo}: no pearl_pomdp/solvers/point_based.py there")
-    runs = [(int(t), 0.0) for t in args.trials.split(",") if t.strip()]
+    runs = [(int(t), 0.0) for t in args.trials.split(",") if t.strip() and int(t) > 0]  # 0: none
     if args.time_limit > 0:
         runs.append((0, args.time_limit))
     out = {"bench": "flat_model", "repo": str(args.repo.resolve()), "model": str(args.model),
