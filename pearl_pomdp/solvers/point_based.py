@@ -387,7 +387,15 @@ class PointBasedSolver:
         try:
             kl = pos[self.pt_key[points]]
             sel = kl >= 0
-            cand, kl = points[sel], kl[sel]
+            cand = points[sel]
+            outside = None
+            if self.bit_words:
+                # supp b_i ⊆ supp c: first against the union of the rows' supports (U), then per row.
+                u_bits = self._bits(U[None, :], np.ones((1, U.shape[0]), dtype=bool))[0]
+                cand = cand[~(self.pt_bits[cand] & ~u_bits).any(axis=1)]
+                if cand.size and M > 1 and M * cand.size * self.bit_words <= _BITSET_MAX_OPS:
+                    rows_bits = self._bits(U[None, :].repeat(M, axis=0), C > 0.0)        # [M, W]
+                    outside = (self.pt_bits[cand][None, :, :] & ~rows_bits[:, None, :]).any(axis=2)
             n_c = cand.size
             if n_c == 0:
                 return ub
@@ -395,9 +403,7 @@ class PointBasedSolver:
             pl = pos[self.pt_probe[cand]]                                  # [n_c, P]; -1: not in U
             ratio = np.where(pl[None] >= 0, C[:, np.maximum(pl, 0)], 0.0) * self.pt_pinv[cand][None]
             bound = ratio.min(axis=2) * delta                              # [M, n_c], <= λ δ
-            if self.bit_words and M * n_c * self.bit_words <= _BITSET_MAX_OPS:
-                rows_bits = self._bits(U[None, :].repeat(M, axis=0), C > 0.0)        # [M, W]
-                outside = (self.pt_bits[cand][None, :, :] & ~rows_bits[:, None, :]).any(axis=2)
+            if outside is not None:
                 bound[outside] = 0.0                                       # supp b_i ⊄ supp c: λ = 0
             corr = np.zeros(M)
             k = 2
