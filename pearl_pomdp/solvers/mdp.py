@@ -128,12 +128,15 @@ def fib_q(model: Pomdp, epsilon: float = 1e-6, max_iterations: int = 100_000,
     O = np.asarray(model.O, dtype=float)
     g = float(model.discount)
     S, A = R.shape
-    Z = O.shape[2]
     if Q_init is None:
         _, Q = mdp_value_iteration(model, epsilon=min(epsilon, 1e-6))
     else:
         Q = np.array(Q_init, dtype=float)
     tol = epsilon * (1.0 - g) / (2.0 * g) if g < 1.0 else epsilon
+    # Observations action a can never produce add max_a' 0 = 0: leave them out (on Pearl's
+    # domain an action has 3-15 of the 18 symbols, so FIB iterates ~3x faster).
+    live = [np.flatnonzero(O[a].any(axis=0)) for a in range(A)]
+    Olive = [np.ascontiguousarray(O[a][:, live[a]]) for a in range(A)]
     t0 = time.perf_counter()
     it, converged = 0, False
     while it < max_iterations:
@@ -141,8 +144,9 @@ def fib_q(model: Pomdp, epsilon: float = 1e-6, max_iterations: int = 100_000,
         Qn = np.empty_like(Q)
         for a, Ta in enumerate(mats):
             # Y[s', o, a'] = O[a, s', o] Q[s', a']; one product T[a] @ Y covers every o.
-            Y = (O[a][:, :, None] * Q[:, None, :]).reshape(S, Z * A)
-            TY = np.asarray(Ta @ Y).reshape(S, Z, A)
+            nz = live[a].shape[0]
+            Y = (Olive[a][:, :, None] * Q[:, None, :]).reshape(S, nz * A)
+            TY = np.asarray(Ta @ Y).reshape(S, nz, A)
             Qn[:, a] = R[:, a] + g * TY.max(axis=2).sum(axis=1)
         # Monotone from above: the min keeps the bound valid under rounding.
         Qn = np.minimum(Qn, Q)

@@ -152,6 +152,13 @@ def _setting(name: str) -> property:
 
     return property(get, set_, doc=f"``settings.{name}`` (see :class:`PointBasedSettings`).")
 
+#: Probe states per sawtooth point (its most likely ones) for the branch-and-bound bound.
+_PROBES = 4
+#: Support bitsets for the sawtooth's containment test up to this many states ...
+_BITSET_MAX_STATES = 4096
+#: ... and when one test costs at most this many word operations.
+_BITSET_MAX_OPS = 4_000_000
+
 #: Keep T dense (as one S × A·S array) up to this many entries (40 MB).
 _DENSE_ENTRIES = 5_000_000
 #: ... and when at least this fraction of T's entries is non-zero.
@@ -167,7 +174,7 @@ class _Node:
     recomputed at every visit because they are cheap (one product with Γ).
     """
 
-    __slots__ = ("idx", "val", "key", "p", "Rb", "ub_c", "ub", "children")
+    __slots__ = ("idx", "val", "key", "p", "Rb", "ub_c", "ub", "children", "ub_seen")
 
     def __init__(self, idx, val, key):
         self.idx = idx        # support of b (state indices)
@@ -178,6 +185,7 @@ class _Node:
         self.ub_c = None      # [A, Z] cached upper bounds at the successors
         self.ub = np.inf      # upper bound at b
         self.children = {}    # flat (a*Z + o) -> _Node, created when the search goes there
+        self.ub_seen = None   # [A] sawtooth version ub_c[a] was last read at (-1: never)
 
 
 class PointBasedSolver:
@@ -245,9 +253,22 @@ class PointBasedSolver:
         self.pt_n = 0
         self.pt_start = np.zeros(self.pt_cap, dtype=np.int64)
         self.pt_len = np.zeros(self.pt_cap, dtype=np.int64)
-        self.pt_key = np.zeros(self.pt_cap, dtype=np.int64)
+        self.pt_key = np.zeros(self.pt_cap, dtype=np.int64)   # the point's most likely state k_i
+        self.pt_kval = np.ones(self.pt_cap)                      # b_i(k_i)
+        # Probe states (the point's _PROBES most likely) and 1/b_i there: λ_i(c) ≤ min over
+        # probes of c(s)/b_i(s). Support bitsets (small S only) tell whether supp b_i ⊆ supp c.
+        self.pt_probe = np.zeros((self.pt_cap, _PROBES), dtype=np.int64)
+        self.pt_pinv = np.zeros((self.pt_cap, _PROBES))
+        self.bit_words = (S + 63) // 64 if S <= _BITSET_MAX_STATES else 0
+        self.pt_bits = np.zeros((self.pt_cap, self.bit_words), dtype=np.uint64)
         self.pt_v = np.zeros(self.pt_cap)
         self.pt_delta = np.zeros(self.pt_cap)
+        # Versions: a point's stamp is the version at which its value last fell; a cached
+        # successor bound read at version t only needs the points stamped after t again,
+        # unless a corner value fell since (that moves every point's delta: full re-read).
+        self.pt_stamp = np.zeros(self.pt_cap, dtype=np.int64)
+        self.ub_version = 0
+        self.vc_version = 0
         self.ent_cap = 1 << 14
         self.ent_n = 0
         self.ent_idx = np.zeros(self.ent_cap, dtype=np.int64)
@@ -336,72 +357,90 @@ class PointBasedSolver:
         offs = np.cumsum(lens) - lens
         return np.repeat(self.pt_start[pts] - offs, lens) + np.arange(total)
 
-    def _upper_batch(self, U: np.ndarray, C: np.ndarray) -> np.ndarray:
-        """Upper bound at each row of ``C`` ([M, |U|], beliefs on states ``U``)."""
+    def _upper_batch(self, U: np.ndarray, C: np.ndarray, points: Optional[np.ndarray] = None) -> np.ndarray:
+        """Upper bound at each row of ``C`` ([M, |U|], beliefs on states ``U``).
+
+        With ``points`` (indices into the point set): only the sawtooth over those points,
+        ``b·V_c + min_i λ_i δ_i``, without the FIB vectors; the caller takes the minimum
+        with what it read before.
+
+        ``λ_i(c) = min_{s ∈ supp b_i} c(s)/b_i(s)`` is at most ``r_i(c) = c(k_i)/b_i(k_i)``
+        at the point's most likely state ``k_i``, and ``δ_i < 0``, so ``r_i δ_i`` is a
+        lower bound of the point's correction from one gathered entry. Only the pairs whose
+        bound beats the best correction found so far are evaluated exactly, the most
+        promising first (branch and bound): the result is the full sawtooth minimum, at a
+        cost that no longer grows with the number of points times their supports."""
         cols = np.flatnonzero(C.any(axis=0))
         if cols.size < U.shape[0]:
             U, C = U[cols], C[:, cols]
         base = C @ self.Vc[U]
-        ub = np.minimum(base, (C @ self.Qfib[U]).max(axis=1))
-        n = self.pt_n
-        if n == 0:
+        if points is None:
+            ub = np.minimum(base, (C @ self.Qfib[U]).max(axis=1))
+            points = np.arange(self.pt_n)
+        else:
+            ub = base
+        if points.size == 0:
             return ub
+        M = C.shape[0]
         pos = self.pos
         pos[U] = np.arange(U.shape[0])
         try:
-            cand = np.flatnonzero(pos[self.pt_key[:n]] >= 0)
-            if cand.size == 0:
+            kl = pos[self.pt_key[points]]
+            sel = kl >= 0
+            cand = points[sel]
+            outside = None
+            if self.bit_words:
+                # supp b_i ⊆ supp c: first against the union of the rows' supports (U), then per row.
+                u_bits = self._bits(U[None, :], np.ones((1, U.shape[0]), dtype=bool))[0]
+                cand = cand[~(self.pt_bits[cand] & ~u_bits).any(axis=1)]
+                if cand.size and M > 1 and M * cand.size * self.bit_words <= _BITSET_MAX_OPS:
+                    rows_bits = self._bits(U[None, :].repeat(M, axis=0), C > 0.0)        # [M, W]
+                    outside = (self.pt_bits[cand][None, :, :] & ~rows_bits[:, None, :]).any(axis=2)
+            n_c = cand.size
+            if n_c == 0:
                 return ub
-            ent = self._entries(cand)
-            loc = pos[self.ent_idx[ent]]
-            bv = self.ent_val[ent]
+            delta = self.pt_delta[cand]
+            pl = pos[self.pt_probe[cand]]                                  # [n_c, P]; -1: not in U
+            ratio = np.where(pl[None] >= 0, C[:, np.maximum(pl, 0)], 0.0) * self.pt_pinv[cand][None]
+            bound = ratio.min(axis=2) * delta                              # [M, n_c], <= λ δ
+            if outside is not None:
+                bound[outside] = 0.0                                       # supp b_i ⊄ supp c: λ = 0
+            corr = np.zeros(M)
+            k = 2
+            while True:
+                open_ = bound < corr[:, None]
+                n_open = int(np.count_nonzero(open_))
+                if n_open == 0:
+                    break
+                if n_open <= k * M or k >= n_c:
+                    pm, pi = np.nonzero(open_)
+                else:
+                    part = np.argpartition(bound, k - 1, axis=1)[:, :k]
+                    pm = np.repeat(np.arange(M), k)
+                    pi = part.ravel()
+                    keep = open_[pm, pi]
+                    pm, pi = pm[keep], pi[keep]
+                pts = cand[pi]
+                lens = self.pt_len[pts]
+                ent = self._entries(pts)
+                loc = pos[self.ent_idx[ent]]
+                ratio = C[np.repeat(pm, lens), loc] / self.ent_val[ent]
+                ratio[loc < 0] = 0.0                                       # outside supp(c): λ = 0
+                lam = np.minimum.reduceat(ratio, np.cumsum(lens) - lens)
+                np.minimum.at(corr, pm, lam * delta[pi])
+                bound[pm, pi] = 0.0                                        # evaluated
+                k *= 4
         finally:
             pos[U] = -1
-        lens = self.pt_len[cand]
-        offs = np.cumsum(lens) - lens
-        # A point binds at c only if its support lies inside supp(c) (else its ratio is 0).
-        outside = np.add.reduceat((loc < 0).astype(np.int64), offs)
-        ok = outside == 0
-        if not ok.all():
-            keep_e = np.repeat(ok, lens)
-            cand, lens, loc, bv = cand[ok], lens[ok], loc[keep_e], bv[keep_e]
-            if cand.size == 0:
-                return ub
-            offs = np.cumsum(lens) - lens
-        n_c, nU, M = cand.size, U.shape[0], C.shape[0]
-        rows = np.repeat(np.arange(n_c), lens)
-        ind = np.zeros((n_c, nU))
-        ind[rows, loc] = 1.0
-        # supp(b_i) ⊆ supp(c) for every (child, point) pair at once:
-        # misses[m, i] = #{s ∈ supp(b_i) : c_m(s) = 0}.
-        misses = (C == 0.0).astype(float) @ ind.T                            # [M, n_c]
-        pm, pi = np.nonzero(misses < 0.5)
-        if pi.size == 0:
-            return ub
-        corr = np.zeros(M)
-        useful = np.unique(pi)
-        pair_cost = int(lens[pi].sum())
-        if 3 * pair_cost < M * useful.size * nU:
-            # Few binding pairs: λ = min_s c(s)/b_i(s) over each pair's entries only.
-            plen = lens[pi]
-            poff = np.cumsum(plen) - plen
-            ent = np.repeat(offs[pi] - poff, plen) + np.arange(pair_cost)
-            lam = np.minimum.reduceat(C[np.repeat(pm, plen), loc[ent]] / bv[ent], poff)
-            np.minimum.at(corr, pm, lam * self.pt_delta[cand[pi]])
-        else:
-            # Many: dense [M, points, |U|] blocks with W = 1/b_i on supp(b_i), +inf elsewhere;
-            # zeros of c are lifted to 1e-300 so 0·inf never occurs (a non-binding pair then
-            # gets λ ≈ 0, i.e. no correction).
-            W = np.full((n_c, nU), np.inf)
-            W[rows, loc] = 1.0 / bv
-            W = W[useful]
-            delta = self.pt_delta[cand[useful]]
-            Cp = np.maximum(C, 1e-300)
-            step = max(1, int(2_000_000 // max(1, useful.size * nU)))
-            for m0 in range(0, M, step):
-                lam = (Cp[m0: m0 + step, None, :] * W[None, :, :]).min(axis=2)    # [m, n_u]
-                corr[m0: m0 + step] = np.minimum((lam * delta).min(axis=1), 0.0)
         return np.minimum(ub, base + corr)
+
+    def _bits(self, states: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """``[M, W]`` uint64 bitsets of the states ``states[m][mask[m]]`` (``states``, ``mask`` ``[M, n]``)."""
+        M = states.shape[0]
+        full = np.zeros((M, self.bit_words * 64), dtype=bool)
+        r, c = np.nonzero(mask)
+        full[r, states[r, c]] = True
+        return np.packbits(full, axis=1, bitorder="little").view(np.uint64)
 
     def upper(self, idx: np.ndarray, val: np.ndarray) -> float:
         """Upper bound at the belief ``val`` on states ``idx``."""
@@ -413,6 +452,8 @@ class PointBasedSolver:
             if v < self.Vc[s] - 1e-12:
                 self.Vc[s] = v
                 self._refresh_deltas()
+                self.ub_version += 1
+                self.vc_version = self.ub_version
             return
         delta = v - float(val @ self.Vc[idx])
         i = self.pt_index.get(key)
@@ -420,13 +461,19 @@ class PointBasedSolver:
             if v < self.pt_v[i]:
                 self.pt_v[i] = v
                 self.pt_delta[i] = delta
+                self.ub_version += 1
+                self.pt_stamp[i] = self.ub_version
             return
         if delta >= 0.0:
             return  # no better than the corners: the point would never bind
         if self.pt_n == self.pt_cap:
             self.pt_cap *= 2
-            for name in ("pt_start", "pt_len", "pt_key", "pt_v", "pt_delta"):
-                setattr(self, name, np.resize(getattr(self, name), self.pt_cap))
+            for name in ("pt_start", "pt_len", "pt_key", "pt_kval", "pt_v", "pt_delta", "pt_stamp",
+                         "pt_probe", "pt_pinv", "pt_bits"):
+                old = getattr(self, name)
+                new = np.zeros((self.pt_cap,) + old.shape[1:], dtype=old.dtype)
+                new[: old.shape[0]] = old
+                setattr(self, name, new)
         m = idx.shape[0]
         while self.ent_n + m > self.ent_cap:
             self.ent_cap *= 2
@@ -435,8 +482,16 @@ class PointBasedSolver:
         i = self.pt_n
         self.ent_idx[self.ent_n: self.ent_n + m] = idx
         self.ent_val[self.ent_n: self.ent_n + m] = val
-        self.pt_start[i], self.pt_len[i], self.pt_key[i] = self.ent_n, m, idx[0]
+        top = int(np.argmax(val))
+        self.pt_start[i], self.pt_len[i], self.pt_key[i], self.pt_kval[i] = self.ent_n, m, idx[top], val[top]
+        probes = np.argsort(-val, kind="stable")[:_PROBES]
+        probes = np.concatenate([probes, np.full(_PROBES - probes.size, top)])
+        self.pt_probe[i], self.pt_pinv[i] = idx[probes], 1.0 / val[probes]
+        if self.bit_words:
+            self.pt_bits[i] = self._bits(idx[None, :], np.ones((1, m), dtype=bool))[0]
         self.pt_v[i], self.pt_delta[i] = v, delta
+        self.ub_version += 1
+        self.pt_stamp[i] = self.ub_version
         self.ent_n += m
         self.pt_n += 1
         self.pt_index[key] = i
@@ -473,15 +528,22 @@ class PointBasedSolver:
             ub = np.zeros(A * Z)
             ub[live] = np.minimum(Cl @ self.Vc[U], (Cl @ self.Qfib[U]).max(axis=1))
             node.ub_c = ub.reshape(A, Z)
+            node.ub_seen = np.full(A, -1, dtype=np.int64)
             self.expansions += 1
             self._refresh_upper(node, U, C, live, set())
         return U, C, live
 
     def _refresh_upper(self, node: _Node, U, C, live, done: set) -> np.ndarray:
         """Re-read the sawtooth at the successors of the greedy action until the greedy action
-        is one already refreshed (``done``); returns ``Q^U(b, ·)``."""
+        is one already refreshed (``done``); returns ``Q^U(b, ·)``.
+
+        Incremental: ``node.ub_c[a]`` already holds the minimum over the points as they
+        were at version ``node.ub_seen[a]``, so only the points whose value fell since are
+        read (all of them when a corner value fell since, or on the first read). The result
+        is the same as a full re-read."""
         Z = self.Z
         ub_c = node.ub_c.reshape(-1)
+        seen = node.ub_seen
         while True:
             Qu = node.Rb + self.g * (node.p * node.ub_c).sum(axis=1)
             a = int(np.argmax(Qu))
@@ -489,8 +551,14 @@ class PointBasedSolver:
                 return Qu
             done.add(a)
             rows = live[(live >= a * Z) & (live < (a + 1) * Z)]
-            if rows.size:
-                ub_c[rows] = np.minimum(ub_c[rows], self._upper_batch(U, C[rows]))
+            if rows.size and seen[a] < self.ub_version:
+                if seen[a] < self.vc_version:
+                    fresh = self._upper_batch(U, C[rows])
+                else:
+                    pts = np.flatnonzero(self.pt_stamp[: self.pt_n] > seen[a])
+                    fresh = self._upper_batch(U, C[rows], pts)
+                ub_c[rows] = np.minimum(ub_c[rows], fresh)
+            seen[a] = self.ub_version
 
     def _lower_children(self, U, C, live) -> Tuple[np.ndarray, np.ndarray]:
         AZ = self.A * self.Z
