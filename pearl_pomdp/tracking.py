@@ -207,10 +207,15 @@ class StepResult:
 
 @dataclass
 class Event:
-    """Something a node must log (``level`` is ``"info"`` or ``"warn"``)."""
+    """Something a node must log (``level`` is ``"info"`` or ``"warn"``).
+
+    ``kind`` names the sort of event (``"nav_failed"``, ``"zero_likelihood"``, …): a node logs
+    every event, but throttles a flood of one kind (see the belief tracker node).
+    """
 
     level: str
     text: str
+    kind: str = ""
 
 
 @dataclass
@@ -318,12 +323,13 @@ class StepProtocol:
         """
         if name not in self._action_index:
             self.counters["unknown_actions"] += 1
-            self.events.append(Event("warn", f"ignored action {name!r}: not an action of {self.model.name}"))
+            self.events.append(Event("warn", f"ignored action {name!r}: not an action of {self.model.name}",
+                                     kind="ignored_action"))
             return None
         if self.step_open:
             self.counters["replaced_actions"] += 1
             self.events.append(Event("warn", f"action {name!r} replaces {self.current_action!r}, "
-                                             f"which no observation closed"))
+                                             f"which no observation closed", kind="replaced_action"))
         self.current_action = name
         self.opened_at = float(now)
         self.drive_limit = None if drive_limit is None else float(drive_limit)
@@ -332,7 +338,7 @@ class StepProtocol:
             if self.stale_after > 0 and now - item.stamp > self.stale_after:
                 self.counters["dropped_stale"] += 1
                 self.events.append(Event("warn", f"dropped stale observation {item.symbol!r} from {item.source} "
-                                                 f"({now - item.stamp:.3f} s old > stale_after {self.stale_after} s)"))
+                                                 f"({now - item.stamp:.3f} s old > stale_after {self.stale_after} s)", kind="stale"))
                 continue
             return self._close(item.symbol, item.source, now, item.text, item.confidence)
         return None
@@ -359,13 +365,13 @@ class StepProtocol:
                 what = f"dropped observation {symbol!r} from {source}"
             self.counters["dropped_overflow"] += 1
             self.events.append(Event("warn", f"{what}: more than max_pending={self.max_pending} "
-                                             f"observations wait for an action"))
+                                             f"observations wait for an action", kind="overflow"))
             if old is None:
                 return None
         self.pending.append(_Pending(symbol, source, float(now), text, confidence))
         self.counters["queued"] += 1
         self.events.append(Event("info", f"queued observation {symbol!r} from {source}: no open step "
-                                         f"({len(self.pending)} waiting)"))
+                                         f"({len(self.pending)} waiting)", kind="queued"))
         return None
 
     def on_tick(self, now: float) -> Optional[StepResult]:
@@ -379,12 +385,12 @@ class StepProtocol:
                 self.last_nav_failure = (f"{self.current_action} did not arrive within its deadline of "
                                          f"{self.drive_limit:.1f} s (opened at {self.opened_at:.3f} s)")
                 self.events.append(Event("warn", f"{self.last_nav_failure}: closing the step with "
-                                                 f"{self.nav_failed_observation!r}"))
+                                                 f"{self.nav_failed_observation!r}", kind="nav_failed"))
                 return self._close(self.nav_failed_observation, "nav_deadline", now)
             self.counters["timeouts"] += 1
             self.events.append(Event("info", f"nothing heard {now - self.opened_at:.3f} s after "
                                              f"{self.current_action!r}: closing the step with "
-                                             f"{self.timeout_observation!r}"))
+                                             f"{self.timeout_observation!r}", kind="timeout"))
             return self._close(self.timeout_observation, "timeout", now)
         return None
 
@@ -398,7 +404,7 @@ class StepProtocol:
         if zero:
             self.counters["zero_likelihood"] += 1
             self.events.append(Event("warn", f"observation {symbol!r} has zero likelihood after {action!r}: "
-                                             f"belief recovered with a uniform floor"))
+                                             f"belief recovered with a uniform floor", kind="zero_likelihood"))
         self.counters["updates"] += 1
         self.step += 1
         self.current_action = None
@@ -515,7 +521,7 @@ class BeliefTracker:
         if missing_symbol:
             self.protocol.events.append(Event("warn", f"drives have no deadline: nav_failed_observation "
                                                       f"{settings.nav_failed_observation!r} is not an observation of "
-                                                      f"{model.name} (add it to the domain's Laser modality)"))
+                                                      f"{model.name} (add it to the domain's Laser modality)", kind="no_deadline"))
         self.mapper = ObservationMapper(model, domain, keyword_filter, settings.confidence_floor)
         self._marginal_index: Optional[list] = None
         #: The last closed steps, oldest first, when :meth:`keep_history` was called (replay --explain).

@@ -135,6 +135,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         self._preloaded = (domain, model, keyword_filter)
         self.core = None
         self._reported_warnings = 0
+        self._event_logged: Dict[str, float] = {}   # kind → node-clock second it was last logged
         self.actions_received = 0  # /pearl/action messages taken (the sim-clock driver waits on it)
         self.inactive_inputs = 0   # inputs and actions that arrived while the node was not active (dropped)
         # Inputs DDS dropped before this node took them (a reader queue of INPUT_QOS depth
@@ -318,6 +319,14 @@ class BeliefTrackerNode(ManagedPearlNode):
 
         return callback
 
+    def _event_due(self, kind: str, now: float) -> bool:
+        """True unless an event of this kind was logged less than a second (node clock) ago."""
+        last = self._event_logged.get(kind)
+        if last is not None and 0.0 <= now - last < 1.0:
+            return False
+        self._event_logged[kind] = now
+        return True
+
     def _on_tick(self) -> None:
         if self.active and self.core is not None:
             self._handle(self.core.on_tick(self.now_s()))
@@ -330,12 +339,15 @@ class BeliefTrackerNode(ManagedPearlNode):
         self._arm_deadline()
         logger = self.get_logger()
         for event in self.protocol.take_events():
-            # One call site per severity: rclpy refuses a second severity at the same line.
-            # Throttled: under a flood, one line per call site per second (the counters are exact).
+            # One line per event; a flood of one kind is cut to one line per second of the
+            # node's clock (sim time under /clock, so a fast-forwarded demo still shows each
+            # of its events; rclpy's own throttle counts wall time). The counters are exact.
+            if not self._event_due(event.kind or event.text, self.now_s()):
+                continue
             if event.level == "warn":
-                logger.warning(event.text, throttle_duration_sec=1.0)
+                logger.warning(event.text)
             else:
-                logger.info(event.text, throttle_duration_sec=1.0)
+                logger.info(event.text)
         if self._warning_total() > self._reported_warnings:
             self._diagnostics_soon()
 
