@@ -133,10 +133,7 @@ class SimulatedHardware:
         action, with its events and whether it was wrong.
         """
         self.navigation.publish_pose(t)
-        body = {"time": self.world.time, "phase": phase, "action": action, "state": self.world.truth()}
-        if result is not None:
-            body.update(events=result.events, wrong=result.wrong)
-        self.truth.publish(String(data=json.dumps(body)))
+        self.truth.publish(String(data=json.dumps(self.world.truth_record(phase, action, result))))
 
     def destroy(self) -> None:
         for node in self.nodes:

@@ -235,6 +235,18 @@ class World:
             "Battery": "low" if self.battery < LOW_BATTERY else "ok",
         }
 
+    def truth_record(self, phase: str, action: str = "", result: Optional["StepResult"] = None) -> dict:
+        """The JSON body of ``/pearl/sim/truth``: the true state now, in the domain's feature terms.
+
+        ``phase`` ``"start"``: the state an action starts in (``pearl fit`` counts transitions
+        between consecutive starts; one more follows the last action); ``"end"``: after the
+        action, with its events and whether it was wrong.
+        """
+        body = {"time": self.time, "phase": phase, "action": action, "state": self.truth()}
+        if result is not None:
+            body.update(events=result.events, wrong=result.wrong)
+        return body
+
     # ------------------------------------------------------------------ stepping
     def act(self, action: str) -> StepResult:
         """Carry out ``action`` and return what it did, with every message it produced (timestamped).

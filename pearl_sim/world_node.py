@@ -77,6 +77,9 @@ def _make_node_class():
             self.publishers_by_modality = {m: self.create_publisher(String, t, RELIABLE)
                                            for m, t in MODALITY_TOPICS.items()}
             self.pose_pub = self.create_publisher(PoseStamped, "/pearl/pose", 10)
+            # The true state at the start and end of every action, as pearl demo records it
+            # (pearl fit counts from it when this topic is recorded).
+            self.truth_pub = self.create_publisher(String, "/pearl/sim/truth", RELIABLE)
             self.create_subscription(String, "/pearl/action", self._on_action, LATCHED_QOS)
             # The tracker's step count: a step it closed is answered by the policy; while that
             # answer is in flight the clock stands still (as the lock-step driver of pearl demo
@@ -107,6 +110,9 @@ def _make_node_class():
 
         def _publish(self, message) -> None:
             self.publishers_by_modality[message.modality].publish(self._String(data=message.text))
+
+        def _publish_truth(self, phase: str, action: str, result=None) -> None:
+            self.truth_pub.publish(self._String(data=json.dumps(self.world.truth_record(phase, action, result))))
 
         def _publish_clock(self) -> None:
             msg = self._Clock()
@@ -164,11 +170,13 @@ def _make_node_class():
                 action = self.actions.popleft()
                 if self.world.time < self.now:
                     self._idle(self.now)       # the time the manager took to answer
+                self._publish_truth("start", action)
                 try:
                     result = self.world.act(action)
                 except ValueError as err:
                     self._finish(f"/pearl/action {action!r}: {err}")
                     return
+                self._publish_truth("end", action, result)
                 self.taken.append(action)
                 self._publish_pose()
                 self.pending.extend(result.messages)
