@@ -152,6 +152,8 @@ def _setting(name: str) -> property:
 
     return property(get, set_, doc=f"``settings.{name}`` (see :class:`PointBasedSettings`).")
 
+#: Sawtooth reads that gather at most this many entries evaluate every pair directly.
+_DIRECT_ENTRIES = 20_000
 #: Probe states per sawtooth point (its most likely ones) for the branch-and-bound bound.
 _PROBES = 4
 #: Support bitsets for the sawtooth's containment test up to this many states ...
@@ -389,6 +391,14 @@ class PointBasedSolver:
             sel = kl >= 0
             cand = points[sel]
             outside = None
+            if M * int(self.pt_len[cand].sum()) <= _DIRECT_ENTRIES:
+                # Small models: every pair exactly, in one gather (the bound costs more than it saves).
+                if cand.size == 0:
+                    return ub
+                pm = np.repeat(np.arange(M), cand.size)
+                pi = np.tile(np.arange(cand.size), M)
+                corr = np.minimum(self._pair_corrections(C, pos, cand, pm, pi), 0.0)
+                return np.minimum(ub, base + corr.reshape(M, cand.size).min(axis=1))
             if self.bit_words:
                 # supp b_i ⊆ supp c: first against the union of the rows' supports (U), then per row.
                 u_bits = self._bits(U[None, :], np.ones((1, U.shape[0]), dtype=bool))[0]
@@ -420,19 +430,22 @@ class PointBasedSolver:
                     pi = part.ravel()
                     keep = open_[pm, pi]
                     pm, pi = pm[keep], pi[keep]
-                pts = cand[pi]
-                lens = self.pt_len[pts]
-                ent = self._entries(pts)
-                loc = pos[self.ent_idx[ent]]
-                ratio = C[np.repeat(pm, lens), loc] / self.ent_val[ent]
-                ratio[loc < 0] = 0.0                                       # outside supp(c): λ = 0
-                lam = np.minimum.reduceat(ratio, np.cumsum(lens) - lens)
-                np.minimum.at(corr, pm, lam * delta[pi])
+                np.minimum.at(corr, pm, self._pair_corrections(C, pos, cand, pm, pi))
                 bound[pm, pi] = 0.0                                        # evaluated
                 k *= 4
         finally:
             pos[U] = -1
         return np.minimum(ub, base + corr)
+
+    def _pair_corrections(self, C, pos, cand, pm, pi) -> np.ndarray:
+        """``λ_i(c_m) δ_i`` for the pairs (row ``pm``, point ``cand[pi]``); ``pos`` maps states to C's columns."""
+        pts = cand[pi]
+        lens = self.pt_len[pts]
+        ent = self._entries(pts)
+        loc = pos[self.ent_idx[ent]]
+        ratio = C[np.repeat(pm, lens), loc] / self.ent_val[ent]
+        ratio[loc < 0] = 0.0                                               # outside supp(c): λ = 0
+        return np.minimum.reduceat(ratio, np.cumsum(lens) - lens) * self.pt_delta[pts]
 
     def _bits(self, states: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """``[M, W]`` uint64 bitsets of the states ``states[m][mask[m]]`` (``states``, ``mask`` ``[M, n]``)."""
