@@ -57,20 +57,37 @@ class FlatPolicyDecider:
             :class:`~pearl_pomdp.solvers.mdp.MostLikelyStatePolicy` (value NaN: it has none).
         model: the model whose action names the decisions carry.
         name: the trace's subtask label.
+        lookahead: steps of exact forward search over ``model`` with the α-vectors at the
+            leaves (0: act greedily on the vectors). One step is what the hierarchy's root
+            does at execution: a point-based lower bound that is not converged covers the
+            beliefs its trials rarely reached poorly, and one Bellman step over the true
+            model repairs its choice there (e.g. guide now rather than confirm again).
     """
 
-    def __init__(self, policy: Policy, model: Pomdp, name: str = "flat"):
+    def __init__(self, policy: Policy, model: Pomdp, name: str = "flat", lookahead: int = 0):
         self.policy = policy
         self.model = model
         self.name = name
         self._alphas: Optional[np.ndarray] = None
         self._labels: Optional[np.ndarray] = None
+        self._search = None
         if isinstance(policy, AlphaVectorPolicy):
             self._alphas, self._labels = policy.alphas, policy.actions
+        if lookahead:
+            if self._alphas is None:
+                raise ValueError("lookahead needs an α-vector policy")
+            from pearl_pomdp.hierarchy.execute import Lookahead
+
+            self._search = Lookahead(model.T, model.O, model.R, model.discount, self._alphas, int(lookahead))
 
     def execute(self, belief) -> Decision:
         """The policy's action at ``belief`` ``[S]``, with the value where the policy has one."""
         b = np.asarray(belief, dtype=float)
+        if self._search is not None:
+            q = self._search.q_values(b)[0]
+            a = int(np.argmax(q))
+            name = self.model.actions[a]
+            return Decision(a, name, [TraceStep(self.name, name, float(q[a]))])
         if self._alphas is not None and self._labels is not None:
             values = self._alphas @ b
             k = int(np.argmax(values))

@@ -149,7 +149,7 @@ def with_word_error_rate(scenario: Scenario, wer: float) -> Scenario:
 
 
 # --------------------------------------------------------------------- the study
-from pearl_sim.policies import DEFAULT_FLAT_TRIALS, POLICY_NAMES  # noqa: E402  (one list, cheap to import: pearl --help)
+from pearl_sim.policies import DEFAULT_FLAT_TRIALS, FLAT_LOOKAHEAD, POLICY_NAMES  # noqa: E402  (one list, cheap to import: pearl --help)
 
 
 
@@ -189,7 +189,8 @@ def build_agents(domain, hierarchy_path, flat_time_limit: Optional[float] = None
             decider = plan(domain, load_hierarchy(hierarchy_path, domain), seed=seed)
         elif name == "flat_pointbased":
             budget = {"trials": flat_trials} if flat_time_limit is None else {"time_limit": flat_time_limit}
-            decider = FlatPolicyDecider(solve(model, "pointbased", seed=seed, **budget).policy, model)
+            decider = FlatPolicyDecider(solve(model, "pointbased", seed=seed, **budget).policy, model,
+                                        lookahead=FLAT_LOOKAHEAD)
         elif name == "qmdp":
             decider = FlatPolicyDecider(solve(model, "qmdp").policy, model)
         elif name == "most_likely_state":

@@ -85,3 +85,30 @@ def test_flat_decider_value_and_mls():
     mls = FlatPolicyDecider(MostLikelyStatePolicy(np.array([1, 2, 0])), model).execute(np.array([0.2, 0.7, 0.1]))
     assert mls.action_name == "Move" and math.isnan(mls.trace[0].value)
     assert mls.as_dict()["trace"][0]["value"] is None
+
+
+def test_flat_decider_lookahead_is_one_bellman_step_over_the_vectors(benchmarks_dir):
+    """FlatPolicyDecider(lookahead=1): argmax_a b·R_a + γ Σ_o max_k α_k·(b T_a diag O_{a,o}),
+    computed here by hand on tiger with horizon-2 vectors."""
+    import numpy as np
+
+    from pearl_pomdp.executive import FlatPolicyDecider
+    from pearl_pomdp.model import load_model
+    from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
+
+    m = load_model(benchmarks_dir / "tiger.95.POMDP")
+    policy = solve_incremental_pruning(m, horizon=2).policy
+    greedy, search = FlatPolicyDecider(policy, m), FlatPolicyDecider(policy, m, lookahead=1)
+    T, O, R = m.T_dense(), m.O, m.R
+    for p in np.linspace(0.0, 1.0, 21):
+        b = np.array([p, 1.0 - p])
+        q = [b @ R[:, a] + m.discount * sum(float(np.max(policy.alphas @ ((b @ T[a]) * O[a, :, o])))
+                                            for o in range(m.num_observations)) for a in range(m.num_actions)]
+        d = search.execute(b)
+        assert d.trace[0].value == pytest.approx(max(q), abs=1e-9)
+        assert q[d.action] == pytest.approx(max(q), abs=1e-9)
+        assert greedy.execute(b).action == int(policy.actions[np.argmax(policy.alphas @ b)])
+    with pytest.raises(ValueError, match="α-vector policy"):
+        from pearl_pomdp.solvers.mdp import most_likely_state_policy
+
+        FlatPolicyDecider(most_likely_state_policy(m), m, lookahead=1)
