@@ -59,6 +59,7 @@ def main() -> int:
                              "doorbell_away": habits["doorbell_away"], "wrong": r.wrong_actions,
                              "raised": habits["questions_raised"], "answered": r.questions_answered,
                              "guided": r.guidance_completed, "needed": r.guidance_needed,
+                             "wanted": r.guidance_wanted,
                              "ends_home": _ends_home(r.actions)})
             n = len(rows)
             needed = [x for x in rows if x["needed"]]
@@ -72,6 +73,8 @@ def main() -> int:
                 "questions_raised_per_episode": sum(x["raised"] for x in rows) / n,
                 "questions_answered_per_episode": sum(x["answered"] for x in rows) / n,
                 "guidance_success": (sum(x["guided"] for x in needed) / len(needed)) if needed else None,
+                "wanted_guidance_success": (sum(x["guided"] for x in rows if x["wanted"])
+                                            / max(1, sum(x["wanted"] for x in rows))) if any(x["wanted"] for x in rows) else None,
             }
     json.dump(out, sys.stdout)
     sys.stdout.write("\n")

@@ -45,6 +45,9 @@ class EpisodeResult:
     actions: List[str] = field(default_factory=list)
     questions_answered: int = 0
     reminders_delivered: int = 0
+    #: She wanted the walk at some point (``guidance_needed`` only says an appointment was due:
+    #: a resident may decline it).
+    guidance_wanted: bool = False
 
 
 def episode_executive(controller, domain, scenario: Scenario, model=None):
@@ -97,6 +100,7 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
         wrong_actions=m.wrong_actions, residents_lost=m.residents_lost,
         walking_speed=scenario.resident.walking_speed, actions=list(trace.actions),
         questions_answered=m.questions_answered, reminders_delivered=m.reminders_delivered,
+        guidance_wanted=m.walk_wishes > 0,
     )
 
 

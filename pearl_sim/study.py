@@ -60,7 +60,8 @@ class StudyEpisode:
         r = self.result
         return {"policy": self.policy, "resident": self.resident, "task": self.task, "noise": self.noise,
                 "word_error_rate": round(self.word_error_rate, 6), "seed": self.seed,
-                "guidance_completed": int(r.guidance_completed), "time_to_goal_s": r.time_to_goal,
+                "guidance_completed": int(r.guidance_completed), "guidance_wanted": int(r.guidance_wanted),
+                "time_to_goal_s": r.time_to_goal,
                 "clarifications": r.clarifications, "unprompted_questions": r.unprompted_questions,
                 "goals_achieved": r.goals_achieved, "wrong_actions": r.wrong_actions,
                 "residents_lost": r.residents_lost, "discounted_return": r.discounted_return, "steps": r.steps}
@@ -161,6 +162,9 @@ def per_policy(episodes: Sequence[StudyEpisode]) -> Dict[str, Dict[str, dict]]:
             out[policy][f"{noise:g}"] = {
                 "episodes": len(rs),
                 "guidance_success": proportion_ci(sum(r.guidance_completed for r in rs), len(rs)),
+                # Of the episodes where she wanted the walk (she may decline the reminder's offer).
+                "wanted_guidance_success": proportion_ci(sum(r.guidance_completed for r in rs if r.guidance_wanted),
+                                                         sum(r.guidance_wanted for r in rs)),
                 "time_to_goal_s": mean_ci([r.time_to_goal for r in rs if r.time_to_goal is not None]),
                 "clarifications_per_goal": (sum(r.clarifications for r in rs) / goals) if goals else None,
                 "clarifications_per_episode": mean_ci([r.clarifications for r in rs]),
@@ -311,6 +315,9 @@ def per_scenario(episodes: Sequence[StudyEpisode]) -> Dict[str, Dict[str, dict]]
             out[name][policy] = {
                 "episodes": n,
                 "guidance_success": (sum(r.guidance_completed for r in needed) / len(needed)) if needed else None,
+                "wanted_guidance_success": (sum(r.guidance_completed for r in rs if r.guidance_wanted)
+                                            / sum(r.guidance_wanted for r in rs))
+                if any(r.guidance_wanted for r in rs) else None,
                 "unprompted_questions_per_episode": sum(r.unprompted_questions for r in rs) / n,
                 "wrong_actions_per_episode": sum(r.wrong_actions for r in rs) / n,
                 "clarifications_per_episode": sum(r.clarifications for r in rs) / n,

@@ -142,6 +142,9 @@ class Metrics:
     #: and questions the resident came to have, so an outcome scores only those.
     reminders_due: int = 0
     questions_raised: int = 0
+    #: Times she came to want the walk (after the reminder, if willing): a guidance is
+    #: *wanted* in an episode where this is above 0.
+    walk_wishes: int = 0
     clarifications: int = 0
     #: Offers or confirmations about a goal the resident does not have at that moment
     #: ("Shall we walk to physiotherapy?" to a resident who does not want to go).
@@ -353,6 +356,7 @@ class World:
             self._guidance_due_at = self.time
             if self.rng.random() < self.scenario.resident.willingness:
                 self.wants_guidance = True
+                self.metrics.walk_wishes += 1
                 events.append(f"{self.scenario.resident.name} wants to be walked to physiotherapy")
                 return "go" if self.rng.random() < 0.5 else "yes", None
             return "no", None

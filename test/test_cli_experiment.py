@@ -21,6 +21,8 @@ def test_experiment_json_reports_policies_pairs_and_files(tmp_path, capsys):
             g = s["guidance_success"]
             assert g["n"] == 3 and 0 <= g["low"] <= g["rate"] <= g["high"] <= 1
             assert "unprompted_questions_per_episode" in s
+            w = s["wanted_guidance_success"]
+            assert w["n"] <= g["n"] and (w["n"] == 0 or 0 <= w["low"] <= w["rate"] <= w["high"] <= 1)
     assert set(report["paired_vs_baseline"]) == {"qmdp", "most_likely_state"}
     assert report["paired_vs_baseline"]["qmdp"]["0.6"]["wrong_actions"]["n"] == 3
     assert report["acceptance"] is None                         # no hierarchical policy in this run
