@@ -11,6 +11,7 @@ from test_parameterize import ACTIONS, HIERARCHY, meds_domain  # noqa: E402
 
 from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.hierarchy import load_hierarchical_policy, parse_hierarchy, plan
+from pearl_pomdp.hierarchy.execute import Lookahead
 
 
 def expectimax(model, b, horizon):
@@ -106,6 +107,21 @@ def test_lookahead_batch_and_round_trip(planned_lookahead, tmp_path):
     loaded = load_hierarchical_policy(tmp_path / "pol", model)
     for b in B[:30]:
         assert loaded.execute(b) == hp.execute(b)
+
+
+def test_lookahead_fast_last_step_is_bit_identical_to_the_loop(planned_lookahead):
+    """The vectorised last search step (what the policy node runs per belief) gives exactly the
+    per-(action, observation) loop's Q-values, single beliefs and batches: ties break the same."""
+    _, hp = planned_lookahead
+    la = hp.subtasks["Act"].lookahead
+    looped = Lookahead(la.T, la.O, la.R, la.discount, la.alphas, la.depth)
+    looped.LAST_STEP_BLOCK = 0  # every call takes the loop
+    B = np.vstack([np.random.default_rng(5).dirichlet(np.ones(la.O.shape[1]) * 0.3, size=60),
+                   np.eye(la.O.shape[1]), np.full((1, la.O.shape[1]), 1.0 / la.O.shape[1])])
+    for depth in (1, 2):
+        assert np.array_equal(la.q_values(B, depth), looped.q_values(B, depth))
+        for b in B:
+            assert np.array_equal(la.q_values(b[None], depth), looped.q_values(b[None], depth))
 
 
 def test_save_load_round_trip(planned, tmp_path):

@@ -77,11 +77,24 @@ class Lookahead:
         self.depth = int(depth)
         # Tᵀ per action, so a batch of row beliefs B [N, S] advances as (Tᵀ Bᵀ)ᵀ.
         self._Tt = [t.T.tocsr() for t in self.T]
+        # The same, stacked [A·S, S]: one sparse product advances B under every action (a CSR
+        # product sums each row in the same order, so the rows equal the per-action ones).
+        self._Tt_stacked = sp.vstack(self._Tt).tocsr()
+        # O as [A, Z, 1, S], laid out for the last step's broadcast (see _q_last_step).
+        self._O_azs = np.ascontiguousarray(self.O.transpose(0, 2, 1)[:, :, None, :])
+
+    #: Most elements of the ``[A, Z, N, S]`` successor block :meth:`_q_last_step` builds; a
+    #: larger batch takes the per-``(a, o)`` loop (splitting the rows would change the BLAS
+    #: products' rounding: a row's ``[N, S] @ [S, K]`` result depends on ``N``).
+    LAST_STEP_BLOCK = 1 << 22
 
     def q_values(self, B: np.ndarray, depth: Optional[int] = None) -> np.ndarray:
         """``Q_d(b, a)`` for every row ``b`` of ``B [N, S_h]`` (rows need not be normalised) → ``[N, A]``."""
         d = self.depth if depth is None else depth
         B = np.atleast_2d(np.asarray(B, dtype=float))
+        A, S, Z = self.O.shape
+        if d == 1 and A * Z * B.shape[0] * S <= self.LAST_STEP_BLOCK:
+            return self._q_last_step(B)
         Q = B @ self.R
         for a, Tt in enumerate(self._Tt):
             predicted = np.asarray((Tt @ B.T).T)  # [N, S_h]
@@ -92,6 +105,24 @@ class Lookahead:
                 else:
                     Q[:, a] += self.discount * self.q_values(successor, d - 1).max(axis=1)
         return Q
+
+    def _q_last_step(self, B: np.ndarray) -> np.ndarray:
+        """``Q_1`` for the rows of ``B``: every action and observation in a few array operations.
+
+        The same products and sums as the per-``(a, o)`` loop of :meth:`q_values` (one
+        ``[N, S] @ [S, K]`` product per ``(a, o)``, then ``Q[:, a] += γ·max`` in observation
+        order), so the values are bit-identical to it — ties break the same way — at a
+        fraction of the Python overhead (the policy node runs this at every step).
+        """
+        A, S, Z = self.O.shape
+        N = B.shape[0]
+        predicted = np.asarray(self._Tt_stacked @ B.T).reshape(A, S, N).transpose(0, 2, 1)  # [A, N, S]
+        successor = predicted[:, None, :, :] * self._O_azs                                 # [A, Z, N, S]
+        best = np.matmul(successor, self.alphas.T).max(axis=3)                             # [A, Z, N]
+        # B·R + γ·best[o=0] + γ·best[o=1] + …, added left to right as the loop does
+        # (add.accumulate is sequential; a sum would pair terms up and round differently).
+        terms = np.concatenate([(B @ self.R)[None], self.discount * best.transpose(1, 2, 0)])  # [1 + Z, N, A]
+        return np.add.accumulate(terms, axis=0)[-1]
 
     def arrays(self, prefix: str) -> Dict[str, np.ndarray]:
         """The arrays :meth:`from_arrays` needs, keys prefixed (for ``policy.npz``)."""
@@ -149,9 +180,11 @@ class SubtaskPolicy:
         self._projection = sp.csr_matrix((np.ones(self.state_to_model.shape[0]),
                                           (np.arange(self.state_to_model.shape[0]), self.state_to_model)),
                                          shape=(self.state_to_model.shape[0], n_model))
+        # P_hᵀ, built once (transposing per decision cost more than the product).
+        self._projection_t = self._projection.T.tocsr()
 
     def _q_values(self, B: np.ndarray) -> np.ndarray:
-        return self.lookahead.q_values(np.asarray((self._projection.T @ B.T).T))
+        return self.lookahead.q_values(np.asarray((self._projection_t @ B.T).T))
 
     def choose(self, belief: np.ndarray):
         """``(action index in self.actions, value)`` at a full belief ``[S]``."""
