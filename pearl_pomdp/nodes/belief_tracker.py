@@ -144,6 +144,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         self._last_seq: Dict[str, int] = {}
         self._last_diag = -1.0
         self._deadline_timer = None
+        self._flush_timer = None
         self._armed_for: Optional[float] = None
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -184,11 +185,14 @@ class BeliefTrackerNode(ManagedPearlNode):
             self._deadline_timer = self.managed_timer(p["step_timeout"] or 1.0, self._on_tick)
             self._deadline_timer.cancel()
         self.managed_timer(p["diagnostics_period"], self.publish_diagnostics)
-        # Warnings held back by the 0.1 s limit go out within 0.1 s of wall time (even when
-        # sim time stands still).
+        # Warnings held back by the 0.1 s limit go out 0.1 s of wall time later (even when sim
+        # time stands still): a one-shot timer, armed only then, so the node does not wake ten
+        # times a second (each wake is a full executor spin, which a step arriving then waits for).
         from rclpy.clock import Clock, ClockType
 
-        self.managed_timer(0.1, self._flush_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._flush_timer = self.managed_timer(0.1, self._flush_diagnostics,
+                                               clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._flush_timer.cancel()
         from std_srvs.srv import Trigger
 
         self._reset_srv = self.create_service(Trigger, p["reset_service"], self._on_reset)
@@ -211,6 +215,7 @@ class BeliefTrackerNode(ManagedPearlNode):
             self._arm_deadline()
 
     def cleanup_node(self) -> None:
+        self._flush_timer = None
         if getattr(self, "_reset_srv", None) is not None:
             self.destroy_service(self._reset_srv)
             self._reset_srv = None
@@ -368,14 +373,18 @@ class BeliefTrackerNode(ManagedPearlNode):
             timer.reset()
 
     def _flush_diagnostics(self) -> None:
+        if self._flush_timer is not None:
+            self._flush_timer.cancel()  # one-shot: _diagnostics_soon arms it again
         if self._warning_total() > self._reported_warnings:
             self.publish_diagnostics()
 
     def _diagnostics_soon(self) -> None:
-        """Publish /diagnostics now, unless done in the last 0.1 s (then the periodic one reports it)."""
+        """Publish /diagnostics now, unless done in the last 0.1 s (then within 0.1 s of wall time)."""
         now = time.monotonic()
         if now - self._last_diag >= 0.1:
             self.publish_diagnostics()
+        elif self._flush_timer is not None and self._flush_timer.is_canceled():
+            self._flush_timer.reset()
 
     def _publish_belief(self, result: Optional[StepResult]) -> None:
         belief = self.protocol.belief

@@ -27,6 +27,8 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Type
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.event_handler import (PublisherEventCallbacks, QoSPublisherEventType, QoSSubscriptionEventType,
+                                 SubscriptionEventCallbacks)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -54,6 +56,41 @@ INPUT_QOS = QoSProfile(depth=20, history=HistoryPolicy.KEEP_LAST, reliability=Re
 
 class NodeSetupError(PearlError):
     """A node cannot start: a parameter is invalid or a file it names is missing."""
+
+
+def _without_type_events(handlers, incompatible_type) -> list:
+    """The event handlers rclpy made, less the incompatible-type one (destroyed at once)."""
+    kept = []
+    for handler in handlers:
+        if handler.event_type == incompatible_type:
+            handler.destroy()
+        else:
+            kept.append(handler)
+    return kept
+
+
+class QosWarningSubscriptionEvents(SubscriptionEventCallbacks):
+    """rclpy's default subscription events less "incompatible type": the QoS warning stays.
+
+    Every event handler is a waitable that the executor re-enters, re-counts and re-adds on
+    *every* spin, whatever woke it; rclpy gives each publisher and subscription two
+    (incompatible QoS, incompatible type). The Pearl nodes' topic types are fixed in
+    :mod:`~pearl_pomdp.nodes.conversions`, and a peer of another type simply never matches
+    (``ros2 topic info`` shows it), so that handler is dropped: a spin of the tracker costs
+    a third less (measured, docs/ros-nodes.md *Step latency*).
+    """
+
+    def create_event_handlers(self, callback_group, subscription, topic_name):
+        return _without_type_events(super().create_event_handlers(callback_group, subscription, topic_name),
+                                    QoSSubscriptionEventType.RCL_SUBSCRIPTION_INCOMPATIBLE_TYPE)
+
+
+class QosWarningPublisherEvents(PublisherEventCallbacks):
+    """rclpy's default publisher events less "incompatible type" (see :class:`QosWarningSubscriptionEvents`)."""
+
+    def create_event_handlers(self, callback_group, publisher, topic_name):
+        return _without_type_events(super().create_event_handlers(callback_group, publisher, topic_name),
+                                    QoSPublisherEventType.RCL_PUBLISHER_INCOMPATIBLE_TYPE)
 
 
 @dataclass(frozen=True)
@@ -123,6 +160,16 @@ class PearlNode(Node):
         super().__init__(node_name or self.DEFAULT_NAME, namespace=namespace, context=context,
                          cli_args=cli_args, parameter_overrides=overrides,
                          start_parameter_services=start_parameter_services)
+
+    def create_publisher(self, *args, event_callbacks=None, **kwargs):
+        """As rclpy's, with :class:`QosWarningPublisherEvents` unless ``event_callbacks`` is given."""
+        return super().create_publisher(*args, event_callbacks=event_callbacks or QosWarningPublisherEvents(),
+                                        **kwargs)
+
+    def create_subscription(self, *args, event_callbacks=None, **kwargs):
+        """As rclpy's, with :class:`QosWarningSubscriptionEvents` unless ``event_callbacks`` is given."""
+        return super().create_subscription(*args, event_callbacks=event_callbacks or QosWarningSubscriptionEvents(),
+                                           **kwargs)
 
     def declare_table(self, params: Sequence[Param]) -> Dict[str, Any]:
         """Declare every :class:`Param` and return ``{name: value}`` after overrides.

@@ -25,7 +25,7 @@ from typing import Any, Callable, List, Optional
 
 from rclpy.lifecycle import LifecycleNodeMixin, LifecycleState, TransitionCallbackReturn
 
-from pearl_pomdp.nodes.common import NodeSetupError, Param, PearlNode
+from pearl_pomdp.nodes.common import NodeSetupError, Param, PearlNode, QosWarningPublisherEvents
 
 __all__ = ["ManagedPearlNode", "AUTOSTART"]
 
@@ -70,7 +70,7 @@ class ManagedPearlNode(LifecycleNodeMixin, PearlNode):
 
     def lifecycle_publisher(self, msg_type, topic: str, qos):
         """A publisher that publishes only while the node is active."""
-        pub = self.create_lifecycle_publisher(msg_type, topic, qos)
+        pub = self.create_lifecycle_publisher(msg_type, topic, qos, event_callbacks=QosWarningPublisherEvents())
         self._lifecycle_publishers.append(pub)
         return pub
 
