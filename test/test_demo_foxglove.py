@@ -78,7 +78,7 @@ def test_pearl_demo_foxglove_streams_the_episode(tmp_path, pearl_policy):
         assert set(belief["marginals"]) >= {"UserLocation", "UserPresent"}
         assert abs(sum(belief["marginals"]["UserPresent"].values()) - 1.0) < 1e-9
         actions = [json.loads(a)["action"] for a in got["/pearl/action"]]
-        assert actions[0] == "GotoPatientRoom"            # the first action of Figure 4 from b0
+        assert actions[:2] == ["DoNothing", "GotoPatientRoom"]   # Figure 4 from b0: hear the reminder, drive to her
         decision = json.loads(got["/pearl/decision"][0])
         assert decision["trace"][-1]["choice"] == decision["action"]
         assert proc.wait(120) == 0, proc.stderr()[-3000:]
