@@ -128,6 +128,7 @@ class _WitnessLP:
         self.exact_2 = use_core is not False
         self._bp: Optional[tuple] = None
         self.rows: List[np.ndarray] = []
+        self.pending: List[np.ndarray] = []  # kept vectors not yet columns of the HiGHS model
         self._col_index = np.arange(num_states + 1, dtype=np.int32)
         if self.S == 2 and self.exact_2:
             self.use_core = False  # solved in closed form, no LP model needed
@@ -137,6 +138,9 @@ class _WitnessLP:
             h = _highs_core._Highs()
             h.setOptionValue("output_flag", False)
             h.setOptionValue("presolve", "off")
+            # One thread: these LPs have S + 1 rows, and HiGHS's thread pool costs more per
+            # run() (about 40 µs on an unchanged model) than a small LP's pivots.
+            h.setOptionValue("threads", 1)
             # Tighter than HiGHS's 1e-7 defaults, below the decision threshold.
             h.setOptionValue("primal_feasibility_tolerance", 1e-10)
             h.setOptionValue("dual_feasibility_tolerance", 1e-10)
@@ -148,15 +152,37 @@ class _WitnessLP:
                 h.addRow(0.0, inf, 1, one, np.ones(1))
             h.addRow(1.0, 1.0, 0, np.zeros(0, dtype=np.int32), np.zeros(0))
             self._inf = inf
+            self._infs = np.full(num_states, inf)
+            self._bulk_bounds = hasattr(h, "changeRowsBounds")
             self._h = h
             self._optimal = _highs_core.HighsModelStatus.kOptimal
 
-    def add(self, alpha: np.ndarray) -> None:
-        """Add a newly kept vector (a column ``λ_k``)."""
+    def add(self, alpha: np.ndarray, defer: bool = False) -> None:
+        """Add a newly kept vector (a column ``λ_k``).
+
+        With ``defer`` the column waits in :attr:`pending` until :meth:`flush`: HiGHS
+        rebuilds its simplex data on the first ``run()`` after a model change (about
+        100 µs, more than a small LP's pivots), so columns are best added several at once.
+        An LP solved while columns wait is against a subset of the kept vectors: its
+        ``δ*`` can only be larger, so a "dropped" verdict stays valid (see :func:`prune`).
+        """
         alpha = np.asarray(alpha, dtype=float)
         self.rows.append(np.append(alpha, -1.0))
         if self.use_core:
-            self._h.addCol(0.0, 0.0, self._inf, self.S + 1, self._col_index, np.append(alpha, 1.0))
+            self.pending.append(alpha)
+            if not defer:
+                self.flush()
+
+    def flush(self) -> None:
+        """Add the waiting columns to the HiGHS model, all in one call."""
+        if not (self.use_core and self.pending):
+            return
+        n, S1 = len(self.pending), self.S + 1
+        values = np.ones((n, S1))
+        values[:, :self.S] = self.pending
+        self._h.addCols(n, np.zeros(n), np.zeros(n), np.full(n, self._inf), n * S1,
+                        np.arange(0, n * S1, S1, dtype=np.int32), np.tile(self._col_index, n), values.ravel())
+        self.pending = []
 
     def _breakpoints_2(self) -> Tuple[np.ndarray, np.ndarray]:
         """Two states: candidate optima ``p`` (b = (1−p, p)) and ``V_K(p)`` there.
@@ -213,9 +239,11 @@ class _WitnessLP:
             return float(g[k]), np.array([1.0 - p[k], p[k]])
         if self.use_core:
             h = self._h
-            inf = self._inf
-            for s in range(self.S):
-                h.changeRowBounds(s, float(c[s]), inf)
+            if self._bulk_bounds:
+                h.changeRowsBounds(self.S, self._col_index[:self.S], np.asarray(c, dtype=float), self._infs)
+            else:  # (scipy's bundled copy has no changeRowsBounds)
+                for s in range(self.S):
+                    h.changeRowBounds(s, float(c[s]), self._inf)
             h.run()
             if h.getModelStatus() == self._optimal:
                 delta = float(h.getObjectiveValue())
@@ -284,6 +312,10 @@ def _best_index(alphas: np.ndarray, idx: np.ndarray, b: np.ndarray, tol: float,
     order = np.lexsort(rows.T[::-1])  # primary key: state 0
     return int(tied[order[-1]]), float(m)
 
+
+#: Sets with ``K·K·S`` up to this use the fused duplicate/dominance step of :func:`prune`.
+_FUSED_LIMIT = 200_000
+_LOWER = np.tril(np.ones((448, 448), dtype=bool), -1)  # _LOWER[i, j]: j < i (K ≤ 447 when fused)
 
 _EYE: dict = {}
 _RANDOM_BELIEFS: dict = {}
@@ -403,12 +435,23 @@ def prune(
         return kept
 
     # 1. duplicates; 2. (weak) pointwise dominance among what is left.
-    order = _lex_order(A)
-    lexrank = np.empty(K, dtype=np.int64)
-    lexrank[order] = np.arange(K)
-    cand = _unique_rows_first(A, order)
-    if cand.size > 1:
-        cand = cand[~_dominated_within(A[cand])]
+    if K * K * S <= _FUSED_LIMIT:
+        # Small sets (most prunes of a long solve): both steps from one comparison matrix,
+        # ge[i, j] = "row j ≥ row i everywhere"; i goes if some j dominates it strictly
+        # or equals it and comes first. The same rows as the two steps below, in fewer
+        # numpy calls (their fixed cost is what a small prune pays).
+        ge = (A[None, :, :] >= A[:, None, :]).all(axis=2)
+        np.fill_diagonal(ge, False)
+        cand = np.flatnonzero(~(ge & (~ge.T | _LOWER[:K, :K])).any(axis=1))
+    else:
+        order = _lex_order(A)
+        cand = _unique_rows_first(A, order)
+        if cand.size > 1:
+            cand = cand[~_dominated_within(A[cand])]
+    # Lexicographic ranks of the candidates (pomdp-solve's tie-break): distinct rows,
+    # so their relative order is the same as among all K rows.
+    lexrank = np.full(K, -1, dtype=np.int64)
+    lexrank[cand[_lex_order(A[cand])]] = np.arange(cand.size)
 
     # 3. witnesses without LPs: simplex corners (pomdp-solve), then given points.
     is_kept = np.zeros(K, dtype=bool)
@@ -487,10 +530,21 @@ def prune(
             if stats is not None:
                 stats.lps += 1
             if delta < tol:
-                alive[c] = False
+                alive[c] = False  # (valid with columns waiting too: the full set only lowers δ*)
                 continue
             b = np.clip(b, 0.0, None)  # type: ignore[arg-type]  # the LP returned a witness (not None) here
             b = b / b.sum()
+            if lp.pending and float(A[c] @ b) - float(np.max(KA[:nk] @ b)) < tol:
+                # A waiting column may be what beats c there: solve again against all kept vectors.
+                lp.flush()
+                delta, b = lp.solve(A[c], need_below=tol)
+                if stats is not None:
+                    stats.lps += 1
+                if delta < tol:
+                    alive[c] = False
+                    continue
+                b = np.clip(b, 0.0, None)  # type: ignore[arg-type]
+                b = b / b.sum()
             j, vbest = _best_index(A, np.flatnonzero(alive), b, tol, lexrank)
             # The LP's witness must hold up in plain arithmetic; otherwise no witness.
             if vbest - float(np.max(KA[:nk] @ b)) <= 0.0:
@@ -502,7 +556,7 @@ def prune(
             keep(j, b)
             KA[nk] = A[j]
             nk += 1
-            lp.add(A[j])
+            lp.add(A[j], defer=True)
             if j != c:
                 queue.append(c)  # c still waits for its own verdict
 
