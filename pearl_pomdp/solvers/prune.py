@@ -440,7 +440,7 @@ def prune(
         # ge[i, j] = "row j ≥ row i everywhere"; i goes if some j dominates it strictly
         # or equals it and comes first. The same rows as the two steps below, in fewer
         # numpy calls (their fixed cost is what a small prune pays).
-        ge = (A[None, :, :] >= A[:, None, :]).all(axis=2)
+        ge: np.ndarray = np.asarray((A[None, :, :] >= A[:, None, :]).all(axis=2))
         np.fill_diagonal(ge, False)
         cand = np.flatnonzero(~(ge & (~ge.T | _LOWER[:K, :K])).any(axis=1))
     else:
