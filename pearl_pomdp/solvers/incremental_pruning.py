@@ -125,7 +125,9 @@ class _Backup:
         parts = [f for f in fresh if f is not None and len(f)]
         if key in self.memory:
             parts.append(self.memory[key])
-        return np.vstack(parts) if parts else None
+        if not parts:
+            return None
+        return parts[0] if len(parts) == 1 else np.vstack(parts)
 
     def _prune(self, vectors: np.ndarray, points: Optional[np.ndarray]) -> Tuple[np.ndarray, np.ndarray]:
         """An intermediate prune (step 1 or 2), at the near-exact ``stage_tol``."""

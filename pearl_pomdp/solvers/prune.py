@@ -128,7 +128,6 @@ class _WitnessLP:
         self.exact_2 = use_core is not False
         self._bp: Optional[tuple] = None
         self.rows: List[np.ndarray] = []
-        self.pending: List[np.ndarray] = []  # kept vectors not yet columns of the HiGHS model
         self._col_index = np.arange(num_states + 1, dtype=np.int32)
         if self.S == 2 and self.exact_2:
             self.use_core = False  # solved in closed form, no LP model needed
@@ -157,32 +156,12 @@ class _WitnessLP:
             self._h = h
             self._optimal = _highs_core.HighsModelStatus.kOptimal
 
-    def add(self, alpha: np.ndarray, defer: bool = False) -> None:
-        """Add a newly kept vector (a column ``λ_k``).
-
-        With ``defer`` the column waits in :attr:`pending` until :meth:`flush`: HiGHS
-        rebuilds its simplex data on the first ``run()`` after a model change (about
-        100 µs, more than a small LP's pivots), so columns are best added several at once.
-        An LP solved while columns wait is against a subset of the kept vectors: its
-        ``δ*`` can only be larger, so a "dropped" verdict stays valid (see :func:`prune`).
-        """
+    def add(self, alpha: np.ndarray) -> None:
+        """Add a newly kept vector (a column ``λ_k``)."""
         alpha = np.asarray(alpha, dtype=float)
         self.rows.append(np.append(alpha, -1.0))
         if self.use_core:
-            self.pending.append(alpha)
-            if not defer:
-                self.flush()
-
-    def flush(self) -> None:
-        """Add the waiting columns to the HiGHS model, all in one call."""
-        if not (self.use_core and self.pending):
-            return
-        n, S1 = len(self.pending), self.S + 1
-        values = np.ones((n, S1))
-        values[:, :self.S] = self.pending
-        self._h.addCols(n, np.zeros(n), np.zeros(n), np.full(n, self._inf), n * S1,
-                        np.arange(0, n * S1, S1, dtype=np.int32), np.tile(self._col_index, n), values.ravel())
-        self.pending = []
+            self._h.addCol(0.0, 0.0, self._inf, self.S + 1, self._col_index, np.append(alpha, 1.0))
 
     def _breakpoints_2(self) -> Tuple[np.ndarray, np.ndarray]:
         """Two states: candidate optima ``p`` (b = (1−p, p)) and ``V_K(p)`` there.
@@ -365,11 +344,20 @@ def _unique_rows_first(alphas: np.ndarray, order: np.ndarray) -> np.ndarray:
     return np.sort(order[new_group])
 
 
-def _best_at_corners(alphas: np.ndarray, idx: np.ndarray, tol: float, lexrank: np.ndarray) -> np.ndarray:
-    """:func:`_best_index` at every corner of the simplex at once."""
+def _best_at_corners(alphas: np.ndarray, idx: np.ndarray, tol: float) -> Tuple[np.ndarray, Optional[np.ndarray]]:
+    """:func:`_best_index` at every corner of the simplex at once (``idx``: distinct rows).
+
+    Returns ``(best [S], lexrank)``; ``lexrank`` (ranks of the rows ``idx``, as for
+    :func:`_best_index`) is computed only when some corner has a tie to break, else None.
+    """
     vals = alphas[idx]  # the value at corner s is component s
     tied = vals >= vals.max(axis=0) - tol
-    return idx[np.argmax(np.where(tied, lexrank[idx][:, None], -1), axis=0)]
+    if tied.sum(axis=0).max() == 1:  # no ties: the best is the only one within tol
+        return idx[np.argmax(vals, axis=0)], None
+    # Distinct rows: their relative lexicographic order is the same as among all rows.
+    lexrank = np.full(alphas.shape[0], -1, dtype=np.int64)
+    lexrank[idx[_lex_order(vals)]] = np.arange(idx.size)
+    return idx[np.argmax(np.where(tied, lexrank[idx][:, None], -1), axis=0)], lexrank
 
 
 # ----------------------------------------------------------------- prune
@@ -448,10 +436,6 @@ def prune(
         cand = _unique_rows_first(A, order)
         if cand.size > 1:
             cand = cand[~_dominated_within(A[cand])]
-    # Lexicographic ranks of the candidates (pomdp-solve's tie-break): distinct rows,
-    # so their relative order is the same as among all K rows.
-    lexrank = np.full(K, -1, dtype=np.int64)
-    lexrank[cand[_lex_order(A[cand])]] = np.arange(cand.size)
 
     # 3. witnesses without LPs: simplex corners (pomdp-solve), then given points.
     is_kept = np.zeros(K, dtype=bool)
@@ -464,7 +448,9 @@ def prune(
         witness[i] = b
 
     eye = _eye(S)
-    for s, i in enumerate(_best_at_corners(A, cand, tol, lexrank)):
+    # (lexrank: pomdp-solve's lexicographic tie-break, None until a tie needs it)
+    corner_best, lexrank = _best_at_corners(A, cand, tol)
+    for s, i in enumerate(corner_best):
         if not is_kept[i]:
             keep(int(i), eye[s])
     # Random beliefs too (seeded, so results are reproducible): a vector that
@@ -530,21 +516,10 @@ def prune(
             if stats is not None:
                 stats.lps += 1
             if delta < tol:
-                alive[c] = False  # (valid with columns waiting too: the full set only lowers δ*)
+                alive[c] = False
                 continue
             b = np.clip(b, 0.0, None)  # type: ignore[arg-type]  # the LP returned a witness (not None) here
             b = b / b.sum()
-            if lp.pending and float(A[c] @ b) - float(np.max(KA[:nk] @ b)) < tol:
-                # A waiting column may be what beats c there: solve again against all kept vectors.
-                lp.flush()
-                delta, b = lp.solve(A[c], need_below=tol)
-                if stats is not None:
-                    stats.lps += 1
-                if delta < tol:
-                    alive[c] = False
-                    continue
-                b = np.clip(b, 0.0, None)  # type: ignore[arg-type]
-                b = b / b.sum()
             j, vbest = _best_index(A, np.flatnonzero(alive), b, tol, lexrank)
             # The LP's witness must hold up in plain arithmetic; otherwise no witness.
             if vbest - float(np.max(KA[:nk] @ b)) <= 0.0:
@@ -556,7 +531,7 @@ def prune(
             keep(j, b)
             KA[nk] = A[j]
             nk += 1
-            lp.add(A[j], defer=True)
+            lp.add(A[j])
             if j != c:
                 queue.append(c)  # c still waits for its own verdict
 
