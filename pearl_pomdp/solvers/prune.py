@@ -51,7 +51,7 @@ Array convention: ``alphas`` is ``[K, S]``, one vector per row.
 from __future__ import annotations
 
 import time
-from typing import List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -108,6 +108,49 @@ class PruneStats:
 
 
 # ---------------------------------------------------------------------- LP
+#: Idle HiGHS models by number of states: building one (the object, its options and
+#: S + 1 rows) costs ~0.2 ms, which a solve of many small prunes would pay per prune.
+_IDLE_HIGHS: Dict[int, list] = {}
+
+
+def _take_highs(S: int):
+    """A HiGHS model of the witness LP with no kept-vector columns yet: an idle one
+    (columns deleted, solver data cleared, so it solves exactly as a new one) or a new one."""
+    idle = _IDLE_HIGHS.get(S)
+    if idle:
+        return idle.pop()
+    h = _highs_core._Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("presolve", "off")
+    # One thread: these LPs have S + 1 rows, and HiGHS's thread pool costs more per
+    # run() (about 40 µs on an unchanged model) than a small LP's pivots.
+    h.setOptionValue("threads", 1)
+    # Tighter than HiGHS's 1e-7 defaults, below the decision threshold.
+    h.setOptionValue("primal_feasibility_tolerance", 1e-10)
+    h.setOptionValue("dual_feasibility_tolerance", 1e-10)
+    inf = _highs_core.kHighsInf
+    h.addVar(-inf, inf)  # t
+    h.changeColCost(0, 1.0)
+    one = np.array([0], dtype=np.int32)
+    for _ in range(S):
+        h.addRow(0.0, inf, 1, one, np.ones(1))
+    h.addRow(1.0, 1.0, 0, np.zeros(0, dtype=np.int32), np.zeros(0))
+    return h
+
+
+def _give_back_highs(S: int, h) -> None:
+    """Reset ``h`` to the state :func:`_take_highs` builds and keep it (a few per size)."""
+    n = h.getNumCol()
+    if n > 1:
+        h.deleteCols(n - 1, np.arange(1, n, dtype=np.int32))
+    h.clearSolver()  # no basis from the last prune: the next one starts as a new model would
+    for s in range(S):
+        h.changeRowBounds(s, 0.0, _highs_core.kHighsInf)
+    idle = _IDLE_HIGHS.setdefault(S, [])
+    if len(idle) < 2 and len(_IDLE_HIGHS) <= 16:
+        idle.append(h)
+
+
 class _WitnessLP:
     """``δ* = max_b c·b − max_{k∈K} α_k·b`` over the belief simplex, for many ``c`` and a growing ``K``.
 
@@ -134,27 +177,18 @@ class _WitnessLP:
         else:
             self.use_core = use_core is not False and _load_highs()
         if self.use_core:
-            h = _highs_core._Highs()
-            h.setOptionValue("output_flag", False)
-            h.setOptionValue("presolve", "off")
-            # One thread: these LPs have S + 1 rows, and HiGHS's thread pool costs more per
-            # run() (about 40 µs on an unchanged model) than a small LP's pivots.
-            h.setOptionValue("threads", 1)
-            # Tighter than HiGHS's 1e-7 defaults, below the decision threshold.
-            h.setOptionValue("primal_feasibility_tolerance", 1e-10)
-            h.setOptionValue("dual_feasibility_tolerance", 1e-10)
             inf = _highs_core.kHighsInf
-            h.addVar(-inf, inf)  # t
-            h.changeColCost(0, 1.0)
-            one = np.array([0], dtype=np.int32)
-            for _ in range(num_states):
-                h.addRow(0.0, inf, 1, one, np.ones(1))
-            h.addRow(1.0, 1.0, 0, np.zeros(0, dtype=np.int32), np.zeros(0))
             self._inf = inf
             self._infs = np.full(num_states, inf)
-            self._bulk_bounds = hasattr(h, "changeRowsBounds")
-            self._h = h
+            self._h = _take_highs(num_states)
+            self._bulk_bounds = hasattr(self._h, "changeRowsBounds")
             self._optimal = _highs_core.HighsModelStatus.kOptimal
+
+    def release(self) -> None:
+        """Hand the HiGHS model back for the next prune with as many states (see :func:`_take_highs`)."""
+        if self.use_core and self._h is not None:
+            _give_back_highs(self.S, self._h)
+            self._h = None
 
     def add(self, alpha: np.ndarray) -> None:
         """Add a newly kept vector (a column ``λ_k``)."""
@@ -534,6 +568,7 @@ def prune(
             lp.add(A[j])
             if j != c:
                 queue.append(c)  # c still waits for its own verdict
+        lp.release()  # (after a PruneTimeout the model is simply dropped)
 
     kept = np.array(sorted(kept_order), dtype=np.int64)
     if stats is not None:
