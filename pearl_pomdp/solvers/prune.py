@@ -197,6 +197,21 @@ class _WitnessLP:
         if self.use_core:
             self._h.addCol(0.0, 0.0, self._inf, self.S + 1, self._col_index, np.append(alpha, 1.0))
 
+    def add_many(self, alphas: np.ndarray) -> None:
+        """:meth:`add` for every row of ``alphas`` (one HiGHS call)."""
+        n = alphas.shape[0]
+        if n == 0:
+            return
+        ext = np.empty((n, self.S + 1))
+        ext[:, :self.S] = alphas
+        ext[:, self.S] = -1.0
+        self.rows.extend(ext.copy())
+        if self.use_core:
+            ext[:, self.S] = 1.0
+            S1 = self.S + 1
+            self._h.addCols(n, np.zeros(n), np.zeros(n), np.full(n, self._inf), n * S1,
+                            np.arange(0, n * S1, S1, dtype=np.int32), np.tile(self._col_index, n), ext.ravel())
+
     def _breakpoints_2(self) -> Tuple[np.ndarray, np.ndarray]:
         """Two states: candidate optima ``p`` (b = (1−p, p)) and ``V_K(p)`` there.
 
@@ -520,8 +535,7 @@ def prune(
         rem = np.array(remaining)
         rem = rem[~pointwise_dominated(A[rem], KA[:nk], slack=tol)]
         lp = _WitnessLP(S, use_core=use_lp_core)
-        for i in kept_order:
-            lp.add(A[i])
+        lp.add_many(A[kept_order])
         queue = list(rem)
         alive = np.zeros(K, dtype=bool)
         alive[rem] = True
