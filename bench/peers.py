@@ -19,7 +19,10 @@ paths (without them the bench prints our figures alone)::
 
 Options: ``--exact FILE:H,...`` / ``--pointbased FILE,...`` pick the runs (``H`` a horizon
 or ``inf``; a FILE without a directory is looked up in ``../shared/benchmarks/pomdp``);
-``--no-exact`` / ``--no-pointbased``; ``--time-limit`` (seconds per run, both sides).
+``--no-exact`` / ``--no-pointbased``; ``--time-limit`` (seconds per run, both sides);
+``--base DIR`` also runs the exact solver of another checkout (say ``git archive main``
+unpacked in DIR) between the peer and ours, and reports ``ours_vs_base`` (wall and
+solver ratios, and whether the two policies are identical).
 
 Prints ONE JSON object on stdout: ``exact`` and ``pointbased`` lists with, per run,
 ``ours`` (``wall_s``, ``solver_s``, ``vectors``, ``value_at_b0``, …), the peer's figures
@@ -90,9 +93,10 @@ def parse_exact_spec(spec: str) -> Tuple[Path, Optional[int]]:
 def worker(argv: List[str]) -> None:
     """``--worker exact FILE H OUT.npz LIMIT`` / ``--worker pointbased FILE PRECISION LIMIT``: one of our runs."""
     t_start = time.perf_counter()
-    sys.path.insert(0, str(REPO))
+    sys.path.insert(0, os.environ.get(_REPO_ENV, str(REPO)))
     import numpy as np
 
+    import pearl_pomdp
     from pearl_pomdp.model import load_model
 
     kind, path = argv[0], argv[1]
@@ -102,7 +106,8 @@ def worker(argv: List[str]) -> None:
         from pearl_pomdp.solvers.point_based import solve_point_based
     t_imported = time.perf_counter()
     model = load_model(path)
-    out: Dict[str, object] = {"import_s": t_imported - t_start, "load_s": time.perf_counter() - t_imported}
+    out: Dict[str, object] = {"import_s": t_imported - t_start, "load_s": time.perf_counter() - t_imported,
+                              "pearl_pomdp_from": str(Path(pearl_pomdp.__file__).parent.parent)}
     if kind == "exact":
         horizon = None if argv[2] == "inf" else int(argv[2])
         res = solve_incremental_pruning(model, horizon=horizon, time_limit=float(argv[4]))
@@ -116,11 +121,18 @@ def worker(argv: List[str]) -> None:
     print(json.dumps(out))
 
 
-def run_ours(args: List[str], timeout: float) -> Dict[str, object]:
+#: Environment variable naming the checkout a worker imports pearl_pomdp from (``--base``).
+_REPO_ENV = "PEARL_PEERS_REPO"
+
+
+def run_ours(args: List[str], timeout: float, repo: Optional[str] = None) -> Dict[str, object]:
     cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", *args]
+    env = dict(os.environ)
+    if repo:
+        env[_REPO_ENV] = str(Path(repo).resolve())
     t0 = time.perf_counter()
     ru0 = os.times()
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
     wall = time.perf_counter() - t0
     ru1 = os.times()
     if proc.returncode != 0:
@@ -225,6 +237,18 @@ def compare_vectors(ours_npz: Path, peer: Dict[str, object]) -> Dict[str, object
     return out
 
 
+def same_policy(a: Path, b: Path) -> bool:
+    """True when two of our runs saved the same vectors and actions (sorted rows compared exactly)."""
+    import numpy as np
+
+    x, y = np.load(a), np.load(b)
+    A, P = x["alphas"], y["alphas"]
+    if A.shape != P.shape:
+        return False
+    o, t = np.lexsort(A.T[::-1]), np.lexsort(P.T[::-1])
+    return bool(np.array_equal(A[o], P[t]) and np.array_equal(x["actions"][o], y["actions"][t]))
+
+
 def geomean(xs: List[float]) -> Optional[float]:
     xs = [x for x in xs if x and x > 0 and math.isfinite(x)]
     return math.exp(sum(math.log(x) for x in xs) / len(xs)) if xs else None
@@ -246,7 +270,11 @@ def main() -> None:
     ap.add_argument("--precision", type=float, default=1e-3, help="point-based target gap at b0 (default 1e-3)")
     ap.add_argument("--time-limit", type=float, default=60.0, help="seconds per run, both sides (default 60)")
     ap.add_argument("--repeat", type=int, default=1, help="runs per (file, solver); medians reported")
+    ap.add_argument("--base", metavar="DIR", help="also run another checkout's solver (e.g. an export of main), "
+                    "between the peer and ours, for a before/after under the same load")
     args = ap.parse_args()
+    if args.base and not (Path(args.base) / "pearl_pomdp" / "__init__.py").is_file():
+        raise SystemExit(f"bench/peers.py: --base {args.base}: no pearl_pomdp package there")
     for exe, flag in ((args.pomdp_solve, "--pomdp-solve"), (args.sarsop, "--sarsop")):
         if exe and not os.access(exe, os.X_OK):
             raise SystemExit(f"bench/peers.py: {flag} {exe}: not an executable file")
@@ -274,14 +302,23 @@ def main() -> None:
             h = "inf" if horizon is None else str(horizon)
             log(f"exact {path.name} h{h}")
             row: Dict[str, object] = {"file": path.name, "horizon": horizon}
-            ours_runs, peer_runs = [], []
-            npz = work / "ours.npz"
+            ours_runs, peer_runs, base_runs = [], [], []
+            npz, base_npz = work / "ours.npz", work / "base.npz"
             for _ in range(args.repeat):
                 if args.pomdp_solve:
                     peer_runs.append(run_pomdp_solve(args.pomdp_solve, path, horizon, args.time_limit + 30, work))
+                if args.base:
+                    base_runs.append(run_ours(["exact", str(path), h, str(base_npz), repr(args.time_limit)],
+                                              timeout=args.time_limit * 3 + 60, repo=args.base))
                 ours_runs.append(run_ours(["exact", str(path), h, str(npz), repr(args.time_limit)],
                                           timeout=args.time_limit * 3 + 60))
             row["ours"] = median_runs(ours_runs)
+            if base_runs:
+                row["base"] = median_runs(base_runs)
+                if "error" not in row["base"] and "error" not in row["ours"]:
+                    row["ours_vs_base"] = {"wall": row["ours"]["wall_s"] / row["base"]["wall_s"],
+                                           "solver": row["ours"]["solver_s"] / row["base"]["solver_s"],
+                                           "same_policy": same_policy(npz, base_npz)}
             if peer_runs:
                 peer = median_runs(peer_runs)
                 for r in peer_runs:
@@ -293,7 +330,7 @@ def main() -> None:
                     row["wall_ratio"] = row["ours"]["wall_s"] / peer["wall_s"]
                     row["solver_vs_peer_wall"] = row["ours"]["solver_s"] / peer["wall_s"]
                 row["pomdp_solve"] = peer
-            log("  " + json.dumps({k: row.get(k) for k in ("wall_ratio", "value_diff")}))
+            log("  " + json.dumps({k: row.get(k) for k in ("wall_ratio", "solver_vs_peer_wall", "ours_vs_base", "value_diff")}))
             result["exact"].append(row)
         for path in pb_runs:
             log(f"pointbased {path.name}")
@@ -323,6 +360,8 @@ def main() -> None:
             "our_solver_s_total": sum(r["ours"].get("solver_s", 0.0) or 0.0 for r in rows),
             "wall_ratio_geomean": geomean([r.get("wall_ratio") for r in rows]),
             "solver_vs_peer_wall_geomean": geomean([r.get("solver_vs_peer_wall") for r in rows]),
+            "ours_vs_base_solver_geomean": geomean([(r.get("ours_vs_base") or {}).get("solver") for r in rows]),
+            "ours_vs_base_wall_geomean": geomean([(r.get("ours_vs_base") or {}).get("wall") for r in rows]),
             "files_slower_than_peer": [f"{r['file']}" + (f" h{r['horizon'] or 'inf'}" if kind == "exact" else "")
                                        for r in rows if (r.get("wall_ratio") or 0) > 1.0],
         }

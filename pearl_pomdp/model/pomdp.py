@@ -14,10 +14,25 @@ import hashlib
 from dataclasses import dataclass, field
 from typing import List, Optional, Sequence, Union
 
-import numpy as np
-import scipy.sparse as sp
+import sys
 
-Matrix = Union[np.ndarray, sp.csr_matrix]
+import numpy as np
+
+Matrix = Union[np.ndarray, "scipy.sparse.csr_matrix"]
+
+
+def issparse(x) -> bool:
+    """``scipy.sparse.issparse(x)``, without importing scipy (~70-200 ms of start-up) when no
+    sparse matrix can exist yet: small models are read and solved without scipy."""
+    sp = sys.modules.get("scipy.sparse")
+    return sp is not None and bool(sp.issparse(x))
+
+
+def _csr(x):
+    """``scipy.sparse.csr_matrix(x, dtype=float)``, importing scipy.sparse on first use."""
+    import scipy.sparse as sp
+
+    return sp.csr_matrix(x, dtype=float)
 
 #: A model with more than this many S×S entries per action keeps T sparse.
 DENSE_LIMIT = 4_000_000
@@ -83,7 +98,7 @@ class Pomdp:
         if len(T) != A:
             raise ValueError(f"T has {len(T)} action matrices, expected {A}")
         for a, Ta in enumerate(T):
-            m = sp.csr_matrix(Ta, dtype=float, copy=True) if sparse else (Ta.toarray() if sp.issparse(Ta) else np.array(Ta, dtype=float))
+            m = _csr(Ta).copy() if sparse else (Ta.toarray() if issparse(Ta) else np.array(Ta, dtype=float))
             if m.shape != (S, S):
                 raise ValueError(f"T[{actions[a]}] has shape {m.shape}, expected ({S}, {S})")
             mats.append(m)
@@ -108,7 +123,7 @@ class Pomdp:
         """Raise ``ValueError`` naming the first row of T, O or b0 that is not a distribution."""
         for a, Ta in enumerate(self.T):
             sums = np.asarray(Ta.sum(axis=1)).ravel()
-            mins = Ta.min() if not sp.issparse(Ta) else min(Ta.data.min(initial=0.0), 0.0)
+            mins = Ta.min() if not issparse(Ta) else min(Ta.data.min(initial=0.0), 0.0)
             if mins < -tolerance:
                 raise ValueError(f"T[{self.actions[a]}] has a negative entry ({mins})")
             bad = np.flatnonzero(np.abs(sums - 1.0) > tolerance)
@@ -144,14 +159,14 @@ class Pomdp:
     @property
     def is_sparse(self) -> bool:
         """True when T is stored as scipy sparse matrices."""
-        return sp.issparse(self.T[0])
+        return issparse(self.T[0])
 
     def T_dense(self) -> np.ndarray:
         """``T`` as one ``[A, S, S]`` array (raises MemoryError-prone models as ValueError)."""
         S, A = self.num_states, self.num_actions
         if A * S * S > 50 * DENSE_LIMIT:
             raise ValueError(f"a dense T of {A}x{S}x{S} is too large; use the sparse matrices in Pomdp.T")
-        return np.stack([Ta.toarray() if sp.issparse(Ta) else Ta for Ta in self.T])
+        return np.stack([Ta.toarray() if issparse(Ta) else Ta for Ta in self.T])
 
     def index(self, kind: str, name: str) -> int:
         """Index of a state/action/observation ``name`` (``kind`` is 'states', 'actions' or 'observations')."""
@@ -168,14 +183,21 @@ class Pomdp:
             h.update("\x1f".join(names).encode())
             h.update(b"\x1e")
         for Ta in self.T:
-            # Same bytes whether T is stored dense or sparse.
-            c = sp.csr_matrix(Ta, dtype=float)
-            c.sum_duplicates()
-            c.eliminate_zeros()
-            c.sort_indices()
-            h.update(np.round(c.data, 12).tobytes())
-            h.update(c.indices.astype(np.int64).tobytes())
-            h.update(c.indptr.astype(np.int64).tobytes())
+            # Same bytes whether T is stored dense or sparse: the canonical CSR arrays.
+            if issparse(Ta):
+                c = _csr(Ta)
+                c.sum_duplicates()
+                c.eliminate_zeros()
+                c.sort_indices()
+                data, indices, indptr = c.data, c.indices, c.indptr
+            else:  # (the same arrays from the dense matrix, row-major, without scipy)
+                dense = np.asarray(Ta, dtype=float)
+                rows, indices = np.nonzero(dense)
+                data = dense[rows, indices]
+                indptr = np.concatenate(([0], np.cumsum(np.bincount(rows, minlength=dense.shape[0]))))
+            h.update(np.round(data, 12).tobytes())
+            h.update(indices.astype(np.int64).tobytes())
+            h.update(indptr.astype(np.int64).tobytes())
         for arr in (self.O, self.R, self.b0):
             h.update(np.round(arr, 12).tobytes())
         h.update(repr(round(self.discount, 12)).encode())

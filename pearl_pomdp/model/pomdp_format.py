@@ -54,14 +54,27 @@ from __future__ import annotations
 import bisect
 import re
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
-import scipy.sparse as sp
 
 from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import ModelFormatError
-from pearl_pomdp.model.pomdp import Pomdp
+from pearl_pomdp.model.pomdp import DENSE_LIMIT, Pomdp, issparse
+
+
+class _Coo:
+    """``row``, ``col``, ``data``, ``nnz`` of a T matrix, dense or CSR, in row-major order
+    (what ``csr.tocoo()`` gives for sorted unique entries; a dense one needs no scipy)."""
+
+    def __init__(self, Ta) -> None:
+        if issparse(Ta):
+            c = Ta.tocoo()
+            self.row, self.col, self.data = c.row, c.col, c.data
+        else:
+            self.row, self.col = np.nonzero(Ta)
+            self.data = Ta[self.row, self.col]
+        self.nnz = int(self.data.size)
 
 __all__ = [
     "read_pomdp",
@@ -881,16 +894,24 @@ class _Parser:
         tkey, tval, t_ren = self._table(self.t_pts, self.t_special, A, S, S, "T", b0)
         okey, oval, o_ren = self._table(self.o_pts, self.o_special, A, S, Z, "O", None)
 
-        # T: one CSR per action straight from the sorted keys
-        ta = tkey // (S * S)
-        rest = tkey - ta * (S * S)
-        ts, tsp = rest // S, rest % S
-        bounds = np.searchsorted(ta, np.arange(A + 1))
-        T = []
-        for a in range(A):
-            lo, hi = bounds[a], bounds[a + 1]
-            indptr = np.searchsorted(ts[lo:hi], np.arange(S + 1)).astype(np.int64)
-            T.append(sp.csr_matrix((tval[lo:hi], tsp[lo:hi], indptr), shape=(S, S)))
+        # T: one matrix per action straight from the sorted unique keys, dense up to
+        # DENSE_LIMIT (as Pomdp would store it; no scipy import), else CSR
+        T: List[Any] = []
+        if S * S <= DENSE_LIMIT:
+            dense = np.zeros(A * S * S)
+            dense[tkey] = tval
+            T = list(dense.reshape(A, S, S))
+        else:
+            import scipy.sparse as sp
+
+            ta = tkey // (S * S)
+            rest = tkey - ta * (S * S)
+            ts, tsp = rest // S, rest % S
+            bounds = np.searchsorted(ta, np.arange(A + 1))
+            for a in range(A):
+                lo, hi = bounds[a], bounds[a + 1]
+                indptr = np.searchsorted(ts[lo:hi], np.arange(S + 1)).astype(np.int64)
+                T.append(sp.csr_matrix((tval[lo:hi], tsp[lo:hi], indptr), shape=(S, S)))
         O = np.zeros(A * S * Z)
         O[okey] = oval
         O = O.reshape(A, S, Z)
@@ -916,7 +937,7 @@ class _Parser:
         return model
 
     # ------------------------------------------------------------------ rewards
-    def rewards(self, A: int, S: int, Z: int, T: List[sp.csr_matrix], O: np.ndarray) -> Tuple[np.ndarray, bool]:
+    def rewards(self, A: int, S: int, Z: int, T: List[Any], O: np.ndarray) -> Tuple[np.ndarray, bool]:
         """``R[s, a]`` by pomdp-solve's rule (last statement wins per (a, s, s', o), expectation)."""
         # cells (a, s): statements whose s' and o are both '*'
         ca, cs, cv, cq = [np.asarray(x) for x in self.r_cell]
@@ -957,7 +978,7 @@ class _Parser:
             fine_actions.update(range(A) if ev[2] is None else [ev[2]])
         depends = False
         for a in sorted(fine_actions):
-            Ta = T[a].tocoo()
+            Ta = _Coo(T[a])
             Oa = O[a]
             # support: (s, s', o) with T[a][s, s'] > 0 and O[a, s', o] > 0
             nz_sp, nz_o = np.nonzero(Oa)
@@ -1105,7 +1126,9 @@ def format_pomdp(model: Pomdp) -> str:
 
     for a in range(A):
         Ta = model.T[a]
-        if sp.issparse(Ta):
+        if issparse(Ta):
+            import scipy.sparse as sp
+
             Tc = sp.csr_matrix(Ta)
             Tc.sum_duplicates()
             Tc.eliminate_zeros()
@@ -1129,6 +1152,8 @@ def format_pomdp(model: Pomdp) -> str:
                 w(f"T: {ac[a]} : {st[s]} " + " ".join(_p(x) for x in dense[s]))
             continue
         if Tc is None:
+            import scipy.sparse as sp
+
             Tc = sp.csr_matrix(dense)
             Tc.sort_indices()
         indptr, indices, data = Tc.indptr, Tc.indices, Tc.data

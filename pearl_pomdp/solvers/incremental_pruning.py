@@ -125,7 +125,9 @@ class _Backup:
         parts = [f for f in fresh if f is not None and len(f)]
         if key in self.memory:
             parts.append(self.memory[key])
-        return np.vstack(parts) if parts else None
+        if not parts:
+            return None
+        return parts[0] if len(parts) == 1 else np.vstack(parts)
 
     def _prune(self, vectors: np.ndarray, points: Optional[np.ndarray]) -> Tuple[np.ndarray, np.ndarray]:
         """An intermediate prune (step 1 or 2), at the near-exact ``stage_tol``."""
@@ -139,6 +141,14 @@ class _Backup:
             return self.reward_share[a][None, :].copy()
         return self.gamma * (gamma_prev * self.O[a, :, o][None, :]) @ self.T[a].T + self.reward_share[a][None, :]
 
+    def project_all(self, gamma_prev: np.ndarray, a: int) -> np.ndarray:
+        """:meth:`project` for every observation of ``a`` at once, ``[Z, K, S]`` (one
+        stacked product instead of |Z| small ones; rows of impossible observations unused)."""
+        if self.Z * gamma_prev.size > 1_000_000:  # large sets: one observation at a time (memory)
+            return np.stack([self.project(gamma_prev, a, o) for o in range(self.Z)])
+        weighted = gamma_prev[None, :, :] * self.O[a].T[:, None, :]  # [Z, K, S']
+        return self.gamma * weighted @ self.T[a].T + self.reward_share[a][None, None, :]
+
     def __call__(self, gamma_prev: np.ndarray, points: Optional[np.ndarray]) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Γ' from Γ: returns ``(alphas [K', S], actions [K'], witnesses [K', S])``."""
         per_action: List[np.ndarray] = []
@@ -146,8 +156,9 @@ class _Backup:
         for a in range(self.A):
             # Step 1: project and prune each Γ^{a,o}.
             projected = []
+            all_o = self.project_all(gamma_prev, a)
             for o in range(self.Z):
-                vecs = self.project(gamma_prev, a, o)
+                vecs = all_o[o] if self.possible[a, o] else self.reward_share[a][None, :].copy()
                 projected.append(self._prune(vecs, self._seeds(("proj", a, o))))
                 self.memory[("proj", a, o)] = projected[-1][1]
             # Step 2: cross-sum pairwise, pruning after each sum. The witnesses of

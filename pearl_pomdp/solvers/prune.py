@@ -51,7 +51,7 @@ Array convention: ``alphas`` is ``[K, S]``, one vector per row.
 from __future__ import annotations
 
 import time
-from typing import List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -108,6 +108,49 @@ class PruneStats:
 
 
 # ---------------------------------------------------------------------- LP
+#: Idle HiGHS models by number of states: building one (the object, its options and
+#: S + 1 rows) costs ~0.2 ms, which a solve of many small prunes would pay per prune.
+_IDLE_HIGHS: Dict[int, list] = {}
+
+
+def _take_highs(S: int):
+    """A HiGHS model of the witness LP with no kept-vector columns yet: an idle one
+    (columns deleted, solver data cleared, so it solves exactly as a new one) or a new one."""
+    idle = _IDLE_HIGHS.get(S)
+    if idle:
+        return idle.pop()
+    h = _highs_core._Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("presolve", "off")
+    # One thread: these LPs have S + 1 rows, and HiGHS's thread pool costs more per
+    # run() (about 40 µs on an unchanged model) than a small LP's pivots.
+    h.setOptionValue("threads", 1)
+    # Tighter than HiGHS's 1e-7 defaults, below the decision threshold.
+    h.setOptionValue("primal_feasibility_tolerance", 1e-10)
+    h.setOptionValue("dual_feasibility_tolerance", 1e-10)
+    inf = _highs_core.kHighsInf
+    h.addVar(-inf, inf)  # t
+    h.changeColCost(0, 1.0)
+    one = np.array([0], dtype=np.int32)
+    for _ in range(S):
+        h.addRow(0.0, inf, 1, one, np.ones(1))
+    h.addRow(1.0, 1.0, 0, np.zeros(0, dtype=np.int32), np.zeros(0))
+    return h
+
+
+def _give_back_highs(S: int, h) -> None:
+    """Reset ``h`` to the state :func:`_take_highs` builds and keep it (a few per size)."""
+    n = h.getNumCol()
+    if n > 1:
+        h.deleteCols(n - 1, np.arange(1, n, dtype=np.int32))
+    h.clearSolver()  # no basis from the last prune: the next one starts as a new model would
+    for s in range(S):
+        h.changeRowBounds(s, 0.0, _highs_core.kHighsInf)
+    idle = _IDLE_HIGHS.setdefault(S, [])
+    if len(idle) < 2 and len(_IDLE_HIGHS) <= 16:
+        idle.append(h)
+
+
 class _WitnessLP:
     """``δ* = max_b c·b − max_{k∈K} α_k·b`` over the belief simplex, for many ``c`` and a growing ``K``.
 
@@ -134,22 +177,18 @@ class _WitnessLP:
         else:
             self.use_core = use_core is not False and _load_highs()
         if self.use_core:
-            h = _highs_core._Highs()
-            h.setOptionValue("output_flag", False)
-            h.setOptionValue("presolve", "off")
-            # Tighter than HiGHS's 1e-7 defaults, below the decision threshold.
-            h.setOptionValue("primal_feasibility_tolerance", 1e-10)
-            h.setOptionValue("dual_feasibility_tolerance", 1e-10)
             inf = _highs_core.kHighsInf
-            h.addVar(-inf, inf)  # t
-            h.changeColCost(0, 1.0)
-            one = np.array([0], dtype=np.int32)
-            for _ in range(num_states):
-                h.addRow(0.0, inf, 1, one, np.ones(1))
-            h.addRow(1.0, 1.0, 0, np.zeros(0, dtype=np.int32), np.zeros(0))
             self._inf = inf
-            self._h = h
+            self._infs = np.full(num_states, inf)
+            self._h = _take_highs(num_states)
+            self._bulk_bounds = hasattr(self._h, "changeRowsBounds")
             self._optimal = _highs_core.HighsModelStatus.kOptimal
+
+    def release(self) -> None:
+        """Hand the HiGHS model back for the next prune with as many states (see :func:`_take_highs`)."""
+        if self.use_core and self._h is not None:
+            _give_back_highs(self.S, self._h)
+            self._h = None
 
     def add(self, alpha: np.ndarray) -> None:
         """Add a newly kept vector (a column ``λ_k``)."""
@@ -157,6 +196,21 @@ class _WitnessLP:
         self.rows.append(np.append(alpha, -1.0))
         if self.use_core:
             self._h.addCol(0.0, 0.0, self._inf, self.S + 1, self._col_index, np.append(alpha, 1.0))
+
+    def add_many(self, alphas: np.ndarray) -> None:
+        """:meth:`add` for every row of ``alphas`` (one HiGHS call)."""
+        n = alphas.shape[0]
+        if n == 0:
+            return
+        ext = np.empty((n, self.S + 1))
+        ext[:, :self.S] = alphas
+        ext[:, self.S] = -1.0
+        self.rows.extend(ext.copy())
+        if self.use_core:
+            ext[:, self.S] = 1.0
+            S1 = self.S + 1
+            self._h.addCols(n, np.zeros(n), np.zeros(n), np.full(n, self._inf), n * S1,
+                            np.arange(0, n * S1, S1, dtype=np.int32), np.tile(self._col_index, n), ext.ravel())
 
     def _breakpoints_2(self) -> Tuple[np.ndarray, np.ndarray]:
         """Two states: candidate optima ``p`` (b = (1−p, p)) and ``V_K(p)`` there.
@@ -213,9 +267,11 @@ class _WitnessLP:
             return float(g[k]), np.array([1.0 - p[k], p[k]])
         if self.use_core:
             h = self._h
-            inf = self._inf
-            for s in range(self.S):
-                h.changeRowBounds(s, float(c[s]), inf)
+            if self._bulk_bounds:
+                h.changeRowsBounds(self.S, self._col_index[:self.S], np.asarray(c, dtype=float), self._infs)
+            else:  # (scipy's bundled copy has no changeRowsBounds)
+                for s in range(self.S):
+                    h.changeRowBounds(s, float(c[s]), self._inf)
             h.run()
             if h.getModelStatus() == self._optimal:
                 delta = float(h.getObjectiveValue())
@@ -285,6 +341,10 @@ def _best_index(alphas: np.ndarray, idx: np.ndarray, b: np.ndarray, tol: float,
     return int(tied[order[-1]]), float(m)
 
 
+#: Sets with ``K·K·S`` up to this use the fused duplicate/dominance step of :func:`prune`.
+_FUSED_LIMIT = 200_000
+_LOWER = np.tril(np.ones((448, 448), dtype=bool), -1)  # _LOWER[i, j]: j < i (K ≤ 447 when fused)
+
 _EYE: dict = {}
 _RANDOM_BELIEFS: dict = {}
 _RANDOM_BELIEFS_SIZE = 0  # floats held by _RANDOM_BELIEFS
@@ -333,11 +393,20 @@ def _unique_rows_first(alphas: np.ndarray, order: np.ndarray) -> np.ndarray:
     return np.sort(order[new_group])
 
 
-def _best_at_corners(alphas: np.ndarray, idx: np.ndarray, tol: float, lexrank: np.ndarray) -> np.ndarray:
-    """:func:`_best_index` at every corner of the simplex at once."""
+def _best_at_corners(alphas: np.ndarray, idx: np.ndarray, tol: float) -> Tuple[np.ndarray, Optional[np.ndarray]]:
+    """:func:`_best_index` at every corner of the simplex at once (``idx``: distinct rows).
+
+    Returns ``(best [S], lexrank)``; ``lexrank`` (ranks of the rows ``idx``, as for
+    :func:`_best_index`) is computed only when some corner has a tie to break, else None.
+    """
     vals = alphas[idx]  # the value at corner s is component s
     tied = vals >= vals.max(axis=0) - tol
-    return idx[np.argmax(np.where(tied, lexrank[idx][:, None], -1), axis=0)]
+    if tied.sum(axis=0).max() == 1:  # no ties: the best is the only one within tol
+        return idx[np.argmax(vals, axis=0)], None
+    # Distinct rows: their relative lexicographic order is the same as among all rows.
+    lexrank = np.full(alphas.shape[0], -1, dtype=np.int64)
+    lexrank[idx[_lex_order(vals)]] = np.arange(idx.size)
+    return idx[np.argmax(np.where(tied, lexrank[idx][:, None], -1), axis=0)], lexrank
 
 
 # ----------------------------------------------------------------- prune
@@ -403,12 +472,19 @@ def prune(
         return kept
 
     # 1. duplicates; 2. (weak) pointwise dominance among what is left.
-    order = _lex_order(A)
-    lexrank = np.empty(K, dtype=np.int64)
-    lexrank[order] = np.arange(K)
-    cand = _unique_rows_first(A, order)
-    if cand.size > 1:
-        cand = cand[~_dominated_within(A[cand])]
+    if K * K * S <= _FUSED_LIMIT:
+        # Small sets (most prunes of a long solve): both steps from one comparison matrix,
+        # ge[i, j] = "row j ≥ row i everywhere"; i goes if some j dominates it strictly
+        # or equals it and comes first. The same rows as the two steps below, in fewer
+        # numpy calls (their fixed cost is what a small prune pays).
+        ge: np.ndarray = np.asarray((A[None, :, :] >= A[:, None, :]).all(axis=2))
+        np.fill_diagonal(ge, False)
+        cand = np.flatnonzero(~(ge & (~ge.T | _LOWER[:K, :K])).any(axis=1))
+    else:
+        order = _lex_order(A)
+        cand = _unique_rows_first(A, order)
+        if cand.size > 1:
+            cand = cand[~_dominated_within(A[cand])]
 
     # 3. witnesses without LPs: simplex corners (pomdp-solve), then given points.
     is_kept = np.zeros(K, dtype=bool)
@@ -421,7 +497,9 @@ def prune(
         witness[i] = b
 
     eye = _eye(S)
-    for s, i in enumerate(_best_at_corners(A, cand, tol, lexrank)):
+    # (lexrank: pomdp-solve's lexicographic tie-break, None until a tie needs it)
+    corner_best, lexrank = _best_at_corners(A, cand, tol)
+    for s, i in enumerate(corner_best):
         if not is_kept[i]:
             keep(int(i), eye[s])
     # Random beliefs too (seeded, so results are reproducible): a vector that
@@ -457,8 +535,7 @@ def prune(
         rem = np.array(remaining)
         rem = rem[~pointwise_dominated(A[rem], KA[:nk], slack=tol)]
         lp = _WitnessLP(S, use_core=use_lp_core)
-        for i in kept_order:
-            lp.add(A[i])
+        lp.add_many(A[kept_order])
         queue = list(rem)
         alive = np.zeros(K, dtype=bool)
         alive[rem] = True
@@ -505,6 +582,7 @@ def prune(
             lp.add(A[j])
             if j != c:
                 queue.append(c)  # c still waits for its own verdict
+        lp.release()  # (after a PruneTimeout the model is simply dropped)
 
     kept = np.array(sorted(kept_order), dtype=np.int64)
     if stats is not None:
