@@ -283,7 +283,8 @@ def plot_study(table: Dict[str, Dict[str, dict]], diffs: Dict[str, Dict[str, dic
         if snr:
             ax.invert_xaxis()   # noisier to the right, as on the word-error-rate axis
         ax.set_ylabel(ylabel)
-        ax.legend(fontsize=8)
+        if ax.get_legend_handles_labels()[0]:      # the paired panel is empty without a baseline
+            ax.legend(fontsize=8)
     axes[0].set_ylim(-0.02, 1.02)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
