@@ -45,19 +45,17 @@ def main() -> int:
         for sc in load_scenarios(path):
             rows = []
             for seed in range(args.seeds):
-                habits = {"doorbell_away": 0, "questions_raised": 0}
+                habits = {"doorbell_away": 0}
 
                 def on_step(world, result, waits, executive, habits=habits):
                     if result.action == "RingDoorBell" and world.robot_at != world.resident_at:
                         habits["doorbell_away"] += 1
-                    for part in [result, *(waits or [])]:
-                        habits["questions_raised"] += sum("wants to know the" in e for e in part.events)
 
                 r = run_episode(sc, controller, domain, seed=sc.seed + 1000 * seed, on_step=on_step)
                 rows.append({"unprompted": r.unprompted_questions,
                              "offers": r.actions.count("ConfirmGuideToPhysio"),
                              "doorbell_away": habits["doorbell_away"], "wrong": r.wrong_actions,
-                             "raised": habits["questions_raised"], "answered": r.questions_answered,
+                             "raised": r.questions_raised, "answered": r.questions_answered,
                              "guided": r.guidance_completed, "needed": r.guidance_needed,
                              "wanted": r.guidance_wanted,
                              "ends_home": _ends_home(r.actions)})
@@ -74,7 +72,7 @@ def main() -> int:
                 "questions_answered_per_episode": sum(x["answered"] for x in rows) / n,
                 "guidance_success": (sum(x["guided"] for x in needed) / len(needed)) if needed else None,
                 "wanted_guidance_success": (sum(x["guided"] for x in rows if x["wanted"])
-                                            / max(1, sum(x["wanted"] for x in rows))) if any(x["wanted"] for x in rows) else None,
+                                            / sum(x["wanted"] for x in rows)) if any(x["wanted"] for x in rows) else None,
             }
     json.dump(out, sys.stdout)
     sys.stdout.write("\n")

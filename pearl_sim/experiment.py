@@ -48,6 +48,8 @@ class EpisodeResult:
     #: She wanted the walk at some point (``guidance_needed`` only says an appointment was due:
     #: a resident may decline it).
     guidance_wanted: bool = False
+    #: Questions she came to have (the world's count), of which ``questions_answered`` were answered.
+    questions_raised: int = 0
 
 
 def episode_executive(controller, domain, scenario: Scenario, model=None):
@@ -100,7 +102,7 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
         wrong_actions=m.wrong_actions, residents_lost=m.residents_lost,
         walking_speed=scenario.resident.walking_speed, actions=list(trace.actions),
         questions_answered=m.questions_answered, reminders_delivered=m.reminders_delivered,
-        guidance_wanted=m.walk_wishes > 0,
+        guidance_wanted=m.walk_wishes > 0, questions_raised=m.questions_raised,
     )
 
 
