@@ -178,7 +178,7 @@ def test_kernel_rejects_wrong_buffers_directly():
         _prune.prune(A, 1e-9, None, 0, lambda *a: None, 0.0, np.empty(2, dtype=np.int64), wit)
     with pytest.raises(ValueError, match="tol must be >= 0"):
         _prune.prune(A, float("nan"), None, 0, lambda *a: None, 0.0, kept, wit)
-    n, lps, _ = _prune.prune(A, 1e-9, None, 0, lambda *a: None, 0.0, kept, wit)
+    n, lps, _, _, _ = _prune.prune(A, 1e-9, None, 0, lambda *a: None, 0.0, kept, wit)
     assert n == 3 and kept[:3].tolist() == [0, 1, 2] and lps == 0
 
 

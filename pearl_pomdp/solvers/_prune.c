@@ -2,7 +2,7 @@
  *
  * Plain CPython C API and the buffer protocol (no numpy headers). Two entry points:
  *   prune(alphas, tol, points (tuple of arrays), random_budget, random_beliefs, deadline, kept_out, witness_out)
- *       -> (n, lps, lp_witnesses)
+ *       -> (n, lps, lp_witnesses, lp_resolves, lp_failures)
  *   WitnessLP(S): add(alpha), solve(c) -> (delta, b): the LP of Lark's filter alone (tests).
  *
  * Legend (the names used below)
@@ -43,7 +43,7 @@
 
 #define PRIMAL_TOL 1e-10 /* basic values >= -PRIMAL_TOL count as feasible (HiGHS was given 1e-10) */
 #define DUAL_TOL 1e-10   /* reduced costs >= -DUAL_TOL count as optimal */
-#define PIVOT_TOL 1e-9   /* smallest |entry| accepted as a pivot */
+#define PIVOT_TOL 1e-7   /* smallest |entry| accepted as a pivot */
 #define REFACTOR_EVERY 50
 #define DEGENERATE_RUN 20 /* degenerate pivots in a row before switching to Bland's rule */
 
@@ -345,7 +345,18 @@ static int cold_start(LP *lp) {
     return 0;
 }
 
-/* delta* for objective c (S values), the witness b (S values, unclipped). 0, or -1: no answer. */
+/* Largest infeasibility of the basic values (t excluded), from a fresh xB = Binv rhs. */
+static double primal_infeasibility(LP *lp) {
+    recompute_xB(lp);
+    double worst = 0.0;
+    for (int p = 0; p < lp->m; p++)
+        if (p != lp->pos[0] && -lp->xB[p] > worst) worst = -lp->xB[p];
+    return worst;
+}
+
+/* delta* for objective c (S values), the witness b (S values, unclipped). 0, or -1: no answer.
+ * Each phase trusts the values it updates pivot by pivot; the end result is checked against a
+ * fresh xB = Binv rhs (and, if need be, a refactored Binv), and re-optimised when it fails. */
 static int lp_solve(LP *lp, const double *c, double *delta, double *b) {
     int S = lp->S, m = lp->m;
     if (lp->ncols == 0) return -1;
@@ -354,13 +365,21 @@ static int lp_solve(LP *lp, const double *c, double *delta, double *b) {
     int ok = -1;
     if (lp->has_basis) {
         recompute_xB(lp);
-        if (dual_simplex(lp) == 0) {
-            lp->nactive = lp->ncols;
-            ok = primal_simplex(lp);
+        for (int round = 0; round < 3; round++) {
+            ok = dual_simplex(lp);
+            if (ok == 0) {
+                lp->nactive = lp->ncols;
+                ok = primal_simplex(lp);
+            }
+            if (ok < 0) break;
+            if (primal_infeasibility(lp) <= PRIMAL_TOL) break;
+            ok = -1; /* drifted: a fresh inverse, then the dual simplex again (the basis is dual feasible) */
+            if (refactor(lp) < 0) break;
         }
     }
     if (ok < 0) { /* no basis yet, or trouble: from a fresh basis */
         if (cold_start(lp) == 0) ok = primal_simplex(lp);
+        if (ok == 0 && primal_infeasibility(lp) > PRIMAL_TOL) ok = -1;
         if (ok < 0) {
             lp->has_basis = 0;
             return -1;
@@ -371,6 +390,26 @@ static int lp_solve(LP *lp, const double *c, double *delta, double *b) {
     *delta = lp->xB[lp->pos[0]];
     for (int s = 0; s < S; s++) b[s] = y[s];
     return 0;
+}
+
+/* An upper bound on delta* from the basis's own lambda (clipped to >= 0, normalised), in plain
+ * arithmetic: max_s c(s) - sum_k lambda_k alpha_k(s). When it is below tol, dropping c is certain. */
+static double lp_certificate(const LP *lp, const double *c) {
+    int S = lp->S;
+    double sum = 0.0;
+    for (int p = 0; p < lp->m; p++)
+        if (lp->head[p] > S && lp->xB[p] > 0.0) sum += lp->xB[p];
+    if (!(sum > 0.0)) return INFINITY;
+    double worst = -INFINITY;
+    for (int s = 0; s < S; s++) {
+        double v = c[s];
+        for (int p = 0; p < lp->m; p++) {
+            int j = lp->head[p];
+            if (j > S && lp->xB[p] > 0.0) v -= lp->xB[p] / sum * lp->col[j - S - 1][s];
+        }
+        if (v > worst) worst = v;
+    }
+    return worst;
 }
 
 /* ------------------------------------------------------------------ one prune */
@@ -440,7 +479,7 @@ typedef struct {
     double deadline;  /* <= 0: none */
     int64_t *kept_out;
     double *wit_out;
-    long lps, lp_witnesses;
+    long lps, lp_witnesses, lp_resolves, lp_failures;
 } PruneJob;
 
 #define NOMEM (-2)
@@ -670,20 +709,37 @@ static int prune_run(PruneJob *J) {
             if (drop) { w.alive[c] = 0; continue; }
             double delta;
             J->lps++;
-            if (lp_solve(&w.lp, cv, &delta, b) < 0 || !(delta >= tol)) { w.alive[c] = 0; continue; }
-            double sum = 0.0;
-            for (int s = 0; s < S; s++) { if (b[s] < 0.0) b[s] = 0.0; sum += b[s]; }
-            if (!(sum > 0.0)) { w.alive[c] = 0; continue; }
-            for (int s = 0; s < S; s++) b[s] /= sum;
-            double vbest;
-            int j = best_alive(J, &w, C, b, &vbest);
-            double vkept = -INFINITY;
-            for (int k = 0; k < nk; k++) {
-                double v = dot(A + (size_t)w.kord[k] * S, b, S);
-                if (v > vkept) vkept = v;
+            int vbest_ok = 0, j = -1;
+            for (int attempt = 0; attempt < 2 && !vbest_ok; attempt++) {
+                if (attempt == 1) { /* the warm basis gave an answer that does not hold: from scratch */
+                    J->lp_resolves++;
+                    w.lp.has_basis = 0;
+                }
+                if (lp_solve(&w.lp, cv, &delta, b) < 0) {
+                    J->lp_failures++;
+                    break;
+                }
+                if (delta < tol) {
+                    double ub = lp_certificate(&w.lp, cv);
+                    if (ub < tol) break;  /* certain: c never wins by tol */
+                    if (attempt == 0) continue;
+                    delta = ub;           /* unresolved: let the witness check below decide */
+                }
+                double sum = 0.0;
+                for (int s = 0; s < S; s++) { if (b[s] < 0.0) b[s] = 0.0; sum += b[s]; }
+                if (!(sum > 0.0)) continue;
+                for (int s = 0; s < S; s++) b[s] /= sum;
+                double vbest;
+                j = best_alive(J, &w, C, b, &vbest);
+                double vkept = -INFINITY;
+                for (int k = 0; k < nk; k++) {
+                    double v = dot(A + (size_t)w.kord[k] * S, b, S);
+                    if (v > vkept) vkept = v;
+                }
+                /* The LP's witness must hold up in plain arithmetic; otherwise no witness. */
+                vbest_ok = vbest - vkept > 0.0;
             }
-            /* The LP's witness must hold up in plain arithmetic; otherwise no witness. */
-            if (!(vbest - vkept > 0.0)) { w.alive[c] = 0; continue; }
+            if (!vbest_ok) { w.alive[c] = 0; continue; }
             J->lp_witnesses++;
             w.alive[j] = 0;
             keep(&w, &nk, j, b, S);
@@ -804,14 +860,14 @@ static PyObject *py_prune(PyObject *Py_UNUSED(self), PyObject *args) {
         goto out;
     }
     PruneJob job = {a.buf, (int)K, (int)S, tol, Pall, (int)nP, (long)budget, random_beliefs, deadline,
-                    k.buf, w.buf, 0, 0};
+                    k.buf, w.buf, 0, 0, 0, 0};
     int n;
     Py_BEGIN_ALLOW_THREADS
     n = prune_run(&job);
     Py_END_ALLOW_THREADS
     if (n == NOMEM) { PyErr_NoMemory(); goto out; }
     if (n == CALLBACK_FAILED) goto out;
-    result = Py_BuildValue("(ill)", n, job.lps, job.lp_witnesses);
+    result = Py_BuildValue("(illll)", n, job.lps, job.lp_witnesses, job.lp_resolves, job.lp_failures);
 out:
     PyBuffer_Release(&a);
     free(Pall);
@@ -916,7 +972,7 @@ static PyTypeObject WitnessLPType = {
 
 static PyMethodDef methods[] = {
     {"prune", py_prune, METH_VARARGS,
-     "prune(alphas, tol, points, random_budget, random_beliefs, deadline, kept_out, witness_out) -> (n, lps, lp_witnesses)\n"
+     "prune(alphas, tol, points, random_budget, random_beliefs, deadline, kept_out, witness_out) -> (n, lps, lp_witnesses, lp_resolves, lp_failures)\n"
      "One prune (see pearl_pomdp.solvers.prune.prune). Writes the n kept indices (ascending) into kept_out\n"
      "and their witnesses into the first n rows of witness_out; n = -1 when deadline (a time.perf_counter()\n"
      "value, <= 0 for none) passed."},

@@ -3,7 +3,7 @@ from typing import Any, Callable, Optional, Tuple
 
 def prune(alphas: Any, tol: float, points: Optional[Any], random_budget: int,
           random_beliefs: Callable[[int, int, int], Any], deadline: float,
-          kept_out: Any, witness_out: Any) -> Tuple[int, int, int]: ...
+          kept_out: Any, witness_out: Any) -> Tuple[int, int, int, int, int]: ...
 
 class WitnessLP:
     iterations: int

@@ -29,7 +29,7 @@ order:
    default 1e-9). The returned value function is Γ' of the last epoch.
 
 What an epoch costs depends on the LP pruning in :mod:`.prune` (pointwise
-dominance first, then one HiGHS LP per remaining vector), so the work goes
+dominance first, then one LP per remaining vector, all in a C kernel), so the work goes
 into needing fewer LPs, never into changing the result:
 
 * witness beliefs seed the prunes: a belief where α wins in A and β wins in

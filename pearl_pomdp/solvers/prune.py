@@ -78,10 +78,13 @@ class PruneStats:
         self.lp_witnesses = 0  #: LPs that found a witness
         self.candidates = 0  #: vectors given to prune in total
         self.kept = 0  #: vectors kept in total
+        self.lp_resolves = 0  #: LPs re-solved from a fresh basis (the warm answer did not hold up)
+        self.lp_failures = 0  #: LPs without an answer (counted as "no witness")
 
     def as_dict(self) -> dict:
         return {"lps": self.lps, "lp_witnesses": self.lp_witnesses,
-                "candidates": self.candidates, "kept": self.kept}
+                "candidates": self.candidates, "kept": self.kept,
+                "lp_resolves": self.lp_resolves, "lp_failures": self.lp_failures}
 
 
 class _WitnessLP:
@@ -212,7 +215,7 @@ def prune(
     kept = np.empty(K, dtype=np.int64)
     witnesses = np.empty((K, S))
     # (the kernel checks finiteness and shapes, and raises ValueError naming what is wrong)
-    n, lps, lp_witnesses = _prune.prune(A, float(tol), P, int(random_budget), _random_beliefs,
+    n, lps, lp_witnesses, lp_resolves, lp_failures = _prune.prune(A, float(tol), P, int(random_budget), _random_beliefs,
                                         0.0 if deadline is None else float(deadline), kept, witnesses)
     if n < 0:
         raise PruneTimeout()
@@ -221,6 +224,8 @@ def prune(
         stats.kept += n
         stats.lps += lps
         stats.lp_witnesses += lp_witnesses
+        stats.lp_resolves += lp_resolves
+        stats.lp_failures += lp_failures
     if return_witnesses:
         return kept[:n], witnesses[:n]
     return kept[:n]
