@@ -55,13 +55,15 @@ typedef struct {
     const double **col;  /* col[k]: alpha_k, S values (its row-S entry is 1) */
     int *head, *pos;     /* [m], [1 + S + cap] */
     double *Binv, *xB, *rhs, *u, *rho, *B; /* [m*m], [m], [m], [m], [m], [m*m] scratch */
+    int *rj;             /* [1 + S + cap] the dual ratio test's candidates (j, alpha_rj, d_j): */
+    double *ra, *rd;     /* computed once, read by both of Harris's passes */
     int has_basis, since_refactor, bland;
     long iterations;     /* pivots, in total */
 } LP;
 
 static void lp_free(LP *lp) {
     free(lp->col); free(lp->head); free(lp->pos); free(lp->Binv); free(lp->xB); free(lp->rhs);
-    free(lp->u); free(lp->rho); free(lp->B);
+    free(lp->u); free(lp->rho); free(lp->B); free(lp->rj); free(lp->ra); free(lp->rd);
     memset(lp, 0, sizeof(*lp));
 }
 
@@ -78,7 +80,11 @@ static int lp_init(LP *lp, int S, int cap) {
     lp->rhs = malloc(sizeof(double) * m);
     lp->u = malloc(sizeof(double) * m);
     lp->rho = malloc(sizeof(double) * m);
-    if (!lp->col || !lp->head || !lp->pos || !lp->Binv || !lp->B || !lp->xB || !lp->rhs || !lp->u || !lp->rho) {
+    lp->rj = malloc(sizeof(int) * (1 + S + lp->cap));
+    lp->ra = malloc(sizeof(double) * (1 + S + lp->cap));
+    lp->rd = malloc(sizeof(double) * (1 + S + lp->cap));
+    if (!lp->col || !lp->head || !lp->pos || !lp->Binv || !lp->B || !lp->xB || !lp->rhs || !lp->u || !lp->rho
+        || !lp->rj || !lp->ra || !lp->rd) {
         lp_free(lp);
         return -1;
     }
@@ -96,6 +102,15 @@ static int lp_add(LP *lp, const double *alpha) {
         if (!pos) return -1;
         lp->pos = pos;
         for (int j = 1 + lp->S + lp->cap; j < 1 + lp->S + cap; j++) pos[j] = -1;
+        int *rj = realloc(lp->rj, sizeof(int) * (1 + lp->S + cap));
+        if (!rj) return -1;
+        lp->rj = rj;
+        double *ra = realloc(lp->ra, sizeof(double) * (1 + lp->S + cap));
+        if (!ra) return -1;
+        lp->ra = ra;
+        double *rd = realloc(lp->rd, sizeof(double) * (1 + lp->S + cap));
+        if (!rd) return -1;
+        lp->rd = rd;
         lp->cap = cap;
     }
     lp->col[lp->ncols++] = alpha;
@@ -297,6 +312,7 @@ static int dual_simplex(LP *lp) {
         const double *rho = lp->Binv + (size_t)leave * m;
         /* Harris: pass 1 bounds the step with relaxed reduced costs, pass 2 takes the largest |alpha|. */
         double theta_max = INFINITY;
+        int nc = 0;
         for (int j = 1; j < nvar; j++) {
             if (lp->pos[j] >= 0) continue;
             double a = col_dot(lp, rho, j);
@@ -304,17 +320,15 @@ static int dual_simplex(LP *lp) {
             double d = reduced_cost(lp, y, j);
             double r = (d + DUAL_TOL) / -a;
             if (r < theta_max) theta_max = r;
+            lp->rj[nc] = j; lp->ra[nc] = a; lp->rd[nc] = d; nc++;
         }
         if (theta_max == INFINITY) return -1; /* primal infeasible: cannot happen for this LP */
         int q = -1;
         double best = 0.0, dq = 0.0;
-        for (int j = 1; j < nvar; j++) {
-            if (lp->pos[j] >= 0) continue;
-            double a = col_dot(lp, rho, j);
-            if (a >= -PIVOT_TOL) continue;
-            double d = reduced_cost(lp, y, j);
+        for (int k = 0; k < nc; k++) {
+            double a = lp->ra[k], d = lp->rd[k];
             if (d / -a > theta_max) continue;
-            if (use_bland ? q < 0 : -a > best) { q = j; best = -a; dq = d; }
+            if (use_bland ? q < 0 : -a > best) { q = lp->rj[k]; best = -a; dq = d; }
         }
         degenerate = dq <= DUAL_TOL ? degenerate + 1 : 0;
         ftran(lp, q);
