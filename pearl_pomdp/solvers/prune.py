@@ -189,7 +189,9 @@ def prune(
         use_lp_core: accepted for compatibility and ignored: there is one LP
             solver now, the kernel's own (it chose between HiGHS models before).
         random_budget: about how many (vector, random belief) values to try
-            before the LPs (0: none). Changes only the work, not the result.
+            before the LPs (0: none). Changes the work, and at most which vectors
+            on the tolerance boundary (winning by < ``tol`` against the final set)
+            are kept: the witnesses they yield seed later prunes.
 
     Returns:
         ``kept`` (int array), or ``(kept, witnesses)`` with ``return_witnesses``.
