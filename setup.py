@@ -6,7 +6,7 @@ The same file serves ``pip install -e .`` (console scripts land in the venv's
 """
 from glob import glob
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
 
 PACKAGE = "pearl_pomdp"
 
@@ -39,7 +39,10 @@ setup(
     name=PACKAGE,
     version=_version(),
     packages=find_packages(exclude=["test", "test.*", "bench"]),
-    package_data={PACKAGE: ["py.typed"]},
+    package_data={PACKAGE: ["py.typed", "solvers/_prune.pyi"]},
+    # The exact solver's pruning kernel (plain CPython C API, no numpy headers needed to build it).
+    ext_modules=[Extension(f"{PACKAGE}.solvers._prune", ["pearl_pomdp/solvers/_prune.c"],
+                           extra_compile_args=["-O2", "-std=c99"])],
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -69,7 +72,7 @@ setup(
                  "mypy>=1.8"]  # .ci/run type-checks the core (mypy.ini)
         + SPEECH,
     },
-    zip_safe=True,
+    zip_safe=False,  # (a compiled extension)
     maintainer="Pearl POMDP developers",
     maintainer_email="pearl-pomdp@example.org",
     description="Hierarchical POMDP behaviour manager for ROS 2 service robots (after Pineau & Thrun).",

@@ -38,6 +38,8 @@ def test_colcon_style_install_layout(tmp_path):
     assert check.stdout.strip() == str(share), check.stderr
     # The installed executable runs from the installed package (one-line error, exit 2).
     site = next((prefix / "lib").glob("python3*/site-packages"))
+    # setup.py build compiled the exact solver's pruning kernel into the install
+    assert list((site / "pearl_pomdp" / "solvers").glob("_prune*.so")), "no compiled _prune in the install"
     run = subprocess.run([str(prefix / "lib" / "pearl_pomdp" / "belief_tracker"), "--ros-args", "-p",
                           "domain:=/no/such.yaml"], capture_output=True, text=True, timeout=60, cwd=tmp_path,
                          env={**os.environ, "PYTHONPATH": str(site), "ROS_LOG_DIR": str(tmp_path),

@@ -104,7 +104,8 @@ def test_many_actions_few_states_and_sparse_storage():
 
 
 def test_time_limit_returns_the_last_complete_epoch():
-    res = solve_incremental_pruning(tiger(0.95), time_limit=0.3)
+    # (0.1 s: the compiled pruning solves all 477 epochs in ~0.6 s, and in under 0.3 s on a quick machine)
+    res = solve_incremental_pruning(tiger(0.95), time_limit=0.1)
     assert not res.converged and res.extra["timed_out"]
     assert 1 <= res.iterations < 477
     assert res.policy.num_vectors == res.vectors_per_epoch[-1]

@@ -29,7 +29,7 @@ order:
    default 1e-9). The returned value function is Γ' of the last epoch.
 
 What an epoch costs depends on the LP pruning in :mod:`.prune` (pointwise
-dominance first, then one HiGHS LP per remaining vector), so the work goes
+dominance first, then one LP per remaining vector, all in a C kernel), so the work goes
 into needing fewer LPs, never into changing the result:
 
 * witness beliefs seed the prunes: a belief where α wins in A and β wins in
@@ -121,15 +121,13 @@ class _Backup:
         # witnesses find most of this epoch's useful vectors without an LP.
         self.memory: dict = {}
 
-    def _seeds(self, key, *fresh: np.ndarray) -> Optional[np.ndarray]:
-        parts = [f for f in fresh if f is not None and len(f)]
-        if key in self.memory:
-            parts.append(self.memory[key])
-        if not parts:
-            return None
-        return parts[0] if len(parts) == 1 else np.vstack(parts)
+    def _seeds(self, key, *fresh: np.ndarray) -> Optional[tuple]:
+        """The seed points of one prune: ``fresh`` witnesses, then last epoch's of the same prune
+        (a tuple of arrays: :func:`.prune` takes them in order, without stacking them)."""
+        mem = self.memory.get(key)
+        return fresh + (mem,) if mem is not None else fresh
 
-    def _prune(self, vectors: np.ndarray, points: Optional[np.ndarray]) -> Tuple[np.ndarray, np.ndarray]:
+    def _prune(self, vectors: np.ndarray, points: Optional[tuple]) -> Tuple[np.ndarray, np.ndarray]:
         """An intermediate prune (step 1 or 2), at the near-exact ``stage_tol``."""
         kept, wit = prune(vectors, tol=self.stage_tol, points=points, return_witnesses=True,
                           stats=self.stats, deadline=self.deadline)
@@ -179,7 +177,7 @@ class _Backup:
         # Step 3: union over actions, prune again.
         union = np.vstack(per_action)
         labels = np.concatenate([np.full(len(v), a, dtype=np.int64) for a, v in enumerate(per_action)])
-        seeds = np.vstack(per_action_witness + ([points] if points is not None and len(points) else []))
+        seeds = tuple(per_action_witness) + ((points,) if points is not None else ())
         kept, wit = prune(union, tol=self.tol, points=seeds, return_witnesses=True,
                           stats=self.stats, deadline=self.deadline)
         return union[kept], labels[kept], wit
