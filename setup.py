@@ -53,7 +53,7 @@ setup(
         (f"share/{PACKAGE}/config/foxglove", glob("config/foxglove/*.json")),
     ],
     python_requires=">=3.10",
-    install_requires=["numpy>=1.24", "scipy>=1.11", "highspy>=1.7", "PyYAML>=6", "tqdm>=4.60"],
+    install_requires=["numpy>=1.24", "scipy>=1.11", "PyYAML>=6", "tqdm>=4.60"],
     extras_require={
         "ros": [
             "ros-jazzy-rclpy",
