@@ -1,20 +1,26 @@
 """Monte-Carlo policy evaluation in the flat model, with common random numbers and control variates.
 
 :func:`~pearl_pomdp.simulate.simulate` estimates a policy's discounted value at ``b0`` by the
-mean of the returns; on Pearl's flat model the returns spread far (std ≈ 12.7 for a mean
-≈ 5: reminders and questions arrive at random times), so a ±1 % interval would need a
-quarter of a million episodes. :func:`evaluate_policies` runs the same episodes (the same
+mean of the returns; on Pearl's flat model the returns spread far (std ≈ 12 for a mean
+≈ 5: reminders and questions arrive at random times), so a ±1 % interval would need about
+a quarter of a million episodes. :func:`evaluate_policies` runs the same episodes (the same
 random draws as :func:`simulate` for the same seed, so its plain returns are identical, and
 every policy sees the same draws: common random numbers) and subtracts **control variates**
 that have mean exactly zero whatever the policy does:
 
 ``D = (V̂(s_0) − b0·V̂) + Σ_t γ^{t+1} (V̂(s_{t+1}) − Σ_{s'} T[a_t][s_t, s'] V̂(s'))``
 
-for each column ``V̂`` of ``controls`` (functions of the true state, e.g. feature
-indicators and the MDP value): each term is a martingale difference of the state process,
-so ``E[D] = 0`` for any policy. The estimate is ``mean(G − D·β)``; ``β`` minimises the
-variance and is fitted by least squares on the *other* half of the episodes (two-fold cross
-fitting), so it is independent of the episodes it corrects and the estimate stays unbiased.
+for each column ``V̂`` of ``controls`` (functions of the true state; by default the MDP
+value): each term is a martingale difference of the state process, so ``E[D] = 0`` for any
+policy. The estimate is ``mean(G − D·β)``; ``β`` minimises the variance and is fitted by
+least squares on the *other* half of the episodes (two-fold cross fitting), so it is
+independent of the episodes it corrects and the estimate stays unbiased.
+
+Measured on Pearl's flat model (hierarchical policy, 1000 episodes): the MDP value alone
+cuts the return's std from 12.0 to 6.2 (3.7× less variance). Richer controls overfit: with
+the 11 feature indicators (:func:`feature_controls`) added, a rare indicator got a
+coefficient of −3079 in one half and the std rose to 8.9; the FIB or lower-bound corner
+values instead of the MDP value gave the same 6.1–6.2.
 
 The returns stop after ``steps`` steps; the part left out lies in
 ``γ^T·[R_min, R_max] / (1 − γ)``, reported as ``truncation`` and added to the interval, so
@@ -175,8 +181,8 @@ def evaluate_policies(model: Pomdp, policies: Mapping[str, object], episodes: in
         steps: steps per episode; default: enough for the truncation to be at most
             ``truncation_tolerance`` (:func:`steps_for_truncation`).
         seed: the random stream (that of :func:`~pearl_pomdp.simulate.simulate`).
-        controls: ``[S, k]`` control functions of the state (default
-            :func:`feature_controls` with the MDP value); ``k = 0`` for none.
+        controls: ``[S, k]`` control functions of the state (default: the MDP value,
+            one column); ``k = 0`` for none.
         truncation_tolerance: see ``steps``.
         progress: a line per policy on stderr.
 
@@ -201,7 +207,7 @@ def evaluate_policies(model: Pomdp, policies: Mapping[str, object], episodes: in
     if controls is None:
         from pearl_pomdp.solvers.mdp import mdp_value_iteration
 
-        controls = feature_controls(model, mdp_value_iteration(model)[0])
+        controls = mdp_value_iteration(model)[0][:, None]
     controls = np.asarray(controls, dtype=float)
     if controls.ndim != 2 or controls.shape[0] != S:
         raise ValueError(f"controls must be [S={S}, k], got shape {controls.shape}")
