@@ -12,7 +12,11 @@ at b0 of
 * ``qmdp``;
 
 and runs the point-based solver for ``--time-limit`` seconds (FIB included) for its lower
-bound LB (the value of a conditional plan: deterministic) and upper bound UB at b0.
+bound LB (the value of a conditional plan: deterministic) and upper bound UB at b0: its own
+trials for all but ``--refine-share`` of the time, then bound updates along the beliefs
+the hierarchical and the QMDP policy visit in their own episodes, and in later rounds the
+flat policy's own (:func:`pearl_pomdp.solvers.refine.refine_along_paths`;
+``--refine-share 0``: trials only).
 
 Every policy value is a lower bound on V*(b0); each estimate's ``lower`` is its 95 % lower
 confidence bound (truncation included). So, with 95 % confidence per estimate,
@@ -62,18 +66,28 @@ def main() -> int:
     ap.add_argument("--lookahead-episodes", type=int, default=60,
                     help="episodes for flat_lookahead1 (0: skip it; slow: ~0.8 s per episode under load)")
     ap.add_argument("--time-limit", type=float, default=120.0, help="seconds of the flat point-based solve (FIB included)")
-    ap.add_argument("--trials", type=int, default=0, help="a trial budget instead of the clock (0: use --time-limit)")
+    ap.add_argument("--refine-share", type=float, default=1 / 3,
+                    help="share of --time-limit spent on updates along the policies' beliefs (0: trials only)")
+    ap.add_argument("--refine-episodes", type=int, default=30, help="episodes per policy whose beliefs are updated")
+    ap.add_argument("--refine-depth", type=int, default=40, help="steps per such episode")
+    ap.add_argument("--refine-rounds", type=int, default=2,
+                    help="rounds of updates; each round after the first adds the episodes of the flat "
+                         "policy as it is then (its lower-bound vectors, greedy)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--progress", action="store_true", help="a line per stage on stderr")
     args = ap.parse_args()
     if args.episodes < 2:
         raise SystemExit("bench/flat_gap.py: --episodes must be at least 2 (a CI needs two episodes)")
+    if not 0.0 <= args.refine_share < 1.0:
+        raise SystemExit(f"bench/flat_gap.py: --refine-share must be in [0, 1), got {args.refine_share}")
 
     from pearl_pomdp.evaluation import LookaheadPolicy, evaluate_policies
     from pearl_pomdp.hierarchy import load_hierarchy, plan
     from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.solvers.base import AlphaVectorPolicy
     from pearl_pomdp.solvers.mdp import solve_fib, solve_qmdp
-    from pearl_pomdp.solvers.point_based import solve_point_based
+    from pearl_pomdp.solvers.point_based import PointBasedSolver
+    from pearl_pomdp.solvers.refine import policy_paths, refine_along_paths
 
     def note(msg: str) -> None:
         if args.progress:
@@ -86,21 +100,44 @@ def main() -> int:
     hp = plan(domain, load_hierarchy(args.hierarchy, domain))
     plan_seconds = time.perf_counter() - t0
     note(f"planned the hierarchy in {plan_seconds:.1f} s")
-    t0 = time.perf_counter()
-    if args.trials > 0:
-        flat = solve_point_based(model, time_limit=None, max_trials=args.trials, seed=args.seed)
-    else:
-        flat = solve_point_based(model, time_limit=args.time_limit, seed=args.seed)
-    solve_seconds = time.perf_counter() - t0
-    lb, ub = float(flat.value_at_start), float(flat.upper_bound)
-    note(f"flat solve: LB {lb:.4f} UB {ub:.4f} after {flat.iterations} trials, {solve_seconds:.1f} s")
     qmdp = solve_qmdp(model)
     fib = solve_fib(model)
+    t0 = time.perf_counter()
+    solver = PointBasedSolver(model, seed=args.seed, fib_time=max(0.5, 0.1 * args.time_limit))
+    setup = time.perf_counter() - t0
+    solver.setup_seconds = setup
+    trial_seconds = max(0.0, (1.0 - args.refine_share) * args.time_limit - setup)
+    solver.run(time_limit=trial_seconds, epsilon=1e-3)
+    after_trials = solver.bounds_at_start()
+    note(f"flat trials: LB {after_trials[0]:.4f} UB {after_trials[1]:.4f} after {solver.trials} trials, "
+         f"{time.perf_counter() - t0:.1f} s")
+    refine = None
+    if args.refine_share > 0:
+        paths = np.vstack([policy_paths(model, p, args.refine_episodes, args.refine_depth, seed=args.seed + 1)
+                           for p in (hp, qmdp.policy)])
+        rounds = max(1, args.refine_rounds)
+        refine = {"backups": 0, "sweeps": 0, "seconds": 0.0, "rounds": []}
+        for k in range(rounds):
+            if k > 0:
+                current = AlphaVectorPolicy(solver.GT[:, : solver.K].T.copy(), solver.gact[: solver.K].copy())
+                paths = np.vstack([paths, policy_paths(model, current, args.refine_episodes, args.refine_depth,
+                                                       seed=args.seed + 1 + k)])
+            left = max(0.0, args.time_limit - (time.perf_counter() - t0))
+            got = refine_along_paths(solver, paths, seconds=left / (rounds - k))
+            for key in ("backups", "sweeps", "seconds"):
+                refine[key] += got[key]
+            refine["rounds"].append({"paths": int(paths.shape[0]), "lb": round(got["lb"], 4), "ub": round(got["ub"], 4)})
+            note(f"updates along the policies' beliefs, round {k + 1}: LB {got['lb']:.4f} UB {got['ub']:.4f}, "
+                 f"{got['backups']} backups in {got['seconds']:.1f} s")
+    solver.prune()
+    solve_seconds = time.perf_counter() - t0
+    lb, ub = solver.bounds_at_start()
+    flat_policy = AlphaVectorPolicy(solver.GT[:, : solver.K].T.copy(), solver.gact[: solver.K].copy())
 
-    policies = {"hierarchical": hp, "flat_pointbased": flat.policy, "qmdp": qmdp.policy}
+    policies = {"hierarchical": hp, "flat_pointbased": flat_policy, "qmdp": qmdp.policy}
     evals = evaluate_policies(model, policies, episodes=args.episodes, seed=args.seed, progress=args.progress)
     if args.lookahead_episodes > 0:
-        evals.update(evaluate_policies(model, {"flat_lookahead1": LookaheadPolicy(flat.policy, model)},
+        evals.update(evaluate_policies(model, {"flat_lookahead1": LookaheadPolicy(flat_policy, model)},
                                        episodes=args.lookahead_episodes, seed=args.seed, progress=args.progress))
 
     h = evals["hierarchical"]
@@ -113,10 +150,14 @@ def main() -> int:
         "observations": model.num_observations, "discount": model.discount, "seed": args.seed,
         "plan_seconds": round(plan_seconds, 3),
         "solver": {"lb": round(lb, 4), "ub": round(ub, 4), "seconds": round(solve_seconds, 2),
-                   "trials": flat.iterations, "time_limit": None if args.trials else args.time_limit,
-                   "trial_budget": args.trials or None, "vectors": flat.extra["vectors"],
-                   "ub_points": flat.extra["ub_points"],
-                   "history": [[round(t, 1), round(a, 4), round(b, 4)] for t, a, b in flat.extra["history"][::10]]},
+                   "setup_seconds": round(setup, 2), "time_limit": args.time_limit, "trials": solver.trials,
+                   "after_trials": {"lb": round(after_trials[0], 4), "ub": round(after_trials[1], 4)},
+                   "refine": None if refine is None else {
+                       "share": round(args.refine_share, 3), "depth": args.refine_depth,
+                       "backups": refine["backups"], "sweeps": refine["sweeps"],
+                       "seconds": round(refine["seconds"], 2), "rounds": refine["rounds"]},
+                   "vectors": solver.K, "ub_points": solver.pt_n, "nodes": len(solver.nodes),
+                   "history": [[round(t, 1), round(a, 4), round(b, 4)] for t, a, b in solver.history[::10]]},
         "initial_upper_bounds": {"fib": round(float(fib.value_at_start), 4), "qmdp": round(float(qmdp.value_at_start), 4)},
         "policies": {name: rounded(r) for name, r in evals.items()},
         "paired_hierarchical_minus": {name: paired(h["values"], evals[name]["values"])
