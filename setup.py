@@ -6,7 +6,7 @@ The same file serves ``pip install -e .`` (console scripts land in the venv's
 """
 from glob import glob
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
 
 PACKAGE = "pearl_pomdp"
 
@@ -35,11 +35,17 @@ NODES = {
 #: speaker additionally needs PortAudio (sounddevice, which pocketsphinx pulls in).
 SPEECH = ["pocketsphinx>=5,<6", "espeakng-loader>=0.2"]
 
+#: The point-based solver's inner loops (one C file, Python's C API only: no numpy headers
+#: needed to build). They are the only implementation of those loops, for every model size.
+KERNELS = [Extension(f"{PACKAGE}.solvers._pointbased_kernel", [f"{PACKAGE}/solvers/_pointbased_kernel.c"],
+                     extra_compile_args=["-O3"])]
+
 setup(
     name=PACKAGE,
     version=_version(),
     packages=find_packages(exclude=["test", "test.*", "bench"]),
-    package_data={PACKAGE: ["py.typed"]},
+    package_data={PACKAGE: ["py.typed", "solvers/*.pyi"]},
+    ext_modules=KERNELS,
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -61,6 +61,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..model.pomdp import Pomdp
+from . import _pointbased_kernel as _kernel
 from .base import AlphaVectorPolicy, SolveResult
 from .mdp import blind_lower_bound, fib_q
 
@@ -152,20 +153,8 @@ def _setting(name: str) -> property:
 
     return property(get, set_, doc=f"``settings.{name}`` (see :class:`PointBasedSettings`).")
 
-#: Sawtooth reads that gather at most this many entries evaluate every pair directly.
-_DIRECT_ENTRIES = 20_000
 #: Probe states per sawtooth point (its most likely ones) for the branch-and-bound bound.
 _PROBES = 4
-#: Support bitsets for the sawtooth's containment test up to this many states ...
-_BITSET_MAX_STATES = 4096
-#: ... and when one test costs at most this many word operations.
-_BITSET_MAX_OPS = 4_000_000
-
-#: Keep T dense (as one S × A·S array) up to this many entries (40 MB).
-_DENSE_ENTRIES = 5_000_000
-#: ... and when at least this fraction of T's entries is non-zero.
-_DENSE_FRACTION = 0.3
-
 
 class _Node:
     """A belief in the search graph, with cached upper bounds at its successors.
@@ -223,25 +212,28 @@ class PointBasedSolver:
         # Observation tie-break order and the Perseus order come from the seed.
         self.z_jitter = self.rng.permutation(self.Z) * 1e-15
         S, A = self.S, self.A
-        # T as one S × (A·S) block: the successors of a belief under all actions are one
-        # gather over the rows of its support. Dense only when T really is dense and small;
-        # otherwise raw CSR arrays (scipy's row slicing costs more than the work here).
-        nnz = 0
-        for t in model.T:
-            nnz += int(t.nnz) if sp.issparse(t) else int(np.count_nonzero(t))
-        dense = not model.is_sparse and A * S * S <= _DENSE_ENTRIES and nnz > _DENSE_FRACTION * A * S * S
-        if dense:
-            self.Tall = np.hstack([np.asarray(t) for t in model.T])
-            self.Tmats = [np.asarray(t) for t in model.T]
-        else:
-            mats = [sp.csr_matrix(t) for t in model.T]
-            Tall = sp.hstack(mats, format="csr")
-            Tall.sum_duplicates()
-            self.t_ptr = Tall.indptr.astype(np.int64)
-            self.t_ind = Tall.indices.astype(np.int64)
-            self.t_dat = Tall.data
-            self.Tmats = mats
-        self.dense = dense
+        # T as one CSR S × (A·S) block: the successors of a belief under all actions are one
+        # gather over the rows of its support (the C kernel's loop, for dense and sparse T alike).
+        mats = [sp.csr_matrix(t) for t in model.T]
+        Tall = sp.hstack(mats, format="csr")
+        Tall.sum_duplicates()
+        Tall.eliminate_zeros()
+        self.t_ptr = np.ascontiguousarray(Tall.indptr, dtype=np.int64)
+        self.t_ind = np.ascontiguousarray(Tall.indices, dtype=np.int64)
+        self.t_dat = np.ascontiguousarray(Tall.data, dtype=float)
+        self.Tmats = mats
+        Tv = sp.vstack(mats, format="csr")          # (A·S) × S: row a·S + s is T[a][s, :]
+        Tv.sum_duplicates()
+        self.tv_ptr = np.ascontiguousarray(Tv.indptr, dtype=np.int64)
+        self.tv_ind = np.ascontiguousarray(Tv.indices, dtype=np.int64)
+        self.tv_dat = np.ascontiguousarray(Tv.data, dtype=float)
+        self._inner = np.zeros(S)
+        # Scratch of the kernels (all zero / -1 between calls) and the successor output buffers.
+        self._bT = np.zeros(A * S)
+        self._U_buf = np.zeros(S, dtype=np.int64)
+        self._C_buf = np.zeros(A * self.Z * min(S, 64))     # grown on demand
+        self._p_buf = np.zeros(A * self.Z)
+        self._live_buf = np.zeros(A * self.Z, dtype=np.int64)
         self.b0 = np.asarray(model.b0, dtype=float)
         self.r_span = float(self.R.max() - self.R.min())
 
@@ -249,20 +241,17 @@ class PointBasedSolver:
         t0 = time.perf_counter()
         Q, self.fib_iterations, self.fib_converged = fib_q(model, epsilon=1e-6, time_limit=fib_time)
         self.fib_seconds = time.perf_counter() - t0
-        self.Qfib = Q                        # [S, A]
-        self.Vc = Q.max(axis=1).copy()       # corner values
+        self.Qfib = np.ascontiguousarray(Q, dtype=float)   # [S, A]
+        self.Vc = np.ascontiguousarray(Q.max(axis=1))      # corner values
         self.pt_cap = 1024
         self.pt_n = 0
         self.pt_start = np.zeros(self.pt_cap, dtype=np.int64)
         self.pt_len = np.zeros(self.pt_cap, dtype=np.int64)
-        self.pt_key = np.zeros(self.pt_cap, dtype=np.int64)   # the point's most likely state k_i
-        self.pt_kval = np.ones(self.pt_cap)                      # b_i(k_i)
         # Probe states (the point's _PROBES most likely) and 1/b_i there: λ_i(c) ≤ min over
-        # probes of c(s)/b_i(s). Support bitsets (small S only) tell whether supp b_i ⊆ supp c.
+        # probes of c(s)/b_i(s).
         self.pt_probe = np.zeros((self.pt_cap, _PROBES), dtype=np.int64)
         self.pt_pinv = np.zeros((self.pt_cap, _PROBES))
-        self.bit_words = (S + 63) // 64 if S <= _BITSET_MAX_STATES else 0
-        self.pt_bits = np.zeros((self.pt_cap, self.bit_words), dtype=np.uint64)
+        self._all_points = np.arange(self.pt_cap, dtype=np.int64)
         self.pt_v = np.zeros(self.pt_cap)
         self.pt_delta = np.zeros(self.pt_cap)
         # Versions: a point's stamp is the version at which its value last fell; a cached
@@ -277,6 +266,10 @@ class PointBasedSolver:
         self.ent_val = np.zeros(self.ent_cap)
         self.pt_index: Dict[bytes, int] = {}
         self.pos = np.full(S, -1, dtype=np.int64)
+        self._no_points = np.zeros(0, dtype=np.int64)
+        self._one_lb = np.zeros(1)
+        self._one_best = np.zeros(1, dtype=np.int64)
+        self._row0 = np.zeros(1, dtype=np.int64)
 
         # ---- lower bound: Γ stored transposed ([S, cap]) so gathering the rows of a support is contiguous.
         blind = blind_lower_bound(model)
@@ -332,14 +325,12 @@ class PointBasedSolver:
         self.gbirth[self.K] = self.backups
         self.K += 1
 
-    def lower(self, idx: np.ndarray, val: np.ndarray) -> float:
-        """Lower bound at the belief ``val`` on states ``idx``."""
-        return float((val @ self.GT[idx, : self.K]).max())
-
-    def _lower_batch(self, U: np.ndarray, C: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-        vals = C @ self.GT[U, : self.K]          # [M, K]
-        best = vals.argmax(axis=1)
-        return vals[np.arange(C.shape[0]), best], best
+    def lower(self, idx: np.ndarray, val: np.ndarray, k0: int = 0) -> float:
+        """Lower bound at the belief ``val`` on states ``idx`` (over the vectors from ``k0`` on)."""
+        lb = self._one_lb
+        _kernel.lower_rows(val, idx.shape[0], idx, self._row0, self.GT, self.cap, k0, self.K, lb, self._one_best,
+                           False)
+        return float(lb[0])
 
     # ------------------------------------------------------------ upper bound
     def _refresh_deltas(self) -> None:
@@ -359,101 +350,33 @@ class PointBasedSolver:
         offs = np.cumsum(lens) - lens
         return np.repeat(self.pt_start[pts] - offs, lens) + np.arange(total)
 
-    def _upper_batch(self, U: np.ndarray, C: np.ndarray, points: Optional[np.ndarray] = None) -> np.ndarray:
-        """Upper bound at each row of ``C`` ([M, |U|], beliefs on states ``U``).
+    def _upper_batch(self, U: np.ndarray, C: np.ndarray, points: Optional[np.ndarray] = None,
+                     rows: Optional[np.ndarray] = None, with_points: bool = True) -> np.ndarray:
+        """Upper bound at the rows ``rows`` of ``C`` ([M, |U|], beliefs on states ``U``; all rows
+        when ``None``).
 
         With ``points`` (indices into the point set): only the sawtooth over those points,
-        ``b·V_c + min_i λ_i δ_i``, without the FIB vectors; the caller takes the minimum
-        with what it read before.
+        ``b·V_c + min(0, min_i λ_i δ_i)``, without the FIB vectors; the caller takes the minimum
+        with what it read before. Without: ``min(max_a b·Q_FIB(:,a), b·V_c + min(0, min_i λ_i δ_i))``
+        over all points (over none with ``with_points=False``: the cheap bound of a first expansion).
 
-        ``λ_i(c) = min_{s ∈ supp b_i} c(s)/b_i(s)`` is at most ``r_i(c) = c(k_i)/b_i(k_i)``
-        at the point's most likely state ``k_i``, and ``δ_i < 0``, so ``r_i δ_i`` is a
-        lower bound of the point's correction from one gathered entry. Only the pairs whose
-        bound beats the best correction found so far are evaluated exactly, the most
-        promising first (branch and bound): the result is the full sawtooth minimum, at a
-        cost that no longer grows with the number of points times their supports."""
-        cols = np.flatnonzero(C.any(axis=0))
-        if cols.size < U.shape[0]:
-            U, C = U[cols], C[:, cols]
-        base = C @ self.Vc[U]
+        ``λ_i(c) = min_{s ∈ supp b_i} c(s)/b_i(s)`` is at most ``c(s)/b_i(s)`` at each of the
+        point's probe states (its most likely ones), and ``δ_i < 0``, so the probes bound the
+        point's correction from below; the kernel reads a point in full only when that bound
+        beats the best correction found so far, and stops reading it as soon as it cannot
+        (branch and bound): the result is the full sawtooth minimum."""
+        C = np.ascontiguousarray(C, dtype=float)
+        if rows is None:
+            rows = np.arange(C.shape[0], dtype=np.int64)
+        out = np.empty(rows.shape[0])
         if points is None:
-            ub = np.minimum(base, (C @ self.Qfib[U]).max(axis=1))
-            points = np.arange(self.pt_n)
+            points, with_fib = self._all_points[: self.pt_n] if with_points else self._no_points, True
         else:
-            ub = base
-        if points.size == 0:
-            return ub
-        M = C.shape[0]
-        pos = self.pos
-        pos[U] = np.arange(U.shape[0])
-        try:
-            kl = pos[self.pt_key[points]]
-            sel = kl >= 0
-            cand = points[sel]
-            outside = None
-            if M * int(self.pt_len[cand].sum()) <= _DIRECT_ENTRIES:
-                # Small models: every pair exactly, in one gather (the bound costs more than it saves).
-                if cand.size == 0:
-                    return ub
-                pm = np.repeat(np.arange(M), cand.size)
-                pi = np.tile(np.arange(cand.size), M)
-                corr = np.minimum(self._pair_corrections(C, pos, cand, pm, pi), 0.0)
-                return np.minimum(ub, base + corr.reshape(M, cand.size).min(axis=1))
-            if self.bit_words:
-                # supp b_i ⊆ supp c: first against the union of the rows' supports (U), then per row.
-                u_bits = self._bits(U[None, :], np.ones((1, U.shape[0]), dtype=bool))[0]
-                cand = cand[~(self.pt_bits[cand] & ~u_bits).any(axis=1)]
-                if cand.size and M > 1 and M * cand.size * self.bit_words <= _BITSET_MAX_OPS:
-                    rows_bits = self._bits(U[None, :].repeat(M, axis=0), C > 0.0)        # [M, W]
-                    outside = (self.pt_bits[cand][None, :, :] & ~rows_bits[:, None, :]).any(axis=2)
-            n_c = cand.size
-            if n_c == 0:
-                return ub
-            delta = self.pt_delta[cand]
-            pl = pos[self.pt_probe[cand]]                                  # [n_c, P]; -1: not in U
-            ratio = np.where(pl[None] >= 0, C[:, np.maximum(pl, 0)], 0.0) * self.pt_pinv[cand][None]
-            bound = ratio.min(axis=2) * delta                              # [M, n_c], <= λ δ
-            if outside is not None:
-                bound[outside] = 0.0                                       # supp b_i ⊄ supp c: λ = 0
-            corr = np.zeros(M)
-            k = 2
-            while True:
-                open_ = bound < corr[:, None]
-                n_open = int(np.count_nonzero(open_))
-                if n_open == 0:
-                    break
-                if n_open <= k * M or k >= n_c:
-                    pm, pi = np.nonzero(open_)
-                else:
-                    part = np.argpartition(bound, k - 1, axis=1)[:, :k]
-                    pm = np.repeat(np.arange(M), k)
-                    pi = part.ravel()
-                    keep = open_[pm, pi]
-                    pm, pi = pm[keep], pi[keep]
-                np.minimum.at(corr, pm, self._pair_corrections(C, pos, cand, pm, pi))
-                bound[pm, pi] = 0.0                                        # evaluated
-                k *= 4
-        finally:
-            pos[U] = -1
-        return np.minimum(ub, base + corr)
-
-    def _pair_corrections(self, C, pos, cand, pm, pi) -> np.ndarray:
-        """``λ_i(c_m) δ_i`` for the pairs (row ``pm``, point ``cand[pi]``); ``pos`` maps states to C's columns."""
-        pts = cand[pi]
-        lens = self.pt_len[pts]
-        ent = self._entries(pts)
-        loc = pos[self.ent_idx[ent]]
-        ratio = C[np.repeat(pm, lens), loc] / self.ent_val[ent]
-        ratio[loc < 0] = 0.0                                               # outside supp(c): λ = 0
-        return np.minimum.reduceat(ratio, np.cumsum(lens) - lens) * self.pt_delta[pts]
-
-    def _bits(self, states: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        """``[M, W]`` uint64 bitsets of the states ``states[m][mask[m]]`` (``states``, ``mask`` ``[M, n]``)."""
-        M = states.shape[0]
-        full = np.zeros((M, self.bit_words * 64), dtype=bool)
-        r, c = np.nonzero(mask)
-        full[r, states[r, c]] = True
-        return np.packbits(full, axis=1, bitorder="little").view(np.uint64)
+            with_fib = False
+        _kernel.sawtooth(C, U.shape[0], U, rows, self.Vc, self.Qfib, self.A, with_fib, self.pos, points,
+                         self.pt_start, self.pt_len, self.pt_probe, self.pt_pinv, _PROBES,
+                         self.ent_idx, self.ent_val, self.pt_delta, out)
+        return out
 
     def upper(self, idx: np.ndarray, val: np.ndarray) -> float:
         """Upper bound at the belief ``val`` on states ``idx``."""
@@ -481,8 +404,8 @@ class PointBasedSolver:
             return  # no better than the corners: the point would never bind
         if self.pt_n == self.pt_cap:
             self.pt_cap *= 2
-            for name in ("pt_start", "pt_len", "pt_key", "pt_kval", "pt_v", "pt_delta", "pt_stamp",
-                         "pt_probe", "pt_pinv", "pt_bits"):
+            self._all_points = np.arange(self.pt_cap, dtype=np.int64)
+            for name in ("pt_start", "pt_len", "pt_v", "pt_delta", "pt_stamp", "pt_probe", "pt_pinv"):
                 old = getattr(self, name)
                 new = np.zeros((self.pt_cap,) + old.shape[1:], dtype=old.dtype)
                 new[: old.shape[0]] = old
@@ -496,12 +419,10 @@ class PointBasedSolver:
         self.ent_idx[self.ent_n: self.ent_n + m] = idx
         self.ent_val[self.ent_n: self.ent_n + m] = val
         top = int(np.argmax(val))
-        self.pt_start[i], self.pt_len[i], self.pt_key[i], self.pt_kval[i] = self.ent_n, m, idx[top], val[top]
+        self.pt_start[i], self.pt_len[i] = self.ent_n, m
         probes = np.argsort(-val, kind="stable")[:_PROBES]
         probes = np.concatenate([probes, np.full(_PROBES - probes.size, top)])
         self.pt_probe[i], self.pt_pinv[i] = idx[probes], 1.0 / val[probes]
-        if self.bit_words:
-            self.pt_bits[i] = self._bits(idx[None, :], np.ones((1, m), dtype=bool))[0]
         self.pt_v[i], self.pt_delta[i] = v, delta
         self.ub_version += 1
         self.pt_stamp[i] = self.ub_version
@@ -516,30 +437,22 @@ class PointBasedSolver:
         Fills ``node.p`` and ``node.Rb`` on the first call."""
         A, Z, S = self.A, self.Z, self.S
         idx, val = node.idx, node.val
-        if self.dense:
-            bT = (val @ self.Tall[idx]).reshape(A, S)
-        else:
-            starts = self.t_ptr[idx]
-            lens = self.t_ptr[idx + 1] - starts
-            offs = np.cumsum(lens) - lens
-            ent = np.repeat(starts - offs, lens) + np.arange(int(lens.sum()))
-            bT = np.bincount(self.t_ind[ent], weights=self.t_dat[ent] * np.repeat(val, lens),
-                             minlength=A * S).reshape(A, S)
-        U = np.flatnonzero((bT > 0.0).any(axis=0))
-        joint = bT[:, U][:, :, None] * self.O[:, U, :]       # [A, |U|, Z]
-        p = joint.sum(axis=1)                               # [A, Z]
-        C = np.transpose(joint, (0, 2, 1)).reshape(A * Z, U.shape[0])
-        pf = p.reshape(-1)
-        live = np.flatnonzero(pf > 1e-300)
-        C[live] /= pf[live, None]
+        while True:
+            nU, nl = _kernel.successors(idx, val, self.t_ptr, self.t_ind, self.t_dat, self.O, A, S, Z, self._bT,
+                                        self.pos, self._U_buf, self._C_buf, self._p_buf, self._live_buf)
+            if nl >= 0:
+                break
+            self._C_buf = np.zeros(2 * A * Z * nU)
+        U = self._U_buf[:nU].copy()
+        C = self._C_buf[: A * Z * nU].reshape(A * Z, nU).copy()
+        live = self._live_buf[:nl].copy()
         if node.p is None:
-            node.p = p
+            node.p = self._p_buf.reshape(A, Z).copy()
             node.Rb = val @ self.R[idx]
             # Cheap bounds first (corners and FIB vectors); the sawtooth is read lazily, only
             # for the successors of actions that become greedy (see _refresh_upper).
-            Cl = C[live]
             ub = np.zeros(A * Z)
-            ub[live] = np.minimum(Cl @ self.Vc[U], (Cl @ self.Qfib[U]).max(axis=1))
+            ub[live] = self._upper_batch(U, C, rows=live, with_points=False)
             node.ub_c = ub.reshape(A, Z)
             node.ub_seen = np.full(A, -1, dtype=np.int64)
             self.expansions += 1
@@ -566,18 +479,19 @@ class PointBasedSolver:
             rows = live[(live >= a * Z) & (live < (a + 1) * Z)]
             if rows.size and seen[a] < self.ub_version:
                 if seen[a] < self.vc_version:
-                    fresh = self._upper_batch(U, C[rows])
+                    fresh = self._upper_batch(U, C, rows=rows)
                 else:
                     pts = np.flatnonzero(self.pt_stamp[: self.pt_n] > seen[a])
-                    fresh = self._upper_batch(U, C[rows], pts)
+                    fresh = self._upper_batch(U, C, pts, rows)
                 ub_c[rows] = np.minimum(ub_c[rows], fresh)
             seen[a] = self.ub_version
 
     def _lower_children(self, U, C, live) -> Tuple[np.ndarray, np.ndarray]:
+        """``(lb, best)`` ``[A, Z]``: the lower bound at each live successor and its maximising vector (0 elsewhere)."""
         AZ = self.A * self.Z
         lb = np.zeros(AZ)
         best = np.zeros(AZ, dtype=np.int64)
-        lb[live], best[live] = self._lower_batch(U, C[live])
+        _kernel.lower_rows(C, U.shape[0], U, live, self.GT, self.cap, 0, self.K, lb, best, False)
         return lb.reshape(self.A, self.Z), best.reshape(self.A, self.Z)
 
     @staticmethod
@@ -605,15 +519,10 @@ class PointBasedSolver:
         else:
             lb, best, cur, K0 = seen
             if self.K > K0:
-                lbf, bestf = lb.reshape(-1).copy(), best.reshape(-1).copy()
-                vals = C[live] @ self.GT[U, K0: self.K]                     # [L, new]
-                j = vals.argmax(axis=1)
-                v = vals[np.arange(live.size), j]
-                better = v > lbf[live]
-                lbf[live[better]] = v[better]
-                bestf[live[better]] = K0 + j[better]
-                lb, best = lbf.reshape(self.A, self.Z), bestf.reshape(self.A, self.Z)
-                cur = max(cur, float((node.val @ self.GT[node.idx, K0: self.K]).max()))
+                lb, best = lb.copy(), best.copy()
+                _kernel.lower_rows(C, U.shape[0], U, live, self.GT, self.cap, K0, self.K, lb.reshape(-1),
+                                   best.reshape(-1), True)
+                cur = max(cur, self.lower(node.idx, node.val, K0))
         Ql = node.Rb + g * (node.p * lb).sum(axis=1)
         a = int(np.argmax(Ql))
         self.backups += 1
@@ -697,8 +606,10 @@ class PointBasedSolver:
 
     def _alpha(self, a: int, best_a: np.ndarray) -> np.ndarray:
         """α = R(:,a) + γ T[a] Σ_o O[a,:,o] ∘ Γ_{best_a[o]}  (the o-sum moves inside T[a])."""
-        inner = (self.O[a] * self.GT[:, best_a]).sum(axis=1)
-        return self.R[:, a] + self.g * np.asarray(self.Tmats[a] @ inner).ravel()
+        out = np.empty(self.S)
+        _kernel.alpha(a, np.ascontiguousarray(best_a, dtype=np.int64), self.R, self.O, self.GT, self.cap,
+                      self.tv_ptr, self.tv_ind, self.tv_dat, self.S, self.A, self.Z, self.g, self._inner, out)
+        return out
 
     def _perseus_start(self) -> bool:
         nodes = [n for n in self.nodes.values() if n.p is not None]

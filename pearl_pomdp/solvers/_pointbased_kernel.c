@@ -1,0 +1,372 @@
+/* The per-belief inner loops of the point-based solver (pearl_pomdp/solvers/point_based.py).
+ *
+ * Why C: on small models a backup is a few dozen tiny numpy calls, and their fixed cost
+ * (~3-5 us each) is what the time goes to (tiger.95: ~300 us per backup, SARSOP ~10 us).
+ * These loops are the only implementation of what they compute (no Python twin to keep in
+ * sync); they are used for every model size.
+ *
+ * No numpy C API: every array is passed through the buffer protocol ("y*" read-only,
+ * "w*" writable), C-contiguous, with the dtypes the docstrings name (float64 = double,
+ * int64 = long long). The Python caller allocates the outputs and owns every buffer.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef long long i64;
+
+#define REL(b) PyBuffer_Release(&(b))
+
+static int cmp_i64(const void *x, const void *y) {
+    i64 a = *(const i64 *)x, b = *(const i64 *)y;
+    return (a > b) - (a < b);
+}
+
+static int check_len(Py_buffer *b, Py_ssize_t itemsize, Py_ssize_t need, const char *name) {
+    if (b->len < need * itemsize) {
+        PyErr_Format(PyExc_ValueError, "_pointbased_kernel: buffer %s holds %zd bytes, needs %zd",
+                     name, b->len, need * itemsize);
+        return 0;
+    }
+    return 1;
+}
+
+/* successors(idx, val, t_ptr, t_ind, t_dat, O, A, S, Z, bT, pos, U_out, C_out, p_out, live_out)
+ *   -> (nU, nlive)
+ *
+ * For the belief val (float64 [n]) on states idx (int64 [n]) and T as one CSR S x (A*S) block
+ * (t_ptr int64 [S+1], t_ind int64, t_dat float64), O float64 [A, S, Z]:
+ *   bT[a*S+s'] = sum_i val[i] T[a][idx[i], s']   (bT: float64 [A*S] scratch, all zero on entry
+ *                                                  and on exit)
+ *   U_out[:nU]  = the states s' with bT[a*S+s'] > 0 for some a, ascending
+ *   C_out       = [A*Z, nU] (row-major, contiguous at the start of the buffer):
+ *                 C[a*Z+o, j] = bT[a*S+U[j]] O[a, U[j], o] / p[a*Z+o]  (unnormalised zeros
+ *                 where p <= 1e-300)
+ *   p_out[a*Z+o] = P(o | b, a);  live_out[:nlive] = the flat indices a*Z+o with p > 1e-300.
+ * nlive = -1 (and only U_out filled) when C_out is shorter than A*Z*nU doubles.
+ * pos: int64 [S] scratch, all -1 on entry and on exit. */
+static PyObject *successors(PyObject *self, PyObject *args) {
+    Py_buffer idx, val, tptr, tind, tdat, O, bT, pos, Uo, Co, po, lo;
+    Py_ssize_t A, S, Z;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*nnnw*w*w*w*w*w*", &idx, &val, &tptr, &tind, &tdat, &O, &A, &S,
+                          &Z, &bT, &pos, &Uo, &Co, &po, &lo))
+        return NULL;
+    PyObject *ret = NULL;
+    Py_ssize_t n = idx.len / (Py_ssize_t)sizeof(i64);
+    if (!check_len(&val, 8, n, "val") || !check_len(&tptr, 8, S + 1, "t_ptr") || !check_len(&O, 8, A * S * Z, "O")
+        || !check_len(&bT, 8, A * S, "bT") || !check_len(&pos, 8, S, "pos") || !check_len(&Uo, 8, S, "U_out")
+        || !check_len(&po, 8, A * Z, "p_out") || !check_len(&lo, 8, A * Z, "live_out"))
+        goto done;
+    {
+        const i64 *ix = (const i64 *)idx.buf, *tp = (const i64 *)tptr.buf, *ti = (const i64 *)tind.buf;
+        const double *v = (const double *)val.buf, *td = (const double *)tdat.buf, *Ob = (const double *)O.buf;
+        double *bt = (double *)bT.buf, *C = (double *)Co.buf, *p = (double *)po.buf;
+        i64 *ps = (i64 *)pos.buf, *U = (i64 *)Uo.buf, *live = (i64 *)lo.buf;
+        Py_ssize_t ntind = tind.len / 8;
+        /* Accumulate b*T[a] for every a; mark the reached states (pos = 1 as a flag first). */
+        for (Py_ssize_t i = 0; i < n; i++) {
+            i64 s = ix[i];
+            if (s < 0 || s >= S) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.successors: state out of range"); goto clean_bt; }
+            double w = v[i];
+            for (i64 e = tp[s]; e < tp[s + 1]; e++) {
+                if (e < 0 || e >= ntind) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.successors: bad t_ptr"); goto clean_bt; }
+                i64 c = ti[e];
+                bt[c] += w * td[e];
+                ps[c % S] = 0;
+            }
+        }
+        Py_ssize_t nU = 0;
+        /* U: the touched states with positive mass under some action, then sorted ascending. */
+        for (Py_ssize_t i = 0; i < n; i++) {
+            i64 s = ix[i];
+            for (i64 e = tp[s]; e < tp[s + 1]; e++) {
+                i64 c = ti[e] % S;
+                if (ps[c] == 0) {
+                    /* reached with positive mass under some action? */
+                    int positive = 0;
+                    for (Py_ssize_t a = 0; a < A; a++)
+                        if (bt[a * S + c] > 0.0) { positive = 1; break; }
+                    ps[c] = positive ? -2 : -3;  /* -2: in U (not yet numbered), -3: touched, not in U */
+                    if (positive) U[nU++] = c;
+                }
+            }
+        }
+        /* sort U ascending (insertion sort for short lists, qsort otherwise) */
+        if (nU < 64) {
+            for (Py_ssize_t i = 1; i < nU; i++) {
+                i64 x = U[i];
+                Py_ssize_t j = i - 1;
+                while (j >= 0 && U[j] > x) { U[j + 1] = U[j]; j--; }
+                U[j + 1] = x;
+            }
+        } else {
+            qsort(U, (size_t)nU, sizeof(i64), cmp_i64);
+        }
+        if (Co.len < A * Z * nU * 8) {  /* the caller grows C_out and calls again */
+            ret = Py_BuildValue("nn", nU, (Py_ssize_t)-1);
+            goto clean_bt;
+        }
+        Py_ssize_t nlive = 0;
+        for (Py_ssize_t a = 0; a < A; a++) {
+            const double *Oa = Ob + a * S * Z;
+            double *rows = C + a * Z * nU;
+            for (Py_ssize_t o = 0; o < Z; o++) p[a * Z + o] = 0.0;
+            for (Py_ssize_t j = 0; j < nU; j++) {
+                double w = bt[a * S + U[j]];
+                const double *Os = Oa + U[j] * Z;
+                for (Py_ssize_t o = 0; o < Z; o++) {
+                    double x = w * Os[o];
+                    rows[o * nU + j] = x;
+                    p[a * Z + o] += x;
+                }
+            }
+            for (Py_ssize_t o = 0; o < Z; o++) {
+                double q = p[a * Z + o];
+                if (q > 1e-300) {
+                    live[nlive++] = a * Z + o;
+                    double inv = 1.0 / q;
+                    double *r = rows + o * nU;
+                    for (Py_ssize_t j = 0; j < nU; j++) r[j] *= inv;
+                }
+            }
+        }
+        ret = Py_BuildValue("nn", nU, nlive);
+    clean_bt:
+        /* restore the scratch: bT zero, pos -1 */
+        for (Py_ssize_t i = 0; i < n; i++) {
+            i64 s = ix[i];
+            if (s < 0 || s >= S) break;
+            for (i64 e = tp[s]; e < tp[s + 1]; e++) {
+                if (e < 0 || e >= ntind) break;
+                i64 c = ti[e];
+                bt[c] = 0.0;
+                ps[c % S] = -1;
+            }
+        }
+    }
+done:
+    REL(idx); REL(val); REL(tptr); REL(tind); REL(tdat); REL(O); REL(bT); REL(pos); REL(Uo); REL(Co); REL(po); REL(lo);
+    return ret;
+}
+
+
+/* lower_rows(C, nU, U, rows, GT, cap, k0, K, lb, best, only_better) -> None
+ *
+ * For each flat row r in rows (int64): v_k = sum_j C[r, j] GT[U[j], k] for k in [k0, K)
+ * (C float64 [*, nU] row-major; GT float64 [S, cap] row-major; zero entries of C skipped),
+ * j* = the first maximiser. only_better = 0: lb[r] = v_{j*}, best[r] = j*; 1: only where
+ * v_{j*} > lb[r] (then both are replaced). lb float64, best int64, indexed by r. */
+static PyObject *lower_rows(PyObject *self, PyObject *args) {
+    Py_buffer Cb, Ub, rb, Gb, lbb, bb;
+    Py_ssize_t nU, cap, k0, K;
+    int only_better;
+    if (!PyArg_ParseTuple(args, "y*ny*y*y*nnnw*w*p", &Cb, &nU, &Ub, &rb, &Gb, &cap, &k0, &K, &lbb, &bb,
+                          &only_better))
+        return NULL;
+    PyObject *ret = NULL;
+    double *acc = NULL;
+    Py_ssize_t nr = rb.len / 8, nk = K - k0;
+    if (nk <= 0 || k0 < 0 || K > cap) {
+        PyErr_SetString(PyExc_ValueError, "_pointbased_kernel.lower_rows: empty or bad vector range");
+        goto done;
+    }
+    if (!check_len(&Ub, 8, nU, "U")) goto done;
+    acc = (double *)malloc(sizeof(double) * (size_t)nk);
+    if (!acc) { PyErr_NoMemory(); goto done; }
+    {
+        const double *C = (const double *)Cb.buf, *G = (const double *)Gb.buf;
+        const i64 *U = (const i64 *)Ub.buf, *rows = (const i64 *)rb.buf;
+        double *lb = (double *)lbb.buf;
+        i64 *best = (i64 *)bb.buf;
+        Py_ssize_t nC = Cb.len / 8, nG = Gb.len / 8, nlb = lbb.len / 8, nb = bb.len / 8;
+        for (Py_ssize_t t = 0; t < nr; t++) {
+            i64 r = rows[t];
+            if (r < 0 || (r + 1) * nU > nC || r >= nlb || r >= nb) {
+                PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.lower_rows: row out of range");
+                goto done;
+            }
+            const double *c = C + r * nU;
+            for (Py_ssize_t k = 0; k < nk; k++) acc[k] = 0.0;
+            for (Py_ssize_t j = 0; j < nU; j++) {
+                double w = c[j];
+                if (w == 0.0) continue;
+                if ((U[j] + 1) * cap > nG) {
+                    PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.lower_rows: state out of range");
+                    goto done;
+                }
+                const double *g = G + U[j] * cap + k0;
+                for (Py_ssize_t k = 0; k < nk; k++) acc[k] += w * g[k];
+            }
+            Py_ssize_t jb = 0;
+            double vb = acc[0];
+            for (Py_ssize_t k = 1; k < nk; k++)
+                if (acc[k] > vb) { vb = acc[k]; jb = k; }
+            if (!only_better || vb > lb[r]) { lb[r] = vb; best[r] = k0 + jb; }
+        }
+    }
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    free(acc);
+    REL(Cb); REL(Ub); REL(rb); REL(Gb); REL(lbb); REL(bb);
+    return ret;
+}
+
+/* sawtooth(C, nU, U, rows, Vc, Qfib, A, with_fib, pos, pts, pt_start, pt_len, pt_probe, pt_pinv, nprobe,
+ *          ent_idx, ent_val, pt_delta, out) -> None
+ *
+ * The upper bound at each belief c = C[rows[t]] (on states U):
+ *   base = c.Vc[U];  corr = min(0, min_{i in pts} lambda_i(c) delta_i),
+ *   lambda_i(c) = min_{s in supp b_i} c(s)/b_i(s)   (0 when a state of supp b_i is outside supp c),
+ *   out[t] = min(base, max_a c.Qfib[U, a], base + corr) with with_fib, else base + corr.
+ * Branch and bound per (row, point): lambda_i <= c(s)/b_i(s) at the point's probe states, so
+ * min over the probes times delta_i (< 0) bounds the correction from below; the point is read in
+ * full only when that bound beats the best correction so far, and the read stops as soon as the
+ * running minimum can no longer beat it. The result is the exact minimum.
+ * pos: int64 [S] scratch, all -1 on entry and on exit. */
+static PyObject *sawtooth(PyObject *self, PyObject *args) {
+    Py_buffer Cb, Ub, rb, Vb, Qb, pb, ptb, stb, lnb, prb, pib, eib, evb, db, ob;
+    Py_ssize_t nU, A, nprobe;
+    int with_fib;
+    if (!PyArg_ParseTuple(args, "y*ny*y*y*y*npw*y*y*y*y*y*ny*y*y*w*", &Cb, &nU, &Ub, &rb, &Vb, &Qb, &A, &with_fib,
+                          &pb, &ptb, &stb, &lnb, &prb, &pib, &nprobe, &eib, &evb, &db, &ob))
+        return NULL;
+    PyObject *ret = NULL;
+    const i64 *U = (const i64 *)Ub.buf, *rows = (const i64 *)rb.buf, *pts = (const i64 *)ptb.buf;
+    const i64 *st = (const i64 *)stb.buf, *ln = (const i64 *)lnb.buf, *pr = (const i64 *)prb.buf;
+    const i64 *ei = (const i64 *)eib.buf;
+    const double *C = (const double *)Cb.buf, *Vc = (const double *)Vb.buf, *Q = (const double *)Qb.buf;
+    const double *pinv = (const double *)pib.buf, *ev = (const double *)evb.buf, *delta = (const double *)db.buf;
+    double *out = (double *)ob.buf;
+    i64 *pos = (i64 *)pb.buf;
+    Py_ssize_t nr = rb.len / 8, np_ = ptb.len / 8, S = pb.len / 8, nC = Cb.len / 8;
+    Py_ssize_t nst = stb.len / 8, nent = eib.len / 8;
+    if (!check_len(&Ub, 8, nU, "U") || !check_len(&ob, 8, nr, "out") || !check_len(&Vb, 8, S, "Vc")
+        || (with_fib && !check_len(&Qb, 8, S * A, "Qfib")))
+        goto done;
+    for (Py_ssize_t j = 0; j < nU; j++) {
+        if (U[j] < 0 || U[j] >= S) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.sawtooth: state out of range"); goto unmark; }
+        pos[U[j]] = j;
+    }
+    for (Py_ssize_t t = 0; t < nr; t++) {
+        i64 r = rows[t];
+        if (r < 0 || (r + 1) * nU > nC) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.sawtooth: row out of range"); goto unmark; }
+        const double *c = C + r * nU;
+        double base = 0.0;
+        for (Py_ssize_t j = 0; j < nU; j++) base += c[j] * Vc[U[j]];
+        double ub = INFINITY;
+        if (with_fib) {
+            double fib = -INFINITY;
+            for (Py_ssize_t a = 0; a < A; a++) {
+                double q = 0.0;
+                for (Py_ssize_t j = 0; j < nU; j++) q += c[j] * Q[U[j] * A + a];
+                if (q > fib) fib = q;
+            }
+            ub = fib < base ? fib : base;
+        }
+        double corr = 0.0;
+        for (Py_ssize_t q = 0; q < np_; q++) {
+            i64 i = pts[q];
+            if (i < 0 || i >= nst) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.sawtooth: point out of range"); goto unmark; }
+            double d = delta[i];
+            if (!(d < 0.0)) continue;
+            /* probe bound: lambda <= min over probes of c(s)/b_i(s) */
+            double lam = INFINITY;
+            for (Py_ssize_t k = 0; k < nprobe; k++) {
+                i64 s = pr[i * nprobe + k];
+                i64 l = pos[s];
+                double x = l >= 0 ? c[l] * pinv[i * nprobe + k] : 0.0;
+                if (x < lam) lam = x;
+            }
+            if (!(lam * d < corr)) continue;
+            i64 e0 = st[i], e1 = st[i] + ln[i];
+            if (e0 < 0 || e1 > nent) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.sawtooth: bad entries"); goto unmark; }
+            for (i64 e = e0; e < e1; e++) {
+                i64 l = pos[ei[e]];
+                double x = l >= 0 ? c[l] / ev[e] : 0.0;
+                if (x < lam) {
+                    lam = x;
+                    if (!(lam * d < corr)) break;
+                }
+            }
+            double v = lam * d;
+            if (v < corr) corr = v;
+        }
+        double st_ub = base + corr;
+        out[t] = (with_fib && ub < st_ub) ? ub : st_ub;
+    }
+    ret = Py_None;
+    Py_INCREF(ret);
+unmark:
+    for (Py_ssize_t j = 0; j < nU; j++)
+        if (U[j] >= 0 && U[j] < S) pos[U[j]] = -1;
+done:
+    REL(Cb); REL(Ub); REL(rb); REL(Vb); REL(Qb); REL(pb); REL(ptb); REL(stb); REL(lnb); REL(prb); REL(pib);
+    REL(eib); REL(evb); REL(db); REL(ob);
+    return ret;
+}
+
+/* alpha(a, best_a, R, O, GT, cap, tv_ptr, tv_ind, tv_dat, S, A, Z, g, inner, out) -> None
+ *
+ * The backed-up vector out[s] = R[s, a] + g * sum_{s'} T[a][s, s'] inner[s'] with
+ * inner[s'] = sum_o O[a, s', o] GT[s', best_a[o]] (R float64 [S, A]; O float64 [A, S, Z];
+ * GT float64 [S, cap]; T as one CSR (A*S) x S block, row a*S+s = T[a][s, :]; inner float64 [S]
+ * scratch; out float64 [S]). */
+static PyObject *alpha(PyObject *self, PyObject *args) {
+    Py_buffer bb, Rb, Ob, Gb, pb, ib, db, innb, ob;
+    Py_ssize_t a, cap, S, A, Z;
+    double g;
+    if (!PyArg_ParseTuple(args, "ny*y*y*y*ny*y*y*nnndw*w*", &a, &bb, &Rb, &Ob, &Gb, &cap, &pb, &ib, &db, &S, &A, &Z,
+                          &g, &innb, &ob))
+        return NULL;
+    PyObject *ret = NULL;
+    if (a < 0 || a >= A || !check_len(&bb, 8, Z, "best_a") || !check_len(&Rb, 8, S * A, "R")
+        || !check_len(&Ob, 8, A * S * Z, "O") || !check_len(&Gb, 8, S * cap, "GT") || !check_len(&pb, 8, A * S + 1, "tv_ptr")
+        || !check_len(&innb, 8, S, "inner") || !check_len(&ob, 8, S, "out"))
+        goto done;
+    {
+        const i64 *best = (const i64 *)bb.buf, *tp = (const i64 *)pb.buf, *ti = (const i64 *)ib.buf;
+        const double *R = (const double *)Rb.buf, *O = (const double *)Ob.buf + a * S * Z, *G = (const double *)Gb.buf;
+        const double *td = (const double *)db.buf;
+        double *inner = (double *)innb.buf, *out = (double *)ob.buf;
+        Py_ssize_t nti = ib.len / 8;
+        for (Py_ssize_t o = 0; o < Z; o++)
+            if (best[o] < 0 || best[o] >= cap) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.alpha: vector out of range"); goto done; }
+        for (Py_ssize_t s = 0; s < S; s++) {
+            const double *Os = O + s * Z, *Gs = G + s * cap;
+            double x = 0.0;
+            for (Py_ssize_t o = 0; o < Z; o++) x += Os[o] * Gs[best[o]];
+            inner[s] = x;
+        }
+        const i64 *row = tp + a * S;
+        for (Py_ssize_t s = 0; s < S; s++) {
+            double x = 0.0;
+            for (i64 e = row[s]; e < row[s + 1]; e++) {
+                if (e < 0 || e >= nti || ti[e] < 0 || ti[e] >= S) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.alpha: bad T"); goto done; }
+                x += td[e] * inner[ti[e]];
+            }
+            out[s] = R[s * A + a] + g * x;
+        }
+    }
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    REL(bb); REL(Rb); REL(Ob); REL(Gb); REL(pb); REL(ib); REL(db); REL(innb); REL(ob);
+    return ret;
+}
+
+static PyMethodDef methods[] = {
+    {"alpha", alpha, METH_VARARGS, "The point-based backup's new vector from the maximising successor vectors."},
+    {"successors", successors, METH_VARARGS, "Successor beliefs of one belief under every (action, observation)."},
+    {"lower_rows", lower_rows, METH_VARARGS, "Lower bound and maximising vector at rows of successor beliefs."},
+    {"sawtooth", sawtooth, METH_VARARGS, "Sawtooth upper bound at rows of successor beliefs (branch and bound)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_pointbased_kernel",
+                                    "Inner loops of pearl_pomdp.solvers.point_based (see the C source).", -1, methods};
+
+PyMODINIT_FUNC PyInit__pointbased_kernel(void) { return PyModule_Create(&module); }
