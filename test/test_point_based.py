@@ -226,7 +226,7 @@ def test_sawtooth_reads_equal_the_definition_full_and_incremental(benchmarks_dir
             checked += 1
         # After a refresh the greedy action's cached successor bounds are at least as tight as
         # a full re-read (they may be tighter: visited successors pass their own bound up).
-        Qu = s._refresh_upper(node, U, C, live, set())
+        Qu = s._refresh_upper(node, U, C, live)
         a = int(np.argmax(Qu))
         ub_c = node.ub_c.reshape(-1)
         greedy = live[(live >= a * s.Z) & (live < (a + 1) * s.Z)]

@@ -215,97 +215,208 @@ done:
     return ret;
 }
 
-/* sawtooth(C, nU, U, rows, Vc, Qfib, A, with_fib, pos, pts, pt_start, pt_len, pt_probe, pt_pinv, nprobe,
- *          ent_idx, ent_val, pt_delta, out) -> None
- *
- * The upper bound at each belief c = C[rows[t]] (on states U):
- *   base = c.Vc[U];  corr = min(0, min_{i in pts} lambda_i(c) delta_i),
- *   lambda_i(c) = min_{s in supp b_i} c(s)/b_i(s)   (0 when a state of supp b_i is outside supp c),
- *   out[t] = min(base, max_a c.Qfib[U, a], base + corr) with with_fib, else base + corr.
- * Branch and bound per (row, point): lambda_i <= c(s)/b_i(s) at the point's probe states, so
- * min over the probes times delta_i (< 0) bounds the correction from below; the point is read in
- * full only when that bound beats the best correction so far, and the read stops as soon as the
- * running minimum can no longer beat it. The result is the exact minimum.
- * pos: int64 [S] scratch, all -1 on entry and on exit. */
-static PyObject *sawtooth(PyObject *self, PyObject *args) {
-    Py_buffer Cb, Ub, rb, Vb, Qb, pb, ptb, stb, lnb, prb, pib, eib, evb, db, ob;
-    Py_ssize_t nU, A, nprobe;
-    int with_fib;
-    if (!PyArg_ParseTuple(args, "y*ny*y*y*y*npw*y*y*y*y*y*ny*y*y*w*", &Cb, &nU, &Ub, &rb, &Vb, &Qb, &A, &with_fib,
-                          &pb, &ptb, &stb, &lnb, &prb, &pib, &nprobe, &eib, &evb, &db, &ob))
-        return NULL;
-    PyObject *ret = NULL;
-    const i64 *U = (const i64 *)Ub.buf, *rows = (const i64 *)rb.buf, *pts = (const i64 *)ptb.buf;
-    const i64 *st = (const i64 *)stb.buf, *ln = (const i64 *)lnb.buf, *pr = (const i64 *)prb.buf;
-    const i64 *ei = (const i64 *)eib.buf;
-    const double *C = (const double *)Cb.buf, *Vc = (const double *)Vb.buf, *Q = (const double *)Qb.buf;
-    const double *pinv = (const double *)pib.buf, *ev = (const double *)evb.buf, *delta = (const double *)db.buf;
-    double *out = (double *)ob.buf;
-    i64 *pos = (i64 *)pb.buf;
-    Py_ssize_t nr = rb.len / 8, np_ = ptb.len / 8, S = pb.len / 8, nC = Cb.len / 8;
-    Py_ssize_t nst = stb.len / 8, nent = eib.len / 8;
-    if (!check_len(&Ub, 8, nU, "U") || !check_len(&ob, 8, nr, "out") || !check_len(&Vb, 8, S, "Vc")
-        || (with_fib && !check_len(&Qb, 8, S * A, "Qfib")))
-        goto done;
+/* The sawtooth point set (see PointBasedSolver._set_upper), read-only. */
+typedef struct {
+    const double *Vc, *Q, *pinv, *ev, *delta;
+    const i64 *st, *ln, *pr, *ei, *stamp;
+    Py_ssize_t A, S, n, nprobe, nent;
+} points_t;
+
+/* The upper bound at the belief c (on states U, scattered by pos: pos[U[j]] = j):
+ *   base = c.Vc[U];  corr = min(0, min_i lambda_i(c) delta_i) over the points i with
+ *   stamp[i] > since,  lambda_i(c) = min_{s in supp b_i} c(s)/b_i(s) (0 when a state of
+ *   supp b_i is outside supp c);  returns min(base, max_a c.Qfib[U, a], base + corr) with
+ *   with_fib, else base + corr.
+ * Branch and bound per point: lambda_i <= c(s)/b_i(s) at the point's probe states, so the
+ * minimum over the probes times delta_i (< 0) bounds the correction from below; the point is
+ * read in full only when that bound beats the best correction so far, and the read stops as
+ * soon as the running minimum cannot beat it any more. The result is the exact minimum.
+ * Returns NAN (with the exception set) on a corrupt point set. */
+static double sawtooth_row(const double *c, Py_ssize_t nU, const i64 *U, const i64 *pos, const points_t *P,
+                           int with_fib, i64 since) {
+    double base = 0.0;
+    for (Py_ssize_t j = 0; j < nU; j++) base += c[j] * P->Vc[U[j]];
+    double ub = INFINITY;
+    if (with_fib) {
+        double fib = -INFINITY;
+        for (Py_ssize_t a = 0; a < P->A; a++) {
+            double q = 0.0;
+            for (Py_ssize_t j = 0; j < nU; j++) q += c[j] * P->Q[U[j] * P->A + a];
+            if (q > fib) fib = q;
+        }
+        ub = fib < base ? fib : base;
+    }
+    double corr = 0.0;
+    for (Py_ssize_t i = 0; i < P->n; i++) {
+        if (P->stamp[i] <= since) continue;
+        double d = P->delta[i];
+        if (!(d < 0.0)) continue;
+        double lam = INFINITY;
+        for (Py_ssize_t k = 0; k < P->nprobe; k++) {
+            i64 s = P->pr[i * P->nprobe + k];
+            if ((unsigned long long)s >= (unsigned long long)P->S) goto corrupt;
+            i64 l = pos[s];
+            double x = l >= 0 ? c[l] * P->pinv[i * P->nprobe + k] : 0.0;
+            if (x < lam) lam = x;
+        }
+        if (!(lam * d < corr)) continue;
+        i64 e0 = P->st[i], e1 = P->st[i] + P->ln[i];
+        if (e0 < 0 || e1 > P->nent) goto corrupt;
+        for (i64 e = e0; e < e1; e++) {
+            if ((unsigned long long)P->ei[e] >= (unsigned long long)P->S) goto corrupt;
+            i64 l = pos[P->ei[e]];
+            double x = l >= 0 ? c[l] / P->ev[e] : 0.0;
+            if (x < lam) {
+                lam = x;
+                if (!(lam * d < corr)) break;
+            }
+        }
+        double v = lam * d;
+        if (v < corr) corr = v;
+    }
+    double st_ub = base + corr;
+    return (with_fib && ub < st_ub) ? ub : st_ub;
+corrupt:
+    PyErr_SetString(PyExc_IndexError, "_pointbased_kernel: corrupt sawtooth point set");
+    return NAN;
+}
+
+/* The buffers of a point set, in the argument order "y*y*y*y*y*y*y*y*y*y*nn":
+ * Vc, Qfib, pt_start, pt_len, pt_probe, pt_pinv, ent_idx, ent_val, pt_delta, pt_stamp, n, nprobe. */
+#define NPB 10
+static int points_from(points_t *P, Py_buffer *b, Py_ssize_t n, Py_ssize_t nprobe, Py_ssize_t A, Py_ssize_t S) {
+    P->Vc = (const double *)b[0].buf; P->Q = (const double *)b[1].buf;
+    P->st = (const i64 *)b[2].buf; P->ln = (const i64 *)b[3].buf; P->pr = (const i64 *)b[4].buf;
+    P->pinv = (const double *)b[5].buf; P->ei = (const i64 *)b[6].buf; P->ev = (const double *)b[7].buf;
+    P->delta = (const double *)b[8].buf; P->stamp = (const i64 *)b[9].buf;
+    P->A = A; P->S = S; P->n = n; P->nprobe = nprobe; P->nent = b[6].len / 8;
+    if (!check_len(&b[0], 8, S, "Vc") || !check_len(&b[1], 8, S * A, "Qfib") || !check_len(&b[2], 8, n, "pt_start")
+        || !check_len(&b[3], 8, n, "pt_len") || !check_len(&b[4], 8, n * nprobe, "pt_probe")
+        || !check_len(&b[5], 8, n * nprobe, "pt_pinv") || !check_len(&b[7], 8, P->nent, "ent_val")
+        || !check_len(&b[8], 8, n, "pt_delta") || !check_len(&b[9], 8, n, "pt_stamp"))
+        return 0;
+    return 1;
+}
+
+static int mark(i64 *pos, const i64 *U, Py_ssize_t nU, Py_ssize_t S) {
     for (Py_ssize_t j = 0; j < nU; j++) {
-        if (U[j] < 0 || U[j] >= S) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.sawtooth: state out of range"); goto unmark; }
+        if (U[j] < 0 || U[j] >= S) {
+            for (Py_ssize_t k = 0; k < j; k++) pos[U[k]] = -1;
+            PyErr_SetString(PyExc_IndexError, "_pointbased_kernel: state out of range");
+            return 0;
+        }
         pos[U[j]] = j;
     }
-    for (Py_ssize_t t = 0; t < nr; t++) {
-        i64 r = rows[t];
-        if (r < 0 || (r + 1) * nU > nC) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.sawtooth: row out of range"); goto unmark; }
-        const double *c = C + r * nU;
-        double base = 0.0;
-        for (Py_ssize_t j = 0; j < nU; j++) base += c[j] * Vc[U[j]];
-        double ub = INFINITY;
-        if (with_fib) {
-            double fib = -INFINITY;
-            for (Py_ssize_t a = 0; a < A; a++) {
-                double q = 0.0;
-                for (Py_ssize_t j = 0; j < nU; j++) q += c[j] * Q[U[j] * A + a];
-                if (q > fib) fib = q;
-            }
-            ub = fib < base ? fib : base;
+    return 1;
+}
+
+static void unmark(i64 *pos, const i64 *U, Py_ssize_t nU) {
+    for (Py_ssize_t j = 0; j < nU; j++) pos[U[j]] = -1;
+}
+
+/* sawtooth(C, nU, U, rows, with_fib, since, pos, <point set>, A, out) -> None
+ * out[t] = sawtooth_row(C[rows[t]]) (C float64 [*, nU] row-major). pos: int64 [S] scratch,
+ * all -1 on entry and on exit. */
+static PyObject *sawtooth(PyObject *self, PyObject *args) {
+    Py_buffer Cb, Ub, rb, pb, ob, b[NPB];
+    Py_ssize_t nU, n, nprobe, A;
+    int with_fib;
+    long long since;
+    if (!PyArg_ParseTuple(args, "y*ny*y*pLw*y*y*y*y*y*y*y*y*y*y*nnnw*", &Cb, &nU, &Ub, &rb, &with_fib, &since, &pb,
+                          &b[0], &b[1], &b[2], &b[3], &b[4], &b[5], &b[6], &b[7], &b[8], &b[9], &n, &nprobe, &A, &ob))
+        return NULL;
+    PyObject *ret = NULL;
+    points_t P;
+    Py_ssize_t S = pb.len / 8, nr = rb.len / 8, nC = Cb.len / 8;
+    const i64 *U = (const i64 *)Ub.buf, *rows = (const i64 *)rb.buf;
+    i64 *pos = (i64 *)pb.buf;
+    if (!points_from(&P, b, n, nprobe, A, S) || !check_len(&Ub, 8, nU, "U") || !check_len(&ob, 8, nr, "out"))
+        goto done;
+    for (Py_ssize_t t = 0; t < nr; t++)
+        if (rows[t] < 0 || (rows[t] + 1) * nU > nC) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.sawtooth: row out of range"); goto done; }
+    if (!mark(pos, U, nU, S)) goto done;
+    {
+        double *out = (double *)ob.buf;
+        for (Py_ssize_t t = 0; t < nr; t++) {
+            out[t] = sawtooth_row((const double *)Cb.buf + rows[t] * nU, nU, U, pos, &P, with_fib, since);
+            if (PyErr_Occurred()) break;
         }
-        double corr = 0.0;
-        for (Py_ssize_t q = 0; q < np_; q++) {
-            i64 i = pts[q];
-            if (i < 0 || i >= nst) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.sawtooth: point out of range"); goto unmark; }
-            double d = delta[i];
-            if (!(d < 0.0)) continue;
-            /* probe bound: lambda <= min over probes of c(s)/b_i(s) */
-            double lam = INFINITY;
-            for (Py_ssize_t k = 0; k < nprobe; k++) {
-                i64 s = pr[i * nprobe + k];
-                i64 l = pos[s];
-                double x = l >= 0 ? c[l] * pinv[i * nprobe + k] : 0.0;
-                if (x < lam) lam = x;
+    }
+    unmark(pos, U, nU);
+    if (!PyErr_Occurred()) { ret = Py_None; Py_INCREF(ret); }
+done:
+    REL(Cb); REL(Ub); REL(rb); REL(pb); REL(ob);
+    for (int k = 0; k < NPB; k++) REL(b[k]);
+    return ret;
+}
+
+/* refresh_upper(Rb, p, ub_c, seen, C, nU, U, live, g, A, Z, ub_version, vc_version, pos, <point set>, Qu) -> a
+ *
+ * PointBasedSolver._refresh_upper: Qu[a] = Rb[a] + g sum_o p[a,o] ub_c[a,o]; while the greedy
+ * action a (first maximiser) has not been refreshed in this call: re-read the sawtooth at its
+ * live successors (all points and the FIB vectors when a corner value fell since seen[a], else
+ * only the points stamped after seen[a]; nothing when seen[a] == ub_version), lower ub_c[a, .]
+ * to it, set seen[a] = ub_version, recompute Qu. Returns the final greedy action; Qu holds the
+ * upper-bound Q-values. Rb, p float64 [A] / [A, Z]; ub_c float64 [A, Z] and seen int64 [A]
+ * updated in place; live int64 ascending. */
+static PyObject *refresh_upper(PyObject *self, PyObject *args) {
+    Py_buffer Rbb, pbb, ubb, sb, Cb, Ub, lb, posb, qb, b[NPB];
+    Py_ssize_t nU, A, Z, n, nprobe;
+    double g;
+    long long ubv, vcv;
+    if (!PyArg_ParseTuple(args, "y*y*w*w*y*ny*y*dnnLLw*y*y*y*y*y*y*y*y*y*y*nnw*", &Rbb, &pbb, &ubb, &sb, &Cb, &nU, &Ub,
+                          &lb, &g, &A, &Z, &ubv, &vcv, &posb, &b[0], &b[1], &b[2], &b[3], &b[4], &b[5], &b[6], &b[7],
+                          &b[8], &b[9], &n, &nprobe, &qb))
+        return NULL;
+    PyObject *ret = NULL;
+    char *done = NULL;
+    points_t P;
+    Py_ssize_t S = posb.len / 8, nl = lb.len / 8, nC = Cb.len / 8;
+    const i64 *U = (const i64 *)Ub.buf, *live = (const i64 *)lb.buf;
+    i64 *pos = (i64 *)posb.buf, *seen = (i64 *)sb.buf;
+    const double *Rb = (const double *)Rbb.buf, *p = (const double *)pbb.buf, *C = (const double *)Cb.buf;
+    double *ub = (double *)ubb.buf, *Qu = (double *)qb.buf;
+    if (!points_from(&P, b, n, nprobe, A, S) || !check_len(&Rbb, 8, A, "Rb") || !check_len(&pbb, 8, A * Z, "p")
+        || !check_len(&ubb, 8, A * Z, "ub_c") || !check_len(&sb, 8, A, "seen") || !check_len(&Ub, 8, nU, "U")
+        || !check_len(&qb, 8, A, "Qu"))
+        goto done;
+    for (Py_ssize_t t = 0; t < nl; t++)
+        if (live[t] < 0 || live[t] >= A * Z || (live[t] + 1) * nU > nC) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.refresh_upper: bad live row"); goto done; }
+    done = (char *)calloc((size_t)A, 1);
+    if (!done) { PyErr_NoMemory(); goto done; }
+    if (!mark(pos, U, nU, S)) goto done;
+    {
+        Py_ssize_t a;
+        for (;;) {
+            a = 0;
+            for (Py_ssize_t x = 0; x < A; x++) {
+                double q = 0.0;
+                for (Py_ssize_t o = 0; o < Z; o++) q += p[x * Z + o] * ub[x * Z + o];
+                Qu[x] = Rb[x] + g * q;
+                if (Qu[x] > Qu[a]) a = x;
             }
-            if (!(lam * d < corr)) continue;
-            i64 e0 = st[i], e1 = st[i] + ln[i];
-            if (e0 < 0 || e1 > nent) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.sawtooth: bad entries"); goto unmark; }
-            for (i64 e = e0; e < e1; e++) {
-                i64 l = pos[ei[e]];
-                double x = l >= 0 ? c[l] / ev[e] : 0.0;
-                if (x < lam) {
-                    lam = x;
-                    if (!(lam * d < corr)) break;
+            if (done[a]) break;
+            done[a] = 1;
+            if (seen[a] < ubv) {
+                int full = seen[a] < vcv;
+                for (Py_ssize_t t = 0; t < nl; t++) {
+                    i64 r = live[t];
+                    if (r < a * Z || r >= (a + 1) * Z) continue;
+                    double v = sawtooth_row(C + r * nU, nU, U, pos, &P, full, full ? -1 : seen[a]);
+                    if (PyErr_Occurred()) goto unmark_;
+                    if (v < ub[r]) ub[r] = v;
                 }
             }
-            double v = lam * d;
-            if (v < corr) corr = v;
+            seen[a] = ubv;
         }
-        double st_ub = base + corr;
-        out[t] = (with_fib && ub < st_ub) ? ub : st_ub;
+        ret = PyLong_FromSsize_t(a);
     }
-    ret = Py_None;
-    Py_INCREF(ret);
-unmark:
-    for (Py_ssize_t j = 0; j < nU; j++)
-        if (U[j] >= 0 && U[j] < S) pos[U[j]] = -1;
+unmark_:
+    unmark(pos, U, nU);
 done:
-    REL(Cb); REL(Ub); REL(rb); REL(Vb); REL(Qb); REL(pb); REL(ptb); REL(stb); REL(lnb); REL(prb); REL(pib);
-    REL(eib); REL(evb); REL(db); REL(ob);
+    free(done);
+    REL(Rbb); REL(pbb); REL(ubb); REL(sb); REL(Cb); REL(Ub); REL(lb); REL(posb); REL(qb);
+    for (int k = 0; k < NPB; k++) REL(b[k]);
     return ret;
 }
 
@@ -363,6 +474,7 @@ static PyMethodDef methods[] = {
     {"successors", successors, METH_VARARGS, "Successor beliefs of one belief under every (action, observation)."},
     {"lower_rows", lower_rows, METH_VARARGS, "Lower bound and maximising vector at rows of successor beliefs."},
     {"sawtooth", sawtooth, METH_VARARGS, "Sawtooth upper bound at rows of successor beliefs (branch and bound)."},
+    {"refresh_upper", refresh_upper, METH_VARARGS, "Re-read the sawtooth at the greedy action's successors until it settles."},
     {NULL, NULL, 0, NULL},
 };
 

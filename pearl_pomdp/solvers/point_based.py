@@ -100,6 +100,11 @@ class PointBasedSettings:
                                        without them)
     ``max_gamma_entries``      K·S     above this many entries of Γ (8 bytes each) pruning
                                        keeps only vectors maximal at visited beliefs
+    ``spread_backoff``         —       a sweep or Perseus round that did not raise LB(b0)
+                                       makes the next one wait 1, 2, 4, … trials, at most
+                                       this many (0: spread after every trial); one that
+                                       did resets the wait (on small models the upper bound
+                                       is what closes the gap, and spreading is wasted work)
     ========================== ======= ==================================================
 
     Raises:
@@ -113,6 +118,7 @@ class PointBasedSettings:
     sweep_max_flops: float = 4e8
     prune_keeps_successors: bool = True
     max_gamma_entries: int = 40_000_000
+    spread_backoff: int = 16
 
     def __post_init__(self) -> None:
         kappa = tuple(float(k) for k in self.trial_kappa) if isinstance(self.trial_kappa, (tuple, list)) else None
@@ -127,6 +133,8 @@ class PointBasedSettings:
             ("sweep_ratio", _finite(self.sweep_ratio) and self.sweep_ratio >= 0, "a number >= 0"),
             ("sweep_max_flops", _finite(self.sweep_max_flops) and self.sweep_max_flops >= 0, "a number >= 0"),
             ("prune_keeps_successors", isinstance(self.prune_keeps_successors, bool), "True or False"),
+            ("spread_backoff", isinstance(self.spread_backoff, int) and not isinstance(self.spread_backoff, bool)
+             and self.spread_backoff >= 0, "an integer >= 0"),
             ("max_gamma_entries", isinstance(self.max_gamma_entries, int)
              and not isinstance(self.max_gamma_entries, bool) and self.max_gamma_entries >= 1, "an integer >= 1"),
         ]
@@ -195,6 +203,7 @@ class PointBasedSolver:
     sweep_max_flops = _setting("sweep_max_flops")
     prune_keeps_successors = _setting("prune_keeps_successors")
     max_gamma_entries = _setting("max_gamma_entries")
+    spread_backoff = _setting("spread_backoff")
 
     def __init__(self, model: Pomdp, seed: int = 0, fib_time: Optional[float] = 5.0,
                  settings: Optional[PointBasedSettings] = None) -> None:
@@ -251,7 +260,6 @@ class PointBasedSolver:
         # probes of c(s)/b_i(s).
         self.pt_probe = np.zeros((self.pt_cap, _PROBES), dtype=np.int64)
         self.pt_pinv = np.zeros((self.pt_cap, _PROBES))
-        self._all_points = np.arange(self.pt_cap, dtype=np.int64)
         self.pt_v = np.zeros(self.pt_cap)
         self.pt_delta = np.zeros(self.pt_cap)
         # Versions: a point's stamp is the version at which its value last fell; a cached
@@ -266,7 +274,6 @@ class PointBasedSolver:
         self.ent_val = np.zeros(self.ent_cap)
         self.pt_index: Dict[bytes, int] = {}
         self.pos = np.full(S, -1, dtype=np.int64)
-        self._no_points = np.zeros(0, dtype=np.int64)
         self._one_lb = np.zeros(1)
         self._one_best = np.zeros(1, dtype=np.int64)
         self._row0 = np.zeros(1, dtype=np.int64)
@@ -303,6 +310,12 @@ class PointBasedSolver:
         self.sweeps = 0
         self.sweep_backups = 0
         self._trial_backups_at_sweep = 0
+        # Spreading back-off (settings.spread_backoff): trials to skip after a spread that did
+        # not lift LB(b0), the trials still to skip, and the Perseus backups forgiven meanwhile.
+        self._spread_skip = 0
+        self._spread_wait = 0
+        self._perseus_forgiven = 0
+        self.spreads_skipped = 0
         self._Tcsr = [sp.csr_matrix(t) for t in model.T]
         self._arm_gain = np.zeros(len(self.trial_kappa))
         self._arm_cost = np.zeros(len(self.trial_kappa))
@@ -350,14 +363,14 @@ class PointBasedSolver:
         offs = np.cumsum(lens) - lens
         return np.repeat(self.pt_start[pts] - offs, lens) + np.arange(total)
 
-    def _upper_batch(self, U: np.ndarray, C: np.ndarray, points: Optional[np.ndarray] = None,
+    def _upper_batch(self, U: np.ndarray, C: np.ndarray, since: Optional[int] = None,
                      rows: Optional[np.ndarray] = None, with_points: bool = True) -> np.ndarray:
         """Upper bound at the rows ``rows`` of ``C`` ([M, |U|], beliefs on states ``U``; all rows
         when ``None``).
 
-        With ``points`` (indices into the point set): only the sawtooth over those points,
-        ``b·V_c + min(0, min_i λ_i δ_i)``, without the FIB vectors; the caller takes the minimum
-        with what it read before. Without: ``min(max_a b·Q_FIB(:,a), b·V_c + min(0, min_i λ_i δ_i))``
+        With ``since`` (a version): only the sawtooth over the points whose value fell after
+        it, ``b·V_c + min(0, min_i λ_i δ_i)``, without the FIB vectors; the caller takes the
+        minimum with what it read before. Without: ``min(max_a b·Q_FIB(:,a), b·V_c + min(0, min_i λ_i δ_i))``
         over all points (over none with ``with_points=False``: the cheap bound of a first expansion).
 
         ``λ_i(c) = min_{s ∈ supp b_i} c(s)/b_i(s)`` is at most ``c(s)/b_i(s)`` at each of the
@@ -369,13 +382,12 @@ class PointBasedSolver:
         if rows is None:
             rows = np.arange(C.shape[0], dtype=np.int64)
         out = np.empty(rows.shape[0])
-        if points is None:
-            points, with_fib = self._all_points[: self.pt_n] if with_points else self._no_points, True
+        if since is None:
+            # every point (none for the cheap bound), and the FIB vectors
+            since, with_fib = (-1 if with_points else self.ub_version + 1), True
         else:
             with_fib = False
-        _kernel.sawtooth(C, U.shape[0], U, rows, self.Vc, self.Qfib, self.A, with_fib, self.pos, points,
-                         self.pt_start, self.pt_len, self.pt_probe, self.pt_pinv, _PROBES,
-                         self.ent_idx, self.ent_val, self.pt_delta, out)
+        _kernel.sawtooth(C, U.shape[0], U, rows, with_fib, since, self.pos, *self._point_set(), self.A, out)
         return out
 
     def upper(self, idx: np.ndarray, val: np.ndarray) -> float:
@@ -404,7 +416,6 @@ class PointBasedSolver:
             return  # no better than the corners: the point would never bind
         if self.pt_n == self.pt_cap:
             self.pt_cap *= 2
-            self._all_points = np.arange(self.pt_cap, dtype=np.int64)
             for name in ("pt_start", "pt_len", "pt_v", "pt_delta", "pt_stamp", "pt_probe", "pt_pinv"):
                 old = getattr(self, name)
                 new = np.zeros((self.pt_cap,) + old.shape[1:], dtype=old.dtype)
@@ -456,35 +467,26 @@ class PointBasedSolver:
             node.ub_c = ub.reshape(A, Z)
             node.ub_seen = np.full(A, -1, dtype=np.int64)
             self.expansions += 1
-            self._refresh_upper(node, U, C, live, set())
+            self._refresh_upper(node, U, C, live)
         return U, C, live
 
-    def _refresh_upper(self, node: _Node, U, C, live, done: set) -> np.ndarray:
+    def _refresh_upper(self, node: _Node, U, C, live) -> np.ndarray:
         """Re-read the sawtooth at the successors of the greedy action until the greedy action
-        is one already refreshed (``done``); returns ``Q^U(b, ·)``.
+        is one already refreshed in this call; returns ``Q^U(b, ·)`` (the kernel's loop).
 
         Incremental: ``node.ub_c[a]`` already holds the minimum over the points as they
         were at version ``node.ub_seen[a]``, so only the points whose value fell since are
-        read (all of them when a corner value fell since, or on the first read). The result
-        is the same as a full re-read."""
-        Z = self.Z
-        ub_c = node.ub_c.reshape(-1)
-        seen = node.ub_seen
-        while True:
-            Qu = node.Rb + self.g * (node.p * node.ub_c).sum(axis=1)
-            a = int(np.argmax(Qu))
-            if a in done:
-                return Qu
-            done.add(a)
-            rows = live[(live >= a * Z) & (live < (a + 1) * Z)]
-            if rows.size and seen[a] < self.ub_version:
-                if seen[a] < self.vc_version:
-                    fresh = self._upper_batch(U, C, rows=rows)
-                else:
-                    pts = np.flatnonzero(self.pt_stamp[: self.pt_n] > seen[a])
-                    fresh = self._upper_batch(U, C, pts, rows)
-                ub_c[rows] = np.minimum(ub_c[rows], fresh)
-            seen[a] = self.ub_version
+        read (all of them, and the FIB vectors, when a corner value fell since, or on the
+        first read). The result is the same as a full re-read."""
+        Qu = np.empty(self.A)
+        _kernel.refresh_upper(node.Rb, node.p, node.ub_c, node.ub_seen, C, U.shape[0], U, live, self.g, self.A,
+                              self.Z, self.ub_version, self.vc_version, self.pos, *self._point_set(), Qu)
+        return Qu
+
+    def _point_set(self) -> tuple:
+        """The sawtooth point set as the kernel reads it (see ``_pointbased_kernel.c``)."""
+        return (self.Vc, self.Qfib, self.pt_start, self.pt_len, self.pt_probe, self.pt_pinv, self.ent_idx,
+                self.ent_val, self.pt_delta, self.pt_stamp, self.pt_n, _PROBES)
 
     def _lower_children(self, U, C, live) -> Tuple[np.ndarray, np.ndarray]:
         """``(lb, best)`` ``[A, Z]``: the lower bound at each live successor and its maximising vector (0 elsewhere)."""
@@ -538,7 +540,7 @@ class PointBasedSolver:
         for ao, child in node.children.items():
             if child.ub < ub_c[ao]:
                 ub_c[ao] = child.ub
-        Qu = self._refresh_upper(node, U, C, live, set())
+        Qu = self._refresh_upper(node, U, C, live)
         u = float(Qu.max())
         if u < node.ub:
             node.ub = u
@@ -846,19 +848,35 @@ class PointBasedSolver:
             # The lower bound is what the policy is worth, so arms are rated by LB gains.
             self._arm_gain[arm] = 0.95 * self._arm_gain[arm] + max(lo - lo_before, 0.0)
             self._arm_cost[arm] = 0.95 * self._arm_cost[arm] + (self.backups - b_before)
-            if not converged:
+            if not converged and self._spread_wait > 0:
+                # Backing off: this trial's share of Perseus backups is forgiven, not owed.
+                self._spread_wait -= 1
+                self.spreads_skipped += 1
+                self._perseus_forgiven = int(self.perseus_share * self.backups) - self.perseus_backups
+            elif not converged:
+                lo_spread = lo
                 swept = False
                 if self.sweep_ratio > 0 and \
                         self.backups - self._trial_backups_at_sweep >= self.sweep_ratio * len(self.nodes):
                     swept = self.sweep()
                     if swept:
                         self._trial_backups_at_sweep = self.backups
+                spread = swept
                 if not swept and self.perseus_share > 0:
-                    owed = int(self.perseus_share * self.backups) - self.perseus_backups
+                    owed = int(self.perseus_share * self.backups) - self.perseus_backups - self._perseus_forgiven
                     if owed > 0:
                         self.perseus(owed)
+                        spread = True
                 lo, hi = self.bounds_at_start()
                 converged = hi - lo <= epsilon
+                if spread and self.spread_backoff:
+                    # A spread that did not lift LB(b0) doubles the number of trials the next
+                    # one waits (up to spread_backoff); one that did resets it.
+                    if lo > lo_spread + 1e-12 * max(1.0, abs(lo_spread)):
+                        self._spread_skip = 0
+                    else:
+                        self._spread_skip = min(self.spread_backoff, max(1, 2 * self._spread_skip))
+                        self._spread_wait = self._spread_skip
             if now - last_hist >= 0.5 or converged:
                 history.append((round(offset + self._clock() - t0, 3), lo, hi))
                 last_hist = now
@@ -880,7 +898,7 @@ class PointBasedSolver:
                 "gap": hi - lo, "backups": self.backups, "vectors": self.K, "ub_points": self.pt_n,
                 "beliefs": len(self.beliefs), "pruned": self.pruned, "fib_iterations": self.fib_iterations, "nodes": len(self.nodes),
                 "fib_seconds": self.fib_seconds, "perseus_backups": self.perseus_backups,
-                "sweeps": self.sweeps, "sweep_backups": self.sweep_backups,
+                "sweeps": self.sweeps, "sweep_backups": self.sweep_backups, "spreads_skipped": self.spreads_skipped,
                 "history": list(history),
             },
         )
