@@ -316,7 +316,6 @@ class PointBasedSolver:
         self._spread_wait = 0
         self._perseus_forgiven = 0
         self.spreads_skipped = 0
-        self._Tcsr = [sp.csr_matrix(t) for t in model.T]
         self._arm_gain = np.zeros(len(self.trial_kappa))
         self._arm_cost = np.zeros(len(self.trial_kappa))
         #: (seconds since the solver was built, LB(b0), UB(b0)) about every 0.5 s.
@@ -580,7 +579,7 @@ class PointBasedSolver:
             nodes = [n for n in self.nodes.values() if n.p is not None]
             got = self._batched_children(nodes)
             if got is not None:
-                _, _, best, live = got
+                _, best, live = got
                 used[best[live]] = True
             keep = np.flatnonzero(used)
         removed = K - keep.size
@@ -630,76 +629,45 @@ class PointBasedSolver:
         self._p_todo = np.ones(len(nodes), dtype=bool)
         return True
 
-    def _add_alphas(self, alphas: np.ndarray, action: int) -> None:
-        n = alphas.shape[0]
-        while self.K + n > self.cap:
-            self.cap *= 2
-            GT = np.zeros((self.S, self.cap))
-            GT[:, : self.K] = self.GT[:, : self.K]
-            self.GT = GT
-            self.gact = np.resize(self.gact, self.cap)
-            self.gbirth = np.resize(self.gbirth, self.cap)
-        self.GT[:, self.K: self.K + n] = alphas.T
-        self.gact[self.K: self.K + n] = action
-        self.gbirth[self.K: self.K + n] = self.backups
-        self.K += n
-
     def _batched_children(self, nodes):
-        """For beliefs ``nodes``: ``(B [N,S] CSR, Ql [N,A], best [N,A,Z], live [N,A,Z])`` — the
-        one-step LB lookahead and the maximising vector at every successor, as sparse products
-        (or ``None`` when those products would exceed ``sweep_max_flops``)."""
-        N, K, A, Z, S, g = len(nodes), self.K, self.A, self.Z, self.S, self.g
+        """For beliefs ``nodes``: ``(Ql [N,A], best [N,A,Z], live [N,A,Z])`` — the one-step LB
+        lookahead and the maximising vector at every successor, against Γ as it is (or ``None``
+        when that would cost more than ``sweep_max_flops`` multiply-adds)."""
+        N, K, A, Z, g = len(nodes), self.K, self.A, self.Z, self.g
         nnz = sum(n.idx.shape[0] for n in nodes)
         if N == 0 or nnz * A * K * 4 > self.sweep_max_flops:
             return None
-        rows = np.repeat(np.arange(N), [n.idx.shape[0] for n in nodes])
-        B = sp.csr_matrix((np.concatenate([n.val for n in nodes]), (rows, np.concatenate([n.idx for n in nodes]))),
-                          shape=(N, S))
-        G = self.GT[:, :K]
-        Ql = np.stack([n.Rb for n in nodes])                      # [N, A]
-        best = np.zeros((N, A, Z), dtype=np.int64)
-        live = np.zeros((N, A, Z), dtype=bool)
-        for a in range(A):
-            Pa = (B @ self._Tcsr[a]).tocsr()                        # b·T[a], [N, S]
-            Pa.sum_duplicates()
-            for o in range(Z):
-                w = self.O[a, Pa.indices, o]
-                if not w.any():
-                    continue
-                Cao = sp.csr_matrix((Pa.data * w, Pa.indices, Pa.indptr), shape=(N, S))
-                V = np.asarray(Cao @ G)                               # [N, K], P(o|b,a)·Γ·b^{a,o}
-                j = V.argmax(axis=1)
-                best[:, a, o] = j
-                live[:, a, o] = np.diff(Cao.indptr) > 0
-                Ql[:, a] += g * V[np.arange(N), j]
-        return B, Ql, best, live
+        Ql = np.empty((N, A))
+        best = np.empty((N, A, Z), dtype=np.int64)
+        live = np.zeros((N, A * Z), dtype=bool)
+        for i, node in enumerate(nodes):
+            U, C, lv = self._successors(node)
+            lb, best[i] = self._lower_children(U, C, lv)
+            Ql[i] = node.Rb + g * (node.p * lb).sum(axis=1)
+            live[i, lv] = True
+        return Ql, best, live.reshape(N, A, Z)
 
     def sweep(self) -> bool:
-        """One synchronous point-based backup of every expanded belief, batched as sparse products
-        (PBVI, Pineau et al. 2003); adds the new vectors that improve their own belief.
-        Returns False (and does nothing) when the products would be too large."""
+        """One synchronous point-based backup of every expanded belief (PBVI, Pineau et al. 2003):
+        every backup reads Γ as it was before the sweep; adds the new vectors that improve their
+        own belief. Returns False (and does nothing) when the products would be too large."""
         nodes = [n for n in self.nodes.values() if n.p is not None]
         if len(nodes) < 2:
             return False
         got = self._batched_children(nodes)
         if got is None:
             return False
-        B, Ql, best, _ = got
-        N, A, Z, S, g = len(nodes), self.A, self.Z, self.S, self.g
-        cur = np.asarray(B @ self.GT[:, : self.K]).max(axis=1)
+        Ql, best, _ = got
+        N = len(nodes)
         an = Ql.argmax(axis=1)
         qn = Ql[np.arange(N), an]
-        improve = qn > cur + 1e-10 * np.maximum(1.0, np.abs(cur))
-        chunk = max(1, int(2_000_000 // S))
-        for a in range(A):
-            sel = np.flatnonzero(improve & (an == a))
-            for c0 in range(0, sel.size, chunk):
-                part = sel[c0: c0 + chunk]
-                inner = np.zeros((part.size, S))
-                for o in range(Z):
-                    inner += self.GT[:, best[part, a, o]].T * self.O[a][:, o]
-                alphas = self.R[:, a][None, :] + g * np.asarray(self._Tcsr[a] @ inner.T).T
-                self._add_alphas(alphas, a)
+        new = []
+        for i, node in enumerate(nodes):
+            cur = self.lower(node.idx, node.val)
+            if qn[i] > cur + 1e-10 * max(1.0, abs(cur)):
+                new.append((self._alpha(int(an[i]), best[i, an[i]]), int(an[i])))
+        for alpha, a in new:
+            self._add_alpha(alpha, a)
         self.sweeps += 1
         self.sweep_backups += N
         return True
