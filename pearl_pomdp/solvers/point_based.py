@@ -297,6 +297,7 @@ class PointBasedSolver:
         self.prunes = 0
         self.pruned = 0
         self._last_prune_K = self.K
+        self._backups_at_prune = 0
         self.seconds = 0.0
         # The knobs are in self.settings (PointBasedSettings, with their legend). Shallow
         # trials (large κ) refine the bounds near b0 (hallway2 gains most), deep ones carry
@@ -591,6 +592,7 @@ class PointBasedSolver:
         self.prunes += 1
         self.pruned += removed
         self._last_prune_K = self.K
+        self._backups_at_prune = self.backups
         return removed
 
     # ------------------------------------------------------------ search
@@ -808,7 +810,10 @@ class PointBasedSolver:
             self.trial(eps_t)
             if self.K * self.S > self.max_gamma_entries:
                 self.prune(by_usage=True)
-            elif self.K > 2 * self._last_prune_K + 50:
+            elif self.K > 2 * self._last_prune_K + 50 and \
+                    self.backups - self._backups_at_prune >= min(len(self.nodes), 4 * self._last_prune_K + 200):
+                # A prune reads Γ at every node and its successors, the work of one backup per
+                # node: amortised over at least that many trial backups (while Γ stays small).
                 self.prune()
             lo, hi = self.bounds_at_start()
             converged = hi - lo <= epsilon
