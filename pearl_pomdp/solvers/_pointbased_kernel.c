@@ -469,7 +469,63 @@ done:
     return ret;
 }
 
+/* qvalue(Rb, p, X, g, A, Z) -> (a, q)
+ * Q[a] = Rb[a] + g sum_o p[a,o] X[a,o] (Rb float64 [A], p and X float64 [A, Z]); returns the first
+ * maximiser and its value. */
+static PyObject *qvalue(PyObject *self, PyObject *args) {
+    Py_buffer Rbb, pbb, xb;
+    double g;
+    Py_ssize_t A, Z;
+    if (!PyArg_ParseTuple(args, "y*y*y*dnn", &Rbb, &pbb, &xb, &g, &A, &Z)) return NULL;
+    PyObject *ret = NULL;
+    if (A >= 1 && check_len(&Rbb, 8, A, "Rb") && check_len(&pbb, 8, A * Z, "p") && check_len(&xb, 8, A * Z, "X")) {
+        const double *Rb = (const double *)Rbb.buf, *p = (const double *)pbb.buf, *X = (const double *)xb.buf;
+        Py_ssize_t best = 0;
+        double qb = -INFINITY;
+        for (Py_ssize_t a = 0; a < A; a++) {
+            double q = 0.0;
+            for (Py_ssize_t o = 0; o < Z; o++) q += p[a * Z + o] * X[a * Z + o];
+            q = Rb[a] + g * q;
+            if (a == 0 || q > qb) { qb = q; best = a; }
+        }
+        ret = Py_BuildValue("nd", best, qb);
+    } else if (!PyErr_Occurred()) {
+        PyErr_SetString(PyExc_ValueError, "_pointbased_kernel.qvalue: no actions");
+    }
+    REL(Rbb); REL(pbb); REL(xb);
+    return ret;
+}
+
+/* excess_obs(p, ub_c, lb, jitter, a, thr, Z) -> o
+ * The first maximiser over o of p[a,o] (ub_c[a,o] - lb[a,o] - thr) + jitter[o] (the trial's
+ * weighted excess uncertainty, ties broken by the seeded jitter). */
+static PyObject *excess_obs(PyObject *self, PyObject *args) {
+    Py_buffer pbb, ub, lbb, jb;
+    Py_ssize_t a, Z;
+    double thr;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*ndn", &pbb, &ub, &lbb, &jb, &a, &thr, &Z)) return NULL;
+    PyObject *ret = NULL;
+    if (Z >= 1 && a >= 0 && check_len(&pbb, 8, (a + 1) * Z, "p") && check_len(&ub, 8, (a + 1) * Z, "ub_c")
+        && check_len(&lbb, 8, (a + 1) * Z, "lb") && check_len(&jb, 8, Z, "jitter")) {
+        const double *p = (const double *)pbb.buf + a * Z, *u = (const double *)ub.buf + a * Z;
+        const double *l = (const double *)lbb.buf + a * Z, *j = (const double *)jb.buf;
+        Py_ssize_t best = 0;
+        double sb = -INFINITY;
+        for (Py_ssize_t o = 0; o < Z; o++) {
+            double x = p[o] * (u[o] - l[o] - thr) + j[o];
+            if (o == 0 || x > sb) { sb = x; best = o; }
+        }
+        ret = PyLong_FromSsize_t(best);
+    } else if (!PyErr_Occurred()) {
+        PyErr_SetString(PyExc_ValueError, "_pointbased_kernel.excess_obs: bad action or no observations");
+    }
+    REL(pbb); REL(ub); REL(lbb); REL(jb);
+    return ret;
+}
+
 static PyMethodDef methods[] = {
+    {"qvalue", qvalue, METH_VARARGS, "Greedy action and value of Rb + g sum_o p X."},
+    {"excess_obs", excess_obs, METH_VARARGS, "The trial's observation: largest weighted excess uncertainty."},
     {"alpha", alpha, METH_VARARGS, "The point-based backup's new vector from the maximising successor vectors."},
     {"successors", successors, METH_VARARGS, "Successor beliefs of one belief under every (action, observation)."},
     {"lower_rows", lower_rows, METH_VARARGS, "Lower bound and maximising vector at rows of successor beliefs."},

@@ -525,10 +525,9 @@ class PointBasedSolver:
                 _kernel.lower_rows(C, U.shape[0], U, live, self.GT, self.cap, K0, self.K, lb.reshape(-1),
                                    best.reshape(-1), True)
                 cur = max(cur, self.lower(node.idx, node.val, K0))
-        Ql = node.Rb + g * (node.p * lb).sum(axis=1)
-        a = int(np.argmax(Ql))
+        a, ql = _kernel.qvalue(node.Rb, node.p, lb, g, self.A, self.Z)
         self.backups += 1
-        if Ql[a] > cur + 1e-10 * max(1.0, abs(cur)):
+        if ql > cur + 1e-10 * max(1.0, abs(cur)):
             alpha = self._alpha(a, best[a])
             self._add_alpha(alpha, a)
             cur = max(cur, float(node.val @ alpha[node.idx]))
@@ -735,10 +734,11 @@ class PointBasedSolver:
         ``P(o|b,a) = 0``); ``live`` the flat indices of the possible ``(a, o)``; ``lb``,
         ``best`` ``[A, Z]`` the lower bound at each successor and the index of its maximising
         α-vector; ``seen`` those plus ``LB(b)`` and ``|Γ|`` (``_update`` then reads only
-        vectors added since); ``Qu`` / ``Ql`` ``[A]`` the upper / lower bound Q-values
-        ``R_b(a) + γ Σ_o P(o|b,a) bound(b^{a,o})``; ``u``, ``l`` the bounds at ``b`` (``l`` a
-        one-step look-ahead of the lower bound); ``thr`` the successor's target width
-        ``eps_t γ^{-(d+1)}``; ``score`` ``[Z]`` the weighted excess uncertainty.
+        vectors added since); ``a``, ``qu`` the action with the largest upper-bound Q-value
+        ``R_b(a) + γ Σ_o P(o|b,a) UB(b^{a,o})`` and that value (``_kernel.qvalue``); ``u``,
+        ``l`` the bounds at ``b`` (``l`` the largest lower-bound Q-value: a one-step look-ahead
+        of the lower bound); ``thr`` the successor's target width ``eps_t γ^{-(d+1)}``; ``o``
+        the observation with the largest weighted excess uncertainty (``_kernel.excess_obs``).
         """
         g, Z = self.g, self.Z
         node = self.root
@@ -749,18 +749,15 @@ class PointBasedSolver:
             U, C, live = self._successors(node)
             lb, best = self._lower_children(U, C, live)
             seen = (lb, best, self.lower(node.idx, node.val), self.K)
-            Qu = node.Rb + g * (node.p * node.ub_c).sum(axis=1)
-            Ql = node.Rb + g * (node.p * lb).sum(axis=1)
-            u = min(node.ub, float(Qu.max()))
+            a, qu = _kernel.qvalue(node.Rb, node.p, node.ub_c, g, self.A, Z)       # greedy on Q^U
+            u = min(node.ub, qu)
             # One-step lookahead of the LB (≥ LB(b) for the uniformly improvable bounds kept here).
-            l = float(Ql.max())
+            l = _kernel.qvalue(node.Rb, node.p, lb, g, self.A, Z)[1]
             if u - l <= eps_t * g ** (-d) or d >= max_d:
                 path.append((node, -1, U, C, live, seen))
                 break
-            a = int(np.argmax(Qu))
             thr = eps_t * g ** (-(d + 1))
-            score = node.p[a] * (node.ub_c[a] - lb[a] - thr) + self.z_jitter
-            o = int(np.argmax(score))
+            o = _kernel.excess_obs(node.p, node.ub_c, lb, self.z_jitter, a, thr, Z)       # argmax of score
             if node.p[a, o] <= 0.0:
                 path.append((node, -1, U, C, live, seen))
                 break
