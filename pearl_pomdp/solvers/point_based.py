@@ -499,7 +499,8 @@ class PointBasedSolver:
                               self.Z, self.ub_version, self.vc_version, self.pos, *self._point_set(), Qu)
         return Qu
 
-    def _point_set(self) -> tuple:
+    def _point_set(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                  np.ndarray, np.ndarray, np.ndarray, int, int]:
         """The sawtooth point set as the kernel reads it (see ``_pointbased_kernel.c``)."""
         return (self.Vc, self.Qfib, self.pt_start, self.pt_len, self.pt_probe, self.pt_pinv, self.ent_idx,
                 self.ent_val, self.pt_delta, self.pt_stamp, self.pt_n, _PROBES)
