@@ -64,7 +64,6 @@ from dataclasses import dataclass
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..model.pomdp import Pomdp
 from . import _pointbased_kernel as _kernel
@@ -156,6 +155,25 @@ class PointBasedSettings:
                 raise ValueError(f"PointBasedSettings.{name} must be {what}, got {getattr(self, name)!r}")
 
 
+def _nonzeros(t) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(rows, cols, values)`` of the non-zero entries of a dense or scipy matrix, row-major
+    (duplicates of a scipy matrix summed)."""
+    if hasattr(t, "tocsr"):
+        c = t.tocsr()
+        c.sum_duplicates()
+        c.eliminate_zeros()
+        r = np.repeat(np.arange(c.shape[0], dtype=np.int64), np.diff(c.indptr))
+        return r, c.indices.astype(np.int64), np.asarray(c.data, dtype=float)
+    d = np.asarray(t, dtype=float)
+    r, col = np.nonzero(d)
+    return r.astype(np.int64), col.astype(np.int64), d[r, col]
+
+
+def _row_pointers(rows: np.ndarray, n: int) -> np.ndarray:
+    """CSR row pointers of sorted row indices ``rows`` over ``n`` rows."""
+    return np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))]).astype(np.int64)
+
+
 def _finite(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
@@ -237,19 +255,21 @@ class PointBasedSolver:
         S, A = self.S, self.A
         # T as one CSR S × (A·S) block: the successors of a belief under all actions are one
         # gather over the rows of its support (the C kernel's loop, for dense and sparse T alike).
-        mats = [sp.csr_matrix(t) for t in model.T]
-        Tall = sp.hstack(mats, format="csr")
-        Tall.sum_duplicates()
-        Tall.eliminate_zeros()
-        self.t_ptr = np.ascontiguousarray(Tall.indptr, dtype=np.int64)
-        self.t_ind = np.ascontiguousarray(Tall.indices, dtype=np.int64)
-        self.t_dat = np.ascontiguousarray(Tall.data, dtype=float)
-        self.Tmats = mats
-        Tv = sp.vstack(mats, format="csr")          # (A·S) × S: row a·S + s is T[a][s, :]
-        Tv.sum_duplicates()
-        self.tv_ptr = np.ascontiguousarray(Tv.indptr, dtype=np.int64)
-        self.tv_ind = np.ascontiguousarray(Tv.indices, dtype=np.int64)
-        self.tv_dat = np.ascontiguousarray(Tv.data, dtype=float)
+        # T[a] as (rows, cols, values) of its non-zeros, row-major (no scipy for a dense model:
+        # importing scipy.sparse costs more than solving a small file).
+        coo = [_nonzeros(t) for t in model.T]
+        # S × (A·S): row s holds T[a][s, :] for every a, at columns a·S + s'.
+        rows = np.concatenate([r for r, _, _ in coo])
+        cols = np.concatenate([c + a * S for a, (_, c, _) in enumerate(coo)])
+        vals = np.concatenate([v for _, _, v in coo])
+        order = np.lexsort((cols, rows))
+        self.t_ptr = _row_pointers(rows[order], S)
+        self.t_ind = np.ascontiguousarray(cols[order], dtype=np.int64)
+        self.t_dat = np.ascontiguousarray(vals[order], dtype=float)
+        # (A·S) × S: row a·S + s is T[a][s, :] (the backed-up vector's product).
+        self.tv_ptr = _row_pointers(np.concatenate([r + a * S for a, (r, _, _) in enumerate(coo)]), A * S)
+        self.tv_ind = np.ascontiguousarray(np.concatenate([c for _, c, _ in coo]), dtype=np.int64)
+        self.tv_dat = np.ascontiguousarray(vals, dtype=float)
         self._inner = np.zeros(S)
         # Scratch of the kernels (all zero / -1 between calls) and the successor output buffers.
         self._bT = np.zeros(A * S)
@@ -589,16 +609,9 @@ class PointBasedSolver:
         if not self.beliefs or K <= self.A:
             return 0
         used = np.zeros(K, dtype=bool)
-        items = list(self.beliefs.values())
-        chunk = max(1, int(4_000_000 // max(K, 1)))
-        for i in range(0, len(items), chunk):
-            part = items[i: i + chunk]
-            rows = np.concatenate([np.full(len(ix), j) for j, (ix, _) in enumerate(part)])
-            cols = np.concatenate([ix for ix, _ in part])
-            data = np.concatenate([v for _, v in part])
-            B = sp.csr_matrix((data, (rows, cols)), shape=(len(part), self.S))
-            vals = np.asarray(B @ self.GT[:, :K])
-            used[vals.argmax(axis=1)] = True
+        for ix, v in self.beliefs.values():
+            self.lower(ix, v)
+            used[self._one_best[0]] = True
         if by_usage or not self.prune_keeps_successors:
             keep = np.flatnonzero(used)
         else:
@@ -645,16 +658,13 @@ class PointBasedSolver:
         nodes = [n for n in self.nodes.values() if n.p is not None]
         if len(nodes) < 2:
             return False
-        rows = np.repeat(np.arange(len(nodes)), [n.idx.shape[0] for n in nodes])
-        cols = np.concatenate([n.idx for n in nodes])
-        data = np.concatenate([n.val for n in nodes])
-        self._p_B = sp.csr_matrix((data, (rows, cols)), shape=(len(nodes), self.S))
+        # The round's beliefs as one flat list of (belief, state, probability) entries: a new
+        # vector's values at all of them are one gather and one bincount.
+        self._p_seg = np.repeat(np.arange(len(nodes)), [n.idx.shape[0] for n in nodes])
+        self._p_idx = np.concatenate([n.idx for n in nodes])
+        self._p_val = np.concatenate([n.val for n in nodes])
         self._p_nodes = nodes
-        lb = np.full(len(nodes), -np.inf)
-        step = max(1, 2_000_000 // max(1, self.K))
-        for k0 in range(0, self.K, step):
-            lb = np.maximum(lb, np.asarray(self._p_B @ self.GT[:, k0: k0 + step]).max(axis=1))
-        self._p_lb = lb
+        self._p_lb = np.array([self.lower(n.idx, n.val) for n in nodes])
         self._p_todo = np.ones(len(nodes), dtype=bool)
         return True
 
@@ -725,7 +735,8 @@ class PointBasedSolver:
             alpha = self._alpha(a, best[a])
             if Ql[a] > self.lower(node.idx, node.val) + 1e-10 * max(1.0, abs(Ql[a])):
                 self._add_alpha(alpha, a)
-            covered = np.asarray(self._p_B @ alpha).ravel() >= self._p_lb
+            values = np.bincount(self._p_seg, weights=self._p_val * alpha[self._p_idx], minlength=len(self._p_nodes))
+            covered = values >= self._p_lb
             self._p_todo &= ~covered
 
     def _pick_arm(self) -> int:
