@@ -39,8 +39,9 @@ there are visited beliefs: a trial lowers UB along one path only), and so is the
 bound: as many Perseus backups as trial backups (Spaan & Vlassis 2005: randomised
 backups; a belief leaves the round once a new vector reaches its old value) or, when
 its products are small enough, a synchronous PBVI sweep over every visited belief on the
-same schedule. A sweep or Perseus round that did not raise LB(b0) makes the next one wait
-1, 2, 4, … trials (on small models the upper bound is what closes the gap).
+same schedule. A sweep or Perseus round that raised neither LB(b0) nor the LB at any
+belief by more than ε makes the next one wait 1, 2, 4, … trials (on small models the upper
+bound is what closes the gap).
 
 The per-belief inner loops (successor beliefs, LB at the successors, the sawtooth with
 its branch and bound, the backed-up vector) are one C kernel, ``_pointbased_kernel.c``,
@@ -110,11 +111,13 @@ class PointBasedSettings:
                                        the last (0: never): a trial lowers UB along one
                                        path, the sweep carries it to the siblings it
                                        passed by (tiger.95: 65 → 50 trials, 4x3: 128 → 54)
-    ``spread_backoff``         —       a sweep or Perseus round that did not raise LB(b0)
-                                       makes the next one wait 1, 2, 4, … trials, at most
-                                       this many (0: spread after every trial); one that
-                                       did resets the wait (on small models the upper bound
-                                       is what closes the gap, and spreading is wasted work)
+    ``spread_backoff``         —       a sweep or Perseus round that raised neither LB(b0)
+                                       nor the LB at any belief by more than the target
+                                       gap ε makes the next one wait 1, 2, 4, … trials, at
+                                       most this many (0: spread after every trial); one
+                                       that did resets the wait (on small models the upper
+                                       bound is what closes the gap, and spreading is
+                                       wasted work)
     ========================== ======= ==================================================
 
     Raises:
@@ -352,6 +355,8 @@ class PointBasedSolver:
         self._perseus_forgiven = 0
         self.spreads_skipped = 0
         self.ub_sweeps = 0
+        #: The largest LB gain at one belief in the current sweep or Perseus round.
+        self.spread_gain = 0.0
         self._backups_at_ub_sweep = 0
         self._arm_gain = np.zeros(len(self.trial_kappa))
         self._arm_cost = np.zeros(len(self.trial_kappa))
@@ -704,6 +709,7 @@ class PointBasedSolver:
         for i, node in enumerate(nodes):
             cur = self.lower(node.idx, node.val)
             if qn[i] > cur + 1e-10 * max(1.0, abs(cur)):
+                self.spread_gain = max(self.spread_gain, float(qn[i]) - cur)
                 new.append((self._alpha(int(an[i]), best[i, an[i]]), int(an[i])))
         for alpha, a in new:
             self._add_alpha(alpha, a)
@@ -733,7 +739,9 @@ class PointBasedSolver:
             if Ql[a] <= self._p_lb[i] + 1e-10 * max(1.0, abs(self._p_lb[i])):
                 continue
             alpha = self._alpha(a, best[a])
-            if Ql[a] > self.lower(node.idx, node.val) + 1e-10 * max(1.0, abs(Ql[a])):
+            cur = self.lower(node.idx, node.val)
+            if Ql[a] > cur + 1e-10 * max(1.0, abs(Ql[a])):
+                self.spread_gain = max(self.spread_gain, float(Ql[a]) - cur)
                 self._add_alpha(alpha, a)
             values = np.bincount(self._p_seg, weights=self._p_val * alpha[self._p_idx], minlength=len(self._p_nodes))
             covered = values >= self._p_lb
@@ -870,6 +878,7 @@ class PointBasedSolver:
                 self._perseus_forgiven = int(self.perseus_share * self.backups) - self.perseus_backups
             elif not converged:
                 lo_spread = lo
+                self.spread_gain = 0.0
                 swept = False
                 if self.sweep_ratio > 0 and \
                         self.backups - self._trial_backups_at_sweep >= self.sweep_ratio * len(self.nodes):
@@ -885,9 +894,11 @@ class PointBasedSolver:
                 lo, hi = self.bounds_at_start()
                 converged = hi - lo <= epsilon
                 if spread and self.spread_backoff:
-                    # A spread that did not lift LB(b0) doubles the number of trials the next
-                    # one waits (up to spread_backoff); one that did resets it.
-                    if lo > lo_spread + 1e-12 * max(1.0, abs(lo_spread)):
+                    # A spread that lifted neither LB(b0) nor the LB at any belief by more than
+                    # the target gap doubles the number of trials the next one waits (up to
+                    # spread_backoff); one that did resets it.
+                    if lo > lo_spread + 1e-12 * max(1.0, abs(lo_spread)) or \
+                            self.spread_gain > epsilon:
                         self._spread_skip = 0
                     else:
                         self._spread_skip = min(self.spread_backoff, max(1, 2 * self._spread_skip))
