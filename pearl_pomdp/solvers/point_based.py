@@ -40,8 +40,8 @@ bound: as many Perseus backups as trial backups (Spaan & Vlassis 2005: randomise
 backups; a belief leaves the round once a new vector reaches its old value) or, when
 its products are small enough, a synchronous PBVI sweep over every visited belief on the
 same schedule. A sweep or Perseus round that raised neither LB(b0) nor the LB at any
-belief by more than ε makes the next one wait 1, 2, 4, … trials (on small models the upper
-bound is what closes the gap).
+belief by more than ε (weighted by the belief's reach γ^d·P(path) from b0) makes the next
+one wait 1, 2, 4, … trials (on small models the upper bound is what closes the gap).
 
 The per-belief inner loops (successor beliefs, LB at the successors, the sawtooth with
 its branch and bound, the backed-up vector) are one C kernel, ``_pointbased_kernel.c``,
@@ -113,11 +113,12 @@ class PointBasedSettings:
                                        passed by (tiger.95: 65 → 50 trials, 4x3: 128 → 54)
     ``spread_backoff``         —       a sweep or Perseus round that raised neither LB(b0)
                                        nor the LB at any belief by more than the target
-                                       gap ε makes the next one wait 1, 2, 4, … trials, at
-                                       most this many (0: spread after every trial); one
-                                       that did resets the wait (on small models the upper
-                                       bound is what closes the gap, and spreading is
-                                       wasted work)
+                                       gap ε, weighted by the belief's reach γ^d·P(path)
+                                       from b0, makes the next one wait 1, 2, 4, … trials,
+                                       at most this many (0: spread after every trial);
+                                       one that did resets the wait (on small models the
+                                       upper bound is what closes the gap, and spreading
+                                       is wasted work)
     ========================== ======= ==================================================
 
     Raises:
@@ -207,7 +208,7 @@ class _Node:
     recomputed at every visit because they are cheap (one product with Γ).
     """
 
-    __slots__ = ("idx", "val", "key", "p", "Rb", "ub_c", "ub", "children", "ub_seen")
+    __slots__ = ("idx", "val", "key", "p", "Rb", "ub_c", "ub", "children", "ub_seen", "reach")
 
     def __init__(self, idx, val, key):
         self.idx = idx        # support of b (state indices)
@@ -219,6 +220,7 @@ class _Node:
         self.ub = np.inf      # upper bound at b
         self.children = {}    # flat (a*Z + o) -> _Node, created when the search goes there
         self.ub_seen = None   # [A] sawtooth version ub_c[a] was last read at (-1: never)
+        self.reach = 0.0      # max over the trials' paths to b of γ^d Π P(o|b,a): b's weight in V(b0)
 
 
 class PointBasedSolver:
@@ -330,6 +332,7 @@ class PointBasedSolver:
         self.expansions = 0
         idx0 = np.flatnonzero(self.b0 > 0)
         self.root = self._node(idx0, self.b0[idx0])
+        self.root.reach = 1.0
         self.trials = 0
         self.prunes = 0
         self.pruned = 0
@@ -355,7 +358,7 @@ class PointBasedSolver:
         self._perseus_forgiven = 0
         self.spreads_skipped = 0
         self.ub_sweeps = 0
-        #: The largest LB gain at one belief in the current sweep or Perseus round.
+        #: The largest LB gain at one belief times its reach, in the current sweep or Perseus round.
         self.spread_gain = 0.0
         self._backups_at_ub_sweep = 0
         self._arm_gain = np.zeros(len(self.trial_kappa))
@@ -709,7 +712,7 @@ class PointBasedSolver:
         for i, node in enumerate(nodes):
             cur = self.lower(node.idx, node.val)
             if qn[i] > cur + 1e-10 * max(1.0, abs(cur)):
-                self.spread_gain = max(self.spread_gain, float(qn[i]) - cur)
+                self.spread_gain = max(self.spread_gain, (float(qn[i]) - cur) * node.reach)
                 new.append((self._alpha(int(an[i]), best[i, an[i]]), int(an[i])))
         for alpha, a in new:
             self._add_alpha(alpha, a)
@@ -741,7 +744,7 @@ class PointBasedSolver:
             alpha = self._alpha(a, best[a])
             cur = self.lower(node.idx, node.val)
             if Ql[a] > cur + 1e-10 * max(1.0, abs(Ql[a])):
-                self.spread_gain = max(self.spread_gain, float(Ql[a]) - cur)
+                self.spread_gain = max(self.spread_gain, (float(Ql[a]) - cur) * node.reach)
                 self._add_alpha(alpha, a)
             values = np.bincount(self._p_seg, weights=self._p_val * alpha[self._p_idx], minlength=len(self._p_nodes))
             covered = values >= self._p_lb
@@ -816,6 +819,9 @@ class PointBasedSolver:
                 child = self._node(U[nz], c[nz])
                 child.ub = min(child.ub, float(node.ub_c[a, o]))
                 node.children[a * Z + o] = child
+            w = node.reach * g * float(node.p[a, o])
+            if w > child.reach:
+                child.reach = w
             node = child
             d += 1
         # Back up along the path, deepest first, refreshing each parent's cached successor bound.
@@ -895,8 +901,9 @@ class PointBasedSolver:
                 converged = hi - lo <= epsilon
                 if spread and self.spread_backoff:
                     # A spread that lifted neither LB(b0) nor the LB at any belief by more than
-                    # the target gap doubles the number of trials the next one waits (up to
-                    # spread_backoff); one that did resets it.
+                    # the target gap (weighted by the belief's reach from b0) doubles the
+                    # number of trials the next one waits (up to spread_backoff); one that
+                    # did resets it.
                     if lo > lo_spread + 1e-12 * max(1.0, abs(lo_spread)) or \
                             self.spread_gain > epsilon:
                         self._spread_skip = 0
