@@ -110,7 +110,7 @@ class PointBasedSettings:
                                        this many trial backups per visited belief since
                                        the last (0: never): a trial lowers UB along one
                                        path, the sweep carries it to the siblings it
-                                       passed by (tiger.95: 65 → 50 trials, 4x3: 128 → 54)
+                                       passed by (tiger.95: 65 → 49 trials, 4x3: 128 → 46)
     ``spread_backoff``         —       a sweep or Perseus round that raised neither LB(b0)
                                        nor the LB at any belief by more than the target
                                        gap ε, weighted by the belief's reach γ^d·P(path)
