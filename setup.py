@@ -35,14 +35,22 @@ NODES = {
 #: speaker additionally needs PortAudio (sounddevice, which pocketsphinx pulls in).
 SPEECH = ["pocketsphinx>=5,<6", "espeakng-loader>=0.2"]
 
+#: The solvers' compiled kernels (one C file each, Python's C API and the buffer protocol
+#: only: no numpy headers needed to build). Each is the only implementation of its loops, for
+#: every model size: the exact solver's prune (with its own warm-started simplex) and the
+#: point-based solver's per-belief inner loops.
+KERNELS = [
+    Extension(f"{PACKAGE}.solvers._prune", [f"{PACKAGE}/solvers/_prune.c"], extra_compile_args=["-O2", "-std=c99"]),
+    Extension(f"{PACKAGE}.solvers._pointbased_kernel", [f"{PACKAGE}/solvers/_pointbased_kernel.c"],
+              extra_compile_args=["-O3"]),
+]
+
 setup(
     name=PACKAGE,
     version=_version(),
     packages=find_packages(exclude=["test", "test.*", "bench"]),
-    package_data={PACKAGE: ["py.typed", "solvers/_prune.pyi"]},
-    # The exact solver's pruning kernel (plain CPython C API, no numpy headers needed to build it).
-    ext_modules=[Extension(f"{PACKAGE}.solvers._prune", ["pearl_pomdp/solvers/_prune.c"],
-                           extra_compile_args=["-O2", "-std=c99"])],
+    package_data={PACKAGE: ["py.typed", "solvers/*.pyi"]},
+    ext_modules=KERNELS,
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -20,9 +20,9 @@ paths (without them the bench prints our figures alone)::
 Options: ``--exact FILE:H,...`` / ``--pointbased FILE,...`` pick the runs (``H`` a horizon
 or ``inf``; a FILE without a directory is looked up in ``../shared/benchmarks/pomdp``);
 ``--no-exact`` / ``--no-pointbased``; ``--time-limit`` (seconds per run, both sides);
-``--base DIR`` also runs the exact solver of another checkout (say ``git archive main``
+``--base DIR`` also runs the solvers of another checkout (say ``git archive main``
 unpacked in DIR) between the peer and ours, and reports ``ours_vs_base`` (wall and
-solver ratios, and whether the two policies are identical).
+solver ratios, and for the exact runs whether the two policies are identical).
 
 Prints ONE JSON object on stdout: ``exact`` and ``pointbased`` lists with, per run,
 ``ours`` (``wall_s``, ``solver_s``, ``vectors``, ``value_at_b0``, …), the peer's figures
@@ -117,7 +117,9 @@ def worker(argv: List[str]) -> None:
     else:
         res = solve_point_based(model, time_limit=float(argv[3]), epsilon=float(argv[2]))
         out.update(solver_s=res.seconds, lower=res.value_at_start, upper=res.upper_bound, gap=res.gap,
-                   converged=res.converged, vectors=res.policy.num_vectors, trials=res.iterations)
+                   converged=res.converged, vectors=res.policy.num_vectors, trials=res.iterations,
+                   setup_s=res.extra.get("setup_seconds"),
+                   backups=sum(res.extra.get(k, 0) for k in ("backups", "perseus_backups", "sweep_backups")))
     print(json.dumps(out))
 
 
@@ -335,20 +337,27 @@ def main() -> None:
         for path in pb_runs:
             log(f"pointbased {path.name}")
             row = {"file": path.name, "precision": args.precision}
-            ours_runs, peer_runs = [], []
+            ours_runs, peer_runs, base_runs = [], [], []
+            pb_args = ["pointbased", str(path), repr(args.precision), repr(args.time_limit)]
             for _ in range(args.repeat):
                 if args.sarsop:
                     peer_runs.append(run_sarsop(args.sarsop, path, args.precision, args.time_limit, work))
-                ours_runs.append(run_ours(["pointbased", str(path), repr(args.precision), repr(args.time_limit)],
-                                          timeout=args.time_limit * 3 + 60))
+                if args.base:
+                    base_runs.append(run_ours(pb_args, timeout=args.time_limit * 3 + 60, repo=args.base))
+                ours_runs.append(run_ours(pb_args, timeout=args.time_limit * 3 + 60))
             row["ours"] = median_runs(ours_runs)
+            if base_runs:
+                row["base"] = median_runs(base_runs)
+                if "error" not in row["base"] and "error" not in row["ours"]:
+                    row["ours_vs_base"] = {"wall": row["ours"]["wall_s"] / row["base"]["wall_s"],
+                                           "solver": row["ours"]["solver_s"] / row["base"]["solver_s"]}
             if peer_runs:
                 peer = median_runs(peer_runs)
                 row["sarsop"] = peer
                 if "error" not in peer and "error" not in row["ours"]:
                     row["wall_ratio"] = row["ours"]["wall_s"] / peer["wall_s"]
                     row["solver_vs_peer_wall"] = row["ours"]["solver_s"] / peer["wall_s"]
-            log("  " + json.dumps({k: row.get(k) for k in ("wall_ratio",)}))
+            log("  " + json.dumps({k: row.get(k) for k in ("wall_ratio", "solver_vs_peer_wall", "ours_vs_base")}))
             result["pointbased"].append(row)
     result["load_avg_end"] = os.getloadavg()
     summary: Dict[str, object] = {}

@@ -164,7 +164,9 @@ def test_settings_are_validated_with_the_field_named():
                        ({"explore_every": 1}, "explore_every"), ({"perseus_share": -1.0}, "perseus_share"),
                        ({"sweep_ratio": float("nan")}, "sweep_ratio"), ({"sweep_max_flops": "big"}, "sweep_max_flops"),
                        ({"prune_keeps_successors": 1}, "prune_keeps_successors"),
-                       ({"max_gamma_entries": 0}, "max_gamma_entries")]:
+                       ({"max_gamma_entries": 0}, "max_gamma_entries"),
+                       ({"spread_backoff": -1}, "spread_backoff"), ({"spread_backoff": 2.0}, "spread_backoff"),
+                       ({"ub_sweep_ratio": -0.5}, "ub_sweep_ratio")]:
         with pytest.raises(ValueError, match=f"PointBasedSettings.{field} must be"):
             PointBasedSettings(**bad)
     assert PointBasedSettings(trial_kappa=[0.3]).trial_kappa == (0.3,)
@@ -226,9 +228,120 @@ def test_sawtooth_reads_equal_the_definition_full_and_incremental(benchmarks_dir
             checked += 1
         # After a refresh the greedy action's cached successor bounds are at least as tight as
         # a full re-read (they may be tighter: visited successors pass their own bound up).
-        Qu = s._refresh_upper(node, U, C, live, set())
+        Qu = s._refresh_upper(node, U, C, live)
         a = int(np.argmax(Qu))
         ub_c = node.ub_c.reshape(-1)
         greedy = live[(live >= a * s.Z) & (live < (a + 1) * s.Z)]
         assert np.all(ub_c[greedy] <= s._upper_batch(U, C[greedy]) + 1e-9)
     assert checked > 100
+
+
+# ------------------------------------------------------------------ the C kernel and the schedule
+EXACT_VALUES = [("cheese.95.POMDP", 3.486206824), ("parr95.95.POMDP", 7.201039921),
+                ("1d.POMDP", 1.260343623), ("tiger.95.POMDP", TIGER_EXACT)]
+
+
+@pytest.mark.parametrize("name, exact", EXACT_VALUES)
+def test_bounds_bracket_the_exact_value_after_every_trial(benchmarks_dir, name, exact):
+    """Anytime: after every trial (with the sweeps, the back-off and the prunes between them)
+    LB(b0) ≤ V*(b0) ≤ UB(b0), and at every visited belief the stored UB is above the LB."""
+    m = read(benchmarks_dir / name)
+    s = PointBasedSolver(m, seed=0, fib_time=None)
+    for k in range(1, 400):
+        r = s.run(time_limit=1e9, epsilon=1e-3, max_trials=k)
+        assert r.value_at_start <= exact + 1e-6, (k, r.value_at_start)
+        assert exact <= r.upper_bound + 1e-6, (k, r.upper_bound)
+        if r.converged:
+            break
+    assert r.converged
+    for node in s.nodes.values():
+        if node.p is not None:
+            assert s.lower(node.idx, node.val) <= node.ub + 1e-9
+    assert s.ub_sweeps > 0
+
+
+def test_exact_solver_value_is_bracketed_on_a_shared_file(benchmarks_dir):
+    """Against our own exact solver, not a stored number: 1d at the exact solver's fixed point."""
+    ip = pytest.importorskip("pearl_pomdp.solvers.incremental_pruning")
+    m = read(benchmarks_dir / "1d.POMDP")
+    exact = ip.solve_incremental_pruning(m, epsilon=1e-9, time_limit=60.0)
+    assert exact.converged
+    res = solve_point_based(m, time_limit=30.0, epsilon=1e-4)
+    assert res.converged
+    assert res.value_at_start <= exact.value_at_start + 1e-6 <= res.upper_bound + 2e-6
+
+
+def test_deterministic_with_sweeps_back_off_and_prunes(benchmarks_dir):
+    """4x3 with a trial budget exercises every schedule (UB sweeps, LB sweeps or Perseus with
+    back-off, prunes): two solves give the same vectors, bounds and counts."""
+    m = read(benchmarks_dir / "4x3.95.POMDP")
+    runs = []
+    for _ in range(2):
+        s = PointBasedSolver(m, seed=3, fib_time=None)
+        r = s.run(time_limit=1e9, epsilon=1e-3, max_trials=40)
+        runs.append((r.value_at_start, r.upper_bound, r.policy.alphas.tobytes(), r.policy.actions.tobytes(),
+                     s.backups, s.perseus_backups, s.sweep_backups, s.ub_sweeps, s.spreads_skipped, s.prunes))
+    assert runs[0] == runs[1]
+    assert runs[0][7] > 0 and runs[0][8] > 0 and runs[0][9] > 0
+
+
+def _definition_successors(m: Pomdp, belief: np.ndarray):
+    """b^{a,o}(s') ∝ O[a,s',o] Σ_s b(s) T[a][s,s'] and P(o|b,a), from the definition."""
+    A, Z = m.num_actions, m.num_observations
+    rows, p = [], np.zeros((A, Z))
+    for a in range(A):
+        t = m.T[a]
+        bT = np.asarray(t.T @ belief).ravel() if hasattr(t, "tocsr") else belief @ np.asarray(t)
+        for o in range(Z):
+            joint = bT * m.O[a, :, o]
+            p[a, o] = joint.sum()
+            rows.append(joint / p[a, o] if p[a, o] > 1e-300 else joint)
+    return np.array(rows), p
+
+
+@pytest.mark.parametrize("name", ["4x3.95.POMDP", "RockSample_4_4.pomdp", "tiger.95.POMDP"])
+def test_kernel_successors_and_lower_bounds_equal_the_definition(benchmarks_dir, name):
+    """The kernel's successor beliefs, P(o|b,a), LB and maximising vectors, and backed-up vector
+    against numpy on the definitions (dense 4x3 and tiger, sparse RockSample), starting with a
+    successor buffer too small for the belief (the kernel asks for a bigger one)."""
+    m = read(benchmarks_dir / name)
+    s = PointBasedSolver(m, seed=0, fib_time=None)
+    s.run(time_limit=1e9, epsilon=1e-9, max_trials=6)
+    s._C_buf = np.zeros(1)
+    G = s.GT[:, : s.K]
+    checked = 0
+    for node in list(s.nodes.values())[:25]:
+        if node.p is None:
+            continue
+        U, C, live = s._successors(node)
+        full = np.zeros(s.S)
+        full[node.idx] = node.val
+        rows, p = _definition_successors(m, full)
+        assert np.allclose(node.p, p, atol=1e-12)
+        got = np.zeros((s.A * s.Z, s.S))
+        got[:, U] = C
+        assert np.allclose(got[live], rows[live], atol=1e-12)
+        assert np.array_equal(live, np.flatnonzero(p.ravel() > 1e-300))
+        lb, best = s._lower_children(U, C, live)
+        vals = rows[live] @ G
+        assert np.allclose(lb.ravel()[live], vals.max(axis=1), atol=1e-9)
+        assert np.allclose(vals[np.arange(live.size), best.ravel()[live]], vals.max(axis=1), atol=1e-9)
+        assert s.lower(node.idx, node.val) == pytest.approx(float((full @ G).max()), abs=1e-9)
+        for a in range(s.A):
+            inner = sum(m.O[a][:, o] * G[:, best[a, o]] for o in range(s.Z))
+            t = m.T[a]
+            want = m.R[:, a] + m.discount * np.asarray(t @ inner).ravel()
+            assert np.allclose(s._alpha(a, best[a]), want, atol=1e-9)
+        checked += 1
+    assert checked >= 5
+
+
+def test_kernel_rejects_short_buffers_with_their_name():
+    from pearl_pomdp.solvers import _pointbased_kernel as kernel
+
+    s = PointBasedSolver(tiger(), seed=0)
+    with pytest.raises(ValueError, match="buffer p_out"):
+        kernel.successors(s.root.idx, s.root.val, s.t_ptr, s.t_ind, s.t_dat, s.O, s.A, s.S, s.Z, s._bT, s.pos,
+                          s._U_buf, s._C_buf, np.zeros(1), s._live_buf)
+    # the scratch buffers are left as they were (zero / -1) for the next call
+    assert not s._bT.any() and (s.pos == -1).all()

@@ -2,6 +2,8 @@
 import subprocess
 import sys
 
+import pytest
+
 
 def test_help_imports_no_numpy():
     """`pearl --help` imports every command module: none may import numpy/scipy/tqdm/matplotlib/rclpy at top."""
@@ -38,6 +40,19 @@ def test_solving_a_small_pomdp_file_imports_no_scipy_and_reads_no_entry_points(b
             f"    main(['solve', {str(benchmarks_dir / 'network.POMDP')!r}, '--method', 'incprune',"
             " '--horizon', '3', '--json', '--quiet'])\n"
             "print(sorted(m for m in ('scipy', 'importlib.metadata', 'pearl_pomdp.cli.launch') if m in sys.modules))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+@pytest.mark.parametrize("name", ["tiger.95.POMDP", "cheese.95.POMDP", "4x3.95.POMDP"])
+def test_point_based_on_a_small_pomdp_file_imports_no_scipy(benchmarks_dir, name):
+    """The point-based solver builds its CSR arrays of T, FIB, sweeps and Perseus without scipy on
+    small dense models: importing scipy.sparse costs more than solving them (issue 15)."""
+    code = ("import contextlib, io, sys\n"
+            "from pearl_pomdp.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    main(['solve', {str(benchmarks_dir / name)!r}, '--method', 'pointbased', '--json', '--quiet'])\n"
+            "print(sorted(m for m in ('scipy',) if m in sys.modules))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
 

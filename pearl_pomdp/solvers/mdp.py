@@ -24,7 +24,6 @@ import time
 from typing import List, Tuple
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..model.pomdp import Pomdp
 from .base import AlphaVectorPolicy, SolveResult
@@ -39,19 +38,26 @@ __all__ = [
     "most_likely_state_policy",
 ]
 
-#: Matrices sparser than this are kept (or made) CSR for the Bellman products.
+#: Matrices sparser than this are kept (or made) CSR for the Bellman products ...
 _SPARSE_DENSITY = 0.25
+#: ... when they have more rows than this (a small dense product is cheaper than importing scipy).
+_SPARSE_MIN_STATES = 64
 
 
 def _transition_mats(model: Pomdp) -> List:
     """``T[a]`` as CSR when sparse enough (FIB on TagAvoid is ~100× faster that way), else dense."""
     mats = []
     for Ta in model.T:
-        if sp.issparse(Ta):
+        if hasattr(Ta, "tocsr"):  # scipy.sparse (then already imported by whoever built it)
             mats.append(Ta.tocsr())
             continue
         nnz = np.count_nonzero(Ta)
-        mats.append(sp.csr_matrix(Ta) if nnz < _SPARSE_DENSITY * Ta.size else np.asarray(Ta))
+        if nnz < _SPARSE_DENSITY * Ta.size and Ta.shape[0] > _SPARSE_MIN_STATES:
+            import scipy.sparse as sp  # not for small dense models: its import costs more than their solve
+
+            mats.append(sp.csr_matrix(Ta))
+        else:
+            mats.append(np.asarray(Ta))
     return mats
 
 

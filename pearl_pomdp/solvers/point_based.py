@@ -33,17 +33,24 @@ backup). On the way back it backs up the lower bound at every visited belief
 there. Visited beliefs form a graph that caches successor upper bounds (valid
 because upper bounds only decrease), as SARSOP's belief tree does.
 
-Between trials the lower bound is also spread over all visited beliefs: as
-many Perseus backups as trial backups (Spaan & Vlassis 2005: randomised
-backups; a belief leaves the round once a new vector reaches its old value),
-and, when its sparse products are small enough, a batched synchronous PBVI
-sweep over every visited belief each time the trials have done half as many
-backups as there are visited beliefs. All per-belief work is vectorised over (action, observation) pairs
-and restricted to the states the belief can reach, with T gathered from one
-CSR ``S × (A·S)`` block, so ten thousand states (RockSample[7,8]) stay cheap.
+Between trials the upper bound is spread over all visited beliefs (an upper-bound
+backup at each, newest first, every time the trials have done half as many backups as
+there are visited beliefs: a trial lowers UB along one path only), and so is the lower
+bound: as many Perseus backups as trial backups (Spaan & Vlassis 2005: randomised
+backups; a belief leaves the round once a new vector reaches its old value) or, when
+its products are small enough, a synchronous PBVI sweep over every visited belief on the
+same schedule. A sweep or Perseus round that raised neither LB(b0) nor the LB at any
+belief by more than ε (weighted by the belief's reach γ^d·P(path) from b0) makes the next
+one wait 1, 2, 4, … trials (on small models the upper bound is what closes the gap).
+
+The per-belief inner loops (successor beliefs, LB at the successors, the sawtooth with
+its branch and bound, the backed-up vector) are one C kernel, ``_pointbased_kernel.c``,
+used for every model size; they work on the states a belief can reach, with T read from
+one CSR ``S × (A·S)`` block, so ten thousand states (RockSample[7,8]) stay cheap.
 Pruning keeps the vectors that are maximal at a visited belief or at one of
 its successors (vectors serving only successors matter: without them TagAvoid's
-search stalls); by visited beliefs alone when Γ grows past a memory cap.
+search stalls); by visited beliefs alone when Γ grows past a memory cap. A prune waits
+until the trials since the last one did about one backup per visited belief.
 
 The search is deterministic (costs are counted in backups, not seconds, except
 for the time limit itself); ``seed`` fixes the Perseus order and the order in
@@ -58,9 +65,9 @@ from dataclasses import dataclass
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..model.pomdp import Pomdp
+from . import _pointbased_kernel as _kernel
 from .base import AlphaVectorPolicy, SolveResult
 from .mdp import blind_lower_bound, fib_q
 
@@ -99,6 +106,19 @@ class PointBasedSettings:
                                        without them)
     ``max_gamma_entries``      K·S     above this many entries of Γ (8 bytes each) pruning
                                        keeps only vectors maximal at visited beliefs
+    ``ub_sweep_ratio``         —       an upper-bound backup at every visited belief after
+                                       this many trial backups per visited belief since
+                                       the last (0: never): a trial lowers UB along one
+                                       path, the sweep carries it to the siblings it
+                                       passed by (tiger.95: 65 → 49 trials, 4x3: 128 → 46)
+    ``spread_backoff``         —       a sweep or Perseus round that raised neither LB(b0)
+                                       nor the LB at any belief by more than the target
+                                       gap ε, weighted by the belief's reach γ^d·P(path)
+                                       from b0, makes the next one wait 1, 2, 4, … trials,
+                                       at most this many (0: spread after every trial);
+                                       one that did resets the wait (on small models the
+                                       upper bound is what closes the gap, and spreading
+                                       is wasted work)
     ========================== ======= ==================================================
 
     Raises:
@@ -112,6 +132,8 @@ class PointBasedSettings:
     sweep_max_flops: float = 4e8
     prune_keeps_successors: bool = True
     max_gamma_entries: int = 40_000_000
+    spread_backoff: int = 16
+    ub_sweep_ratio: float = 0.5
 
     def __post_init__(self) -> None:
         kappa = tuple(float(k) for k in self.trial_kappa) if isinstance(self.trial_kappa, (tuple, list)) else None
@@ -126,12 +148,34 @@ class PointBasedSettings:
             ("sweep_ratio", _finite(self.sweep_ratio) and self.sweep_ratio >= 0, "a number >= 0"),
             ("sweep_max_flops", _finite(self.sweep_max_flops) and self.sweep_max_flops >= 0, "a number >= 0"),
             ("prune_keeps_successors", isinstance(self.prune_keeps_successors, bool), "True or False"),
+            ("ub_sweep_ratio", _finite(self.ub_sweep_ratio) and self.ub_sweep_ratio >= 0, "a number >= 0"),
+            ("spread_backoff", isinstance(self.spread_backoff, int) and not isinstance(self.spread_backoff, bool)
+             and self.spread_backoff >= 0, "an integer >= 0"),
             ("max_gamma_entries", isinstance(self.max_gamma_entries, int)
              and not isinstance(self.max_gamma_entries, bool) and self.max_gamma_entries >= 1, "an integer >= 1"),
         ]
         for name, ok, what in checks:
             if not ok:
                 raise ValueError(f"PointBasedSettings.{name} must be {what}, got {getattr(self, name)!r}")
+
+
+def _nonzeros(t) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(rows, cols, values)`` of the non-zero entries of a dense or scipy matrix, row-major
+    (duplicates of a scipy matrix summed)."""
+    if hasattr(t, "tocsr"):
+        c = t.tocsr()
+        c.sum_duplicates()
+        c.eliminate_zeros()
+        r = np.repeat(np.arange(c.shape[0], dtype=np.int64), np.diff(c.indptr))
+        return r, c.indices.astype(np.int64), np.asarray(c.data, dtype=float)
+    d = np.asarray(t, dtype=float)
+    r, col = np.nonzero(d)
+    return r.astype(np.int64), col.astype(np.int64), d[r, col]
+
+
+def _row_pointers(rows: np.ndarray, n: int) -> np.ndarray:
+    """CSR row pointers of sorted row indices ``rows`` over ``n`` rows."""
+    return np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))]).astype(np.int64)
 
 
 def _finite(x) -> bool:
@@ -152,20 +196,8 @@ def _setting(name: str) -> property:
 
     return property(get, set_, doc=f"``settings.{name}`` (see :class:`PointBasedSettings`).")
 
-#: Sawtooth reads that gather at most this many entries evaluate every pair directly.
-_DIRECT_ENTRIES = 20_000
 #: Probe states per sawtooth point (its most likely ones) for the branch-and-bound bound.
 _PROBES = 4
-#: Support bitsets for the sawtooth's containment test up to this many states ...
-_BITSET_MAX_STATES = 4096
-#: ... and when one test costs at most this many word operations.
-_BITSET_MAX_OPS = 4_000_000
-
-#: Keep T dense (as one S × A·S array) up to this many entries (40 MB).
-_DENSE_ENTRIES = 5_000_000
-#: ... and when at least this fraction of T's entries is non-zero.
-_DENSE_FRACTION = 0.3
-
 
 class _Node:
     """A belief in the search graph, with cached upper bounds at its successors.
@@ -176,7 +208,7 @@ class _Node:
     recomputed at every visit because they are cheap (one product with Γ).
     """
 
-    __slots__ = ("idx", "val", "key", "p", "Rb", "ub_c", "ub", "children", "ub_seen")
+    __slots__ = ("idx", "val", "key", "p", "Rb", "ub_c", "ub", "children", "ub_seen", "reach")
 
     def __init__(self, idx, val, key):
         self.idx = idx        # support of b (state indices)
@@ -188,6 +220,7 @@ class _Node:
         self.ub = np.inf      # upper bound at b
         self.children = {}    # flat (a*Z + o) -> _Node, created when the search goes there
         self.ub_seen = None   # [A] sawtooth version ub_c[a] was last read at (-1: never)
+        self.reach = 0.0      # max over the trials' paths to b of γ^d Π P(o|b,a): b's weight in V(b0)
 
 
 class PointBasedSolver:
@@ -206,6 +239,8 @@ class PointBasedSolver:
     sweep_max_flops = _setting("sweep_max_flops")
     prune_keeps_successors = _setting("prune_keeps_successors")
     max_gamma_entries = _setting("max_gamma_entries")
+    spread_backoff = _setting("spread_backoff")
+    ub_sweep_ratio = _setting("ub_sweep_ratio")
 
     def __init__(self, model: Pomdp, seed: int = 0, fib_time: Optional[float] = 5.0,
                  settings: Optional[PointBasedSettings] = None) -> None:
@@ -223,25 +258,30 @@ class PointBasedSolver:
         # Observation tie-break order and the Perseus order come from the seed.
         self.z_jitter = self.rng.permutation(self.Z) * 1e-15
         S, A = self.S, self.A
-        # T as one S × (A·S) block: the successors of a belief under all actions are one
-        # gather over the rows of its support. Dense only when T really is dense and small;
-        # otherwise raw CSR arrays (scipy's row slicing costs more than the work here).
-        nnz = 0
-        for t in model.T:
-            nnz += int(t.nnz) if sp.issparse(t) else int(np.count_nonzero(t))
-        dense = not model.is_sparse and A * S * S <= _DENSE_ENTRIES and nnz > _DENSE_FRACTION * A * S * S
-        if dense:
-            self.Tall = np.hstack([np.asarray(t) for t in model.T])
-            self.Tmats = [np.asarray(t) for t in model.T]
-        else:
-            mats = [sp.csr_matrix(t) for t in model.T]
-            Tall = sp.hstack(mats, format="csr")
-            Tall.sum_duplicates()
-            self.t_ptr = Tall.indptr.astype(np.int64)
-            self.t_ind = Tall.indices.astype(np.int64)
-            self.t_dat = Tall.data
-            self.Tmats = mats
-        self.dense = dense
+        # T as one CSR S × (A·S) block: the successors of a belief under all actions are one
+        # gather over the rows of its support (the C kernel's loop, for dense and sparse T alike).
+        # T[a] as (rows, cols, values) of its non-zeros, row-major (no scipy for a dense model:
+        # importing scipy.sparse costs more than solving a small file).
+        coo = [_nonzeros(t) for t in model.T]
+        # S × (A·S): row s holds T[a][s, :] for every a, at columns a·S + s'.
+        rows = np.concatenate([r for r, _, _ in coo])
+        cols = np.concatenate([c + a * S for a, (_, c, _) in enumerate(coo)])
+        vals = np.concatenate([v for _, _, v in coo])
+        order = np.lexsort((cols, rows))
+        self.t_ptr = _row_pointers(rows[order], S)
+        self.t_ind = np.ascontiguousarray(cols[order], dtype=np.int64)
+        self.t_dat = np.ascontiguousarray(vals[order], dtype=float)
+        # (A·S) × S: row a·S + s is T[a][s, :] (the backed-up vector's product).
+        self.tv_ptr = _row_pointers(np.concatenate([r + a * S for a, (r, _, _) in enumerate(coo)]), A * S)
+        self.tv_ind = np.ascontiguousarray(np.concatenate([c for _, c, _ in coo]), dtype=np.int64)
+        self.tv_dat = np.ascontiguousarray(vals, dtype=float)
+        self._inner = np.zeros(S)
+        # Scratch of the kernels (all zero / -1 between calls) and the successor output buffers.
+        self._bT = np.zeros(A * S)
+        self._U_buf = np.zeros(S, dtype=np.int64)
+        self._C_buf = np.zeros(A * self.Z * min(S, 64))     # grown on demand
+        self._p_buf = np.zeros(A * self.Z)
+        self._live_buf = np.zeros(A * self.Z, dtype=np.int64)
         self.b0 = np.asarray(model.b0, dtype=float)
         self.r_span = float(self.R.max() - self.R.min())
 
@@ -249,20 +289,16 @@ class PointBasedSolver:
         t0 = time.perf_counter()
         Q, self.fib_iterations, self.fib_converged = fib_q(model, epsilon=1e-6, time_limit=fib_time)
         self.fib_seconds = time.perf_counter() - t0
-        self.Qfib = Q                        # [S, A]
-        self.Vc = Q.max(axis=1).copy()       # corner values
+        self.Qfib = np.ascontiguousarray(Q, dtype=float)   # [S, A]
+        self.Vc = np.ascontiguousarray(Q.max(axis=1))      # corner values
         self.pt_cap = 1024
         self.pt_n = 0
         self.pt_start = np.zeros(self.pt_cap, dtype=np.int64)
         self.pt_len = np.zeros(self.pt_cap, dtype=np.int64)
-        self.pt_key = np.zeros(self.pt_cap, dtype=np.int64)   # the point's most likely state k_i
-        self.pt_kval = np.ones(self.pt_cap)                      # b_i(k_i)
         # Probe states (the point's _PROBES most likely) and 1/b_i there: λ_i(c) ≤ min over
-        # probes of c(s)/b_i(s). Support bitsets (small S only) tell whether supp b_i ⊆ supp c.
+        # probes of c(s)/b_i(s).
         self.pt_probe = np.zeros((self.pt_cap, _PROBES), dtype=np.int64)
         self.pt_pinv = np.zeros((self.pt_cap, _PROBES))
-        self.bit_words = (S + 63) // 64 if S <= _BITSET_MAX_STATES else 0
-        self.pt_bits = np.zeros((self.pt_cap, self.bit_words), dtype=np.uint64)
         self.pt_v = np.zeros(self.pt_cap)
         self.pt_delta = np.zeros(self.pt_cap)
         # Versions: a point's stamp is the version at which its value last fell; a cached
@@ -277,6 +313,9 @@ class PointBasedSolver:
         self.ent_val = np.zeros(self.ent_cap)
         self.pt_index: Dict[bytes, int] = {}
         self.pos = np.full(S, -1, dtype=np.int64)
+        self._one_lb = np.zeros(1)
+        self._one_best = np.zeros(1, dtype=np.int64)
+        self._row0 = np.zeros(1, dtype=np.int64)
 
         # ---- lower bound: Γ stored transposed ([S, cap]) so gathering the rows of a support is contiguous.
         blind = blind_lower_bound(model)
@@ -293,10 +332,12 @@ class PointBasedSolver:
         self.expansions = 0
         idx0 = np.flatnonzero(self.b0 > 0)
         self.root = self._node(idx0, self.b0[idx0])
+        self.root.reach = 1.0
         self.trials = 0
         self.prunes = 0
         self.pruned = 0
         self._last_prune_K = self.K
+        self._backups_at_prune = 0
         self.seconds = 0.0
         # The knobs are in self.settings (PointBasedSettings, with their legend). Shallow
         # trials (large κ) refine the bounds near b0 (hallway2 gains most), deep ones carry
@@ -310,7 +351,16 @@ class PointBasedSolver:
         self.sweeps = 0
         self.sweep_backups = 0
         self._trial_backups_at_sweep = 0
-        self._Tcsr = [sp.csr_matrix(t) for t in model.T]
+        # Spreading back-off (settings.spread_backoff): trials to skip after a spread that did
+        # not lift LB(b0), the trials still to skip, and the Perseus backups forgiven meanwhile.
+        self._spread_skip = 0
+        self._spread_wait = 0
+        self._perseus_forgiven = 0
+        self.spreads_skipped = 0
+        self.ub_sweeps = 0
+        #: The largest LB gain at one belief times its reach, in the current sweep or Perseus round.
+        self.spread_gain = 0.0
+        self._backups_at_ub_sweep = 0
         self._arm_gain = np.zeros(len(self.trial_kappa))
         self._arm_cost = np.zeros(len(self.trial_kappa))
         #: (seconds since the solver was built, LB(b0), UB(b0)) about every 0.5 s.
@@ -332,14 +382,12 @@ class PointBasedSolver:
         self.gbirth[self.K] = self.backups
         self.K += 1
 
-    def lower(self, idx: np.ndarray, val: np.ndarray) -> float:
-        """Lower bound at the belief ``val`` on states ``idx``."""
-        return float((val @ self.GT[idx, : self.K]).max())
-
-    def _lower_batch(self, U: np.ndarray, C: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-        vals = C @ self.GT[U, : self.K]          # [M, K]
-        best = vals.argmax(axis=1)
-        return vals[np.arange(C.shape[0]), best], best
+    def lower(self, idx: np.ndarray, val: np.ndarray, k0: int = 0) -> float:
+        """Lower bound at the belief ``val`` on states ``idx`` (over the vectors from ``k0`` on)."""
+        lb = self._one_lb
+        _kernel.lower_rows(val, idx.shape[0], idx, self._row0, self.GT, self.cap, k0, self.K, lb, self._one_best,
+                           False)
+        return float(lb[0])
 
     # ------------------------------------------------------------ upper bound
     def _refresh_deltas(self) -> None:
@@ -359,101 +407,32 @@ class PointBasedSolver:
         offs = np.cumsum(lens) - lens
         return np.repeat(self.pt_start[pts] - offs, lens) + np.arange(total)
 
-    def _upper_batch(self, U: np.ndarray, C: np.ndarray, points: Optional[np.ndarray] = None) -> np.ndarray:
-        """Upper bound at each row of ``C`` ([M, |U|], beliefs on states ``U``).
+    def _upper_batch(self, U: np.ndarray, C: np.ndarray, since: Optional[int] = None,
+                     rows: Optional[np.ndarray] = None, with_points: bool = True) -> np.ndarray:
+        """Upper bound at the rows ``rows`` of ``C`` ([M, |U|], beliefs on states ``U``; all rows
+        when ``None``).
 
-        With ``points`` (indices into the point set): only the sawtooth over those points,
-        ``b·V_c + min_i λ_i δ_i``, without the FIB vectors; the caller takes the minimum
-        with what it read before.
+        With ``since`` (a version): only the sawtooth over the points whose value fell after
+        it, ``b·V_c + min(0, min_i λ_i δ_i)``, without the FIB vectors; the caller takes the
+        minimum with what it read before. Without: ``min(max_a b·Q_FIB(:,a), b·V_c + min(0, min_i λ_i δ_i))``
+        over all points (over none with ``with_points=False``: the cheap bound of a first expansion).
 
-        ``λ_i(c) = min_{s ∈ supp b_i} c(s)/b_i(s)`` is at most ``r_i(c) = c(k_i)/b_i(k_i)``
-        at the point's most likely state ``k_i``, and ``δ_i < 0``, so ``r_i δ_i`` is a
-        lower bound of the point's correction from one gathered entry. Only the pairs whose
-        bound beats the best correction found so far are evaluated exactly, the most
-        promising first (branch and bound): the result is the full sawtooth minimum, at a
-        cost that no longer grows with the number of points times their supports."""
-        cols = np.flatnonzero(C.any(axis=0))
-        if cols.size < U.shape[0]:
-            U, C = U[cols], C[:, cols]
-        base = C @ self.Vc[U]
-        if points is None:
-            ub = np.minimum(base, (C @ self.Qfib[U]).max(axis=1))
-            points = np.arange(self.pt_n)
+        ``λ_i(c) = min_{s ∈ supp b_i} c(s)/b_i(s)`` is at most ``c(s)/b_i(s)`` at each of the
+        point's probe states (its most likely ones), and ``δ_i < 0``, so the probes bound the
+        point's correction from below; the kernel reads a point in full only when that bound
+        beats the best correction found so far, and stops reading it as soon as it cannot
+        (branch and bound): the result is the full sawtooth minimum."""
+        C = np.ascontiguousarray(C, dtype=float)
+        if rows is None:
+            rows = np.arange(C.shape[0], dtype=np.int64)
+        out = np.empty(rows.shape[0])
+        if since is None:
+            # every point (none for the cheap bound), and the FIB vectors
+            since, with_fib = (-1 if with_points else self.ub_version + 1), True
         else:
-            ub = base
-        if points.size == 0:
-            return ub
-        M = C.shape[0]
-        pos = self.pos
-        pos[U] = np.arange(U.shape[0])
-        try:
-            kl = pos[self.pt_key[points]]
-            sel = kl >= 0
-            cand = points[sel]
-            outside = None
-            if M * int(self.pt_len[cand].sum()) <= _DIRECT_ENTRIES:
-                # Small models: every pair exactly, in one gather (the bound costs more than it saves).
-                if cand.size == 0:
-                    return ub
-                pm = np.repeat(np.arange(M), cand.size)
-                pi = np.tile(np.arange(cand.size), M)
-                corr = np.minimum(self._pair_corrections(C, pos, cand, pm, pi), 0.0)
-                return np.minimum(ub, base + corr.reshape(M, cand.size).min(axis=1))
-            if self.bit_words:
-                # supp b_i ⊆ supp c: first against the union of the rows' supports (U), then per row.
-                u_bits = self._bits(U[None, :], np.ones((1, U.shape[0]), dtype=bool))[0]
-                cand = cand[~(self.pt_bits[cand] & ~u_bits).any(axis=1)]
-                if cand.size and M > 1 and M * cand.size * self.bit_words <= _BITSET_MAX_OPS:
-                    rows_bits = self._bits(U[None, :].repeat(M, axis=0), C > 0.0)        # [M, W]
-                    outside = (self.pt_bits[cand][None, :, :] & ~rows_bits[:, None, :]).any(axis=2)
-            n_c = cand.size
-            if n_c == 0:
-                return ub
-            delta = self.pt_delta[cand]
-            pl = pos[self.pt_probe[cand]]                                  # [n_c, P]; -1: not in U
-            ratio = np.where(pl[None] >= 0, C[:, np.maximum(pl, 0)], 0.0) * self.pt_pinv[cand][None]
-            bound = ratio.min(axis=2) * delta                              # [M, n_c], <= λ δ
-            if outside is not None:
-                bound[outside] = 0.0                                       # supp b_i ⊄ supp c: λ = 0
-            corr = np.zeros(M)
-            k = 2
-            while True:
-                open_ = bound < corr[:, None]
-                n_open = int(np.count_nonzero(open_))
-                if n_open == 0:
-                    break
-                if n_open <= k * M or k >= n_c:
-                    pm, pi = np.nonzero(open_)
-                else:
-                    part = np.argpartition(bound, k - 1, axis=1)[:, :k]
-                    pm = np.repeat(np.arange(M), k)
-                    pi = part.ravel()
-                    keep = open_[pm, pi]
-                    pm, pi = pm[keep], pi[keep]
-                np.minimum.at(corr, pm, self._pair_corrections(C, pos, cand, pm, pi))
-                bound[pm, pi] = 0.0                                        # evaluated
-                k *= 4
-        finally:
-            pos[U] = -1
-        return np.minimum(ub, base + corr)
-
-    def _pair_corrections(self, C, pos, cand, pm, pi) -> np.ndarray:
-        """``λ_i(c_m) δ_i`` for the pairs (row ``pm``, point ``cand[pi]``); ``pos`` maps states to C's columns."""
-        pts = cand[pi]
-        lens = self.pt_len[pts]
-        ent = self._entries(pts)
-        loc = pos[self.ent_idx[ent]]
-        ratio = C[np.repeat(pm, lens), loc] / self.ent_val[ent]
-        ratio[loc < 0] = 0.0                                               # outside supp(c): λ = 0
-        return np.minimum.reduceat(ratio, np.cumsum(lens) - lens) * self.pt_delta[pts]
-
-    def _bits(self, states: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        """``[M, W]`` uint64 bitsets of the states ``states[m][mask[m]]`` (``states``, ``mask`` ``[M, n]``)."""
-        M = states.shape[0]
-        full = np.zeros((M, self.bit_words * 64), dtype=bool)
-        r, c = np.nonzero(mask)
-        full[r, states[r, c]] = True
-        return np.packbits(full, axis=1, bitorder="little").view(np.uint64)
+            with_fib = False
+        _kernel.sawtooth(C, U.shape[0], U, rows, with_fib, since, self.pos, *self._point_set(), self.A, out)
+        return out
 
     def upper(self, idx: np.ndarray, val: np.ndarray) -> float:
         """Upper bound at the belief ``val`` on states ``idx``."""
@@ -481,8 +460,7 @@ class PointBasedSolver:
             return  # no better than the corners: the point would never bind
         if self.pt_n == self.pt_cap:
             self.pt_cap *= 2
-            for name in ("pt_start", "pt_len", "pt_key", "pt_kval", "pt_v", "pt_delta", "pt_stamp",
-                         "pt_probe", "pt_pinv", "pt_bits"):
+            for name in ("pt_start", "pt_len", "pt_v", "pt_delta", "pt_stamp", "pt_probe", "pt_pinv"):
                 old = getattr(self, name)
                 new = np.zeros((self.pt_cap,) + old.shape[1:], dtype=old.dtype)
                 new[: old.shape[0]] = old
@@ -496,12 +474,10 @@ class PointBasedSolver:
         self.ent_idx[self.ent_n: self.ent_n + m] = idx
         self.ent_val[self.ent_n: self.ent_n + m] = val
         top = int(np.argmax(val))
-        self.pt_start[i], self.pt_len[i], self.pt_key[i], self.pt_kval[i] = self.ent_n, m, idx[top], val[top]
+        self.pt_start[i], self.pt_len[i] = self.ent_n, m
         probes = np.argsort(-val, kind="stable")[:_PROBES]
         probes = np.concatenate([probes, np.full(_PROBES - probes.size, top)])
         self.pt_probe[i], self.pt_pinv[i] = idx[probes], 1.0 / val[probes]
-        if self.bit_words:
-            self.pt_bits[i] = self._bits(idx[None, :], np.ones((1, m), dtype=bool))[0]
         self.pt_v[i], self.pt_delta[i] = v, delta
         self.ub_version += 1
         self.pt_stamp[i] = self.ub_version
@@ -516,68 +492,53 @@ class PointBasedSolver:
         Fills ``node.p`` and ``node.Rb`` on the first call."""
         A, Z, S = self.A, self.Z, self.S
         idx, val = node.idx, node.val
-        if self.dense:
-            bT = (val @ self.Tall[idx]).reshape(A, S)
-        else:
-            starts = self.t_ptr[idx]
-            lens = self.t_ptr[idx + 1] - starts
-            offs = np.cumsum(lens) - lens
-            ent = np.repeat(starts - offs, lens) + np.arange(int(lens.sum()))
-            bT = np.bincount(self.t_ind[ent], weights=self.t_dat[ent] * np.repeat(val, lens),
-                             minlength=A * S).reshape(A, S)
-        U = np.flatnonzero((bT > 0.0).any(axis=0))
-        joint = bT[:, U][:, :, None] * self.O[:, U, :]       # [A, |U|, Z]
-        p = joint.sum(axis=1)                               # [A, Z]
-        C = np.transpose(joint, (0, 2, 1)).reshape(A * Z, U.shape[0])
-        pf = p.reshape(-1)
-        live = np.flatnonzero(pf > 1e-300)
-        C[live] /= pf[live, None]
+        while True:
+            nU, nl = _kernel.successors(idx, val, self.t_ptr, self.t_ind, self.t_dat, self.O, A, S, Z, self._bT,
+                                        self.pos, self._U_buf, self._C_buf, self._p_buf, self._live_buf)
+            if nl >= 0:
+                break
+            self._C_buf = np.zeros(2 * A * Z * nU)
+        U = self._U_buf[:nU].copy()
+        C = self._C_buf[: A * Z * nU].reshape(A * Z, nU).copy()
+        live = self._live_buf[:nl].copy()
         if node.p is None:
-            node.p = p
+            node.p = self._p_buf.reshape(A, Z).copy()
             node.Rb = val @ self.R[idx]
             # Cheap bounds first (corners and FIB vectors); the sawtooth is read lazily, only
             # for the successors of actions that become greedy (see _refresh_upper).
-            Cl = C[live]
             ub = np.zeros(A * Z)
-            ub[live] = np.minimum(Cl @ self.Vc[U], (Cl @ self.Qfib[U]).max(axis=1))
+            ub[live] = self._upper_batch(U, C, rows=live, with_points=False)
             node.ub_c = ub.reshape(A, Z)
             node.ub_seen = np.full(A, -1, dtype=np.int64)
             self.expansions += 1
-            self._refresh_upper(node, U, C, live, set())
+            self._refresh_upper(node, U, C, live)
         return U, C, live
 
-    def _refresh_upper(self, node: _Node, U, C, live, done: set) -> np.ndarray:
+    def _refresh_upper(self, node: _Node, U, C, live) -> np.ndarray:
         """Re-read the sawtooth at the successors of the greedy action until the greedy action
-        is one already refreshed (``done``); returns ``Q^U(b, ·)``.
+        is one already refreshed in this call; returns ``Q^U(b, ·)`` (the kernel's loop).
 
         Incremental: ``node.ub_c[a]`` already holds the minimum over the points as they
         were at version ``node.ub_seen[a]``, so only the points whose value fell since are
-        read (all of them when a corner value fell since, or on the first read). The result
-        is the same as a full re-read."""
-        Z = self.Z
-        ub_c = node.ub_c.reshape(-1)
-        seen = node.ub_seen
-        while True:
-            Qu = node.Rb + self.g * (node.p * node.ub_c).sum(axis=1)
-            a = int(np.argmax(Qu))
-            if a in done:
-                return Qu
-            done.add(a)
-            rows = live[(live >= a * Z) & (live < (a + 1) * Z)]
-            if rows.size and seen[a] < self.ub_version:
-                if seen[a] < self.vc_version:
-                    fresh = self._upper_batch(U, C[rows])
-                else:
-                    pts = np.flatnonzero(self.pt_stamp[: self.pt_n] > seen[a])
-                    fresh = self._upper_batch(U, C[rows], pts)
-                ub_c[rows] = np.minimum(ub_c[rows], fresh)
-            seen[a] = self.ub_version
+        read (all of them, and the FIB vectors, when a corner value fell since, or on the
+        first read). The result is the same as a full re-read."""
+        Qu = np.empty(self.A)
+        _kernel.refresh_upper(node.Rb, node.p, node.ub_c, node.ub_seen, C, U.shape[0], U, live, self.g, self.A,
+                              self.Z, self.ub_version, self.vc_version, self.pos, *self._point_set(), Qu)
+        return Qu
+
+    def _point_set(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                  np.ndarray, np.ndarray, np.ndarray, int, int]:
+        """The sawtooth point set as the kernel reads it (see ``_pointbased_kernel.c``)."""
+        return (self.Vc, self.Qfib, self.pt_start, self.pt_len, self.pt_probe, self.pt_pinv, self.ent_idx,
+                self.ent_val, self.pt_delta, self.pt_stamp, self.pt_n, _PROBES)
 
     def _lower_children(self, U, C, live) -> Tuple[np.ndarray, np.ndarray]:
+        """``(lb, best)`` ``[A, Z]``: the lower bound at each live successor and its maximising vector (0 elsewhere)."""
         AZ = self.A * self.Z
         lb = np.zeros(AZ)
         best = np.zeros(AZ, dtype=np.int64)
-        lb[live], best[live] = self._lower_batch(U, C[live])
+        _kernel.lower_rows(C, U.shape[0], U, live, self.GT, self.cap, 0, self.K, lb, best, False)
         return lb.reshape(self.A, self.Z), best.reshape(self.A, self.Z)
 
     @staticmethod
@@ -605,36 +566,41 @@ class PointBasedSolver:
         else:
             lb, best, cur, K0 = seen
             if self.K > K0:
-                lbf, bestf = lb.reshape(-1).copy(), best.reshape(-1).copy()
-                vals = C[live] @ self.GT[U, K0: self.K]                     # [L, new]
-                j = vals.argmax(axis=1)
-                v = vals[np.arange(live.size), j]
-                better = v > lbf[live]
-                lbf[live[better]] = v[better]
-                bestf[live[better]] = K0 + j[better]
-                lb, best = lbf.reshape(self.A, self.Z), bestf.reshape(self.A, self.Z)
-                cur = max(cur, float((node.val @ self.GT[node.idx, K0: self.K]).max()))
-        Ql = node.Rb + g * (node.p * lb).sum(axis=1)
-        a = int(np.argmax(Ql))
+                lb, best = lb.copy(), best.copy()
+                _kernel.lower_rows(C, U.shape[0], U, live, self.GT, self.cap, K0, self.K, lb.reshape(-1),
+                                   best.reshape(-1), True)
+                cur = max(cur, self.lower(node.idx, node.val, K0))
+        a, ql = _kernel.qvalue(node.Rb, node.p, lb, g, self.A, self.Z)
         self.backups += 1
-        if Ql[a] > cur + 1e-10 * max(1.0, abs(cur)):
+        if ql > cur + 1e-10 * max(1.0, abs(cur)):
             alpha = self._alpha(a, best[a])
             self._add_alpha(alpha, a)
             cur = max(cur, float(node.val @ alpha[node.idx]))
         self.beliefs.setdefault(node.key, (node.idx, node.val))
-        # Refresh the cached successor bounds: from successors updated elsewhere, then by
-        # re-reading the sawtooth for the successors of the greedy action (the one that sets
-        # UB(b)) until that action stops changing.
+        self._update_upper(node, U, C, live)
+        return cur, node.ub
+
+    def _update_upper(self, node: _Node, U, C, live) -> None:
+        """Lower the upper bound at ``node``: refresh the cached successor bounds from successors
+        updated elsewhere, then re-read the sawtooth for the successors of the greedy action
+        (the one that sets UB(b)) until that action stops changing; store the new value."""
         ub_c = node.ub_c.reshape(-1)
         for ao, child in node.children.items():
             if child.ub < ub_c[ao]:
                 ub_c[ao] = child.ub
-        Qu = self._refresh_upper(node, U, C, live, set())
+        Qu = self._refresh_upper(node, U, C, live)
         u = float(Qu.max())
         if u < node.ub:
             node.ub = u
             self._set_upper(node.idx, node.val, u, node.key)
-        return cur, node.ub
+
+    def sweep_upper(self) -> None:
+        """An upper-bound backup at every expanded belief, the most recently created first (deep
+        beliefs tend to be created last, so improvements travel towards ``b0`` in one pass)."""
+        for node in reversed([n for n in self.nodes.values() if n.p is not None]):
+            U, C, live = self._successors(node)
+            self._update_upper(node, U, C, live)
+        self.ub_sweeps += 1
 
     # ------------------------------------------------------------ pruning
     def prune(self, by_usage: bool = False) -> int:
@@ -651,16 +617,9 @@ class PointBasedSolver:
         if not self.beliefs or K <= self.A:
             return 0
         used = np.zeros(K, dtype=bool)
-        items = list(self.beliefs.values())
-        chunk = max(1, int(4_000_000 // max(K, 1)))
-        for i in range(0, len(items), chunk):
-            part = items[i: i + chunk]
-            rows = np.concatenate([np.full(len(ix), j) for j, (ix, _) in enumerate(part)])
-            cols = np.concatenate([ix for ix, _ in part])
-            data = np.concatenate([v for _, v in part])
-            B = sp.csr_matrix((data, (rows, cols)), shape=(len(part), self.S))
-            vals = np.asarray(B @ self.GT[:, :K])
-            used[vals.argmax(axis=1)] = True
+        for ix, v in self.beliefs.values():
+            self.lower(ix, v)
+            used[self._one_best[0]] = True
         if by_usage or not self.prune_keeps_successors:
             keep = np.flatnonzero(used)
         else:
@@ -669,7 +628,7 @@ class PointBasedSolver:
             nodes = [n for n in self.nodes.values() if n.p is not None]
             got = self._batched_children(nodes)
             if got is not None:
-                _, _, best, live = got
+                _, best, live = got
                 used[best[live]] = True
             keep = np.flatnonzero(used)
         removed = K - keep.size
@@ -681,6 +640,7 @@ class PointBasedSolver:
         self.prunes += 1
         self.pruned += removed
         self._last_prune_K = self.K
+        self._backups_at_prune = self.backups
         return removed
 
     # ------------------------------------------------------------ search
@@ -697,96 +657,65 @@ class PointBasedSolver:
 
     def _alpha(self, a: int, best_a: np.ndarray) -> np.ndarray:
         """α = R(:,a) + γ T[a] Σ_o O[a,:,o] ∘ Γ_{best_a[o]}  (the o-sum moves inside T[a])."""
-        inner = (self.O[a] * self.GT[:, best_a]).sum(axis=1)
-        return self.R[:, a] + self.g * np.asarray(self.Tmats[a] @ inner).ravel()
+        out = np.empty(self.S)
+        _kernel.alpha(a, np.ascontiguousarray(best_a, dtype=np.int64), self.R, self.O, self.GT, self.cap,
+                      self.tv_ptr, self.tv_ind, self.tv_dat, self.S, self.A, self.Z, self.g, self._inner, out)
+        return out
 
     def _perseus_start(self) -> bool:
         nodes = [n for n in self.nodes.values() if n.p is not None]
         if len(nodes) < 2:
             return False
-        rows = np.repeat(np.arange(len(nodes)), [n.idx.shape[0] for n in nodes])
-        cols = np.concatenate([n.idx for n in nodes])
-        data = np.concatenate([n.val for n in nodes])
-        self._p_B = sp.csr_matrix((data, (rows, cols)), shape=(len(nodes), self.S))
+        # The round's beliefs as one flat list of (belief, state, probability) entries: a new
+        # vector's values at all of them are one gather and one bincount.
+        self._p_seg = np.repeat(np.arange(len(nodes)), [n.idx.shape[0] for n in nodes])
+        self._p_idx = np.concatenate([n.idx for n in nodes])
+        self._p_val = np.concatenate([n.val for n in nodes])
         self._p_nodes = nodes
-        lb = np.full(len(nodes), -np.inf)
-        step = max(1, 2_000_000 // max(1, self.K))
-        for k0 in range(0, self.K, step):
-            lb = np.maximum(lb, np.asarray(self._p_B @ self.GT[:, k0: k0 + step]).max(axis=1))
-        self._p_lb = lb
+        self._p_lb = np.array([self.lower(n.idx, n.val) for n in nodes])
         self._p_todo = np.ones(len(nodes), dtype=bool)
         return True
 
-    def _add_alphas(self, alphas: np.ndarray, action: int) -> None:
-        n = alphas.shape[0]
-        while self.K + n > self.cap:
-            self.cap *= 2
-            GT = np.zeros((self.S, self.cap))
-            GT[:, : self.K] = self.GT[:, : self.K]
-            self.GT = GT
-            self.gact = np.resize(self.gact, self.cap)
-            self.gbirth = np.resize(self.gbirth, self.cap)
-        self.GT[:, self.K: self.K + n] = alphas.T
-        self.gact[self.K: self.K + n] = action
-        self.gbirth[self.K: self.K + n] = self.backups
-        self.K += n
-
     def _batched_children(self, nodes):
-        """For beliefs ``nodes``: ``(B [N,S] CSR, Ql [N,A], best [N,A,Z], live [N,A,Z])`` — the
-        one-step LB lookahead and the maximising vector at every successor, as sparse products
-        (or ``None`` when those products would exceed ``sweep_max_flops``)."""
-        N, K, A, Z, S, g = len(nodes), self.K, self.A, self.Z, self.S, self.g
+        """For beliefs ``nodes``: ``(Ql [N,A], best [N,A,Z], live [N,A,Z])`` — the one-step LB
+        lookahead and the maximising vector at every successor, against Γ as it is (or ``None``
+        when that would cost more than ``sweep_max_flops`` multiply-adds)."""
+        N, K, A, Z, g = len(nodes), self.K, self.A, self.Z, self.g
         nnz = sum(n.idx.shape[0] for n in nodes)
         if N == 0 or nnz * A * K * 4 > self.sweep_max_flops:
             return None
-        rows = np.repeat(np.arange(N), [n.idx.shape[0] for n in nodes])
-        B = sp.csr_matrix((np.concatenate([n.val for n in nodes]), (rows, np.concatenate([n.idx for n in nodes]))),
-                          shape=(N, S))
-        G = self.GT[:, :K]
-        Ql = np.stack([n.Rb for n in nodes])                      # [N, A]
-        best = np.zeros((N, A, Z), dtype=np.int64)
-        live = np.zeros((N, A, Z), dtype=bool)
-        for a in range(A):
-            Pa = (B @ self._Tcsr[a]).tocsr()                        # b·T[a], [N, S]
-            Pa.sum_duplicates()
-            for o in range(Z):
-                w = self.O[a, Pa.indices, o]
-                if not w.any():
-                    continue
-                Cao = sp.csr_matrix((Pa.data * w, Pa.indices, Pa.indptr), shape=(N, S))
-                V = np.asarray(Cao @ G)                               # [N, K], P(o|b,a)·Γ·b^{a,o}
-                j = V.argmax(axis=1)
-                best[:, a, o] = j
-                live[:, a, o] = np.diff(Cao.indptr) > 0
-                Ql[:, a] += g * V[np.arange(N), j]
-        return B, Ql, best, live
+        Ql = np.empty((N, A))
+        best = np.empty((N, A, Z), dtype=np.int64)
+        live = np.zeros((N, A * Z), dtype=bool)
+        for i, node in enumerate(nodes):
+            U, C, lv = self._successors(node)
+            lb, best[i] = self._lower_children(U, C, lv)
+            Ql[i] = node.Rb + g * (node.p * lb).sum(axis=1)
+            live[i, lv] = True
+        return Ql, best, live.reshape(N, A, Z)
 
     def sweep(self) -> bool:
-        """One synchronous point-based backup of every expanded belief, batched as sparse products
-        (PBVI, Pineau et al. 2003); adds the new vectors that improve their own belief.
-        Returns False (and does nothing) when the products would be too large."""
+        """One synchronous point-based backup of every expanded belief (PBVI, Pineau et al. 2003):
+        every backup reads Γ as it was before the sweep; adds the new vectors that improve their
+        own belief. Returns False (and does nothing) when the products would be too large."""
         nodes = [n for n in self.nodes.values() if n.p is not None]
         if len(nodes) < 2:
             return False
         got = self._batched_children(nodes)
         if got is None:
             return False
-        B, Ql, best, _ = got
-        N, A, Z, S, g = len(nodes), self.A, self.Z, self.S, self.g
-        cur = np.asarray(B @ self.GT[:, : self.K]).max(axis=1)
+        Ql, best, _ = got
+        N = len(nodes)
         an = Ql.argmax(axis=1)
         qn = Ql[np.arange(N), an]
-        improve = qn > cur + 1e-10 * np.maximum(1.0, np.abs(cur))
-        chunk = max(1, int(2_000_000 // S))
-        for a in range(A):
-            sel = np.flatnonzero(improve & (an == a))
-            for c0 in range(0, sel.size, chunk):
-                part = sel[c0: c0 + chunk]
-                inner = np.zeros((part.size, S))
-                for o in range(Z):
-                    inner += self.GT[:, best[part, a, o]].T * self.O[a][:, o]
-                alphas = self.R[:, a][None, :] + g * np.asarray(self._Tcsr[a] @ inner.T).T
-                self._add_alphas(alphas, a)
+        new = []
+        for i, node in enumerate(nodes):
+            cur = self.lower(node.idx, node.val)
+            if qn[i] > cur + 1e-10 * max(1.0, abs(cur)):
+                self.spread_gain = max(self.spread_gain, (float(qn[i]) - cur) * node.reach)
+                new.append((self._alpha(int(an[i]), best[i, an[i]]), int(an[i])))
+        for alpha, a in new:
+            self._add_alpha(alpha, a)
         self.sweeps += 1
         self.sweep_backups += N
         return True
@@ -813,9 +742,12 @@ class PointBasedSolver:
             if Ql[a] <= self._p_lb[i] + 1e-10 * max(1.0, abs(self._p_lb[i])):
                 continue
             alpha = self._alpha(a, best[a])
-            if Ql[a] > self.lower(node.idx, node.val) + 1e-10 * max(1.0, abs(Ql[a])):
+            cur = self.lower(node.idx, node.val)
+            if Ql[a] > cur + 1e-10 * max(1.0, abs(Ql[a])):
+                self.spread_gain = max(self.spread_gain, (float(Ql[a]) - cur) * node.reach)
                 self._add_alpha(alpha, a)
-            covered = np.asarray(self._p_B @ alpha).ravel() >= self._p_lb
+            values = np.bincount(self._p_seg, weights=self._p_val * alpha[self._p_idx], minlength=len(self._p_nodes))
+            covered = values >= self._p_lb
             self._p_todo &= ~covered
 
     def _pick_arm(self) -> int:
@@ -852,10 +784,11 @@ class PointBasedSolver:
         ``P(o|b,a) = 0``); ``live`` the flat indices of the possible ``(a, o)``; ``lb``,
         ``best`` ``[A, Z]`` the lower bound at each successor and the index of its maximising
         α-vector; ``seen`` those plus ``LB(b)`` and ``|Γ|`` (``_update`` then reads only
-        vectors added since); ``Qu`` / ``Ql`` ``[A]`` the upper / lower bound Q-values
-        ``R_b(a) + γ Σ_o P(o|b,a) bound(b^{a,o})``; ``u``, ``l`` the bounds at ``b`` (``l`` a
-        one-step look-ahead of the lower bound); ``thr`` the successor's target width
-        ``eps_t γ^{-(d+1)}``; ``score`` ``[Z]`` the weighted excess uncertainty.
+        vectors added since); ``a``, ``qu`` the action with the largest upper-bound Q-value
+        ``R_b(a) + γ Σ_o P(o|b,a) UB(b^{a,o})`` and that value (``_kernel.qvalue``); ``u``,
+        ``l`` the bounds at ``b`` (``l`` the largest lower-bound Q-value: a one-step look-ahead
+        of the lower bound); ``thr`` the successor's target width ``eps_t γ^{-(d+1)}``; ``o``
+        the observation with the largest weighted excess uncertainty (``_kernel.excess_obs``).
         """
         g, Z = self.g, self.Z
         node = self.root
@@ -866,18 +799,15 @@ class PointBasedSolver:
             U, C, live = self._successors(node)
             lb, best = self._lower_children(U, C, live)
             seen = (lb, best, self.lower(node.idx, node.val), self.K)
-            Qu = node.Rb + g * (node.p * node.ub_c).sum(axis=1)
-            Ql = node.Rb + g * (node.p * lb).sum(axis=1)
-            u = min(node.ub, float(Qu.max()))
+            a, qu = _kernel.qvalue(node.Rb, node.p, node.ub_c, g, self.A, Z)       # greedy on Q^U
+            u = min(node.ub, qu)
             # One-step lookahead of the LB (≥ LB(b) for the uniformly improvable bounds kept here).
-            l = float(Ql.max())
+            l = _kernel.qvalue(node.Rb, node.p, lb, g, self.A, Z)[1]
             if u - l <= eps_t * g ** (-d) or d >= max_d:
                 path.append((node, -1, U, C, live, seen))
                 break
-            a = int(np.argmax(Qu))
             thr = eps_t * g ** (-(d + 1))
-            score = node.p[a] * (node.ub_c[a] - lb[a] - thr) + self.z_jitter
-            o = int(np.argmax(score))
+            o = _kernel.excess_obs(node.p, node.ub_c, lb, self.z_jitter, a, thr, Z)       # argmax of score
             if node.p[a, o] <= 0.0:
                 path.append((node, -1, U, C, live, seen))
                 break
@@ -889,6 +819,9 @@ class PointBasedSolver:
                 child = self._node(U[nz], c[nz])
                 child.ub = min(child.ub, float(node.ub_c[a, o]))
                 node.children[a * Z + o] = child
+            w = node.reach * g * float(node.p[a, o])
+            if w > child.reach:
+                child.reach = w
             node = child
             d += 1
         # Back up along the path, deepest first, refreshing each parent's cached successor bound.
@@ -927,7 +860,10 @@ class PointBasedSolver:
             self.trial(eps_t)
             if self.K * self.S > self.max_gamma_entries:
                 self.prune(by_usage=True)
-            elif self.K > 2 * self._last_prune_K + 50:
+            elif self.K > 2 * self._last_prune_K + 50 and \
+                    self.backups - self._backups_at_prune >= min(len(self.nodes), 4 * self._last_prune_K + 200):
+                # A prune reads Γ at every node and its successors, the work of one backup per
+                # node: amortised over at least that many trial backups (while Γ stays small).
                 self.prune()
             lo, hi = self.bounds_at_start()
             converged = hi - lo <= epsilon
@@ -935,19 +871,45 @@ class PointBasedSolver:
             # The lower bound is what the policy is worth, so arms are rated by LB gains.
             self._arm_gain[arm] = 0.95 * self._arm_gain[arm] + max(lo - lo_before, 0.0)
             self._arm_cost[arm] = 0.95 * self._arm_cost[arm] + (self.backups - b_before)
-            if not converged:
+            if not converged and self.ub_sweep_ratio > 0 and \
+                    self.backups - self._backups_at_ub_sweep >= self.ub_sweep_ratio * len(self.nodes):
+                self.sweep_upper()
+                self._backups_at_ub_sweep = self.backups
+                lo, hi = self.bounds_at_start()
+                converged = hi - lo <= epsilon
+            if not converged and self._spread_wait > 0:
+                # Backing off: this trial's share of Perseus backups is forgiven, not owed.
+                self._spread_wait -= 1
+                self.spreads_skipped += 1
+                self._perseus_forgiven = int(self.perseus_share * self.backups) - self.perseus_backups
+            elif not converged:
+                lo_spread = lo
+                self.spread_gain = 0.0
                 swept = False
                 if self.sweep_ratio > 0 and \
                         self.backups - self._trial_backups_at_sweep >= self.sweep_ratio * len(self.nodes):
                     swept = self.sweep()
                     if swept:
                         self._trial_backups_at_sweep = self.backups
+                spread = swept
                 if not swept and self.perseus_share > 0:
-                    owed = int(self.perseus_share * self.backups) - self.perseus_backups
+                    owed = int(self.perseus_share * self.backups) - self.perseus_backups - self._perseus_forgiven
                     if owed > 0:
                         self.perseus(owed)
+                        spread = True
                 lo, hi = self.bounds_at_start()
                 converged = hi - lo <= epsilon
+                if spread and self.spread_backoff:
+                    # A spread that lifted neither LB(b0) nor the LB at any belief by more than
+                    # the target gap (weighted by the belief's reach from b0) doubles the
+                    # number of trials the next one waits (up to spread_backoff); one that
+                    # did resets it.
+                    if lo > lo_spread + 1e-12 * max(1.0, abs(lo_spread)) or \
+                            self.spread_gain > epsilon:
+                        self._spread_skip = 0
+                    else:
+                        self._spread_skip = min(self.spread_backoff, max(1, 2 * self._spread_skip))
+                        self._spread_wait = self._spread_skip
             if now - last_hist >= 0.5 or converged:
                 history.append((round(offset + self._clock() - t0, 3), lo, hi))
                 last_hist = now
@@ -969,7 +931,8 @@ class PointBasedSolver:
                 "gap": hi - lo, "backups": self.backups, "vectors": self.K, "ub_points": self.pt_n,
                 "beliefs": len(self.beliefs), "pruned": self.pruned, "fib_iterations": self.fib_iterations, "nodes": len(self.nodes),
                 "fib_seconds": self.fib_seconds, "perseus_backups": self.perseus_backups,
-                "sweeps": self.sweeps, "sweep_backups": self.sweep_backups,
+                "sweeps": self.sweeps, "sweep_backups": self.sweep_backups, "spreads_skipped": self.spreads_skipped,
+                "ub_sweeps": self.ub_sweeps,
                 "history": list(history),
             },
         )
