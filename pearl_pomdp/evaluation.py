@@ -82,29 +82,19 @@ def feature_controls(model: Pomdp, values: Optional[np.ndarray] = None) -> np.nd
 class LookaheadPolicy:
     """An α-vector policy executed with one step of exact forward search over the model, batched:
     ``argmax_a [b·R_a + γ Σ_o max_k α_k·(b T_a diag O_{a,o})]`` — the choice of
-    :class:`~pearl_pomdp.executive.FlatPolicyDecider` with ``lookahead=1``. Observations an
-    action never produces are skipped (their term is exactly 0), which is what makes
-    thousands of episodes on Pearl's flat model affordable."""
+    :class:`~pearl_pomdp.executive.FlatPolicyDecider` with ``lookahead=1``, through the same
+    :class:`~pearl_pomdp.hierarchy.execute.Lookahead`, over every episode's belief at once
+    (its loop skips the observations an action never produces, which is what makes thousands
+    of episodes on Pearl's flat model affordable)."""
 
     def __init__(self, policy, model: Pomdp):
-        import scipy.sparse as sp
+        from pearl_pomdp.hierarchy.execute import Lookahead
 
-        self.alphas_t = np.ascontiguousarray(np.asarray(policy.alphas, dtype=float).T)   # [S, K]
-        self.R = np.asarray(model.R, dtype=float)
-        self.O = np.asarray(model.O, dtype=float)
-        self.g = float(model.discount)
-        self._Tt = [sp.csr_matrix(t, dtype=float).T.tocsr() for t in model.T]
-        self._live = [np.flatnonzero(self.O[a].any(axis=0)) for a in range(self.O.shape[0])]
+        self._search = Lookahead(model.T, model.O, model.R, model.discount, policy.alphas, 1)
 
     def q_values(self, B: np.ndarray) -> np.ndarray:
         """``[N, A]`` one-step look-ahead Q-values at the rows of ``B`` ``[N, S]``."""
-        B = np.atleast_2d(np.asarray(B, dtype=float))
-        Q = B @ self.R
-        for a, Tt in enumerate(self._Tt):
-            predicted = np.asarray((Tt @ B.T).T)
-            for o in self._live[a]:
-                Q[:, a] += self.g * ((predicted * self.O[a, :, o]) @ self.alphas_t).max(axis=1)
-        return Q
+        return self._search.q_values(B)
 
     def actions_batch(self, beliefs: np.ndarray) -> np.ndarray:
         """The look-ahead action per row of ``beliefs`` ``[N, S]``."""

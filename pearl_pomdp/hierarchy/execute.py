@@ -82,6 +82,9 @@ class Lookahead:
         self._Tt_stacked = sp.vstack(self._Tt).tocsr()
         # O as [A, Z, 1, S], laid out for the last step's broadcast (see _q_last_step).
         self._O_azs = np.ascontiguousarray(self.O.transpose(0, 2, 1)[:, :, None, :])
+        # Per action, the observations it can produce: the loop skips the others, whose
+        # successor is 0 and whose term is exactly 0 (Pearl's flat model: most of them).
+        self._live_obs = [np.flatnonzero(self.O[a].any(axis=0)) for a in range(self.O.shape[0])]
 
     #: Most elements of the ``[A, Z, N, S]`` successor block :meth:`_q_last_step` builds; a
     #: larger batch takes the per-``(a, o)`` loop (splitting the rows would change the BLAS
@@ -98,7 +101,7 @@ class Lookahead:
         Q = B @ self.R
         for a, Tt in enumerate(self._Tt):
             predicted = np.asarray((Tt @ B.T).T)  # [N, S_h]
-            for o in range(self.O.shape[2]):
+            for o in self._live_obs[a]:
                 successor = predicted * self.O[a, :, o]
                 if d == 1:
                     Q[:, a] += self.discount * (successor @ self.alphas.T).max(axis=1)

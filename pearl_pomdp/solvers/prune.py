@@ -47,8 +47,8 @@ simplex re-optimises, and a newly kept vector is a new column, after which the
 primal simplex re-optimises. Harris's ratio test, Bland's rule after a run of
 degenerate pivots, refactoring every 50 pivots, and one retry from a fresh
 basis before an LP counts as "no witness" keep it robust. The random beliefs of
-step 3 come from the kernel's own seeded generator (same numbers for the same
-set sizes), so a prune's result never depends on earlier calls.
+step 3 come from numpy's generator seeded by the set size (:func:`_random_beliefs`,
+which the kernel calls back), so a prune's result never depends on earlier calls.
 
 Array convention: ``alphas`` is ``[K, S]``, one vector per row.
 """
