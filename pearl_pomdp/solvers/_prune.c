@@ -827,8 +827,11 @@ static PyObject *py_prune(PyObject *Py_UNUSED(self), PyObject *args) {
                           &kept_obj, &wit_obj))
         return NULL;
     if (!(tol >= 0.0) || !isfinite(tol)) return PyErr_Format(PyExc_ValueError, "tol must be >= 0, got %R", PyTuple_GET_ITEM(args, 1));
+    /* Every resource that `out:` releases is declared (and empty) before the first `goto out`. */
     Py_buffer a = {0}, p = {0}, k = {0}, w = {0};
     int have_k = 0, have_w = 0;
+    Py_ssize_t nP = 0;
+    double *Pall = NULL;
     PyObject *result = NULL;
     if (get_doubles(alphas_obj, &a, 2, 0, "alphas") < 0) return NULL;
     Py_ssize_t K = a.shape[0], S = a.shape[1];
@@ -838,8 +841,6 @@ static PyObject *py_prune(PyObject *Py_UNUSED(self), PyObject *args) {
     }
     if (!all_finite(a.buf, K * S)) { PyErr_SetString(PyExc_ValueError, "alphas has a non-finite entry"); goto out; }
     /* points: None or a tuple of [P_i, S] arrays, used in that order (no vstack needed) */
-    Py_ssize_t nP = 0;
-    double *Pall = NULL;
     if (points_obj != Py_None) {
         if (!PyTuple_Check(points_obj)) { PyErr_SetString(PyExc_ValueError, "points must be None or a tuple of [P, S] arrays"); goto out; }
         Py_ssize_t nparts = PyTuple_GET_SIZE(points_obj);
