@@ -892,10 +892,14 @@ static PyObject *py_prune(PyObject *Py_UNUSED(self), PyObject *args) {
             }
         }
     }
-    if (PyObject_GetBuffer(kept_obj, &k, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) goto out;
+    if (PyObject_GetBuffer(kept_obj, &k, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) {
+        PyErr_Clear(); /* (the exporter's own message does not say which argument) */
+        PyErr_SetString(PyExc_ValueError, "kept_out must be a writable C-contiguous int64 array of at least K entries");
+        goto out;
+    }
     have_k = 1;
     if (k.itemsize != 8 || !k.format || !(strcmp(k.format, "q") == 0 || strcmp(k.format, "l") == 0) || k.len < 8 * K) {
-        PyErr_SetString(PyExc_ValueError, "kept_out must be a writable int64 array of at least K entries");
+        PyErr_SetString(PyExc_ValueError, "kept_out must be a writable C-contiguous int64 array of at least K entries");
         goto out;
     }
     if (get_doubles(wit_obj, &w, 2, 1, "witness_out") < 0) goto out;
