@@ -39,10 +39,14 @@ SPEECH = ["pocketsphinx>=5,<6", "espeakng-loader>=0.2"]
 #: only: no numpy headers needed to build). Each is the only implementation of its loops, for
 #: every model size: the exact solver's prune (with its own warm-started simplex) and the
 #: point-based solver's per-belief inner loops.
+#: Every build shows any warning (test/test_kernel_build.py fails CI on one: -Werror there,
+#: not here, so a user's newer compiler with new warnings still installs).
+WARNINGS = ["-Wall", "-Wextra"]
 KERNELS = [
-    Extension(f"{PACKAGE}.solvers._prune", [f"{PACKAGE}/solvers/_prune.c"], extra_compile_args=["-O2", "-std=c99"]),
+    Extension(f"{PACKAGE}.solvers._prune", [f"{PACKAGE}/solvers/_prune.c"],
+              extra_compile_args=["-O2", "-std=c99", *WARNINGS]),
     Extension(f"{PACKAGE}.solvers._pointbased_kernel", [f"{PACKAGE}/solvers/_pointbased_kernel.c"],
-              extra_compile_args=["-O3"]),
+              extra_compile_args=["-O3", *WARNINGS]),
 ]
 
 setup(

@@ -19,7 +19,9 @@ paths (without them the bench prints our figures alone)::
 
 Options: ``--exact FILE:H,...`` / ``--pointbased FILE,...`` pick the runs (``H`` a horizon
 or ``inf``; a FILE without a directory is looked up in ``../shared/benchmarks/pomdp``);
-``--no-exact`` / ``--no-pointbased``; ``--time-limit`` (seconds per run, both sides);
+``--set small|medium|large|all`` (medium adds shuttle h10 and ∞, large network ∞);
+``--no-exact`` / ``--no-pointbased``; ``--time-limit`` (seconds per run, both sides;
+default 300 for exact runs, pomdp-solve's limit in RESULTS.md, and 60 for point-based ones);
 ``--base DIR`` also runs the solvers of another checkout (say ``git archive main``
 unpacked in DIR) between the peer and ours, and reports ``ours_vs_base`` (wall and
 solver ratios, and for the exact runs whether the two policies are identical).
@@ -49,13 +51,22 @@ from typing import Dict, List, Optional, Tuple
 REPO = Path(__file__).resolve().parents[1]
 BENCHMARKS = REPO.parent / "shared" / "benchmarks" / "pomdp"
 
-#: Exact runs: the files on which pomdp-solve needs at most a few seconds (RESULTS.md).
+#: Exact runs: small = the files on which pomdp-solve needs at most a few seconds (RESULTS.md);
+#: medium = shuttle h10 (~10 s) and shuttle ∞ (pomdp-solve ~130-180 s; the run issue 26 fixed);
+#: large = network ∞ (pomdp-solve ~300 s, at the edge of its limit). Every infinite-horizon
+#: run pomdp-solve finishes within 300 s is here; 4x3.95 ∞ is not (it does not).
 EXACT_SETS = {
     "small": ["tiger.95.POMDP:15", "tiger.95.POMDP:inf", "tiger.aaai.POMDP:10", "tiger.aaai.POMDP:inf",
               "1d.POMDP:10", "1d.POMDP:inf", "parr95.95.POMDP:10", "parr95.95.POMDP:inf",
               "cheese.95.POMDP:10", "cheese.95.POMDP:inf", "network.POMDP:10"],
-    "medium": ["shuttle.95.POMDP:10"],
+    "medium": ["shuttle.95.POMDP:10", "shuttle.95.POMDP:inf"],
+    "large": ["network.POMDP:inf"],
 }
+#: Seconds per run (both sides) unless --time-limit says otherwise: RESULTS.md killed
+#: pomdp-solve after 300 s; SARSOP reaches its gap on the point-based files in under a second.
+DEFAULT_TIME_LIMIT = {"exact": 300.0, "pointbased": 60.0}
+#: Values at b0 closer than this count as the same (issue 26's acceptance).
+SAME_VALUE = 1e-6
 #: Point-based runs: the files on which SARSOP reaches its 1e-3 gap in under a second.
 POINTBASED_SETS = {
     "small": ["tiger.95.POMDP", "tiger.aaai.POMDP", "1d.POMDP", "parr95.95.POMDP", "shuttle.95.POMDP",
@@ -113,7 +124,9 @@ def worker(argv: List[str]) -> None:
         res = solve_incremental_pruning(model, horizon=horizon, time_limit=float(argv[4]))
         np.savez(argv[3], alphas=res.policy.alphas, actions=res.policy.actions, b0=np.asarray(model.b0))
         out.update(solver_s=res.seconds, vectors=res.policy.num_vectors, value_at_b0=res.value_at_start,
-                   epochs=res.iterations, converged=res.converged, lps=res.extra["prune"]["lps"])
+                   epochs=res.iterations, converged=res.converged, lps=res.extra["prune"]["lps"],
+                   stop_reason=res.extra.get("stop_reason"), last_residual=res.extra.get("last_residual"),
+                   cycle_period=res.extra.get("cycle_period"))
     else:
         res = solve_point_based(model, time_limit=float(argv[3]), epsilon=float(argv[2]))
         out.update(solver_s=res.seconds, lower=res.value_at_start, upper=res.upper_bound, gap=res.gap,
@@ -162,7 +175,8 @@ def run_pomdp_solve(exe: str, path: Path, horizon: Optional[int], timeout: float
     t0 = time.perf_counter()
     ru0 = os.times()
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        # (in workdir: pomdp-solve writes a scratch file "##pomdp-solve-PID##" into its cwd)
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=workdir)
     except subprocess.TimeoutExpired:
         return {"error": f"killed after {timeout:g} s", "wall_s": time.perf_counter() - t0}
     wall = time.perf_counter() - t0
@@ -263,14 +277,16 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--pomdp-solve", metavar="PATH", help="pomdp-solve executable (exact peer)")
     ap.add_argument("--sarsop", metavar="PATH", help="SARSOP's pomdpsol executable (point-based peer)")
-    ap.add_argument("--set", choices=["small", "medium", "all"], default="small",
-                    help="which files: small (seconds), medium (+ shuttle h10, RockSample_4_4), all = both")
+    ap.add_argument("--set", choices=["small", "medium", "large", "all"], default="small",
+                    help="which files: small (seconds), medium (+ shuttle h10 and ∞, RockSample_4_4), "
+                         "large (+ network ∞), all = every set")
     ap.add_argument("--exact", metavar="FILE:H,...", help="exact runs instead of the set's")
     ap.add_argument("--pointbased", metavar="FILE,...", help="point-based runs instead of the set's")
     ap.add_argument("--no-exact", action="store_true")
     ap.add_argument("--no-pointbased", action="store_true")
     ap.add_argument("--precision", type=float, default=1e-3, help="point-based target gap at b0 (default 1e-3)")
-    ap.add_argument("--time-limit", type=float, default=60.0, help="seconds per run, both sides (default 60)")
+    ap.add_argument("--time-limit", type=float, default=None,
+                    help="seconds per run, both sides (default 300 exact, 60 point-based)")
     ap.add_argument("--repeat", type=int, default=1, help="runs per (file, solver); medians reported")
     ap.add_argument("--base", metavar="DIR", help="also run another checkout's solver (e.g. an export of main), "
                     "between the peer and ours, for a before/after under the same load")
@@ -280,14 +296,17 @@ def main() -> None:
     for exe, flag in ((args.pomdp_solve, "--pomdp-solve"), (args.sarsop, "--sarsop")):
         if exe and not os.access(exe, os.X_OK):
             raise SystemExit(f"bench/peers.py: {flag} {exe}: not an executable file")
-    if args.repeat < 1 or args.time_limit <= 0 or args.precision <= 0:
+    if args.repeat < 1 or (args.time_limit is not None and args.time_limit <= 0) or args.precision <= 0:
         raise SystemExit("bench/peers.py: --repeat must be >= 1, --time-limit and --precision > 0")
-    sets = ["small", "medium"] if args.set == "all" else (["small", "medium"] if args.set == "medium" else ["small"])
+    order = ["small", "medium", "large"]
+    sets = order if args.set == "all" else order[:order.index(args.set) + 1]
+    exact_limit = args.time_limit or DEFAULT_TIME_LIMIT["exact"]
+    pb_limit = args.time_limit or DEFAULT_TIME_LIMIT["pointbased"]
 
     exact_specs = [] if args.no_exact else (
         args.exact.split(",") if args.exact else [s for k in sets for s in EXACT_SETS[k]])
     pb_specs = [] if args.no_pointbased else (
-        args.pointbased.split(",") if args.pointbased else [s for k in sets for s in POINTBASED_SETS[k]])
+        args.pointbased.split(",") if args.pointbased else [s for k in sets for s in POINTBASED_SETS.get(k, [])])
     exact_runs = [parse_exact_spec(s) for s in exact_specs]
     pb_runs = [resolve(s) for s in pb_specs]
 
@@ -295,6 +314,7 @@ def main() -> None:
         "bench": "peers", "argv": sys.argv[1:], "python": platform.python_version(),
         "machine": platform.machine(), "cpus": os.cpu_count(), "load_avg_start": os.getloadavg(),
         "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
+        "time_limit": {"exact": exact_limit, "pointbased": pb_limit},
         "peers": {"pomdp_solve": args.pomdp_solve, "sarsop": args.sarsop},
         "exact": [], "pointbased": [],
     }
@@ -308,12 +328,12 @@ def main() -> None:
             npz, base_npz = work / "ours.npz", work / "base.npz"
             for _ in range(args.repeat):
                 if args.pomdp_solve:
-                    peer_runs.append(run_pomdp_solve(args.pomdp_solve, path, horizon, args.time_limit + 30, work))
+                    peer_runs.append(run_pomdp_solve(args.pomdp_solve, path, horizon, exact_limit, work))
                 if args.base:
-                    base_runs.append(run_ours(["exact", str(path), h, str(base_npz), repr(args.time_limit)],
-                                              timeout=args.time_limit * 3 + 60, repo=args.base))
-                ours_runs.append(run_ours(["exact", str(path), h, str(npz), repr(args.time_limit)],
-                                          timeout=args.time_limit * 3 + 60))
+                    base_runs.append(run_ours(["exact", str(path), h, str(base_npz), repr(exact_limit)],
+                                              timeout=exact_limit * 3 + 60, repo=args.base))
+                ours_runs.append(run_ours(["exact", str(path), h, str(npz), repr(exact_limit)],
+                                          timeout=exact_limit * 3 + 60))
             row["ours"] = median_runs(ours_runs)
             if base_runs:
                 row["base"] = median_runs(base_runs)
@@ -329,22 +349,24 @@ def main() -> None:
                 if "error" not in peer and "error" not in row["ours"]:
                     row["vectors_vs_peer"] = compare_vectors(npz, peer)
                     row["value_diff"] = row["ours"]["value_at_b0"] - peer["value_at_b0"]
+                    row["same_value"] = abs(row["value_diff"]) <= SAME_VALUE
                     row["wall_ratio"] = row["ours"]["wall_s"] / peer["wall_s"]
                     row["solver_vs_peer_wall"] = row["ours"]["solver_s"] / peer["wall_s"]
                 row["pomdp_solve"] = peer
-            log("  " + json.dumps({k: row.get(k) for k in ("wall_ratio", "solver_vs_peer_wall", "ours_vs_base", "value_diff")}))
+            log("  " + json.dumps({k: row.get(k) for k in ("wall_ratio", "solver_vs_peer_wall", "ours_vs_base", "value_diff")}
+                                  | {"stop": row["ours"].get("stop_reason")}))
             result["exact"].append(row)
         for path in pb_runs:
             log(f"pointbased {path.name}")
             row = {"file": path.name, "precision": args.precision}
             ours_runs, peer_runs, base_runs = [], [], []
-            pb_args = ["pointbased", str(path), repr(args.precision), repr(args.time_limit)]
+            pb_args = ["pointbased", str(path), repr(args.precision), repr(pb_limit)]
             for _ in range(args.repeat):
                 if args.sarsop:
-                    peer_runs.append(run_sarsop(args.sarsop, path, args.precision, args.time_limit, work))
+                    peer_runs.append(run_sarsop(args.sarsop, path, args.precision, pb_limit, work))
                 if args.base:
-                    base_runs.append(run_ours(pb_args, timeout=args.time_limit * 3 + 60, repo=args.base))
-                ours_runs.append(run_ours(pb_args, timeout=args.time_limit * 3 + 60))
+                    base_runs.append(run_ours(pb_args, timeout=pb_limit * 3 + 60, repo=args.base))
+                ours_runs.append(run_ours(pb_args, timeout=pb_limit * 3 + 60))
             row["ours"] = median_runs(ours_runs)
             if base_runs:
                 row["base"] = median_runs(base_runs)
@@ -371,6 +393,10 @@ def main() -> None:
             "solver_vs_peer_wall_geomean": geomean([r.get("solver_vs_peer_wall") for r in rows]),
             "ours_vs_base_solver_geomean": geomean([(r.get("ours_vs_base") or {}).get("solver") for r in rows]),
             "ours_vs_base_wall_geomean": geomean([(r.get("ours_vs_base") or {}).get("wall") for r in rows]),
+            "values_not_within_1e-6": [f"{r['file']} h{r['horizon'] or 'inf'}" for r in rows
+                                       if kind == "exact" and r.get("same_value") is False],
+            "ours_not_converged": [f"{r['file']}" + (f" h{r['horizon'] or 'inf'}" if kind == "exact" else "")
+                                   for r in rows if not r["ours"].get("converged")],
             "files_slower_than_peer": [f"{r['file']}" + (f" h{r['horizon'] or 'inf'}" if kind == "exact" else "")
                                        for r in rows if (r.get("wall_ratio") or 0) > 1.0],
         }

@@ -65,6 +65,32 @@ def test_human_output(capsys, benchmarks_dir):
     assert "vectors per epoch: " + " ".join(map(str, TIGER_H15_VECTORS)) in out
 
 
+def test_json_says_why_incprune_stopped_and_its_last_residual(capsys, benchmarks_dir):
+    tiger = str(benchmarks_dir / "tiger.95.POMDP")
+    r = run_json(capsys, "solve", tiger, "--method", "incprune")
+    assert r["stop_reason"] == "converged" and r["converged"] and r["iterations"] == 477
+    assert r["value_at_start"] == pytest.approx(TIGER_INF_VALUE, abs=1e-9)
+    # pomdp-solve's threshold ε(1−γ)/(2γ) with ε = 1e-9: the residual got under it
+    assert 0 < r["last_residual"] <= 1e-9 * 0.05 / 1.9 and r["cycle_period"] is None
+    r = run_json(capsys, "solve", tiger, "--method", "incprune", "--horizon", "3")
+    assert r["stop_reason"] == "horizon" and r["converged"]
+    from pearl_pomdp.model import load_model
+    from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
+
+    api = solve_incremental_pruning(load_model(tiger), horizon=3)
+    assert r["last_residual"] == api.extra["last_residual"] > 1.0  # max_b |V_3(b) − V_2(b)|
+    r = run_json(capsys, "solve", tiger, "--method", "incprune", "--time-limit", "0.02")
+    assert r["stop_reason"] == "time_limit" and not r["converged"] and r["last_residual"] > 1e-9
+    assert run_json(capsys, "solve", tiger, "--method", "qmdp")["stop_reason"] == "converged"
+
+
+def test_human_output_says_why_it_stopped(capsys, benchmarks_dir):
+    assert main(["solve", str(benchmarks_dir / "tiger.95.POMDP"), "--method", "incprune", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "9 α-vectors after 477 epochs" in out and "(converged)" in out
+    assert "last residual 2.61e-11" in out
+
+
 def test_pointbased_save_then_simulate(capsys, tmp_path, benchmarks_dir):
     model = str(benchmarks_dir / "tiger.95.POMDP")
     policy = tmp_path / "tiger.npz"
@@ -119,7 +145,7 @@ def test_trial_budget_pointbased(capsys, benchmarks_dir):
                      "--epsilon", "1e-12")
     again = run_json(capsys, "solve", str(benchmarks_dir / "tiger.95.POMDP"), "--method", "pointbased", "--trials", "3",
                      "--epsilon", "1e-12")
-    assert first["iterations"] == 3 and not first["converged"]
+    assert first["iterations"] == 3 and not first["converged"] and first["stop_reason"] == "trials"
     assert (first["value_at_start"], first["upper_bound"]) == (again["value_at_start"], again["upper_bound"])
 
 

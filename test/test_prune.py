@@ -194,6 +194,23 @@ def test_kernel_deadline_raises_prune_timeout():
         prune(alphas, random_budget=0, deadline=time.perf_counter() - 1.0)
 
 
+def test_kernel_deadline_holds_before_the_first_lp():
+    """A large prune spends seconds before any LP (dominance, 4000 seed points against 200,000
+    vectors: ~12 s here); the deadline holds there too (issue 26: it was read between LPs only).
+    (3 s of slack: the sort before the first clock read takes ~1 s under AddressSanitizer.)"""
+    import time
+
+    from pearl_pomdp.solvers.prune import PruneTimeout
+
+    rng = np.random.default_rng(0)
+    alphas = rng.normal(size=(200_000, 24))
+    points = rng.dirichlet(np.ones(24), 4000)
+    t0 = time.perf_counter()
+    with pytest.raises(PruneTimeout):
+        prune(alphas, points=points, random_budget=0, deadline=t0 + 0.3)
+    assert time.perf_counter() - t0 < 3.3
+
+
 def test_seed_points_save_lps_without_changing_the_result():
     rng = np.random.default_rng(7)
     alphas = rng.normal(size=(200, 3))

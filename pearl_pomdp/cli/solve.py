@@ -17,7 +17,11 @@ Default method: incprune when --horizon is given or the model is tiny
 
 --json prints one object: states, actions, observations, method, value_at_start (the
 policy's value at b0; a lower bound for pointbased), upper_bound (null if none),
-alpha_vectors, iterations, seconds, converged, and for incprune vectors_per_epoch.
+alpha_vectors, iterations, seconds, converged, stop_reason (why it stopped: converged,
+horizon, time_limit, vector_cap, or trials for pointbased), and for incprune
+vectors_per_epoch, last_residual (the Bellman residual max_b |V_t(b) − V_t−1(b)| between
+its last two epochs) and cycle_period (set when the value functions came back to an
+earlier epoch's; see docs/solvers.md).
 Examples:
   pearl solve config/table4.domain.yaml --time-limit 5 --out table4.npz
   pearl solve config/table4.domain.yaml --method qmdp --json
@@ -97,7 +101,20 @@ def solve(model, method: str, horizon=None, epsilon=None, time_limit=None, seed=
                           progress=progress, trials=trials, where="--method")
 
 
-def summary(model, result) -> dict:
+def stop_reason(result, trials=None) -> str:
+    """Why a solve stopped: the solver's own ``extra["stop_reason"]`` (incprune), else
+    ``converged``, ``trials`` (pointbased's trial budget) or ``time_limit``."""
+    reason = result.extra.get("stop_reason")
+    if reason:
+        return str(reason)
+    if result.converged:
+        return "converged"
+    if trials is not None and result.iterations >= trials:
+        return "trials"
+    return "time_limit"
+
+
+def summary(model, result, trials=None) -> dict:
     """The --json object for a :class:`~pearl_pomdp.solvers.base.SolveResult`."""
     out = {
         "model": model.name,
@@ -113,9 +130,13 @@ def summary(model, result) -> dict:
         "iterations": int(result.iterations),
         "seconds": float(result.seconds),
         "converged": bool(result.converged),
+        "stop_reason": stop_reason(result, trials),
     }
     if result.method == "incprune":
         out["vectors_per_epoch"] = [int(v) for v in result.vectors_per_epoch]
+        residual = result.extra.get("last_residual")
+        out["last_residual"] = None if residual is None else float(residual)
+        out["cycle_period"] = result.extra.get("cycle_period")
     return out
 
 
@@ -129,13 +150,14 @@ def run(args: argparse.Namespace) -> int:
     method = args.method or default_method(model, args.horizon)
     result = solve(model, method, horizon=args.horizon, epsilon=args.epsilon, time_limit=args.time_limit,
                    seed=args.seed, progress=show_progress(args), trials=args.trials)
-    info = summary(model, result)
+    info = summary(model, result, args.trials)
     if args.horizon is not None:
         info["horizon"] = args.horizon
     if args.out:
         from pearl_pomdp.policy_io import header_path, save_policy
 
-        meta = {k: info[k] for k in ("method", "value_at_start", "upper_bound", "seconds", "iterations", "converged")}
+        meta = {k: info[k] for k in ("method", "value_at_start", "upper_bound", "seconds", "iterations", "converged",
+                                     "stop_reason")}
         meta.update({"horizon": args.horizon, "epsilon": args.epsilon, "time_limit": args.time_limit,
                      "trials": args.trials, "source": str(args.model)})
         if "vectors_per_epoch" in info:
@@ -149,11 +171,20 @@ def run(args: argparse.Namespace) -> int:
     gamma = f"γ = {model.discount:g}"
     print(f"{model.name}: {model.num_states} states, {model.num_actions} actions, "
           f"{model.num_observations} observations ({gamma})")
-    if result.converged:
-        stop = f"horizon {args.horizon} reached" if args.horizon is not None else "converged"
-    elif args.trials is not None and result.iterations >= args.trials:
+    reason = info["stop_reason"]
+    if reason == "horizon":
+        stop = f"horizon {args.horizon} reached"
+    elif reason == "converged":
+        stop = "converged"
+        if info.get("cycle_period"):
+            stop += f": the value function repeats the one {info['cycle_period']} epochs before"
+    elif reason == "trials":
         stop = f"stopped after {args.trials} trials before converging"
-    elif args.time_limit is not None or result.method == "pointbased":
+    elif reason == "vector_cap":
+        cap = result.extra.get("vector_cap") or {}
+        stop = (f"stopped before converging: {cap.get('where', 'a set')} would hold {cap.get('vectors')} vectors, "
+                f"more than the cap of {cap.get('max_vectors')}")
+    elif reason == "time_limit":
         stop = "stopped by the time limit before converging"
     else:
         stop = "not converged"
@@ -163,6 +194,8 @@ def run(args: argparse.Namespace) -> int:
     line = f"V(b0) = {info['value_at_start']:.10g}"
     if info["upper_bound"] is not None:
         line += f"   upper bound {info['upper_bound']:.10g}   gap {info['gap']:.4g}"
+    if info.get("last_residual") is not None:
+        line += f"   last residual {info['last_residual']:.3g}"
     print(line)
     if result.method == "incprune" and info["vectors_per_epoch"] and len(info["vectors_per_epoch"]) <= 30:
         print("vectors per epoch: " + " ".join(map(str, info["vectors_per_epoch"])))

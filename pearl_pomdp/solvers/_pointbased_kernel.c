@@ -48,7 +48,7 @@ static int check_len(Py_buffer *b, Py_ssize_t itemsize, Py_ssize_t need, const c
  *   p_out[a*Z+o] = P(o | b, a);  live_out[:nlive] = the flat indices a*Z+o with p > 1e-300.
  * nlive = -1 (and only U_out filled) when C_out is shorter than A*Z*nU doubles.
  * pos: int64 [S] scratch, all -1 on entry and on exit. */
-static PyObject *successors(PyObject *self, PyObject *args) {
+static PyObject *successors(PyObject *Py_UNUSED(self), PyObject *args) {
     Py_buffer idx, val, tptr, tind, tdat, O, bT, pos, Uo, Co, po, lo;
     Py_ssize_t A, S, Z;
     if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*nnnw*w*w*w*w*w*", &idx, &val, &tptr, &tind, &tdat, &O, &A, &S,
@@ -159,7 +159,7 @@ done:
  * (C float64 [*, nU] row-major; GT float64 [S, cap] row-major; zero entries of C skipped),
  * j* = the first maximiser. only_better = 0: lb[r] = v_{j*}, best[r] = j*; 1: only where
  * v_{j*} > lb[r] (then both are replaced). lb float64, best int64, indexed by r. */
-static PyObject *lower_rows(PyObject *self, PyObject *args) {
+static PyObject *lower_rows(PyObject *Py_UNUSED(self), PyObject *args) {
     Py_buffer Cb, Ub, rb, Gb, lbb, bb;
     Py_ssize_t nU, cap, k0, K;
     int only_better;
@@ -317,7 +317,7 @@ static void unmark(i64 *pos, const i64 *U, Py_ssize_t nU) {
 /* sawtooth(C, nU, U, rows, with_fib, since, pos, <point set>, A, out) -> None
  * out[t] = sawtooth_row(C[rows[t]]) (C float64 [*, nU] row-major). pos: int64 [S] scratch,
  * all -1 on entry and on exit. */
-static PyObject *sawtooth(PyObject *self, PyObject *args) {
+static PyObject *sawtooth(PyObject *Py_UNUSED(self), PyObject *args) {
     Py_buffer Cb, Ub, rb, pb, ob, b[NPB];
     Py_ssize_t nU, n, nprobe, A;
     int with_fib;
@@ -359,7 +359,7 @@ done:
  * to it, set seen[a] = ub_version, recompute Qu. Returns the final greedy action; Qu holds the
  * upper-bound Q-values. Rb, p float64 [A] / [A, Z]; ub_c float64 [A, Z] and seen int64 [A]
  * updated in place; live int64 ascending. */
-static PyObject *refresh_upper(PyObject *self, PyObject *args) {
+static PyObject *refresh_upper(PyObject *Py_UNUSED(self), PyObject *args) {
     Py_buffer Rbb, pbb, ubb, sb, Cb, Ub, lb, posb, qb, b[NPB];
     Py_ssize_t nU, A, Z, n, nprobe;
     double g;
@@ -426,7 +426,7 @@ done:
  * inner[s'] = sum_o O[a, s', o] GT[s', best_a[o]] (R float64 [S, A]; O float64 [A, S, Z];
  * GT float64 [S, cap]; T as one CSR (A*S) x S block, row a*S+s = T[a][s, :]; inner float64 [S]
  * scratch; out float64 [S]). */
-static PyObject *alpha(PyObject *self, PyObject *args) {
+static PyObject *alpha(PyObject *Py_UNUSED(self), PyObject *args) {
     Py_buffer bb, Rb, Ob, Gb, pb, ib, db, innb, ob;
     Py_ssize_t a, cap, S, A, Z;
     double g;
@@ -472,7 +472,7 @@ done:
 /* qvalue(Rb, p, X, g, A, Z) -> (a, q)
  * Q[a] = Rb[a] + g sum_o p[a,o] X[a,o] (Rb float64 [A], p and X float64 [A, Z]); returns the first
  * maximiser and its value. */
-static PyObject *qvalue(PyObject *self, PyObject *args) {
+static PyObject *qvalue(PyObject *Py_UNUSED(self), PyObject *args) {
     Py_buffer Rbb, pbb, xb;
     double g;
     Py_ssize_t A, Z;
@@ -499,7 +499,7 @@ static PyObject *qvalue(PyObject *self, PyObject *args) {
 /* excess_obs(p, ub_c, lb, jitter, a, thr, Z) -> o
  * The first maximiser over o of p[a,o] (ub_c[a,o] - lb[a,o] - thr) + jitter[o] (the trial's
  * weighted excess uncertainty, ties broken by the seeded jitter). */
-static PyObject *excess_obs(PyObject *self, PyObject *args) {
+static PyObject *excess_obs(PyObject *Py_UNUSED(self), PyObject *args) {
     Py_buffer pbb, ub, lbb, jb;
     Py_ssize_t a, Z;
     double thr;
@@ -535,6 +535,7 @@ static PyMethodDef methods[] = {
 };
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_pointbased_kernel",
-                                    "Inner loops of pearl_pomdp.solvers.point_based (see the C source).", -1, methods};
+                                    "Inner loops of pearl_pomdp.solvers.point_based (see the C source).", -1, methods,
+                                    NULL, NULL, NULL, NULL};
 
 PyMODINIT_FUNC PyInit__pointbased_kernel(void) { return PyModule_Create(&module); }

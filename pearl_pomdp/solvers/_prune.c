@@ -504,7 +504,22 @@ typedef struct {
     int64_t *kept_out;
     double *wit_out;
     long lps, lp_witnesses, lp_resolves, lp_failures;
+    double work; /* arithmetic done since the clock was last read (over_time) */
 } PruneJob;
+
+/* Read the clock about every CLOCK_EVERY multiply-adds: one prune of a large set can spend
+ * seconds before its first LP (dominance, seed points, the first filter), and the deadline
+ * must hold there too, while thousands of small prunes must not pay a clock read per row. */
+#define CLOCK_EVERY 2e6
+
+/* Account for `work` multiply-adds; 1 when the deadline (<= 0: none) has passed. */
+static int over_time(PruneJob *J, double work) {
+    if (J->deadline <= 0) return 0;
+    J->work += work;
+    if (J->work < CLOCK_EVERY) return 0;
+    J->work = 0.0;
+    return now_monotonic() > J->deadline;
+}
 
 #define NOMEM (-2)
 #define TIMEOUT (-1)
@@ -609,8 +624,10 @@ static int prune_run(PruneJob *J) {
             int i = order[r];
             for (int s = 0; s < S; s++)
                 if (by[s] != i && geq_all(A + (size_t)by[s] * S, A + (size_t)i * S, S)) { dominated[i] = 1; break; }
+            if (over_time(J, (double)S * S)) { rc = TIMEOUT; goto done; }
         }
     }
+    if (J->deadline > 0 && now_monotonic() > J->deadline) { rc = TIMEOUT; goto done; } /* after the sort */
     char *in_cand = w.is_kept; /* scratch: zeroed again below */
     for (int r = 0; r < N; r++)
         if (!dominated[order[r]]) in_cand[order[r]] = 1;
@@ -680,6 +697,7 @@ static int prune_run(PruneJob *J) {
                 else if (v > second) second = v;
             }
             if ((C < 2 || top - second > tol) && w.wit_point[arg] < 0) w.wit_point[arg] = (int)p;
+            if (over_time(J, (double)C * S)) { rc = TIMEOUT; goto done; }
         }
         for (int r = 0; r < C; r++) {
             int i = w.cand[r];
@@ -698,6 +716,7 @@ static int prune_run(PruneJob *J) {
         int drop = 0;
         for (int k = 0; k < nk && !drop; k++) drop = within_tol(c, A + (size_t)w.kord[k] * S, S, tol);
         if (!drop) { w.queue[nq++] = i; w.alive[i] = 1; }
+        if (over_time(J, (double)nk * S)) { rc = TIMEOUT; goto done; }
     }
     if (nq > 0) {
         if (lp_init(&w.lp, S, nk + nq) < 0) goto done;
@@ -711,7 +730,7 @@ static int prune_run(PruneJob *J) {
         for (int qi = 0; qi < nq; qi++) {
             int c = w.queue[qi];
             if (!w.alive[c]) continue;
-            if (J->deadline > 0 && now_monotonic() > J->deadline) { rc = TIMEOUT; goto done; }
+            if (J->deadline > 0 && now_monotonic() > J->deadline) { rc = TIMEOUT; goto done; } /* each LP */
             /* Re-filter every alive vector against the vectors kept since the last pass, in batches
              * (as before: those within tol everywhere of a kept vector are out). */
             if (nk - filtered_upto >= (nk / 8 > 1 ? nk / 8 : 1)) {
@@ -721,6 +740,7 @@ static int prune_run(PruneJob *J) {
                     for (int k = (checked[i] > filtered_upto ? checked[i] : filtered_upto); k < nk; k++)
                         if (within_tol(A + (size_t)i * S, A + (size_t)w.kord[k] * S, S, tol)) { w.alive[i] = 0; break; }
                     checked[i] = nk;
+                    if (over_time(J, (double)(nk - filtered_upto) * S)) { rc = TIMEOUT; goto done; }
                 }
                 filtered_upto = nk;
                 if (!w.alive[c]) continue;
@@ -827,8 +847,11 @@ static PyObject *py_prune(PyObject *Py_UNUSED(self), PyObject *args) {
                           &kept_obj, &wit_obj))
         return NULL;
     if (!(tol >= 0.0) || !isfinite(tol)) return PyErr_Format(PyExc_ValueError, "tol must be >= 0, got %R", PyTuple_GET_ITEM(args, 1));
+    /* Every resource that `out:` releases is declared (and empty) before the first `goto out`. */
     Py_buffer a = {0}, p = {0}, k = {0}, w = {0};
     int have_k = 0, have_w = 0;
+    Py_ssize_t nP = 0;
+    double *Pall = NULL;
     PyObject *result = NULL;
     if (get_doubles(alphas_obj, &a, 2, 0, "alphas") < 0) return NULL;
     Py_ssize_t K = a.shape[0], S = a.shape[1];
@@ -838,8 +861,6 @@ static PyObject *py_prune(PyObject *Py_UNUSED(self), PyObject *args) {
     }
     if (!all_finite(a.buf, K * S)) { PyErr_SetString(PyExc_ValueError, "alphas has a non-finite entry"); goto out; }
     /* points: None or a tuple of [P_i, S] arrays, used in that order (no vstack needed) */
-    Py_ssize_t nP = 0;
-    double *Pall = NULL;
     if (points_obj != Py_None) {
         if (!PyTuple_Check(points_obj)) { PyErr_SetString(PyExc_ValueError, "points must be None or a tuple of [P, S] arrays"); goto out; }
         Py_ssize_t nparts = PyTuple_GET_SIZE(points_obj);
@@ -871,10 +892,14 @@ static PyObject *py_prune(PyObject *Py_UNUSED(self), PyObject *args) {
             }
         }
     }
-    if (PyObject_GetBuffer(kept_obj, &k, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) goto out;
+    if (PyObject_GetBuffer(kept_obj, &k, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) {
+        PyErr_Clear(); /* (the exporter's own message does not say which argument) */
+        PyErr_SetString(PyExc_ValueError, "kept_out must be a writable C-contiguous int64 array of at least K entries");
+        goto out;
+    }
     have_k = 1;
     if (k.itemsize != 8 || !k.format || !(strcmp(k.format, "q") == 0 || strcmp(k.format, "l") == 0) || k.len < 8 * K) {
-        PyErr_SetString(PyExc_ValueError, "kept_out must be a writable int64 array of at least K entries");
+        PyErr_SetString(PyExc_ValueError, "kept_out must be a writable C-contiguous int64 array of at least K entries");
         goto out;
     }
     if (get_doubles(wit_obj, &w, 2, 1, "witness_out") < 0) goto out;
@@ -884,7 +909,7 @@ static PyObject *py_prune(PyObject *Py_UNUSED(self), PyObject *args) {
         goto out;
     }
     PruneJob job = {a.buf, (int)K, (int)S, tol, Pall, (int)nP, (long)budget, random_beliefs, deadline,
-                    k.buf, w.buf, 0, 0, 0, 0};
+                    k.buf, w.buf, 0, 0, 0, 0, 0.0};
     int n;
     Py_BEGIN_ALLOW_THREADS
     n = prune_run(&job);

@@ -71,8 +71,24 @@ class SolveResult:
         iterations: epochs (exact) or backup rounds (point-based).
         seconds: wall-clock solve time.
         vectors_per_epoch: for exact solvers, ``|Γ_t|`` after each epoch.
-        converged: whether the stopping criterion was met (vs. a time/horizon limit).
-        extra: method-specific figures (kept JSON-serialisable).
+        converged: whether the stopping criterion was met, or a finite horizon
+            completed (vs. a time limit, trial budget or vector cap).
+        extra: method-specific figures (kept JSON-serialisable). The exact solver
+            (``incprune``, :func:`~pearl_pomdp.solvers.incremental_pruning.solve_incremental_pruning`)
+            always sets:
+
+            * ``stop_reason``: ``"converged"`` (its stop rule held), ``"horizon"``
+              (all the epochs asked for), ``"time_limit"`` or ``"vector_cap"`` (a set
+              an epoch would build was over ``max_vectors``); in the last two the
+              epoch in progress is dropped and ``policy`` is the last complete one;
+            * ``last_residual``: the Bellman residual ``max_b |V_t(b) − V_{t−1}(b)|``
+              over the belief simplex between the last two complete epochs (``None``
+              with fewer than one), and ``last_residual_exact`` (False: an upper
+              bound, when the time limit left no room for its LPs);
+            * ``cycle_period``: ``k`` when it stopped because Γ_t repeated Γ_{t−k}
+              (``k ≥ 2``), else ``None``; ``stop_error`` (the weak bound to Γ_{t−1})
+              and ``stop_threshold``; ``timed_out``; ``vector_cap``; ``epoch_seconds``;
+              ``prune`` (LP counts).
     """
 
     policy: AlphaVectorPolicy

@@ -185,7 +185,9 @@ def prune(
             per kept vector (a belief where it is best).
         stats: a :class:`PruneStats` to add counters to.
         deadline: ``time.perf_counter()`` value after which
-            :class:`PruneTimeout` is raised (checked between LPs).
+            :class:`PruneTimeout` is raised: checked before every LP, and about every
+            millisecond of work in the steps before the LPs (sorting, dominance, seed
+            points, the first filter), so a prune overruns it by at most one LP.
         use_lp_core: accepted for compatibility and ignored: there is one LP
             solver now, the kernel's own (it chose between HiGHS models before).
         random_budget: about how many (vector, random belief) values to try
