@@ -345,3 +345,55 @@ def test_kernel_rejects_short_buffers_with_their_name():
                           s._U_buf, s._C_buf, np.zeros(1), s._live_buf)
     # the scratch buffers are left as they were (zero / -1) for the next call
     assert not s._bT.any() and (s.pos == -1).all()
+
+
+def test_action_filter_restricts_every_choice_and_bounds_the_restricted_problem(benchmarks_dir):
+    """With an action filter that forbids tiger's 'listen' everywhere, the solver can only open
+    doors: its LB vectors carry only door actions, and both bounds bracket the value of the
+    best door-only policy (open at random forever: (−100 + 10)/2 per step, discounted)."""
+    from pearl_pomdp.model.pomdp_format import read_pomdp
+    from pearl_pomdp.solvers.point_based import PointBasedSolver
+
+    model = read_pomdp(benchmarks_dir / "tiger.95.POMDP")
+    listen = model.actions.index("listen")
+    asked = []
+
+    def no_listening(idx, val):
+        asked.append(idx.shape[0])
+        mask = np.ones(model.num_actions, dtype=bool)
+        mask[listen] = False
+        return mask
+
+    solver = PointBasedSolver(model, seed=0, fib_time=None, action_filter=no_listening)
+    result = solver.run(time_limit=float("inf"), epsilon=1e-3, max_trials=200)
+    door_only = (-100 + 10) / 2 / (1 - model.discount)          # the tiger is never located
+    assert asked, "the filter was never asked"
+    assert result.value_at_start <= door_only + 1e-6
+    assert result.upper_bound >= door_only - 1e-6
+    assert result.upper_bound - result.value_at_start <= 1e-3
+    # The vectors that act at b0 open a door (the blind 'listen' vector may survive elsewhere).
+    assert result.policy.action(model.b0) != listen
+
+
+def test_start_beliefs_close_their_own_gaps(benchmarks_dir):
+    """Trials start from every start belief until each gap is within epsilon; the bounds at a
+    start are the exact values there (tiger.95 solved exactly by incremental pruning)."""
+    from pearl_pomdp.model.pomdp_format import read_pomdp
+    from pearl_pomdp.solvers.point_based import PointBasedSolver
+    from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
+
+    model = read_pomdp(benchmarks_dir / "tiger.95.POMDP")
+    starts = np.array([[0.9, 0.1], [0.2, 0.8]])
+    solver = PointBasedSolver(model, seed=0, fib_time=None, starts=starts)
+    result = solver.run(time_limit=float("inf"), epsilon=1e-2, max_trials=2000)
+    assert result.converged and result.extra["starts"] == 3
+    gaps = solver.start_gaps()
+    assert gaps.max() <= 1e-2
+    exact = solve_incremental_pruning(model, epsilon=1e-9)
+    for b in starts:
+        v_exact = exact.policy.value(b)
+        assert solver.lower(np.arange(2), b) <= v_exact + 1e-6
+        assert solver.upper(np.arange(2), b) >= v_exact - 1e-6
+        assert v_exact - solver.lower(np.arange(2), b) <= 1e-2 + 1e-9
+    with pytest.raises(ValueError, match="start belief"):
+        PointBasedSolver(model, starts=np.array([[1.0, -1.0]]))

@@ -62,7 +62,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
-from typing import Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -198,6 +198,8 @@ def _setting(name: str) -> property:
 
 #: Probe states per sawtooth point (its most likely ones) for the branch-and-bound bound.
 _PROBES = 4
+#: The immediate reward given to an action the action filter forbids at a belief.
+_FORBIDDEN = -1e30
 
 class _Node:
     """A belief in the search graph, with cached upper bounds at its successors.
@@ -208,7 +210,7 @@ class _Node:
     recomputed at every visit because they are cheap (one product with Γ).
     """
 
-    __slots__ = ("idx", "val", "key", "p", "Rb", "ub_c", "ub", "children", "ub_seen", "reach")
+    __slots__ = ("idx", "val", "key", "p", "Rb", "ub_c", "ub", "children", "ub_seen", "reach", "allowed")
 
     def __init__(self, idx, val, key):
         self.idx = idx        # support of b (state indices)
@@ -221,6 +223,7 @@ class _Node:
         self.children = {}    # flat (a*Z + o) -> _Node, created when the search goes there
         self.ub_seen = None   # [A] sawtooth version ub_c[a] was last read at (-1: never)
         self.reach = 0.0      # max over the trials' paths to b of γ^d Π P(o|b,a): b's weight in V(b0)
+        self.allowed = None   # [A] bool: the actions the action filter allows at b (None: all)
 
 
 class PointBasedSolver:
@@ -243,10 +246,15 @@ class PointBasedSolver:
     ub_sweep_ratio = _setting("ub_sweep_ratio")
 
     def __init__(self, model: Pomdp, seed: int = 0, fib_time: Optional[float] = 5.0,
-                 settings: Optional[PointBasedSettings] = None) -> None:
+                 settings: Optional[PointBasedSettings] = None,
+                 action_filter: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None,
+                 starts: Optional[np.ndarray] = None) -> None:
         if settings is not None and not isinstance(settings, PointBasedSettings):
             raise TypeError(f"settings must be a PointBasedSettings, got {type(settings).__name__}")
         self.settings = settings if settings is not None else PointBasedSettings()
+        #: ``(idx, val) -> [A] bool``: the actions allowed at the belief ``val`` on states ``idx``
+        #: (asked once per belief; at least one must be allowed). ``None``: every action.
+        self.action_filter = action_filter
         if not model.discount < 1.0:
             raise ValueError("the point-based solver needs a discount below 1 (got %g)" % model.discount)
         self.model = model
@@ -325,14 +333,40 @@ class PointBasedSolver:
         self.K = 0
         self.gact = np.zeros(self.cap, dtype=np.int64)
         self.gbirth = np.zeros(self.cap, dtype=np.int64)
-        for a in range(A):
-            self._add_alpha(blind[a], a)
         self.beliefs: Dict[bytes, Tuple[np.ndarray, np.ndarray]] = {}
         self.nodes: Dict[bytes, _Node] = {}
         self.expansions = 0
         idx0 = np.flatnonzero(self.b0 > 0)
         self.root = self._node(idx0, self.b0[idx0])
         self.root.reach = 1.0
+        #: The beliefs trials start from: b0 first, then ``starts`` (each row a belief over the
+        #: model's states; duplicates and b0 itself are dropped). The search targets the gap at
+        #: every one of them (see :meth:`run`).
+        self.starts: List[_Node] = [self.root]
+        for row in ([] if starts is None else np.atleast_2d(np.asarray(starts, dtype=float))):
+            if row.shape != (S,) or not np.all(np.isfinite(row)) or row.min() < 0 or row.sum() <= 0:
+                raise ValueError(f"PointBasedSolver: a start belief must be a non-negative row of {S} numbers "
+                                 f"with a positive sum")
+            row = row / row.sum()
+            nz = np.flatnonzero(row > 0)
+            node = self._node(nz, row[nz])
+            if all(node is not other for other in self.starts):
+                node.reach = max(node.reach, 1.0)
+                self.starts.append(node)
+        # The lower bound starts from the blind policies "always do a" (each the value of a real
+        # policy). With an action filter only those of the actions it allows at every start
+        # belief (a policy the filter forbids somewhere is no lower bound of the restricted
+        # problem), and the worst case R_min / (1 − γ) of any policy, so Γ is never empty.
+        if self.action_filter is None:
+            seeds = range(A)
+        else:
+            for n in self.starts:
+                n.allowed = self._allowed_at(n.idx, n.val)
+            seeds = np.flatnonzero(np.logical_and.reduce([n.allowed for n in self.starts]))
+            first = int(np.flatnonzero(self.root.allowed)[0])
+            self._add_alpha(np.full(S, float(self.R.min()) / (1.0 - self.g)), first)
+        for a in seeds:
+            self._add_alpha(blind[a], int(a))
         self.trials = 0
         self.prunes = 0
         self.pruned = 0
@@ -485,6 +519,14 @@ class PointBasedSolver:
         self.pt_n += 1
         self.pt_index[key] = i
 
+    def _allowed_at(self, idx: np.ndarray, val: np.ndarray) -> np.ndarray:
+        """The action filter's mask at a belief, checked (shape ``[A]``, at least one True)."""
+        mask = np.asarray(self.action_filter(idx, val), dtype=bool)  # type: ignore[misc]  # set when called
+        if mask.shape != (self.A,) or not mask.any():
+            raise ValueError(f"PointBasedSolver: the action filter must return {self.A} booleans with at least one "
+                             f"True, got shape {mask.shape} with {int(mask.sum())} True")
+        return mask
+
     # ------------------------------------------------------------ expansion
     def _successors(self, node: _Node) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(U, C, live)``: states reachable in one step, successor beliefs ``[A*Z, |U|]`` on U
@@ -501,9 +543,19 @@ class PointBasedSolver:
         U = self._U_buf[:nU].copy()
         C = self._C_buf[: A * Z * nU].reshape(A * Z, nU).copy()
         live = self._live_buf[:nl].copy()
+        if self.action_filter is not None:
+            if node.allowed is None:
+                node.allowed = self._allowed_at(idx, val)
+            # Successors of the actions not allowed here are never read (nor backed up through).
+            live = live[node.allowed[live // Z]]
         if node.p is None:
             node.p = self._p_buf.reshape(A, Z).copy()
             node.Rb = val @ self.R[idx]
+            if node.allowed is not None:
+                # A forbidden action never wins a max: its probabilities are 0 and its reward is
+                # far below any real value (finite, so products with 0 stay 0).
+                node.p[~node.allowed] = 0.0
+                node.Rb = np.where(node.allowed, node.Rb, _FORBIDDEN)
             # Cheap bounds first (corners and FIB vectors); the sawtooth is read lazily, only
             # for the successors of actions that become greedy (see _refresh_upper).
             ub = np.zeros(A * Z)
@@ -761,7 +813,32 @@ class PointBasedSolver:
             return (best + 1 + (self.trials // self.explore_every) % (n - 1)) % n
         return best
 
-    def trial(self, eps_t: float) -> None:
+    def start_gaps(self) -> np.ndarray:
+        """``UB − LB`` at every start belief (b0 first), as :meth:`run` tests them."""
+        return np.array([min(n.ub, self.upper(n.idx, n.val)) - self.lower(n.idx, n.val) for n in self.starts])
+
+    def _open_gap(self, epsilon: float) -> Optional[int]:
+        """The index of the first start belief whose gap exceeds ``epsilon`` (``None``: none)."""
+        if len(self.starts) == 1:
+            lo, hi = self.bounds_at_start()
+            return 0 if hi - lo > epsilon else None
+        open_ = np.flatnonzero(self.start_gaps() > epsilon)
+        return int(open_[0]) if open_.size else None
+
+    def _next_start(self, epsilon: float) -> Tuple[Optional[_Node], float]:
+        """The start of the next trial and its gap: b0 on every other trial while its gap is
+        open, else the start belief with the widest gap (the first on ties); ``(None, 0)`` when
+        every gap is within ``epsilon``."""
+        if len(self.starts) == 1:
+            lo, hi = self.bounds_at_start()
+            return (self.root, hi - lo) if hi - lo > epsilon else (None, 0.0)
+        gaps = self.start_gaps()
+        if gaps[0] > epsilon and self.trials % 2 == 0:
+            return self.root, float(gaps[0])
+        i = int(np.argmax(gaps))
+        return (self.starts[i], float(gaps[i])) if gaps[i] > epsilon else (None, 0.0)
+
+    def trial(self, eps_t: float, start: Optional[_Node] = None) -> None:
         """One HSVI2/SARSOP trial from ``b0`` with target width ``eps_t``, then the backups on its path.
 
         **Down.** At belief ``b`` of depth ``d`` the trial stops when the width there,
@@ -791,7 +868,7 @@ class PointBasedSolver:
         the observation with the largest weighted excess uncertainty (``_kernel.excess_obs``).
         """
         g, Z = self.g, self.Z
-        node = self.root
+        node = self.root if start is None else start
         path: list = []
         d = 0
         max_d = self._max_depth(eps_t)
@@ -848,16 +925,17 @@ class PointBasedSolver:
         last_hist = -np.inf
         history = self.history
         offset = self.seconds + self.setup_seconds
-        converged = hi - lo <= epsilon
+        start, gap = self._next_start(epsilon)
+        converged = start is None
         while not converged:
             now = self._clock()
             if now - t0 >= time_limit or (max_trials is not None and self.trials >= max_trials):
                 break
-            gap = hi - lo
             arm = self._pick_arm()
             eps_t = max(epsilon, self.trial_kappa[arm] * gap) if gap > 10 * epsilon else epsilon * 0.5
-            b_before, lo_before = self.backups, lo
-            self.trial(eps_t)
+            b_before, lo_before = self.backups, self.lower(start.idx, start.val)  # type: ignore[union-attr]
+            self.trial(eps_t, start)
+            lo_start = self.lower(start.idx, start.val)  # type: ignore[union-attr]
             if self.K * self.S > self.max_gamma_entries:
                 self.prune(by_usage=True)
             elif self.K > 2 * self._last_prune_K + 50 and \
@@ -866,17 +944,18 @@ class PointBasedSolver:
                 # node: amortised over at least that many trial backups (while Γ stays small).
                 self.prune()
             lo, hi = self.bounds_at_start()
-            converged = hi - lo <= epsilon
+            converged = self._open_gap(epsilon) is None
             # Discounted totals: an arm's rate follows the recent phase of the search.
-            # The lower bound is what the policy is worth, so arms are rated by LB gains.
-            self._arm_gain[arm] = 0.95 * self._arm_gain[arm] + max(lo - lo_before, 0.0)
+            # The lower bound is what the policy is worth, so arms are rated by LB gains
+            # (at the belief the trial started from).
+            self._arm_gain[arm] = 0.95 * self._arm_gain[arm] + max(lo_start - lo_before, 0.0)
             self._arm_cost[arm] = 0.95 * self._arm_cost[arm] + (self.backups - b_before)
             if not converged and self.ub_sweep_ratio > 0 and \
                     self.backups - self._backups_at_ub_sweep >= self.ub_sweep_ratio * len(self.nodes):
                 self.sweep_upper()
                 self._backups_at_ub_sweep = self.backups
                 lo, hi = self.bounds_at_start()
-                converged = hi - lo <= epsilon
+                converged = self._open_gap(epsilon) is None
             if not converged and self._spread_wait > 0:
                 # Backing off: this trial's share of Perseus backups is forgiven, not owed.
                 self._spread_wait -= 1
@@ -898,7 +977,7 @@ class PointBasedSolver:
                         self.perseus(owed)
                         spread = True
                 lo, hi = self.bounds_at_start()
-                converged = hi - lo <= epsilon
+                converged = self._open_gap(epsilon) is None
                 if spread and self.spread_backoff:
                     # A spread that lifted neither LB(b0) nor the LB at any belief by more than
                     # the target gap (weighted by the belief's reach from b0) doubles the
@@ -910,6 +989,9 @@ class PointBasedSolver:
                     else:
                         self._spread_skip = min(self.spread_backoff, max(1, 2 * self._spread_skip))
                         self._spread_wait = self._spread_skip
+            if not converged:
+                start, gap = self._next_start(epsilon)
+                converged = start is None
             if now - last_hist >= 0.5 or converged:
                 history.append((round(offset + self._clock() - t0, 3), lo, hi))
                 last_hist = now
@@ -926,13 +1008,15 @@ class PointBasedSolver:
         policy = AlphaVectorPolicy(self.GT[:, : self.K].T.copy(), self.gact[: self.K].copy())
         return SolveResult(
             policy=policy, method="pointbased", value_at_start=lo, upper_bound=hi,
-            iterations=self.trials, seconds=self.seconds, converged=bool(hi - lo <= epsilon),
+            iterations=self.trials, seconds=self.seconds, converged=self._open_gap(epsilon) is None,
             extra={
                 "gap": hi - lo, "backups": self.backups, "vectors": self.K, "ub_points": self.pt_n,
                 "beliefs": len(self.beliefs), "pruned": self.pruned, "fib_iterations": self.fib_iterations, "nodes": len(self.nodes),
                 "fib_seconds": self.fib_seconds, "perseus_backups": self.perseus_backups,
                 "sweeps": self.sweeps, "sweep_backups": self.sweep_backups, "spreads_skipped": self.spreads_skipped,
                 "ub_sweeps": self.ub_sweeps,
+                "starts": len(self.starts),
+                "max_start_gap": float(self.start_gaps().max()),
                 "history": list(history),
             },
         )
