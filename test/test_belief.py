@@ -12,7 +12,7 @@ from pearl_pomdp.model.pomdp import Pomdp
 
 
 def tiger(accuracy=0.85) -> Pomdp:
-    """tiger.95 written out by hand (same numbers as ../shared/benchmarks/pomdp/tiger.95.POMDP)."""
+    """tiger.95 written out by hand (same numbers as test/data/pomdp/tiger.95.POMDP)."""
     listen_T = np.eye(2)
     reset_T = np.full((2, 2), 0.5)
     O = np.array([

@@ -1,7 +1,7 @@
 """Point-based solver with bounds: the bounds bracket known optimal values and close.
 
-Reference values: pomdp-solve's converged incremental pruning and SARSOP's bounds
-(../shared/benchmarks/RESULTS.md).
+Reference values: pomdp-solve's converged incremental pruning and SARSOP's bounds, both run
+on this project's machine (the peers are built outside the repository; docs/solvers.md).
 """
 from pathlib import Path
 
