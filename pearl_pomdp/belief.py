@@ -1,4 +1,4 @@
-"""The Bayes filter over a flat POMDP's states (DESIGN.md §2, eq. 5 of Pineau & Thrun).
+"""The Bayes filter over a flat POMDP's states (docs/design.md §2, eq. 5 of Pineau & Thrun).
 
 After doing action ``a`` in belief ``b`` and observing ``o``::
 

@@ -1,4 +1,4 @@
-"""The executive: the step loop of :mod:`pearl_pomdp.tracking` plus a decider (DESIGN.md §6).
+"""The executive: the step loop of :mod:`pearl_pomdp.tracking` plus a decider (docs/design.md §6).
 
 The robot runs this loop split over two nodes — ``belief_tracker`` wraps the
 :class:`~pearl_pomdp.tracking.BeliefTracker`, ``hierarchical_policy`` wraps the decider —

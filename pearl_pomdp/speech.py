@@ -18,7 +18,7 @@ The paper applies "a keyword filter to the output of the speech recognizer
    one-word "kitchen".)
 4. No keyword at all → ``unknown_symbol``; the filter counts it
    (:attr:`KeywordFilter.unknown_count`) and keeps the last few texts so that
-   nothing is silently dropped (DESIGN.md §9). Empty text is also unknown: that is
+   nothing is silently dropped (docs/design.md §9). Empty text is also unknown: that is
    what a recogniser returns when the timeout closes a step.
 """
 from __future__ import annotations

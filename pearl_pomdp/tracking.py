@@ -1,6 +1,6 @@
 """Belief tracking step by step: the one step loop the robot, the simulator and the study run.
 
-The step protocol (DESIGN.md §6): the policy publishes an action ``a_t``; the next
+The step protocol (docs/design.md §6): the policy publishes an action ``a_t``; the next
 observation ``o_{t+1}`` (one input from any modality) closes the step; the belief is
 updated with ``(a_t, o_{t+1})`` by eq. 5; the policy answers with ``a_{t+1}``.
 :class:`BeliefTracker` is that loop without ROS. The ``belief_tracker`` node is a thin

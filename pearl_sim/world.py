@@ -1,10 +1,10 @@
-"""The simulated nursing home: a robot, one resident, a scheduler (DESIGN.md §7).
+"""The simulated nursing home: a robot, one resident, a scheduler (docs/design.md §7).
 
 :class:`World` is the ground truth that the POMDP only observes through noisy
 messages. It is richer than the Pearl model on purpose: positions in metres,
 walking speeds from 5 cm/s, rests, a resident who loses a robot that drives on
 without her, a recogniser with a word error rate. Its interface is the step
-protocol of DESIGN.md §6: the robot takes an action; the world answers with *one*
+protocol of docs/design.md §6: the robot takes an action; the world answers with *one*
 message (any modality) that closes the step, or ``None`` when nothing is heard
 before ``step_timeout`` (the tracker maps that to Speech ``unknown``).
 

@@ -1,4 +1,4 @@
-"""The flat POMDP and its array conventions (DESIGN.md §2).
+"""The flat POMDP and its array conventions (docs/design.md §2).
 
 Conventions, used by every module of the project:
 

@@ -1,6 +1,6 @@
 """Replay a bag's recorded inputs through the belief tracker and hierarchical policy.
 
-One process, one executor, simulated time (DESIGN.md §6 "In one process", §8): the real
+One process, one executor, simulated time (docs/design.md §6 "One loop, and in one process", §8): the real
 node classes of :mod:`pearl_pomdp.nodes` (built by :class:`~pearl_pomdp.nodes.graph.PearlGraph`)
 receive, in file order,
 

@@ -1,4 +1,4 @@
-"""The belief tracker node: observations in, beliefs out (DESIGN.md §6).
+"""The belief tracker node: observations in, beliefs out (docs/design.md §6).
 
 A thin rclpy wrapper of the core :class:`~pearl_pomdp.tracking.BeliefTracker` — the same
 object the simulator and the study drive (input → symbol, what closes a step, queueing,

@@ -1,6 +1,6 @@
 """All three Pearl nodes in one process, on one executor, under simulated time.
 
-For tests, replay and demos that must be deterministic (DESIGN.md §6 "In one process"):
+For tests, replay and demos that must be deterministic (docs/design.md §6 "One loop, and in one process"):
 the same node classes as the separate processes, on one ``SingleThreadedExecutor``, with
 ``use_sim_time`` on, so time only moves when someone publishes ``/clock``.
 

@@ -1,4 +1,4 @@
-"""The hierarchical policy node: beliefs in, primitive actions out (DESIGN.md §4, §6).
+"""The hierarchical policy node: beliefs in, primitive actions out (docs/design.md §4, §6).
 
 For every belief it runs EXECUTE top-down (root → … → primitive) and publishes the
 primitive action and the trace. All planning happens at start-up, before spinning: a

@@ -11,7 +11,7 @@ References:
     * M. Spaan, N. Vlassis. "Perseus: randomized point-based value iteration
       for POMDPs", JAIR 24, 2005.
 
-Conventions (DESIGN.md §2): ``T[a][s, s'] = P(s'|s,a)`` (dense or scipy CSR),
+Conventions (docs/design.md §2): ``T[a][s, s'] = P(s'|s,a)`` (dense or scipy CSR),
 ``O[a, s', o] = P(o|s',a)``, ``R[s, a]``, ``b0[s]``, discount ``γ < 1``.
 
 The solver keeps
