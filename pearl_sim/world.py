@@ -67,9 +67,9 @@ def default_guide_pace():
     """``(GuidePaceConfig, lost_symbol)`` from ``config/pearl_nodes.yaml``'s ``guide_pace`` section
     (the settings the guide_pace node runs with), read once per process."""
     from pearl_pomdp.guide_pace import GuidePaceConfig
-    from pearl_pomdp.params import node_params
+    from pearl_pomdp.params import node_parameters
 
-    params = node_params("guide_pace")
+    params = node_parameters("guide_pace")
     return GuidePaceConfig.from_params(params), str(params.get("lost_symbol", "userLost"))
 
 

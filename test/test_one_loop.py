@@ -87,7 +87,7 @@ def on_graph(domain, model, decider, scenario, seed, tmp_path):
                                 timeout_sec=20.0), "the listener never got b0"
         driver = SimClockDriver(graph, wait_s=20.0)
         trace = run_episode(world, GraphBackend(graph, sim, driver), max_steps=STEPS)
-        updates = graph.tracker.protocol.counters["updates"]
+        updates = graph.tracker.core.counters()["updates"]
         graph.spin_until(lambda: len(beliefs) >= updates + 1, timeout_sec=10.0)
         return trace.actions, beliefs
     finally:

@@ -39,7 +39,7 @@ def test_message_symbols_follow_the_tracker_rules():
     assert symbol(Message(0, "Laser", "atRoom")) == "atRoom"
     tracker.reset()                                             # (the three above wait in the queue)
     tracker.on_action("DoNothing", 10.0)
-    assert tracker.on_tick(15.0).observation == "unknown"      # nothing heard → the timeout symbol
+    assert tracker.on_tick(15.0).closed.observation == "unknown"      # nothing heard → the timeout symbol
 
 
 @pytest.fixture(scope="module")
