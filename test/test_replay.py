@@ -41,6 +41,9 @@ def test_replay_matches_recorded_actions(bag, tmp_path):
     expected = json.loads((REPO / "bags" / f"{bag.name}.expected.json").read_text())["expected_actions"]
     assert result.expected_actions == expected  # what the bag holds is what was seen live
     assert result.actions == expected and result.match and result.first_mismatch is None
+    # Parity: the tracker publishes the beliefs it published when the bag was recorded (b0 and one per step).
+    assert result.expected_beliefs == len(expected) and result.beliefs == result.expected_beliefs
+    assert result.beliefs_match and result.max_belief_difference <= 1e-12, result.max_belief_difference
     reader = BagReader(bag)
     inputs = sum(1 for m in reader.messages if m.topic.startswith("/pearl/") and
                  m.topic in ("/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder"))
