@@ -247,7 +247,7 @@ class BeliefFilter:
         a = self.action_index(action)
         o = self.observation_index(observation)
         self.updates += 1
-        if self._fused_ok:
+        if self._M is not None:   # the fused operators (built when they fit: _fused_ok)
             unnormalised = _matvec(self._M[a][o], b)
         else:
             unnormalised = self._OT[a, o] * _matvec(self._TT[a], b)

@@ -136,10 +136,10 @@ class GuidePace:
         c = self.config
         v_max = c.cruise_speed if nav_speed is None else max(0.0, float(nav_speed))
         self.became_lost = False
-        behind = resident_distance_behind
-        seen = behind is not None and math.isfinite(behind)
-        if seen:
-            behind = max(0.0, float(behind))
+        raw = resident_distance_behind
+        behind = 0.0   # metres she is behind the robot (read only while she is seen)
+        if raw is not None and math.isfinite(raw):
+            behind = max(0.0, float(raw))
             her = robot_progress - behind
             if self._her_last is not None:
                 rate = max(0.0, (her - self._her_last) / dt)

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import re
 from collections import deque
-from typing import Deque, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+from typing import Deque, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["KeywordFilter", "normalise", "tokens", "parse_speech_message", "speech_message"]
 
@@ -169,7 +169,7 @@ class KeywordFilter:
         return self.classify(text)
 
 
-def _find(words: Sequence[str], phrase: Tuple[str, ...]) -> Iterable[int]:
+def _find(words: Sequence[str], phrase: Tuple[str, ...]) -> Iterator[int]:
     n = len(phrase)
     for i in range(len(words) - n + 1):
         if tuple(words[i:i + n]) == phrase:

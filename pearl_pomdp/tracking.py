@@ -854,9 +854,11 @@ class BeliefTracker:
         observation the model lacks, raises ``ValueError`` naming the field and changes nothing.
         The open step's deadline follows a new ``step_timeout`` at once.
         """
-        changes = {k: float(v) for k, v in (("step_timeout", step_timeout), ("stale_after", stale_after),
-                                            ("confidence_floor", confidence_floor)) if v is not None}
-        new = dataclasses.replace(self.settings, **changes)   # checks the ranges
+        new = dataclasses.replace(   # checks the ranges
+            self.settings,
+            step_timeout=self.settings.step_timeout if step_timeout is None else float(step_timeout),
+            stale_after=self.settings.stale_after if stale_after is None else float(stale_after),
+            confidence_floor=self.settings.confidence_floor if confidence_floor is None else float(confidence_floor))
         _StepProtocol.check_timeout(self.model, new.step_timeout, new.timeout_observation)
         self.settings = new
         self._protocol.step_timeout = new.step_timeout

@@ -526,6 +526,7 @@ class World:
 
     def _walk_follower(self, dt: float, robot_pos: Optional[float], events: List[str]) -> None:
         f = self._follower
+        assert f is not None  # called only while a resident follows
         resident = self.scenario.resident
         if robot_pos is None:       # robot waiting at the destination
             robot_pos = f["length"]

@@ -115,6 +115,7 @@ def _die_with(launcher_pid: int):
     come: the child sees another parent and exits before running the node.
     """
     def preexec() -> None:  # pragma: no cover - runs in the child between fork and exec
+        assert _LIBC is not None  # only installed on Linux (see the caller)
         _LIBC.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
         if os.getppid() != launcher_pid:
             os._exit(1)

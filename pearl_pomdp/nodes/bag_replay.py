@@ -304,8 +304,10 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
         belief_sub = node.create_subscription(Float64MultiArray, BELIEF_TOPIC, lambda m: beliefs.append(list(m.data)),
                                               keep_all)
+        core = graph.tracker.core
+        assert core is not None  # the graph's tracker is configured (autostart)
         if explain:
-            graph.tracker.core.keep_history()
+            core.keep_history()
             node.create_subscription(String, DECISION_TOPIC, lambda m: decisions.append(json.loads(m.data)), 1000)
         pubs = {t: node.create_publisher(String, t, EVENT_QOS) for t in INPUT_TOPICS if t in reader.topics}
         driver.wait_until_matched(list(pubs.values()))
@@ -355,11 +357,11 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
             driver.set_time(pending[1], raw=pending[0])
             fed += 1
         tracker = graph.tracker
-        driver.wait(lambda: tracker.core is not None and len(beliefs) >= 1 + tracker.core.step, "the beliefs")
+        driver.wait(lambda: len(beliefs) >= 1 + core.step, "the beliefs")
         explanation = None
         if explain:
             driver.wait(lambda: len(decisions) >= graph.policy.decisions, "the decision traces")
-            explanation = explain_steps(list(tracker.core.history or []), decisions, tracker.core.marginals)
+            explanation = explain_steps(list(core.history or []), decisions, core.marginals)
         seconds = time.perf_counter() - start
         if bar is not None:
             bar.close()

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import (EVENT_QOS, INPUT_QOS, LATCHED_QOS, NodeSetupError, Param,
@@ -129,8 +129,9 @@ class BeliefTrackerNode(ManagedPearlNode):
         self.lost_inputs = 0
         self._last_seq: Dict[str, int] = {}
         self._last_diag = -1.0
-        self._deadline_timer = None
-        self._flush_timer = None
+        self._deadline_timer: Optional[Any] = None
+        self._flush_timer: Optional[Any] = None
+        self._reset_srv: Optional[Any] = None
         self._armed_for: Optional[float] = None
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -197,7 +198,7 @@ class BeliefTrackerNode(ManagedPearlNode):
 
     def cleanup_node(self) -> None:
         self._flush_timer = None
-        if getattr(self, "_reset_srv", None) is not None:
+        if self._reset_srv is not None:
             self.destroy_service(self._reset_srv)
             self._reset_srv = None
         self.core = None
