@@ -46,7 +46,8 @@ def package_share_dir(package: str) -> Optional[Path]:
 
     Looked up, in order: the ament index of every prefix in ``AMENT_PREFIX_PATH`` (a colcon
     or apt install); for ``pearl_pomdp``, the source tree this module was imported from (an
-    editable install: the directory holding ``package.xml``, ``launch/`` and ``config/``);
+    editable install: the directory holding ``package.xml``, ``launch/`` and ``config/``), then
+    the ``share/pearl_pomdp`` of the prefix it is installed in;
     ``<sys.prefix>/share/<package>`` (a pip install's data files). ``None`` when none exists.
     """
     for prefix in filter(None, os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)):
@@ -54,9 +55,16 @@ def package_share_dir(package: str) -> Optional[Path]:
         if marker.is_file():
             return Path(prefix) / "share" / package
     if package == "pearl_pomdp":
-        tree = Path(__file__).resolve().parents[1]
+        here = Path(__file__).resolve()
+        tree = here.parents[1]
         if (tree / "package.xml").is_file() and (tree / "launch").is_dir():
             return tree
+        # An install prefix (colcon or setup.py install): PREFIX/lib/pythonX.Y/site-packages/
+        # pearl_pomdp/ beside PREFIX/share/pearl_pomdp, found even before AMENT_PREFIX_PATH is set.
+        if len(here.parents) > 4:
+            installed = here.parents[4] / "share" / package
+            if (installed / "package.xml").is_file():
+                return installed
     candidate = Path(sys.prefix) / "share" / package
     return candidate if candidate.is_dir() else None
 
