@@ -364,18 +364,32 @@ def test_nodes_of_a_sigkilled_pearl_launch_exit(tmp_path, pearl_policy, when):
         out.close()
 
 
+def _disposition(inherited: str):
+    """``preexec_fn`` that starts the child with SIGINT at its default or ignored (as a background
+    job of a non-interactive shell has it: the ignored disposition survives exec)."""
+    def preexec() -> None:  # pragma: no cover - runs in the child
+        signal.signal(signal.SIGINT, signal.SIG_IGN if inherited == "ignored" else signal.SIG_DFL)
+    return preexec
+
+
+@pytest.mark.parametrize("inherited", ["default", "ignored"])
 @pytest.mark.parametrize("library", ["numpy", "rclpy"])
-def test_a_node_interrupted_while_importing_exits_quietly(tmp_path, library):
+def test_a_node_interrupted_while_importing_exits_quietly(tmp_path, library, inherited):
     """SIGINT before run_node installs its handlers (a launch stopping while a node starts):
     exit 0 and no KeyboardInterrupt traceback. Under load the old code printed one (test_node_params).
 
     The signal is sent once the node's process has begun loading ``library`` (its shared objects
     appear in /proc/PID/maps), i.e. while the node module's own imports run — after the package
     has installed its quiet handler. (Before Python has imported any of our code nothing can
-    catch it: that window is the interpreter's own start-up, a few tens of milliseconds.)"""
+    catch it: that window is the interpreter's own start-up, a few tens of milliseconds.)
+
+    ``inherited="ignored"``: the process started with SIGINT ignored (pytest or CI run as a
+    background job). The old code kept it ignored until run_node, so the signal was lost and the
+    node went on to plan and run (issue 22: both cases failed in a full-suite run)."""
     env = ros_env(allocate_domain_id(), tmp_path)
     proc = subprocess.Popen([sys.executable, "-m", "pearl_pomdp.nodes.hierarchical_policy"], env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO,
+                            preexec_fn=_disposition(inherited))
     maps = Path(f"/proc/{proc.pid}/maps")
     try:
         deadline = time.monotonic() + 30.0
@@ -387,10 +401,66 @@ def test_a_node_interrupted_while_importing_exits_quietly(tmp_path, library):
                 pass
             time.sleep(0.002)
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=10)
+        t0 = time.monotonic()
+        try:
+            _, err = proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"still running 10 s after SIGINT while loading {library} (SIGINT {inherited})")
+        elapsed = time.monotonic() - t0
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait(timeout=5)
     assert "Traceback" not in err, err
     assert proc.returncode == 0, err
+    assert elapsed < EXIT_WITHIN
+
+
+#: Stop signals sent over a node's start-up (test below).
+START_UP_POINTS = 20
+
+
+def test_a_stop_signal_anywhere_in_start_up_ends_the_node_beside_a_cpu_burner(tmp_path, pearl_policy):
+    """SIGINT at 20 points spread evenly over a node's start-up — from the exec to the first line
+    after its policy is loaded — with a CPU burner on one core: the process is gone within 2 s every
+    time. Once it has printed a line of its own, it exits 0 without a traceback.
+
+    The node is the policy node loading a planned policy (imports, rclpy, DDS, policy, topics);
+    its start-up T is measured first, in the same conditions, and the points are k·T/20."""
+    env = ros_env(allocate_domain_id(), tmp_path)
+    cmd = [str(BIN / "hierarchical_policy"), "--ros-args", "-p", f"domain:={DOMAIN}", "-p", f"policy:={pearl_policy}"]
+    burner = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        t0 = time.monotonic()
+        first = Proc(cmd, env, tmp_path, "startup")
+        deadline = t0 + START_TIMEOUT
+        while "policy ready" not in first.stderr() and time.monotonic() < deadline and first.returncode is None:
+            time.sleep(0.01)
+        start_up = time.monotonic() - t0
+        assert "policy ready" in first.stderr(), first.stderr()[-2000:]
+        assert first.stop(5.0) == 0
+        results = []
+        for k in range(START_UP_POINTS):
+            delay = start_up * k / START_UP_POINTS
+            proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                                    cwd=REPO, preexec_fn=_disposition("default"))
+            time.sleep(delay)
+            proc.send_signal(signal.SIGINT)
+            sent = time.monotonic()
+            try:
+                _, err = proc.communicate(timeout=10)
+                gone = time.monotonic() - sent
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                _, err = proc.communicate()
+                gone = float("inf")
+            results.append((round(delay, 3), proc.returncode, round(gone, 3), err))
+    finally:
+        burner.kill()
+        burner.wait()
+    late = [(d, rc, g) for d, rc, g, _ in results if g >= EXIT_WITHIN]
+    assert late == [], f"start-up {start_up:.2f} s: still running {EXIT_WITHIN} s after SIGINT at {late}"
+    spoken = [(d, rc, err[-300:]) for d, rc, g, err in results if "[hierarchical_policy]" in err
+              and (rc != 0 or "Traceback" in err)]
+    assert spoken == [], spoken
+    assert sum(rc == 0 for _, rc, _, _ in results) >= START_UP_POINTS // 2, [r[:3] for r in results]
