@@ -16,7 +16,7 @@ from pearl_pomdp.bags.reader import BagError, BagReader
 from pearl_pomdp.bags.writer import BagWriter
 from pearl_pomdp.errors import PearlError
 
-rclpy_serialization = pytest.importorskip("rclpy.serialization")
+from rclpy import serialization as rclpy_serialization
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 

@@ -26,7 +26,7 @@ def tiger(discount: float) -> Pomdp:
 
 
 def load(benchmarks_dir, name):
-    fmt = pytest.importorskip("pearl_pomdp.model.pomdp_format")
+    from pearl_pomdp.model import pomdp_format as fmt
     return fmt.read_pomdp(benchmarks_dir / name)
 
 

@@ -27,7 +27,7 @@ def tiger(discount=0.95, sparse=False) -> Pomdp:
 
 
 def read(path: Path) -> Pomdp:
-    fmt = pytest.importorskip("pearl_pomdp.model.pomdp_format")
+    from pearl_pomdp.model import pomdp_format as fmt
     return fmt.read_pomdp(path)
 
 

@@ -12,7 +12,7 @@ from ros_helpers import REPO, wait_for
 
 pytestmark = pytest.mark.ros
 
-rclpy = pytest.importorskip("rclpy")
+import rclpy
 
 from rclpy.event_handler import QoSPublisherEventType, QoSSubscriptionEventType  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402

@@ -18,7 +18,7 @@ from ros_helpers import Probe
 
 pytestmark = pytest.mark.ros
 
-rclpy = pytest.importorskip("rclpy")
+import rclpy
 
 from pearl_pomdp.model.pomdp import Pomdp  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
