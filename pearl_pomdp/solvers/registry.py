@@ -20,9 +20,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Dict, Optional, Tuple
 
 from pearl_pomdp.errors import PearlError
-from pearl_pomdp.interfaces import Solver
 
-if TYPE_CHECKING:  # pragma: no cover - typing only
+if TYPE_CHECKING:  # pragma: no cover - typing only (interfaces imports numpy: `pearl --help` must not)
+    from pearl_pomdp.interfaces import Solver
     from pearl_pomdp.model.pomdp import Pomdp
     from pearl_pomdp.solvers.base import SolveResult
 
@@ -71,7 +71,7 @@ def _qmdp(model: "Pomdp", *, horizon: Optional[int] = None, epsilon: Optional[fl
 
 
 #: name → solver (see the module doc).
-SOLVERS: Dict[str, Solver] = {"incprune": _incprune, "pointbased": _pointbased, "qmdp": _qmdp}
+SOLVERS: Dict[str, "Solver"] = {"incprune": _incprune, "pointbased": _pointbased, "qmdp": _qmdp}
 
 
 def solver_names() -> Tuple[str, ...]:
