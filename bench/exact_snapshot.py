@@ -1,4 +1,4 @@
-"""Save (or compare) the exact solver's policies on the shared files: the before/after check of a pruning change.
+"""Save (or compare) the exact solver's policies on the benchmark files (test/data/pomdp): the before/after check of a pruning change.
 
     .venv/bin/python bench/exact_snapshot.py save DIR [FILE:H ...]     # one .npz per run into DIR
     .venv/bin/python bench/exact_snapshot.py compare DIR_A DIR_B        # ONE JSON object on stdout
@@ -16,7 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-BENCHMARKS = Path(__file__).resolve().parents[2] / "shared" / "benchmarks" / "pomdp"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from models import model_path  # noqa: E402  (bench/models.py: test/data/pomdp)
+
 DEFAULT_RUNS = ["tiger.95.POMDP:15", "tiger.95.POMDP:inf", "tiger.aaai.POMDP:10", "tiger.aaai.POMDP:inf",
                 "1d.POMDP:10", "1d.POMDP:inf", "parr95.95.POMDP:10", "parr95.95.POMDP:inf",
                 "cheese.95.POMDP:10", "cheese.95.POMDP:inf", "network.POMDP:10"]
@@ -29,7 +31,7 @@ def save(out_dir: Path, runs) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     for spec in runs:
         name, h = spec.rsplit(":", 1)
-        path = Path(name) if Path(name).is_file() else BENCHMARKS / name
+        path = model_path(name)
         model = load_model(str(path))
         name = path.name
         t0 = time.perf_counter()

@@ -1,12 +1,12 @@
-"""Incremental pruning vs pomdp-solve 5.5.2 on the shared benchmark files.
+"""Incremental pruning vs pomdp-solve 5.5.2 on the benchmark files (test/data/pomdp).
 
 Prints one JSON object: for each run (file, horizon) our vector count and
-V(b0) next to pomdp-solve's (from ../shared/benchmarks/RESULTS.md), our
+V(b0) next to pomdp-solve's (its measured runs, in ``REFERENCE`` below), our
 seconds (wall and CPU) and the ratio to pomdp-solve's seconds. If a
 ``pomdp-solve`` binary is on PATH (or given with ``--pomdp-solve``), it is run
 on the same file in the same session, so the time ratio is measured under the
 same machine load (``ps_seconds_here``, ``ratio_here``); the ratio against
-RESULTS.md is kept too (``ratio_results``).
+those recorded runs is kept too (``ratio_results``).
 
     .venv/bin/python bench/incprune.py                 # the slow runs (minutes)
     .venv/bin/python bench/incprune.py --set fast      # the small files (seconds)
@@ -35,9 +35,10 @@ sys.path.insert(0, str(REPO))
 from pearl_pomdp.model import load_model  # noqa: E402
 from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning  # noqa: E402
 
-BENCHMARKS = REPO.parent / "shared" / "benchmarks" / "pomdp"
+from models import model_path  # noqa: E402  (bench/models.py: test/data/pomdp)
 
-# (file, horizon or None, pomdp-solve vectors, pomdp-solve V(b0), pomdp-solve wall s, epochs) — RESULTS.md
+# (file, horizon or None, pomdp-solve vectors, pomdp-solve V(b0), pomdp-solve wall s, epochs): pomdp-solve 5.5.2
+# built outside the repository, `-method incprune`, run on this 2-core machine on 2026-11-23
 REFERENCE = [
     ("tiger.95.POMDP", 10, 27, 6.693368432, 0.023, 10),
     ("tiger.95.POMDP", 15, 47, 9.728424745, 0.085, 15),
@@ -60,7 +61,7 @@ SLOW = {("shuttle.95.POMDP", 10), ("network.POMDP", None), ("4x3.95.POMDP", 10),
 
 
 def run_pomdp_solve(binary: str, path: Path, horizon, limit: float):
-    """Run pomdp-solve like RESULTS.md did; return (seconds, vectors, V(b0) or None) or None on timeout."""
+    """Run pomdp-solve as for REFERENCE; return (seconds, vectors, V(b0) or None) or None on timeout."""
     with tempfile.TemporaryDirectory() as tmp:
         prefix = os.path.join(tmp, "out")
         cmd = [binary, "-pomdp", str(path), "-method", "incprune", "-o", prefix]
@@ -98,7 +99,7 @@ def main(argv=None) -> int:
         tag = f"{name}:{horizon if horizon is not None else 'inf'}"
         if args.only and not re.search(args.only, tag):
             continue
-        model = load_model(BENCHMARKS / name)
+        model = load_model(model_path(name))
         print(f"[incprune bench] {tag} …", file=sys.stderr, flush=True)
         c0 = time.process_time()
         res = solve_incremental_pruning(model, horizon=horizon, time_limit=args.time_limit, progress=True)
@@ -116,7 +117,7 @@ def main(argv=None) -> int:
             "lps": res.extra["prune"]["lps"],
         }
         if args.pomdp_solve:
-            out = run_pomdp_solve(args.pomdp_solve, BENCHMARKS / name, horizon, args.time_limit)
+            out = run_pomdp_solve(args.pomdp_solve, model_path(name), horizon, args.time_limit)
             if out is None:
                 row["ps_seconds_here"] = None
             else:

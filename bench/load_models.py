@@ -1,6 +1,6 @@
-"""Load/write times of every shared benchmark model (.pomdp reader and writer, PomdpX).
+"""Load/write times of every benchmark model (.pomdp reader and writer, PomdpX).
 
-For each file in ../shared/benchmarks/pomdp: read time (min and median of --repeat runs, wall
+For each file in test/data/pomdp (bench/models.py): read time (min and median of --repeat runs, wall
 and process CPU — CPU is less disturbed by the other jobs on this shared machine), the size,
 the .pomdp write and re-read times, whether the re-read model is identical (fingerprint and
 exact arrays), and the same for PomdpX. Prints one JSON object; progress on stderr.
@@ -28,7 +28,10 @@ sys.path.insert(0, str(REPO))
 from pearl_pomdp.model.pomdp_format import read_pomdp, write_pomdp  # noqa: E402
 from pearl_pomdp.model.pomdpx import read_pomdpx, write_pomdpx  # noqa: E402
 
-BENCHMARKS = REPO.parent / "shared" / "benchmarks" / "pomdp"
+sys.path.insert(0, str(REPO / "bench"))
+from models import model_dir  # noqa: E402  (bench/models.py: test/data/pomdp)
+
+BENCHMARKS = model_dir()
 
 
 def timed(fn, *args):

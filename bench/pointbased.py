@@ -1,16 +1,17 @@
 """Point-based solver vs SARSOP on every benchmark file (one JSON object on stdout).
 
-For each model in ``../shared/benchmarks/pomdp/`` (or ``--problems``) it runs
+For each model in ``test/data/pomdp/`` (or ``--problems``) it runs
 :func:`pearl_pomdp.solvers.point_based.solve_point_based` with target gap
 ``--epsilon`` (1e-3, SARSOP's ``--precision``) and ``--time-limit`` seconds (60, SARSOP's
 ``--timeout``), and reports our lower/upper bound at b0, gap, seconds, α-vectors,
 trials, and the time at which our lower bound first came within 2 % of SARSOP's,
-next to SARSOP's LB/UB/wall time/stop parsed from ``../shared/benchmarks/RESULTS.md``.
+next to SARSOP's LB/UB/wall time/stop parsed from ``--peer-results FILE`` (the markdown of
+SARSOP's recorded runs; SARSOP is built and run outside this repository; without it no SARSOP columns).
 "within_2pct" is ``LB_ours ≥ LB_sarsop − 0.02·|LB_sarsop|``. ``load_seconds`` (reading
 the file) is reported apart from the solve.
 
     .venv/bin/python bench/pointbased.py [--problems hallway,tiger.95] [--time-limit 60]
-        [--epsilon 1e-3] [--progress]
+        [--epsilon 1e-3] [--progress] [--peer-results FILE]
 
 Timings on the shared machine are noisy; the ``load`` field records the load
 average at the start of each problem.
@@ -27,14 +28,15 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-BENCH = REPO.parent / "shared" / "benchmarks"
+sys.path.insert(0, str(REPO / "bench"))
+from models import model_files, peer_results  # noqa: E402  (bench/models.py: test/data/pomdp)
 
 from pearl_pomdp.model import load_model  # noqa: E402
 from pearl_pomdp.solvers.point_based import solve_point_based  # noqa: E402
 
 
 def sarsop_rows(results_md: Path) -> dict:
-    """SARSOP's table in RESULTS.md: problem file → {lb, ub, wall_s, stop, vectors}."""
+    """SARSOP's table in the peer-results markdown: problem file → {lb, ub, wall_s, stop, vectors}."""
     rows = {}
     in_table = False
     header = None
@@ -66,10 +68,13 @@ def main() -> int:
     ap.add_argument("--time-limit", type=float, default=60.0)
     ap.add_argument("--epsilon", type=float, default=1e-3)
     ap.add_argument("--progress", action="store_true", help="tqdm line per problem on stderr")
+    ap.add_argument("--peer-results", metavar="FILE", default=None,
+                    help="markdown of SARSOP's recorded runs (a '### SARSOP' table); without it no SARSOP columns")
     args = ap.parse_args()
 
-    ref = sarsop_rows(BENCH / "RESULTS.md")
-    files = sorted(p for p in (BENCH / "pomdp").iterdir() if p.suffix.lower() == ".pomdp")
+    results = peer_results(args.peer_results)
+    ref = sarsop_rows(results) if results is not None else {}
+    files = sorted(model_files())
     if args.problems:
         wanted = [w.strip() for w in args.problems.split(",") if w.strip()]
         files = [f for f in files if any(f.name.startswith(w) for w in wanted)]

@@ -1,8 +1,9 @@
-"""Our solvers side by side with the peer-solver numbers of ``../shared/benchmarks/RESULTS.md``.
+"""Our solvers side by side with the peer solvers' recorded results (``--peer-results RESULTS.md``).
 
-For every model in ``../shared/benchmarks/pomdp/`` (or those picked with ``--problems``):
+For every model in ``test/data/pomdp/`` (or those picked with ``--problems``):
 
-* **incprune** (exact) for every horizon at which pomdp-solve finished in RESULTS.md
+* **incprune** (exact) for every horizon at which pomdp-solve finished in the peer results
+  (without ``--peer-results``: ``--horizons``, default 10)
   (10, 15 for tiger.95, and ``inf`` = run to the epsilon stop), capped at
   ``--incprune-time-limit`` seconds (default 300, pomdp-solve's cap). Compared: α-vector
   count, V(b0), epochs, wall time (ratio ours / pomdp-solve). Problems where pomdp-solve
@@ -15,16 +16,18 @@ For every model in ``../shared/benchmarks/pomdp/`` (or those picked with ``--pro
 
 With a peer on PATH, ``time_ratio_vs_peer_here`` compares against the peer's wall time in
 this same run (same machine load); ``time_ratio_vs_pomdp_solve`` / ``time_ratio_vs_sarsop``
-compare against the RESULTS.md times. On a loaded machine compare CPU seconds
+compare against the recorded peer times. On a loaded machine compare CPU seconds
 (``cpu_ratio_vs_peer_here``): our ``--time-limit`` is wall-clock, while ``pomdpsol
 --timeout`` counts its own solving time, so under load SARSOP gets more CPU in "60 s".
 
-The reference tables are parsed from RESULTS.md (not retyped). If ``pomdpsol`` or
+The reference tables are parsed from the peer-results file (not retyped): the markdown the
+peers' runs wrote (pomdp-solve and SARSOP are built and run outside this repository). Without it
+the peer columns are empty and the script says so. If ``pomdpsol`` or
 ``pomdp-solve`` is on PATH they are run in the same run, with the same caps, for time
 ratios on equal terms (``peers`` in the output).
 
     .venv/bin/python bench/solvers.py [--problems tiger.95,cheese.95] [--time-limit 60]
-        [--incprune-time-limit 300] [--methods incprune,pointbased,qmdp] [--no-peers]
+        [--incprune-time-limit 300] [--methods incprune,pointbased,qmdp] [--no-peers] [--peer-results FILE]
 
 Prints one JSON object on stdout; progress (tqdm) on stderr.
 """
@@ -48,9 +51,10 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-SHARED = REPO.parent / "shared" / "benchmarks"
+sys.path.insert(0, str(REPO / "bench"))
+from models import model_files, peer_results  # noqa: E402  (bench/models.py: test/data/pomdp)
 
-# --------------------------------------------------------------- RESULTS.md
+# ------------------------------------------------------------ peer results
 
 
 def markdown_tables(text: str) -> List[List[Dict[str, str]]]:
@@ -145,7 +149,8 @@ def run_incprune(model, horizon, time_limit, ref):
     out["complete"] = bool(complete)
     if ref.get("value_at_start") is not None:
         out["value_diff"] = float(r.value_at_start - ref["value_at_start"])
-    out["vectors_match"] = bool(complete and ref.get("alpha_vectors") == r.policy.num_vectors)
+    out["vectors_match"] = (None if ref.get("alpha_vectors") is None
+                            else bool(complete and ref["alpha_vectors"] == r.policy.num_vectors))
     out["time_ratio_vs_pomdp_solve"] = _ratio(wall, ref.get("wall_seconds")) if complete else None
     return out
 
@@ -189,7 +194,7 @@ def _children_cpu() -> float:
 
 
 def run_pomdpsol(path: Path, timeout: float) -> dict:
-    """Run SARSOP's ``pomdpsol`` like RESULTS.md did; parse the last summary row for the bounds."""
+    """Run SARSOP's ``pomdpsol`` as for the recorded peer results; parse the last summary row for the bounds."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = ["pomdpsol", "--timeout", f"{timeout:g}", "--precision", "1e-3", "-o", str(Path(tmp) / "out.policy"),
                str(path)]
@@ -242,7 +247,9 @@ def main() -> None:
     ap.add_argument("--methods", default="incprune,pointbased,qmdp")
     ap.add_argument("--time-limit", type=float, default=60.0, help="pointbased time limit, s (default 60)")
     ap.add_argument("--incprune-time-limit", type=float, default=300.0, help="cap per incprune run, s (default 300)")
-    ap.add_argument("--benchmarks", default=str(SHARED), help="directory with RESULTS.md and pomdp/")
+    ap.add_argument("--peer-results", metavar="FILE", default=None,
+                    help="markdown tables of the peers' recorded runs (pomdp-solve, SARSOP); without it no peer columns")
+    ap.add_argument("--horizons", default="10", help="incprune horizons without --peer-results (default 10)")
     ap.add_argument("--no-peers", action="store_true", help="do not run pomdpsol/pomdp-solve even if on PATH")
     args = ap.parse_args()
 
@@ -251,9 +258,10 @@ def main() -> None:
     from pearl_pomdp.jsonable import numpy_to_json
     from pearl_pomdp.model import load_model
 
-    bench = Path(args.benchmarks)
-    refs = parse_results(bench / "RESULTS.md")
-    files = sorted(p for p in (bench / "pomdp").iterdir() if p.suffix.lower() == ".pomdp")
+    results = peer_results(args.peer_results)
+    refs = parse_results(results) if results is not None else {"sarsop": {}, "pomdp_solve": {}}
+    own_horizons = {h.strip(): {"finished": True} for h in args.horizons.split(",") if h.strip()}
+    files = sorted(model_files())
     if args.problems:
         wanted = [w.strip().lower() for w in args.problems.split(",") if w.strip()]
         names = {p: {p.name.lower(), p.stem.lower()} for p in files}
@@ -279,8 +287,8 @@ def main() -> None:
             continue
         entry["load_seconds"] = round(time.perf_counter() - t0, 3)
         entry["S/A/O"] = f"{model.num_states}/{model.num_actions}/{model.num_observations}"
-        ps_rows = refs["pomdp_solve"].get(path.name, {})
-        sarsop_row = refs["sarsop"].get(path.name)
+        ps_rows = refs["pomdp_solve"].get(path.name, {}) if results is not None else own_horizons
+        sarsop_row = refs["sarsop"].get(path.name) if results is not None else {}
 
         if "incprune" in methods:
             runs = []
@@ -304,7 +312,7 @@ def main() -> None:
             if runs:
                 entry["incprune"] = runs
             else:
-                entry["incprune"] = {"skipped": "pomdp-solve did not finish 10 epochs within 300 s in RESULTS.md"}
+                entry["incprune"] = {"skipped": "pomdp-solve did not finish 10 epochs within 300 s in the peer results"}
 
         if "pointbased" in methods and sarsop_row is not None:
             bar.set_postfix_str(f"{path.name} pointbased")
@@ -337,7 +345,7 @@ def main() -> None:
     summary = {
         "incprune_runs": sum(len(e["incprune"]) for e in problems.values() if isinstance(e.get("incprune"), list)),
         "incprune_vector_counts_matching": sum(
-            r.get("vectors_match", False) for e in problems.values() if isinstance(e.get("incprune"), list)
+            bool(r.get("vectors_match")) for e in problems.values() if isinstance(e.get("incprune"), list)
             for r in e["incprune"]),
         "incprune_max_abs_value_diff": max(
             [abs(r["value_diff"]) for e in problems.values() if isinstance(e.get("incprune"), list)
@@ -348,7 +356,7 @@ def main() -> None:
     print(json.dumps({
         "benchmark": "solvers",
         "load_average_1min_at_end": round(os.getloadavg()[0], 2),
-        "reference": str(bench / "RESULTS.md"),
+        "reference": None if results is None else str(results),
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
         "options": {"problems": [p.name for p in files], "methods": methods, "pointbased_time_limit": args.time_limit,
                     "incprune_time_limit": args.incprune_time_limit, "peers_on_path": sorted(peers)},

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-TIGER = REPO.parent / "shared" / "benchmarks" / "pomdp" / "tiger.95.POMDP"
+TIGER = REPO / "test" / "data" / "pomdp" / "tiger.95.POMDP"
 HEAVY = ["numpy", "scipy", "scipy.optimize", "scipy.sparse", "highspy", "tqdm", "matplotlib", "rclpy"]
 
 _RUN = "import sys\nfrom pearl_pomdp.cli import main\nsys.exit(main(sys.argv[1:]))\n"

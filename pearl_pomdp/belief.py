@@ -1,4 +1,4 @@
-"""The Bayes filter over a flat POMDP's states (DESIGN.md §2, eq. 5 of Pineau & Thrun).
+"""The Bayes filter over a flat POMDP's states (docs/design.md §2, eq. 5 of Pineau & Thrun).
 
 After doing action ``a`` in belief ``b`` and observing ``o``::
 
@@ -247,7 +247,7 @@ class BeliefFilter:
         a = self.action_index(action)
         o = self.observation_index(observation)
         self.updates += 1
-        if self._fused_ok:
+        if self._M is not None:   # the fused operators (built when they fit: _fused_ok)
             unnormalised = _matvec(self._M[a][o], b)
         else:
             unnormalised = self._OT[a, o] * _matvec(self._TT[a], b)

@@ -1,4 +1,4 @@
-"""The executive: the step loop of :mod:`pearl_pomdp.tracking` plus a decider (DESIGN.md §6).
+"""The executive: the step loop of :mod:`pearl_pomdp.tracking` plus a decider (docs/design.md §6).
 
 The robot runs this loop split over two nodes — ``belief_tracker`` wraps the
 :class:`~pearl_pomdp.tracking.BeliefTracker`, ``hierarchical_policy`` wraps the decider —
@@ -111,8 +111,10 @@ class Executive:
             also accepts recognised speech *text* (words matching no keyword become the
             unknown symbol and are counted).
         domain: the FactoredDomain (modalities, keywords, drives, :meth:`marginals`), optional.
-        settings: the step rules (:class:`~pearl_pomdp.tracking.StepSettings`; the params
-            file's belief_tracker section via :func:`pearl_pomdp.params.step_settings`).
+        settings: the step rules (:class:`~pearl_pomdp.tracking.StepSettings`, whose defaults
+            are the node's; the robot's values: :func:`pearl_pomdp.params.step_settings`). A
+            model without the ``unknown`` symbol needs ``StepSettings(step_timeout=0.0)`` or
+            another ``timeout_observation``.
 
     Attributes:
         tracker: the :class:`~pearl_pomdp.tracking.BeliefTracker` (the belief_tracker node runs the same class).
@@ -125,9 +127,7 @@ class Executive:
         self.model = model
         self.decider = decider
         self.domain = domain
-        self.tracker = BeliefTracker(model, domain, settings or StepSettings(step_timeout=0.0), keyword_filter)
-        self.keyword_filter = self.tracker.mapper.keyword_filter
-        self._obs_index = {o: i for i, o in enumerate(model.observations)}
+        self.tracker = BeliefTracker(model, domain, settings, keyword_filter)
         self._act_index = {a: i for i, a in enumerate(model.actions)}
         self.reset()
 
@@ -137,9 +137,6 @@ class Executive:
         self.tracker.reset()
         self.last_decision: Optional[Decision] = None
         self.steps: List[StepResult] = []
-        kf = self.keyword_filter
-        self._unknown_base = kf.unknown_count if kf is not None else 0
-        self._zero_base = self.tracker.protocol.filter.zero_likelihood_count
         if isinstance(self.decider, ObservingDecider):
             self.decider.reset()
 
@@ -150,19 +147,18 @@ class Executive:
 
     @property
     def updates(self) -> int:
-        """Belief updates done."""
-        return self.tracker.protocol.counters["updates"]
+        """Belief updates done since :meth:`reset`."""
+        return self.tracker.counters()["updates"]
 
     @property
     def zero_likelihood(self) -> int:
         """Updates whose observation had zero likelihood (recovered; see :mod:`pearl_pomdp.belief`)."""
-        return self.tracker.protocol.filter.zero_likelihood_count - self._zero_base
+        return self.tracker.counters()["zero_likelihood"]
 
     @property
     def unknown_inputs(self) -> int:
-        """Speech texts the keyword filter could not classify."""
-        kf = self.keyword_filter
-        return (kf.unknown_count - self._unknown_base) if kf is not None else 0
+        """Speech texts the keyword filter could not classify (since :meth:`reset`)."""
+        return self.tracker.counters()["unknown_speech"]
 
     # ------------------------------------------------------------- timed loop
     def decide(self) -> Decision:
@@ -181,7 +177,7 @@ class Executive:
 
     def on_tick(self, now: float) -> List[str]:
         """The clock reads ``now``; the actions decided because a timeout closed the step."""
-        closed = self.tracker.on_tick(now)
+        closed = self.tracker.on_tick(now).closed
         return self._answer(closed, now) if closed is not None else []
 
     def _answer(self, closed: Optional[StepResult], now: float) -> List[str]:
@@ -193,12 +189,10 @@ class Executive:
         actions: List[str] = []
         while True:
             if closed is not None:
-                self.steps.append(closed)
-                if isinstance(self.decider, ObservingDecider):
-                    self.decider.observe(closed.action, closed.observation)
+                self._closed(closed)
             action = self.decide().action_name
             actions.append(action)
-            closed = self.tracker.on_action(action, now)
+            closed = self.tracker.on_action(action, now).closed
             if closed is None:
                 return actions
 
@@ -207,26 +201,12 @@ class Executive:
         return self.tracker.deadline()
 
     # ----------------------------------------------------------- untimed use
-    def symbol(self, observation: str) -> str:
-        """The model symbol for ``observation``: a symbol as it is, else speech text through the keyword filter.
-
-        Raises:
-            BeliefError: not a symbol of the model and no keyword filter to classify it.
-        """
-        if observation in self._obs_index:
-            return observation
-        mapper = self.tracker.mapper
-        if mapper.keyword_filter is None:
-            shown = ", ".join(self.model.observations[:20])
-            raise BeliefError(f"unknown observation {observation!r}; known: {shown} "
-                              "(give a keyword_filter to accept recognised speech text)")
-        symbol = mapper.speech(observation)
-        if symbol is None:
-            raise BeliefError(f"the keyword filter mapped {observation!r} to no observation of the model")
-        return symbol
-
     def observe(self, action_name: str, observation: str) -> np.ndarray:
         """Close one step: update the belief with the action taken and the observation that followed.
+
+        Untimed use (a scripted dialog): the tracker's clock is the step count. The observation
+        goes through the tracker as the input that carries it (:meth:`BeliefTracker.input_for`),
+        so the robot's rule applies: a symbol as it is, speech text through the keyword filter.
 
         Args:
             action_name: the primitive action that was executed (``a_t``).
@@ -241,17 +221,30 @@ class Executive:
         """
         if action_name not in self._act_index:
             raise BeliefError(f"unknown action {action_name!r}; known: {', '.join(self.model.actions)}")
-        symbol = self.symbol(observation)
-        protocol = self.tracker.protocol
-        now = float(protocol.step)
-        if protocol.current_action != action_name:
-            protocol.on_action(action_name, now)
-        closed = protocol.on_observation(symbol, "observe", now, observation)
-        assert closed is not None  # the step was opened just above
+        tracker = self.tracker
+        now = float(tracker.step)
+        opened = False
+        if tracker.open_action != action_name:
+            queued = tracker.on_action(action_name, now).closed
+            if queued is not None:   # an input queued by timed use closes the step at once
+                self._closed(queued)
+            opened = True
+        outcome = tracker.on_input(tracker.input_for(observation), observation, now)
+        if outcome.closed is None:
+            if opened:
+                tracker.abandon_step()
+            if tracker.keyword_filter is None:
+                shown = ", ".join(self.model.observations[:20])
+                raise BeliefError(f"unknown observation {observation!r}; known: {shown} "
+                                  "(give a keyword_filter to accept recognised speech text)")
+            raise BeliefError(f"the keyword filter mapped {observation!r} to no observation of the model")
+        self._closed(outcome.closed)
+        return self.belief
+
+    def _closed(self, closed: StepResult) -> None:
         self.steps.append(closed)
         if isinstance(self.decider, ObservingDecider):
-            self.decider.observe(action_name, symbol)
-        return self.belief
+            self.decider.observe(closed.action, closed.observation)
 
     def step(self, observation: str) -> Decision:
         """Observe the outcome of the last decided action, then decide the next one."""

@@ -57,13 +57,14 @@ class GuidePaceConfig:
         ValueError: a setting is out of range (the message names it and the value).
     """
 
-    cruise_speed: float = 0.6
-    follow_gap: float = 1.0
-    resume_gap: float = 1.5
-    stop_gap: float = 2.5
+    # The one source of these defaults (the guide_pace node declares its parameters from them).
+    cruise_speed: float = 0.6          # m/s: Pearl drove at about walking pace
+    follow_gap: float = 1.0            # m: she walks one step behind the robot
+    resume_gap: float = 1.5            # m: drive on once she is this close again
+    stop_gap: float = 2.5              # m: farther behind than this the robot stops and waits (beyond arm's reach)
     gain: float = 0.5
     pace_time_constant: float = 3.0
-    lost_timeout: float = 60.0
+    lost_timeout: float = 60.0         # s: (stop_gap - resume_gap) / 5 cm/s = 20 s, plus a 10 s rest, doubled
 
     @classmethod
     def from_params(cls, params, **overrides) -> "GuidePaceConfig":
@@ -135,10 +136,10 @@ class GuidePace:
         c = self.config
         v_max = c.cruise_speed if nav_speed is None else max(0.0, float(nav_speed))
         self.became_lost = False
-        behind = resident_distance_behind
-        seen = behind is not None and math.isfinite(behind)
-        if seen:
-            behind = max(0.0, float(behind))
+        raw = resident_distance_behind
+        behind = 0.0   # metres she is behind the robot (read only while she is seen)
+        if raw is not None and math.isfinite(raw):
+            behind = max(0.0, float(raw))
             her = robot_progress - behind
             if self._her_last is not None:
                 rate = max(0.0, (her - self._her_last) / dt)

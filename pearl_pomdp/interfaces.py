@@ -9,7 +9,7 @@
   :class:`~pearl_pomdp.executive.FlatPolicyDecider`).
 * :class:`ObservingDecider` — a decider that also keeps its own memory of what was heard
   (a behaviour tree, a state machine): the executive tells it every closed step.
-* :class:`Solver` — ``solve(model, **options) -> SolveResult``; solvers are looked up by
+* :class:`Solver` — ``solve(model, *, options) -> SolveResult``; solvers are looked up by
   name in :mod:`pearl_pomdp.solvers.registry`.
 
 These are :class:`typing.Protocol` s: anything with the methods fits, and mypy checks it.
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, List, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, List, Optional, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -90,6 +90,13 @@ class ObservingDecider(Decider, Protocol):
 
 
 class Solver(Protocol):
-    """A POMDP solver: ``solve(model, **options) -> SolveResult`` (see the registry for options)."""
+    """A POMDP solver: ``solve(model, *, options) -> SolveResult``.
 
-    def __call__(self, model: "Pomdp", **options: Any) -> "SolveResult": ...
+    Every solver takes the same keyword options (:mod:`pearl_pomdp.solvers.registry` says what
+    each means); ``None`` is the solver's own default, and an option the solver has no use for
+    must be ``None`` (it raises :class:`~pearl_pomdp.errors.PearlError` otherwise).
+    """
+
+    def __call__(self, model: "Pomdp", *, horizon: Optional[int] = None, epsilon: Optional[float] = None,
+                 time_limit: Optional[float] = None, seed: Optional[int] = None, progress: bool = False,
+                 trials: Optional[int] = None) -> "SolveResult": ...

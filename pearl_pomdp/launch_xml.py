@@ -46,7 +46,8 @@ def package_share_dir(package: str) -> Optional[Path]:
 
     Looked up, in order: the ament index of every prefix in ``AMENT_PREFIX_PATH`` (a colcon
     or apt install); for ``pearl_pomdp``, the source tree this module was imported from (an
-    editable install: the directory holding ``package.xml``, ``launch/`` and ``config/``);
+    editable install: the directory holding ``package.xml``, ``launch/`` and ``config/``), then
+    the ``share/pearl_pomdp`` of the prefix it is installed in;
     ``<sys.prefix>/share/<package>`` (a pip install's data files). ``None`` when none exists.
     """
     for prefix in filter(None, os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)):
@@ -54,9 +55,16 @@ def package_share_dir(package: str) -> Optional[Path]:
         if marker.is_file():
             return Path(prefix) / "share" / package
     if package == "pearl_pomdp":
-        tree = Path(__file__).resolve().parents[1]
+        here = Path(__file__).resolve()
+        tree = here.parents[1]
         if (tree / "package.xml").is_file() and (tree / "launch").is_dir():
             return tree
+        # An install prefix (colcon or setup.py install): PREFIX/lib/pythonX.Y/site-packages/
+        # pearl_pomdp/ beside PREFIX/share/pearl_pomdp, found even before AMENT_PREFIX_PATH is set.
+        if len(here.parents) > 4:
+            installed = here.parents[4] / "share" / package
+            if (installed / "package.xml").is_file():
+                return installed
     candidate = Path(sys.prefix) / "share" / package
     return candidate if candidate.is_dir() else None
 
@@ -248,9 +256,16 @@ class _Scope:
         where = f"<{el.tag}>" + (f".{attr}" if attr else "")
         return SpecError(self.source, where, problem, line=el.line)
 
-    def attr(self, el: _Element, name: str, required: bool = False, default: Optional[str] = None) -> Optional[str]:
+    def attr(self, el: _Element, name: str, default: Optional[str] = None) -> Optional[str]:
+        """Attribute ``name`` with its substitutions done, or ``default`` when it is absent."""
         if name not in el.attrib:
-            if required:
+            return default
+        return self.substitute(el.attrib[name], el, name)
+
+    def need(self, el: _Element, name: str, default: Optional[str] = None) -> str:
+        """Attribute ``name`` with its substitutions done; absent: ``default``, or an error naming it."""
+        if name not in el.attrib:
+            if default is None:
                 raise self.error(el, name, "missing attribute")
             return default
         return self.substitute(el.attrib[name], el, name)
@@ -265,7 +280,7 @@ _NODE_ATTRS = {"pkg", "exec", "name", "namespace", "output", "args", "ros_args",
 def _condition(scope: _Scope, el: _Element) -> bool:
     for key, want in (("if", True), ("unless", False)):
         if key in el.attrib:
-            value = scope.attr(el, key).strip().lower()
+            value = scope.need(el, key).strip().lower()
             if value not in _TRUE | _FALSE:
                 raise scope.error(el, key, f"condition must be true/false/1/0, got {value!r}")
             if (value in _TRUE) != want:
@@ -336,7 +351,7 @@ def _walk(elements: List[_Element], scope: _Scope, given: Dict[str, str], declar
             continue
         if el.tag == "arg":
             _check_attrs(scope, el, {"name", "default", "description"})
-            name = scope.attr(el, "name", required=True)
+            name = scope.need(el, "name")
             default = scope.attr(el, "default")
             declared[name] = LaunchArg(name, default, el.attrib.get("description", ""))
             if name in given:
@@ -348,7 +363,7 @@ def _walk(elements: List[_Element], scope: _Scope, given: Dict[str, str], declar
                                               f"(pass {name}:=VALUE)")
         elif el.tag == "let":
             _check_attrs(scope, el, {"name", "value"})
-            scope.values[scope.attr(el, "name", required=True)] = scope.attr(el, "value", required=True)
+            scope.values[scope.need(el, "name")] = scope.need(el, "value")
         elif el.tag == "group":
             _check_attrs(scope, el, {"scoped", "forwarding"})
             scoped = (scope.attr(el, "scoped", default="true") or "true").lower() in _TRUE
@@ -359,7 +374,7 @@ def _walk(elements: List[_Element], scope: _Scope, given: Dict[str, str], declar
                 if child.tag in ("push-ros-namespace", "push_ros_namespace"):
                     _check_attrs(inner, child, {"namespace"})
                     if _condition(inner, child):
-                        part = inner.attr(child, "namespace", required=True).strip("/")
+                        part = inner.need(child, "namespace").strip("/")
                         ns = f"{ns.rstrip('/') if ns else ''}/{part}"
                 else:
                     body.append(child)
@@ -373,8 +388,8 @@ def _walk(elements: List[_Element], scope: _Scope, given: Dict[str, str], declar
 
 def _node(el: _Element, scope: _Scope, namespace: Optional[str]) -> LaunchNode:
     _check_attrs(scope, el, _NODE_ATTRS)
-    node = LaunchNode(package=scope.attr(el, "pkg", required=True), executable=scope.attr(el, "exec", required=True),
-                      name=scope.attr(el, "name"), output=scope.attr(el, "output", default="log"), line=el.line)
+    node = LaunchNode(package=scope.need(el, "pkg"), executable=scope.need(el, "exec"),
+                      name=scope.attr(el, "name"), output=scope.need(el, "output", default="log"), line=el.line)
     if node.output not in ("screen", "log", "both"):
         raise scope.error(el, "output", f"must be screen, log or both, got {node.output!r}")
     # ros2 launch ends the launch when such a node exits; pearl launch always does.
@@ -397,7 +412,7 @@ def _node(el: _Element, scope: _Scope, namespace: Optional[str]) -> LaunchNode:
             _param(child, scope, node, prefix="")
         elif child.tag == "remap":
             _check_attrs(scope, child, {"from", "to"})
-            node.remappings.append((scope.attr(child, "from", required=True), scope.attr(child, "to", required=True)))
+            node.remappings.append((scope.need(child, "from"), scope.need(child, "to")))
         else:
             raise scope.error(child, "", "unsupported element inside <node> (param, remap)")
     return node
@@ -408,14 +423,14 @@ def _param(el: _Element, scope: _Scope, node: LaunchNode, prefix: str) -> None:
     if "from" in el.attrib:
         if "name" in el.attrib or "value" in el.attrib:
             raise scope.error(el, "from", "a <param from=…> takes no name or value")
-        path = Path(scope.attr(el, "from"))
+        path = Path(scope.need(el, "from"))
         if not path.is_absolute():
             path = scope.source.resolve().parent / path if not path.exists() else path.resolve()
         if not path.is_file():
             raise scope.error(el, "from", f"no such parameters file: {path}")
         node.parameters.append(("file", str(path)))
         return
-    name = scope.attr(el, "name", required=True)
+    name = scope.need(el, "name")
     full = f"{prefix}{name}"
     if "value" in el.attrib:
         if el.children:

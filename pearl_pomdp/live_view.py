@@ -21,8 +21,9 @@ channel                    encoding / schema     what :meth:`LiveView.publish` t
 ``/pearl/places``          foxglove.SceneUpdate ``{name: [x, y, yaw]}`` (spheres and labels)
 =========================  ===================  =====================================================
 
-Requires ``pip install foxglove-sdk`` (extra ``live``); importing this module without it
-raises ImportError naming the package.
+Requires ``foxglove-sdk`` (installed with the ``ros`` extra of the README's install, or
+``pip install foxglove-sdk``); importing this module without it raises ImportError naming the
+package.
 """
 from __future__ import annotations
 

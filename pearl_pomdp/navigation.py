@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["Place", "Landmark", "LandmarkDetector", "DriveDeadline", "DriveTimer", "places_from_parameters"]
 
@@ -231,7 +231,7 @@ class DriveTimer:
         return self.deadline.seconds(distance, speed)
 
 
-def places_from_parameters(names: Iterable[str], poses: Dict[str, Sequence[float]]) -> Dict[str, Place]:
+def places_from_parameters(names: Iterable[str], poses: Mapping[str, Sequence[float]]) -> Dict[str, Place]:
     """``{name: Place}`` from ``location_names`` and ``locations.<name>`` = [x, y, yaw].
 
     Raises:

@@ -1,9 +1,11 @@
 """The node parameters file (``config/pearl_nodes.yaml``), read without ROS.
 
-One source per default: the robot (``--params-file`` in the launch file), ``PearlGraph``
-(demo, replay, tests), the nodes whose defaults are tables (:mod:`pearl_pomdp.nodes.defaults`)
-and the fast experiment path all take the node parameters from this file, so the demo, the
-study and the robot follow the same rules.
+One source per default: the code holds the defaults (the tracker's in
+:class:`pearl_pomdp.tracking.StepSettings`), this file only what the Pearl robot sets
+differently. The robot (``--params-file`` in the launch file, and each node's own
+``defaults_file``: :mod:`pearl_pomdp.nodes.defaults`), ``PearlGraph`` (demo, replay, tests) and
+the fast experiment path (:func:`step_settings`) all apply it, so the demo, the study and the
+robot follow the same rules.
 
 The file is in the ROS 2 params-file format (Nav2's ``nav2_params.yaml`` convention):
 ``node_name: {ros__parameters: {...}}``, with ``/**`` for parameters every node shares.
@@ -19,7 +21,7 @@ from typing import Any, Dict, Union
 
 from pearl_pomdp.errors import PearlError, SpecError
 
-__all__ = ["default_params_file", "flatten", "node_parameters", "node_params", "step_settings"]
+__all__ = ["default_params_file", "flatten", "node_parameters", "step_settings"]
 
 PARAMS_NAME = "config/pearl_nodes.yaml"
 
@@ -49,7 +51,7 @@ def flatten(tree: Any, prefix: str = "") -> Dict[str, Any]:
     return out
 
 
-def node_parameters(path: Union[str, Path, None], node_name: str) -> Dict[str, Any]:
+def node_parameters(node_name: str, path: Union[str, Path, None] = None) -> Dict[str, Any]:
     """The flattened parameters that the params file ``path`` gives ``node_name`` (see the module doc).
 
     ``path`` ``None``: the shipped file.
@@ -81,15 +83,11 @@ def node_parameters(path: Union[str, Path, None], node_name: str) -> Dict[str, A
     return out
 
 
-def node_params(node: str, path: Union[str, Path, None] = None) -> Dict[str, Any]:
-    """:func:`node_parameters` with the shipped file as the default ``path``."""
-    return node_parameters(path, node)
-
-
 def step_settings(path: Union[str, Path, None] = None, **overrides: Any):
-    """The belief tracker's :class:`~pearl_pomdp.tracking.StepSettings` from the params file."""
+    """The belief tracker's :class:`~pearl_pomdp.tracking.StepSettings` as the node runs them: the
+    code's defaults, then the params file's ``/**`` and ``belief_tracker`` sections, then ``overrides``."""
     from pearl_pomdp.tracking import StepSettings
 
-    return StepSettings.from_params({**node_params("belief_tracker", path), **overrides})
+    return StepSettings.from_params({**node_parameters("belief_tracker", path), **overrides})
 
 

@@ -34,7 +34,7 @@ import io
 import json
 import math
 from pathlib import Path
-from typing import Any, Optional, Union
+from typing import TYPE_CHECKING, Any, Dict, Optional, Union
 
 import numpy as np
 
@@ -43,6 +43,9 @@ from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.jsonable import numpy_to_json
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.solvers.base import AlphaVectorPolicy
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from pearl_pomdp.solvers.mdp import MostLikelyStatePolicy
 
 __all__ = ["save_policy", "load_policy", "read_policy_header", "header_path", "FORMAT", "FORMAT_VERSION"]
 
@@ -130,7 +133,8 @@ def save_policy(path: PathLike, policy, model: Pomdp, meta: Optional[dict] = Non
         raise PolicyError(f"{path}: action index {int(actions.max())} out of range for model '{model.name}' with {A} actions")
 
     buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
+    named: Dict[str, Any] = dict(arrays)   # name → array (numpy's stub would also match allow_pickle)
+    np.savez(buffer, **named)
     data = buffer.getvalue()
     header = {
         "format": FORMAT,
@@ -261,7 +265,7 @@ def load_policy(path: PathLike, model: Optional[Pomdp] = None):
         if not np.isfinite(alphas).all():
             raise PolicyError(f"{path}: alphas has a non-finite entry")
         check_actions("actions", actions)
-        policy = AlphaVectorPolicy(alphas, actions)
+        policy: Union[AlphaVectorPolicy, "MostLikelyStatePolicy"] = AlphaVectorPolicy(alphas, actions)
     else:
         state_actions = need("state_actions", 1, "iu")
         if state_actions.shape != (S,):
@@ -273,7 +277,7 @@ def load_policy(path: PathLike, model: Optional[Pomdp] = None):
             raise PolicyError(f"{path}: most-likely-state policies need pearl_pomdp.solvers.mdp ({err})") from None
         policy = MostLikelyStatePolicy(state_actions.astype(np.int64))
     try:
-        policy.header = {k: v for k, v in header.items() if not k.startswith("_")}
+        setattr(policy, "header", {k: v for k, v in header.items() if not k.startswith("_")})
     except AttributeError:  # a class with __slots__: the header is still available via read_policy_header
         pass
     return policy

@@ -18,14 +18,14 @@ The paper applies "a keyword filter to the output of the speech recognizer
    one-word "kitchen".)
 4. No keyword at all → ``unknown_symbol``; the filter counts it
    (:attr:`KeywordFilter.unknown_count`) and keeps the last few texts so that
-   nothing is silently dropped (DESIGN.md §9). Empty text is also unknown: that is
+   nothing is silently dropped (docs/design.md §9). Empty text is also unknown: that is
    what a recogniser returns when the timeout closes a step.
 """
 from __future__ import annotations
 
 import re
 from collections import deque
-from typing import Deque, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+from typing import Deque, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["KeywordFilter", "normalise", "tokens", "parse_speech_message", "speech_message"]
 
@@ -169,7 +169,7 @@ class KeywordFilter:
         return self.classify(text)
 
 
-def _find(words: Sequence[str], phrase: Tuple[str, ...]) -> Iterable[int]:
+def _find(words: Sequence[str], phrase: Tuple[str, ...]) -> Iterator[int]:
     n = len(phrase)
     for i in range(len(words) - n + 1):
         if tuple(words[i:i + n]) == phrase:

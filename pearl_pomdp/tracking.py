@@ -1,19 +1,32 @@
 """Belief tracking step by step: the one step loop the robot, the simulator and the study run.
 
-The step protocol (DESIGN.md §6): the policy publishes an action ``a_t``; the next
+The step protocol (docs/design.md §6): the policy publishes an action ``a_t``; the next
 observation ``o_{t+1}`` (one input from any modality) closes the step; the belief is
 updated with ``(a_t, o_{t+1})`` by eq. 5; the policy answers with ``a_{t+1}``.
-:class:`BeliefTracker` is that loop without ROS. The ``belief_tracker`` node is a thin
-rclpy wrapper of it (subscriptions call :meth:`BeliefTracker.on_input` /
-:meth:`~BeliefTracker.on_action`, a timer calls :meth:`~BeliefTracker.on_tick`), and
-:class:`pearl_pomdp.executive.Executive` drives the same object directly for experiments
-with thousands of episodes — so a change to the rules below shows up in both.
+:class:`BeliefTracker` is that loop without ROS, behind one closed façade:
 
-**Inputs → observation symbols** (:class:`ObservationMapper`, the only place this is done):
+* **in**: :meth:`~BeliefTracker.on_input` (an input message), :meth:`~BeliefTracker.on_action`
+  (an action taken), :meth:`~BeliefTracker.on_tick` (the clock), :meth:`~BeliefTracker.reset`,
+  :meth:`~BeliefTracker.abandon_step` (stop without an update) and
+  :meth:`~BeliefTracker.set_live` (the settings that may change while running);
+* **out**: every call that takes an input, an action or the clock returns one
+  :class:`InputOutcome` — what it did (its :attr:`~InputOutcome.kind`), the step it closed and
+  the :class:`Event` s to log; the rest is read-only state (belief, counters, deadline).
 
-* Speech text goes through the domain's keyword filter (:class:`pearl_pomdp.speech.KeywordFilter`);
-  text with no keyword becomes the ``unknown`` symbol (still an observation: the robot heard
-  something it did not understand) and is counted. A recogniser may attach its confidence
+The ``belief_tracker`` node is a thin rclpy wrapper of it (subscriptions call ``on_input`` /
+``on_action``, a one-shot timer at :meth:`~BeliefTracker.deadline` calls ``on_tick``), and
+:class:`pearl_pomdp.executive.Executive` drives the same object for experiments with
+thousands of episodes — so a change to the rules below shows up in both. Its settings are
+:class:`StepSettings`, whose fields are the node's parameters (name, type, range,
+description, whether it may change at run time): one source for every default.
+
+**Inputs → observation symbols** (the one place this is done):
+
+* Speech text that is exactly a Speech symbol of the model is that symbol (a script or a
+  recogniser that sends the symbol itself); other text goes through the domain's keyword
+  filter (:class:`pearl_pomdp.speech.KeywordFilter`): text with no keyword becomes the
+  ``unknown`` symbol (still an observation: the robot heard something it did not understand)
+  and is counted. A recogniser may attach its confidence
   (:func:`pearl_pomdp.speech.parse_speech_message`): a keyword heard with confidence below
   ``confidence_floor`` is taken as ``unknown`` too (counter ``low_confidence``) — a mumbled
   "yes" is weaker evidence than a clear one, and the model's speech noise already
@@ -24,11 +37,11 @@ with thousands of episodes — so a change to the rules below shows up in both.
 * For a flat model without modalities every symbol is valid on every input, and speech
   text must itself be a symbol (there are no keywords).
 
-**The cases the paper leaves open**, each counted in :attr:`StepProtocol.counters`:
+**The cases the paper leaves open**, each counted in :meth:`BeliefTracker.counters`:
 
 * *Nothing is heard.* With ``step_timeout > 0`` a step still open ``step_timeout`` seconds
   after its action is closed with ``timeout_observation`` (default ``unknown``: silence
-  carries no more information than unrecognised speech). :meth:`StepProtocol.deadline`
+  carries no more information than unrecognised speech). :meth:`BeliefTracker.deadline`
   says when; the node arms a one-shot timer for that instant, the simulator jumps its
   clock to it. Counter ``timeouts``. Actions listed in ``no_timeout_actions`` (by
   default the domain's ``category: Move`` actions) are not closed by ``step_timeout``:
@@ -56,24 +69,28 @@ with thousands of episodes — so a change to the rules below shows up in both.
   (``zero_likelihood``).
 
 Nothing is dropped silently: every case increments a counter and records an :class:`Event`
-(:meth:`StepProtocol.take_events`) that the node logs and reports on ``/diagnostics``.
+(in the :class:`InputOutcome` of the call) that the node logs and reports on ``/diagnostics``.
 """
 from __future__ import annotations
 
 import collections
-from dataclasses import dataclass
-from typing import Any, Deque, Dict, FrozenSet, List, Optional, Sequence, Tuple
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
 from pearl_pomdp.belief import BeliefFilter
 from pearl_pomdp.model.pomdp import Pomdp
+from pearl_pomdp.navigation import DriveTimer, places_from_parameters
 from pearl_pomdp.speech import KeywordFilter, parse_speech_message
 
-__all__ = ["BeliefTracker", "ObservationMapper", "StepProtocol", "StepResult", "StepSettings", "Event",
-           "COUNTERS", "SYMBOL_INPUTS", "drive_actions"]
+__all__ = ["BeliefTracker", "InputOutcome", "StepResult", "StepSettings", "SettingSpec", "Event",
+           "COUNTERS", "SYMBOL_INPUTS", "INPUTS", "drive_actions"]
 
-#: Names of the counters of :class:`StepProtocol` (reported on /diagnostics).
+#: Names of the step rules' counters (reported on /diagnostics; :meth:`BeliefTracker.counters`
+#: adds the input mapping's: ``unknown_speech``, ``low_confidence``, ``invalid_<input>``).
 COUNTERS = ("updates", "timeouts", "nav_failures", "queued", "dropped_stale", "dropped_overflow",
             "replaced_actions", "unknown_actions", "zero_likelihood")
 
@@ -92,72 +109,146 @@ def drive_actions(domain) -> List[str]:
     return domain.actions_in("Move")
 
 
+def _setting(default: Any, description: str, *, range: Optional[Tuple[float, float]] = None,
+             live: bool = False, parameter: bool = True) -> Any:
+    """A :class:`StepSettings` field: its default and what the node's parameter table says of it."""
+    return field(default=default, metadata={"description": description, "range": range, "live": live,
+                                            "parameter": parameter})
+
+
 @dataclass(frozen=True)
-class StepSettings:
-    """The step protocol's parameters (one source: ``config/pearl_nodes.yaml``'s belief_tracker section).
+class SettingSpec:
+    """One :class:`StepSettings` field as a node parameter (see :meth:`StepSettings.parameters`).
 
     Attributes:
-        step_timeout: seconds after which an open step is closed with ``timeout_observation``;
-            ``0`` disables the timeout.
-        timeout_observation: the symbol used on timeout.
-        no_timeout_actions: actions never timed out; ``None`` = the domain's drives
-            (``category: Move``), or none for a flat model.
-        max_pending: observations that may wait for the next action.
-        stale_after: seconds after which a waiting observation is dropped; ``0`` never.
-        confidence_floor: speech recognised with a lower confidence counts as ``unknown``.
-        drive_speed: m/s a drive is timed at (:class:`~pearl_pomdp.navigation.DriveDeadline`);
-            ``0`` gives drives no deadline (only an observation closes them).
-        guide_speed: m/s a guidance (``guide_actions``) is timed at: the slowest pace, rests
-            included, of a resident the robot still guides.
-        guide_actions: drives that walk the resident along.
-        drive_path_factor, drive_slack, drive_margin, drive_max_seconds: the other fields of
-            :class:`~pearl_pomdp.navigation.DriveDeadline`.
-        nav_failed_observation: the symbol that closes a drive at its deadline.
-        place_feature: the state feature whose values are the places (the drives set it).
-        places: ``(name, x, y)`` of each place, metres in the map frame (the params file's
-            ``location_names`` / ``locations.<name>``).
+        name: the field and parameter name.
+        default: the default as a parameter value (tuples as lists, ``None`` as ``[]``).
+        description: one line for ``ros2 param describe`` (the reason for the default included).
+        range: ``(low, high)`` for numbers (checked by :class:`StepSettings` and by rclpy).
+        live: True when it may change at run time (:meth:`BeliefTracker.set_live`).
     """
 
-    step_timeout: float = 10.0
-    timeout_observation: str = "unknown"
-    no_timeout_actions: Optional[Tuple[str, ...]] = None
-    max_pending: int = 8
-    stale_after: float = 0.0
-    confidence_floor: float = 0.0
-    drive_speed: float = 0.0
-    guide_speed: float = 0.03
-    guide_actions: Tuple[str, ...] = ()
-    drive_path_factor: float = 1.4
-    drive_slack: float = 1.5
-    drive_margin: float = 10.0
-    drive_max_seconds: float = 1800.0
-    nav_failed_observation: str = "navFailed"
-    place_feature: str = "RobotLocation"
-    places: Tuple[Tuple[str, float, float], ...] = ()
+    name: str
+    default: Any
+    description: str
+    range: Optional[Tuple[float, float]] = None
+    live: bool = False
+
+
+@dataclass(frozen=True)
+class StepSettings:
+    """The step rules' parameters: the one source of their defaults, ranges and descriptions.
+
+    The ``belief_tracker`` node's parameter table is generated from these fields
+    (:meth:`parameters`); ``config/pearl_nodes.yaml`` holds only the values the shipped robot
+    sets differently, each with its reason. Every field is checked here (a value out of its
+    range raises ``ValueError`` naming the field).
+
+    ``places``: ``(name, x, y)`` of each place, metres in the map frame — not a parameter of
+    its own: the params file's ``location_names`` / ``locations.<name>`` (:meth:`from_params`).
+    """
+
+    step_timeout: float = _setting(
+        10.0, "Seconds without input after an action before the step is closed with timeout_observation "
+              "(0: wait forever): a resident answering a question takes a few seconds; 10 s of silence is "
+              "no answer", range=(0.0, 3600.0), live=True)
+    timeout_observation: str = _setting(
+        "unknown", "Observation symbol that closes a step on timeout: silence is taken as unrecognised speech")
+    no_timeout_actions: Optional[Tuple[str, ...]] = _setting(
+        None, "Actions whose step only an input closes (drives end with a laser landmark); empty: the "
+              "domain's category: Move actions; names the model does not have are ignored")
+    max_pending: int = _setting(
+        8, "Observations that may wait for the next action (FIFO): a burst longer than this is a fault",
+        range=(0, 1000))
+    stale_after: float = _setting(
+        0.0, "Drop a waiting observation older than this many seconds when it would be used (0: never)",
+        range=(0.0, 3600.0), live=True)
+    confidence_floor: float = _setting(
+        0.0, "Speech recognised with a lower confidence counts as unknown (0: every keyword counts)",
+        range=(0.0, 1.0), live=True)
+    drive_speed: float = _setting(
+        0.0, "Drives get a deadline from distance at this speed (m/s) and are closed with "
+             "nav_failed_observation when it passes (0: no drive deadline; needs location_names)",
+        range=(0.0, 5.0))
+    guide_speed: float = _setting(
+        0.03, "Speed (m/s) guide_actions are timed at: the slowest pace, rests included, of a resident "
+              "the robot still guides (a 5 cm/s walker who rests 10 s every ~25 s averages 0.035 m/s)",
+        range=(0.005, 3.0))
+    guide_actions: Tuple[str, ...] = _setting((), "Drives that walk the resident along (timed at guide_speed)")
+    drive_path_factor: float = _setting(
+        1.4, "Path length over straight-line distance: corridors and doors make paths ~40 % longer",
+        range=(1.0, 10.0))
+    drive_slack: float = _setting(
+        1.5, "Multiplier on a drive's expected time: people in the way, the navigation's recoveries",
+        range=(1.0, 10.0))
+    drive_margin: float = _setting(
+        10.0, "Seconds added to every drive's deadline: turning on the spot, a door, start-up",
+        range=(0.0, 3600.0))
+    drive_max_seconds: float = _setting(
+        1800.0, "No drive deadline is longer than this (s): no drive waits longer than half an hour",
+        range=(1.0, 86400.0))
+    nav_failed_observation: str = _setting(
+        "navFailed", "Observation symbol (a Laser symbol of the domain) that closes a drive at its deadline")
+    place_feature: str = _setting(
+        "RobotLocation", "State feature whose values are the places the drives go to")
+    places: Tuple[Tuple[str, float, float], ...] = _setting((), "", parameter=False)
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            lo_hi = f.metadata.get("range")
+            if lo_hi is None:
+                continue
+            value = getattr(self, f.name)
+            lo, hi = lo_hi
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or not lo <= value <= hi:
+                raise ValueError(f"{f.name} must be in [{lo:g}, {hi:g}], got {value!r}")
 
     @classmethod
-    def from_params(cls, params: Dict[str, Any]) -> "StepSettings":
-        """From a parameter table (the node's, or the params file's belief_tracker section)."""
-        names = {f for f in cls.__dataclass_fields__}
-        kwargs = {k: v for k, v in params.items() if k in names}
+    def parameters(cls) -> List[SettingSpec]:
+        """The fields that are node parameters, in order, as the node declares them."""
+        out = []
+        for f in dataclasses.fields(cls):
+            if not f.metadata.get("parameter", False):
+                continue
+            default = f.default
+            if default is None or isinstance(default, tuple):
+                default = list(default or ())
+            out.append(SettingSpec(f.name, default, f.metadata["description"], f.metadata["range"],
+                                   f.metadata["live"]))
+        return out
+
+    @classmethod
+    def live_names(cls) -> Tuple[str, ...]:
+        """The fields that may change at run time (:meth:`BeliefTracker.set_live`)."""
+        return tuple(s.name for s in cls.parameters() if s.live)
+
+    @classmethod
+    def from_params(cls, params: Mapping[str, Any]) -> "StepSettings":
+        """From a parameter table (the node's, or the params file's belief_tracker and ``/**`` sections).
+
+        String lists may hold ``""`` entries (ROS has no typed empty list in a params file):
+        they are dropped, and an empty ``no_timeout_actions`` means "the domain's drives".
+        The places are ``location_names`` with ``locations.<name>`` = ``[x, y, yaw]``
+        (:func:`~pearl_pomdp.navigation.places_from_parameters`, the one place parser).
+
+        Raises:
+            ValueError: a value is out of range or a place's pose is malformed (names the parameter).
+        """
+        names = {f.name for f in dataclasses.fields(cls)}
+        kwargs: Dict[str, Any] = {k: v for k, v in params.items() if k in names}
         if "no_timeout_actions" in kwargs:
-            given = kwargs["no_timeout_actions"]
-            # An empty list in a params file means "not given" (ROS cannot express None).
-            kwargs["no_timeout_actions"] = tuple(given) if given else None
+            given = tuple(a for a in (kwargs["no_timeout_actions"] or ()) if a)
+            kwargs["no_timeout_actions"] = given or None
         if "guide_actions" in kwargs:
             kwargs["guide_actions"] = tuple(a for a in kwargs["guide_actions"] if a)
-        names_given = [n for n in params.get("location_names", ()) if n]
-        if names_given and "places" not in params:
-            places = []
-            for name in names_given:
-                pose = params.get(f"locations.{name}")
-                if pose is None or len(pose) < 2:
-                    raise ValueError(f"locations.{name}: expected [x, y, yaw] for location {name!r}, got {pose!r}")
-                places.append((name, float(pose[0]), float(pose[1])))
-            kwargs["places"] = tuple(places)
+        place_names = [n for n in params.get("location_names", ()) if n]
+        if place_names and "places" not in params:
+            poses = {name: params.get(f"locations.{name}", ()) for name in place_names}
+            kwargs["places"] = tuple((p.name, p.x, p.y) for p in places_from_parameters(place_names, poses).values())
         return cls(**kwargs)
 
-    def drive_timer(self, domain, drives: Sequence[str]):
+    def drive_timer(self, domain, drives: Sequence[str]) -> Optional[DriveTimer]:
         """The :class:`~pearl_pomdp.navigation.DriveTimer` of these settings, or ``None`` (off,
         no domain, or no drive with a place goal).
 
@@ -166,7 +257,7 @@ class StepSettings:
         """
         if self.drive_speed <= 0 or domain is None:
             return None
-        from pearl_pomdp.navigation import DriveDeadline, DriveTimer, Place
+        from pearl_pomdp.navigation import DriveDeadline, Place
 
         deadline = DriveDeadline(speed=self.drive_speed, path_factor=self.drive_path_factor, slack=self.drive_slack,
                                  margin=self.drive_margin, max_seconds=self.drive_max_seconds)
@@ -186,7 +277,8 @@ class StepResult:
         step: how many steps are closed, this one included (1 for the first).
         action: ``a_t``, the action that opened the step.
         observation: ``o_{t+1}``, the symbol that closed it.
-        source: where the observation came from (``speech``, ``touchscreen`` …, or ``timeout``).
+        source: where the observation came from (``speech``, ``touchscreen`` …, ``timeout`` or
+            ``nav_deadline``).
         belief: ``[S]`` belief after the update.
         zero_likelihood: True when the filter had to recover (see ``pearl_pomdp.belief``).
         time: when the step closed (the clock given with the closing input or tick).
@@ -218,6 +310,47 @@ class Event:
     kind: str = ""
 
 
+@dataclass(frozen=True)
+class InputOutcome:
+    """What one call of the tracker did: the one outcome of :meth:`BeliefTracker.on_input`,
+    :meth:`~BeliefTracker.on_action`, :meth:`~BeliefTracker.on_tick` and
+    :meth:`~BeliefTracker.abandon_step`.
+
+    Attributes:
+        kind: what happened —
+
+            * ``"closed"``: the call closed a step (:attr:`closed` holds it): an input closed the
+              open step, a queued input closed the step an action opened, or the clock passed
+              a deadline;
+            * ``"queued"``: an input arrived while no step was open and waits for the next action;
+            * ``"invalid"``: the input maps to no observation symbol (counted, nothing observed);
+            * ``"dropped"``: the input was dropped at once (``max_pending`` 0);
+            * ``"opened"``: an action opened a step and nothing closed it yet;
+            * ``"unknown"``: the action is not one of the model's (counted, ignored);
+            * ``"abandoned"``: :meth:`~BeliefTracker.abandon_step` left the open step without an update;
+            * ``"idle"``: nothing happened (a tick before any deadline, nothing to abandon).
+        closed: the step closed by this call, or ``None``.
+        symbol: the observation symbol the input was taken as (``None`` for an invalid input,
+            an action or a tick).
+        heard: how an input was read — ``"symbol"`` (a symbol input, or speech that was itself
+            a Speech symbol), ``"keyword"`` (speech through the keyword filter),
+            ``"no_keyword"`` (speech with no keyword: the unknown symbol, counted),
+            ``"low_confidence"`` (a keyword below ``confidence_floor``: the unknown symbol,
+            counted), ``"invalid"``; ``""`` for actions and ticks.
+        text: the input's text (speech as recognised, without its confidence).
+        confidence: the recogniser's confidence (1.0 when none was given).
+        events: what the call has to report, oldest first (the node logs each).
+    """
+
+    kind: str
+    closed: Optional[StepResult] = None
+    symbol: Optional[str] = None
+    heard: str = ""
+    text: str = ""
+    confidence: float = 1.0
+    events: Tuple[Event, ...] = ()
+
+
 @dataclass
 class _Pending:
     symbol: str
@@ -227,7 +360,7 @@ class _Pending:
     confidence: float = 1.0
 
 
-class StepProtocol:
+class _StepProtocol:
     """The step rules over a flat :class:`Pomdp`, on observation *symbols* (see the module doc).
 
     Args:
@@ -236,23 +369,17 @@ class StepProtocol:
             see :class:`StepSettings` (``no_timeout_actions`` here is a plain list).
         belief_filter: the filter to use (a new :class:`BeliefFilter` by default).
 
+    Private: :class:`BeliefTracker` is its only user (ranges are checked by :class:`StepSettings`).
+
     Raises:
-        ValueError: a parameter is out of range, or a named symbol/action is not in the
-            model (the message names the parameter and the valid values).
+        ValueError: a named symbol/action is not in the model (the message names the parameter
+            and the valid values).
     """
 
     def __init__(self, model: Pomdp, *, step_timeout: float = 0.0, timeout_observation: str = "unknown",
                  no_timeout_actions: Sequence[str] = (), max_pending: int = 8, stale_after: float = 0.0,
                  belief_filter: Optional[BeliefFilter] = None, nav_failed_observation: Optional[str] = None):
-        if step_timeout < 0:
-            raise ValueError(f"step_timeout must be >= 0 s, got {step_timeout}")
-        if stale_after < 0:
-            raise ValueError(f"stale_after must be >= 0 s, got {stale_after}")
-        if max_pending < 0:
-            raise ValueError(f"max_pending must be >= 0, got {max_pending}")
-        if step_timeout > 0 and timeout_observation not in model.observations:
-            raise ValueError(f"timeout_observation {timeout_observation!r} is not an observation of "
-                             f"{model.name} (valid: {', '.join(model.observations)})")
+        self.check_timeout(model, step_timeout, timeout_observation)
         if nav_failed_observation is not None and nav_failed_observation not in model.observations:
             raise ValueError(f"nav_failed_observation {nav_failed_observation!r} is not an observation of "
                              f"{model.name} (add it to the domain's Laser modality, or set drive_speed 0 "
@@ -274,6 +401,13 @@ class StepProtocol:
         self._obs_index = {name: i for i, name in enumerate(model.observations)}
         self.counters: Dict[str, int] = {}
         self.reset()
+
+    @staticmethod
+    def check_timeout(model: Pomdp, step_timeout: float, timeout_observation: str) -> None:
+        """A timeout needs its observation in the model (raises ``ValueError`` naming both)."""
+        if step_timeout > 0 and timeout_observation not in model.observations:
+            raise ValueError(f"timeout_observation {timeout_observation!r} is not an observation of "
+                             f"{model.name} (valid: {', '.join(model.observations)}; or step_timeout 0)")
 
     # ---------------------------------------------------------------- state
     def reset(self) -> None:
@@ -308,8 +442,16 @@ class StepProtocol:
             return None
         return self.opened_at + self.step_timeout
 
+    def abandon(self) -> bool:
+        """Leave the open step without an update (True if one was open)."""
+        was_open = self.step_open
+        self.current_action = None
+        self.opened_at = None
+        self.drive_limit = None
+        return was_open
+
     def take_events(self) -> List[Event]:
-        """The events since the last call (for the node to log), oldest first."""
+        """The events since the last call (for the tracker's outcome), oldest first."""
         events, self.events = self.events, []
         return events
 
@@ -344,10 +486,11 @@ class StepProtocol:
         return None
 
     def on_observation(self, symbol: str, source: str, now: float, text: str = "",
-                       confidence: float = 1.0) -> Optional[StepResult]:
+                       confidence: float = 1.0) -> Tuple[str, Optional[StepResult]]:
         """An observation symbol arrived from ``source`` at time ``now`` (s).
 
-        Closes the open step, or queues the observation when no step is open.
+        Closes the open step, or queues the observation when no step is open. Returns
+        ``(kind, closed step)``: kind ``"closed"``, ``"queued"`` or ``"dropped"`` (``max_pending`` 0).
 
         Raises:
             ValueError: ``symbol`` is not an observation of the model (callers validate first).
@@ -355,10 +498,11 @@ class StepProtocol:
         if symbol not in self._obs_index:
             raise ValueError(f"{symbol!r} is not an observation of {self.model.name}")
         if self.step_open:
-            return self._close(symbol, source, now, text, confidence)
+            return "closed", self._close(symbol, source, now, text, confidence)
         if self.max_pending == 0 or len(self.pending) >= self.max_pending:
             if self.pending:
                 old: Optional[_Pending] = self.pending.popleft()
+                assert old is not None
                 what = f"dropped queued observation {old.symbol!r} from {old.source}"
             else:
                 old = None
@@ -367,12 +511,12 @@ class StepProtocol:
             self.events.append(Event("warn", f"{what}: more than max_pending={self.max_pending} "
                                              f"observations wait for an action", kind="overflow"))
             if old is None:
-                return None
+                return "dropped", None
         self.pending.append(_Pending(symbol, source, float(now), text, confidence))
         self.counters["queued"] += 1
         self.events.append(Event("info", f"queued observation {symbol!r} from {source}: no open step "
                                          f"({len(self.pending)} waiting)", kind="queued"))
-        return None
+        return "queued", None
 
     def on_tick(self, now: float) -> Optional[StepResult]:
         """Check the step timeout at time ``now`` (s); closes the step with the timeout observation."""
@@ -413,13 +557,12 @@ class StepProtocol:
         return StepResult(self.step, action, symbol, source, self.belief, zero, float(now), text or symbol,
                           confidence)
 
-    def snapshot(self) -> Tuple[int, Optional[str], int]:
-        """``(step, open action or None, number queued)`` — for diagnostics."""
-        return self.step, self.current_action, len(self.pending)
 
 
-class ObservationMapper:
+class _ObservationMapper:
     """Turns input strings into observation symbols of the model (see the module doc).
+
+    Private: :class:`BeliefTracker` is its only user.
 
     Args:
         model: the compiled :class:`~pearl_pomdp.model.pomdp.Pomdp`.
@@ -430,40 +573,48 @@ class ObservationMapper:
 
     def __init__(self, model: Pomdp, domain=None, keyword_filter: Optional[KeywordFilter] = None,
                  confidence_floor: float = 0.0):
-        if not 0.0 <= confidence_floor <= 1.0:
-            raise ValueError(f"confidence_floor must be in [0, 1], got {confidence_floor}")
         self.model = model
         symbols = set(model.observations)
         self.allowed: Dict[str, FrozenSet[str]] = {}
         modalities = {m.lower(): list(v) for m, v in (domain.modalities if domain is not None else {}).items()}
         for key, modality in SYMBOL_INPUTS.items():
             self.allowed[key] = frozenset(modalities.get(modality, symbols))
-        self.invalid: Dict[str, int] = {key: 0 for key in INPUTS}
         self.keyword_filter = keyword_filter
         if keyword_filter is None and domain is not None and domain.keywords:
             self.keyword_filter = KeywordFilter.from_domain(domain)
-        self.speech_symbols = frozenset(modalities.get("speech", symbols))
+        self.speech_symbols = frozenset(s for s in modalities.get("speech", symbols) if s in symbols)
+        self.allowed["speech"] = self.speech_symbols
         self.confidence_floor = float(confidence_floor)
+        self.reset()
+
+    def reset(self) -> None:
+        """Zero the counts."""
+        self.invalid: Dict[str, int] = {key: 0 for key in INPUTS}
+        self.no_keyword = 0
         self.low_confidence = 0
 
-    @property
-    def unknown_speech(self) -> int:
-        """Speech texts with no keyword, classified as the unknown symbol (0 without a filter)."""
-        return self.keyword_filter.unknown_count if self.keyword_filter is not None else 0
-
-    def speech(self, text: str, confidence: float = 1.0) -> Optional[str]:
-        """The symbol of recognised text, or ``None`` (counted) when it maps to no symbol."""
-        if self.keyword_filter is not None:
+    def speech(self, text: str, confidence: float = 1.0) -> Tuple[Optional[str], str]:
+        """``(symbol or None, how it was heard)`` of recognised text (see :attr:`InputOutcome.heard`)."""
+        stripped = text.strip()
+        if stripped in self.speech_symbols:
+            symbol, heard = stripped, "symbol"
+        elif self.keyword_filter is not None:
             symbol = self.keyword_filter.classify(text)
-            if confidence < self.confidence_floor and symbol != self.keyword_filter.unknown_symbol:
-                self.low_confidence += 1
-                symbol = self.keyword_filter.unknown_symbol
+            heard = "no_keyword" if symbol == self.keyword_filter.unknown_symbol else "keyword"
+            if heard == "no_keyword":
+                self.no_keyword += 1
         else:
-            symbol = text.strip()
-        if symbol not in self.speech_symbols or symbol not in self.model.observations:
             self.invalid["speech"] += 1
-            return None
-        return symbol
+            return None, "invalid"
+        unknown = self.keyword_filter.unknown_symbol if self.keyword_filter is not None else None
+        if heard in ("symbol", "keyword") and confidence < self.confidence_floor and unknown is not None \
+                and symbol != unknown:
+            self.low_confidence += 1
+            symbol, heard = unknown, "low_confidence"
+        if symbol not in self.speech_symbols:
+            self.invalid["speech"] += 1
+            return None, "invalid"
+        return symbol, heard
 
     def symbol(self, key: str, text: str) -> Optional[str]:
         """The symbol of a touchscreen/laser/reminder string, or ``None`` (counted) if invalid."""
@@ -474,24 +625,19 @@ class ObservationMapper:
         return symbol
 
 
-@dataclass
-class InputOutcome:
-    """What one input did: its symbol (``None``: invalid, counted) and the step it closed, if any."""
-
-    symbol: Optional[str]
-    closed: Optional[StepResult] = None
-    text: str = ""
-    confidence: float = 1.0
-
-
 class BeliefTracker:
-    """The step loop on raw inputs: :class:`ObservationMapper` + :class:`StepProtocol`.
+    """The step loop on raw inputs, behind one closed façade (see the module doc).
 
     Args:
         model: the compiled model (beliefs are ``[S]`` over its states).
         domain: the FactoredDomain (modalities, keywords, drives, marginals), or ``None``.
-        settings: the step rules (:class:`StepSettings`; defaults when ``None``).
+        settings: the step rules (:class:`StepSettings`; its defaults when ``None``).
         keyword_filter: overrides the domain's keyword filter.
+
+    Attributes:
+        settings: the settings in force (:meth:`set_live` replaces them).
+        startup_events: what construction has to report (e.g. drives left without deadlines).
+        history: the last closed steps, oldest first, once :meth:`keep_history` was called.
 
     Raises:
         ValueError: a setting is out of range or names something the model does not have.
@@ -505,103 +651,113 @@ class BeliefTracker:
             no_timeout = drive_actions(domain) if domain is not None else []
         else:
             no_timeout = [a for a in settings.no_timeout_actions if a in model.actions]
-        #: Deadlines of the drives (:class:`~pearl_pomdp.navigation.DriveTimer`), or ``None``.
-        self.drive_timer = settings.drive_timer(domain, no_timeout)
-        missing_symbol = self.drive_timer is not None and settings.nav_failed_observation not in model.observations
+        self._drive_timer = settings.drive_timer(domain, no_timeout)
+        missing_symbol = self._drive_timer is not None and settings.nav_failed_observation not in model.observations
+        startup: List[Event] = []
         if missing_symbol:
             # A domain written before navFailed existed (a recorded bag's copy): drives keep no
             # deadline, as when it was recorded; said once at start.
-            self.drive_timer = None
-        self.protocol = StepProtocol(model, step_timeout=settings.step_timeout,
-                                     timeout_observation=settings.timeout_observation,
-                                     no_timeout_actions=no_timeout, max_pending=settings.max_pending,
-                                     stale_after=settings.stale_after,
-                                     nav_failed_observation=(settings.nav_failed_observation
-                                                             if self.drive_timer is not None else None))
-        if missing_symbol:
-            self.protocol.events.append(Event("warn", f"drives have no deadline: nav_failed_observation "
-                                                      f"{settings.nav_failed_observation!r} is not an observation of "
-                                                      f"{model.name} (add it to the domain's Laser modality)", kind="no_deadline"))
-        self.mapper = ObservationMapper(model, domain, keyword_filter, settings.confidence_floor)
+            self._drive_timer = None
+            startup.append(Event("warn", f"drives have no deadline: nav_failed_observation "
+                                         f"{settings.nav_failed_observation!r} is not an observation of "
+                                         f"{model.name} (add it to the domain's Laser modality)", kind="no_deadline"))
+        self.startup_events: Tuple[Event, ...] = tuple(startup)
+        self._protocol = _StepProtocol(model, step_timeout=settings.step_timeout,
+                                       timeout_observation=settings.timeout_observation,
+                                       no_timeout_actions=no_timeout, max_pending=settings.max_pending,
+                                       stale_after=settings.stale_after,
+                                       nav_failed_observation=(settings.nav_failed_observation
+                                                               if self._drive_timer is not None else None))
+        self._mapper = _ObservationMapper(model, domain, keyword_filter, settings.confidence_floor)
         self._marginal_index: Optional[list] = None
-        #: The last closed steps, oldest first, when :meth:`keep_history` was called (replay --explain).
         self.history: Optional[Deque[StepResult]] = None
 
-    def keep_history(self, maxlen: int = 10_000) -> None:
-        """Remember the last ``maxlen`` closed steps in :attr:`history` (off by default: a robot runs for days)."""
-        self.history = collections.deque(maxlen=maxlen)
-
-    def _closed(self, result: Optional[StepResult]) -> Optional[StepResult]:
-        if result is not None and self.history is not None:
-            self.history.append(result)
-        return result
-
-    # The protocol's state, for callers that only hold the tracker.
+    # ------------------------------------------------------------ read-only
     @property
     def belief(self) -> np.ndarray:
-        return self.protocol.belief
+        """The current belief ``[S]`` (a fresh array after each update; never mutated)."""
+        return self._protocol.belief
+
+    @property
+    def step(self) -> int:
+        """Steps closed since :meth:`reset`."""
+        return self._protocol.step
 
     @property
     def step_open(self) -> bool:
-        return self.protocol.step_open
+        """True while an action waits for its observation."""
+        return self._protocol.step_open
+
+    @property
+    def open_action(self) -> Optional[str]:
+        """The action of the open step, or ``None``."""
+        return self._protocol.current_action
+
+    @property
+    def opened_at(self) -> Optional[float]:
+        """When the open step was opened (clock seconds), or ``None``."""
+        return self._protocol.opened_at
+
+    @property
+    def pending(self) -> int:
+        """Observations waiting for the next action."""
+        return len(self._protocol.pending)
+
+    @property
+    def last_nav_failure(self) -> str:
+        """Why the last drive failed (for /diagnostics); empty until one did."""
+        return self._protocol.last_nav_failure
+
+    @property
+    def drive_timer(self) -> Optional[DriveTimer]:
+        """The drives' deadlines (:class:`~pearl_pomdp.navigation.DriveTimer`), or ``None``."""
+        return self._drive_timer
+
+    @property
+    def no_timeout_actions(self) -> FrozenSet[str]:
+        """The actions ``step_timeout`` never closes (the drives)."""
+        return self._protocol.no_timeout_actions
+
+    @property
+    def keyword_filter(self) -> Optional[KeywordFilter]:
+        """The speech keyword filter, or ``None`` (no keywords: speech text must be a symbol)."""
+        return self._mapper.keyword_filter
+
+    def symbols(self, key: str) -> FrozenSet[str]:
+        """The observation symbols input ``key`` may carry (speech: the Speech symbols).
+
+        Raises:
+            ValueError: ``key`` is not an input (names the inputs).
+        """
+        if key not in self._mapper.allowed:
+            raise ValueError(f"unknown input {key!r}; inputs: {', '.join(INPUTS)}")
+        return self._mapper.allowed[key]
+
+    def input_for(self, observation: str) -> str:
+        """The input that carries ``observation``: the symbol input whose modality has it, else
+        ``speech`` (a Speech symbol, or recognised text for the keyword filter)."""
+        if observation.strip() in self._mapper.speech_symbols:
+            return "speech"
+        for key in SYMBOL_INPUTS:
+            if observation.strip() in self._mapper.allowed[key]:
+                return key
+        return "speech"
 
     def deadline(self) -> Optional[float]:
-        """When the open step times out, or ``None`` (see :meth:`StepProtocol.deadline`)."""
-        return self.protocol.deadline()
+        """When the open step times out (clock seconds), or ``None`` (no open step, no timeout,
+        a drive without a deadline). A drive's deadline is its opening time plus its limit."""
+        return self._protocol.deadline()
 
-    def reset(self) -> None:
-        """Back to ``b0``: no open step, nothing queued, counters zeroed."""
-        self.protocol.reset()
-
-    def on_action(self, name: str, now: float) -> Optional[StepResult]:
-        """An action was taken at ``now``: opens a step (a queued input may close it at once).
-
-        A drive gets its deadline here, from the place the robot most likely is now.
-        """
-        limit = None
-        if self.drive_timer is not None and name in self.drive_timer.goals:
-            limit = self.drive_timer.seconds(name, self.likely_place())
-        return self._closed(self.protocol.on_action(name, now, limit))
-
-    def likely_place(self) -> Optional[str]:
-        """The most likely value of ``place_feature`` under the current belief (``None`` without a drive timer)."""
-        if self.drive_timer is None:
-            return None
-        marginal = self.marginals().get(self.settings.place_feature, {})
-        return max(marginal, key=lambda v: marginal[v]) if marginal else None
-
-    def on_tick(self, now: float) -> Optional[StepResult]:
-        """The clock reads ``now``: closes the step on its timeout."""
-        return self._closed(self.protocol.on_tick(now))
-
-    def on_input(self, key: str, data: str, now: float) -> InputOutcome:
-        """One input message: ``key`` is ``speech``, ``touchscreen``, ``laser`` or ``reminder``.
-
-        Speech ``data`` is recogniser text, optionally with its confidence
-        (:func:`~pearl_pomdp.speech.parse_speech_message`); the others carry a symbol.
-        """
-        if key == "speech":
-            text, confidence = parse_speech_message(data)
-            symbol = self.mapper.speech(text, confidence)
-        elif key in SYMBOL_INPUTS:
-            text, confidence = data, 1.0
-            symbol = self.mapper.symbol(key, data)
-        else:
-            raise ValueError(f"unknown input {key!r}; inputs: {', '.join(INPUTS)}")
-        if symbol is None:
-            return InputOutcome(None, None, text, confidence)
-        closed = self._closed(self.protocol.on_observation(symbol, key, now, text, confidence))
-        return InputOutcome(symbol, closed, text, confidence)
-
-    def take_events(self) -> List[Event]:
-        return self.protocol.take_events()
+    def snapshot(self) -> Tuple[int, Optional[str], int]:
+        """``(step, open action or None, number queued)`` — for diagnostics."""
+        return self.step, self.open_action, self.pending
 
     def counters(self) -> Dict[str, int]:
-        """Every counter of the step rules and the input mapping."""
-        out = dict(self.protocol.counters)
-        out["unknown_speech"] = self.mapper.unknown_speech
-        out["low_confidence"] = self.mapper.low_confidence
-        for key, n in self.mapper.invalid.items():
+        """Every counter of the step rules and the input mapping (all zeroed by :meth:`reset`)."""
+        out = dict(self._protocol.counters)
+        out["unknown_speech"] = self._mapper.no_keyword
+        out["low_confidence"] = self._mapper.low_confidence
+        for key, n in self._mapper.invalid.items():
             out[f"invalid_{key}"] = n
         return out
 
@@ -626,3 +782,92 @@ class BeliefTracker:
         return {name: dict(zip(names, np.bincount(col, weights=b, minlength=len(names)).tolist()))
                 for name, names, col in self._marginal_index}
 
+    def likely_place(self) -> Optional[str]:
+        """The most likely value of ``place_feature`` under the current belief (``None`` without a drive timer)."""
+        if self._drive_timer is None:
+            return None
+        marginal = self.marginals().get(self.settings.place_feature, {})
+        return max(marginal, key=lambda v: marginal[v]) if marginal else None
+
+    def keep_history(self, maxlen: int = 10_000) -> None:
+        """Remember the last ``maxlen`` closed steps in :attr:`history` (off by default: a robot runs for days)."""
+        self.history = collections.deque(maxlen=maxlen)
+
+    # ------------------------------------------------------------ routes in
+    def reset(self) -> None:
+        """Back to ``b0``: no open step, nothing queued, every counter zeroed (history kept)."""
+        self._protocol.reset()
+        self._mapper.reset()
+
+    def on_action(self, name: str, now: float) -> InputOutcome:
+        """An action was taken at ``now``: opens a step (a queued input may close it at once).
+
+        A drive gets its deadline here, from the place the robot most likely is now.
+        """
+        limit = None
+        if self._drive_timer is not None and name in self._drive_timer.goals:
+            limit = self._drive_timer.seconds(name, self.likely_place())
+        known = name in self.model.actions
+        closed = self._protocol.on_action(name, now, limit)
+        if closed is not None:
+            return self._outcome("closed", closed)
+        return self._outcome("opened" if known else "unknown", None)
+
+    def on_tick(self, now: float) -> InputOutcome:
+        """The clock reads ``now``: closes the open step when its deadline has passed."""
+        closed = self._protocol.on_tick(now)
+        return self._outcome("closed" if closed is not None else "idle", closed)
+
+    def on_input(self, key: str, data: str, now: float) -> InputOutcome:
+        """One input message: ``key`` is ``speech``, ``touchscreen``, ``laser`` or ``reminder``.
+
+        Speech ``data`` is recogniser text, optionally with its confidence
+        (:func:`~pearl_pomdp.speech.parse_speech_message`); the others carry a symbol.
+
+        Raises:
+            ValueError: ``key`` is not an input (names the inputs).
+        """
+        if key == "speech":
+            text, confidence = parse_speech_message(data)
+            symbol, heard = self._mapper.speech(text, confidence)
+        elif key in SYMBOL_INPUTS:
+            text, confidence = data, 1.0
+            symbol = self._mapper.symbol(key, data)
+            heard = "symbol" if symbol is not None else "invalid"
+        else:
+            raise ValueError(f"unknown input {key!r}; inputs: {', '.join(INPUTS)}")
+        if symbol is None:
+            return self._outcome("invalid", None, None, heard, text, confidence)
+        kind, closed = self._protocol.on_observation(symbol, key, now, text, confidence)
+        return self._outcome(kind, closed, symbol, heard, text, confidence)
+
+    def abandon_step(self) -> InputOutcome:
+        """Leave the open step without an update (a deactivated node: the robot stops what it was
+        doing, and on activation the policy decides afresh). The belief and the queue are kept."""
+        return self._outcome("abandoned" if self._protocol.abandon() else "idle", None)
+
+    def set_live(self, *, step_timeout: Optional[float] = None, stale_after: Optional[float] = None,
+                 confidence_floor: Optional[float] = None) -> None:
+        """Change the settings that may change while running (:meth:`StepSettings.live_names`).
+
+        Every value is checked before any is applied: out of range, or a timeout whose
+        observation the model lacks, raises ``ValueError`` naming the field and changes nothing.
+        The open step's deadline follows a new ``step_timeout`` at once.
+        """
+        new = dataclasses.replace(   # checks the ranges
+            self.settings,
+            step_timeout=self.settings.step_timeout if step_timeout is None else float(step_timeout),
+            stale_after=self.settings.stale_after if stale_after is None else float(stale_after),
+            confidence_floor=self.settings.confidence_floor if confidence_floor is None else float(confidence_floor))
+        _StepProtocol.check_timeout(self.model, new.step_timeout, new.timeout_observation)
+        self.settings = new
+        self._protocol.step_timeout = new.step_timeout
+        self._protocol.stale_after = new.stale_after
+        self._mapper.confidence_floor = new.confidence_floor
+
+    # ---------------------------------------------------------------- out
+    def _outcome(self, kind: str, closed: Optional[StepResult], symbol: Optional[str] = None, heard: str = "",
+                 text: str = "", confidence: float = 1.0) -> InputOutcome:
+        if closed is not None and self.history is not None:
+            self.history.append(closed)
+        return InputOutcome(kind, closed, symbol, heard, text, confidence, tuple(self._protocol.take_events()))

@@ -85,6 +85,7 @@ class BehaviourTreeNode(PearlNode):
         if step == 0:
             self.tree.reset()
         else:
+            assert isinstance(action, str) and isinstance(observation, str)  # checked above
             self.tree.observe(action, observation)
         self.last_step = step
         decision = self.tree.execute(None)

@@ -15,7 +15,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 from pearl_pomdp.errors import PearlError
 from pearl_sim.scenario import Scenario, load_scenarios
@@ -298,7 +298,10 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
         latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         listener.create_subscription(String, "/pearl/belief_marginals", on_marginals, latched)
         if live_view is not None:
-            listener.create_subscription(String, "/pearl/action", lambda m: shown("/pearl/action", m.data), latched)
+            def on_action_message(msg: Any) -> None:   # std_msgs/String
+                shown("/pearl/action", msg.data)
+
+            listener.create_subscription(String, "/pearl/action", on_action_message, latched)
             live_view.publish_places({name: [x, y, 0.0] for name, (x, y) in scenario.map.items()}, 0.0)
         rec_node = graph.add_node(rclpy.create_node("demo_recorder", context=context,
                                                     parameter_overrides=[rclpy.parameter.Parameter(

@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Callable, Dict, Iterable, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from pearl_pomdp.interfaces import Decider
 from pearl_sim.scenario import Scenario
 from pearl_sim.world import World
 
@@ -107,7 +108,7 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
 
 
 # ----------------------------------------------------------------- statistics
-def mean_ci(values: Sequence[float]) -> Dict[str, float]:
+def mean_ci(values: Sequence[float]) -> Dict[str, Optional[float]]:
     """Mean and 95% half-width (normal approximation; 0 for fewer than two values)."""
     x = np.asarray(list(values), dtype=float)
     if x.size == 0:
@@ -116,7 +117,7 @@ def mean_ci(values: Sequence[float]) -> Dict[str, float]:
     return {"mean": float(x.mean()), "ci95": float(half), "n": int(x.size)}
 
 
-def proportion_ci(successes: int, n: int) -> Dict[str, float]:
+def proportion_ci(successes: int, n: int) -> Dict[str, Optional[float]]:
     """Success rate with a 95% Wilson score interval."""
     if n == 0:
         return {"rate": None, "low": None, "high": None, "successes": 0, "n": 0}
@@ -125,28 +126,6 @@ def proportion_ci(successes: int, n: int) -> Dict[str, float]:
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
     return {"rate": p, "low": max(0.0, centre - half), "high": min(1.0, centre + half), "successes": successes, "n": n}
-
-
-def summarise(results: Iterable[EpisodeResult]) -> Dict[str, dict]:
-    """Per-agent scores with confidence intervals."""
-    by_agent: Dict[str, List[EpisodeResult]] = {}
-    for r in results:
-        by_agent.setdefault(r.agent, []).append(r)
-    out = {}
-    for agent, rs in by_agent.items():
-        guided = [r for r in rs if r.guidance_needed]
-        goals = sum(r.goals_achieved for r in rs)
-        out[agent] = {
-            "episodes": len(rs),
-            "guidance_success": proportion_ci(sum(r.guidance_completed for r in guided), len(guided)),
-            "time_to_goal_s": mean_ci([r.time_to_goal for r in guided if r.time_to_goal is not None]),
-            "clarifications_per_goal": (sum(r.clarifications for r in rs) / goals) if goals else None,
-            "unprompted_questions_per_episode": mean_ci([r.unprompted_questions for r in rs]),
-            "wrong_actions_per_episode": mean_ci([r.wrong_actions for r in rs]),
-            "residents_lost": int(sum(r.residents_lost for r in rs)),
-            "discounted_return": mean_ci([r.discounted_return for r in rs]),
-        }
-    return out
 
 
 def with_word_error_rate(scenario: Scenario, wer: float) -> Scenario:
@@ -160,10 +139,19 @@ from pearl_sim.policies import DEFAULT_FLAT_TRIALS, FLAT_LOOKAHEAD, POLICY_NAMES
 
 
 
+class PlannedAgents(Dict[str, Any]):
+    """name → agent (a :class:`~pearl_sim.agents.Controller`, the behaviour tree, a scripted
+    agent), with :attr:`timings`: name → seconds it took to plan."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.timings: Dict[str, float] = {}
+
+
 def build_agents(domain, hierarchy_path, flat_time_limit: Optional[float] = None, policies: Sequence[str] = POLICY_NAMES,
                  seed: int = 0, log: Optional[Callable[[str], None]] = None,
-                 flat_trials: Optional[int] = DEFAULT_FLAT_TRIALS) -> Dict[str, object]:
-    """Plan every compared controller once; returns name → agent.
+                 flat_trials: Optional[int] = DEFAULT_FLAT_TRIALS) -> PlannedAgents:
+    """Plan every compared controller once; returns name → agent (and each one's planning time).
 
     Args:
         domain: the Pearl FactoredDomain.
@@ -184,11 +172,11 @@ def build_agents(domain, hierarchy_path, flat_time_limit: Optional[float] = None
     if unknown:
         raise ValueError(f"unknown policy {unknown[0]!r}; known: {', '.join(POLICY_NAMES)}")
     model = domain.compile()
-    agents: Dict[str, object] = {}
-    timings: Dict[str, float] = {}
+    agents = PlannedAgents()
+    timings = agents.timings
     for name in policies:
         t0 = _time.perf_counter()
-        decider: object
+        decider: Decider
         if name == "hierarchical":
             from pearl_pomdp.hierarchy import load_hierarchy, plan
 
@@ -213,49 +201,8 @@ def build_agents(domain, hierarchy_path, flat_time_limit: Optional[float] = None
             agents[name] = ScriptedAgent(name, list(model.actions))
             timings[name] = 0.0
             continue
-        agents[name] = Controller(name, decider)  # type: ignore[arg-type]
+        agents[name] = Controller(name, decider)
         timings[name] = _time.perf_counter() - t0
         if log:
             log(f"planned {name} in {timings[name]:.1f} s")
-    build_agents.timings = timings  # type: ignore[attr-defined]
     return agents
-
-
-def run_study(domain, agents: Dict[str, object], scenarios: Sequence[Scenario], keyword_filter, episodes: int = 1,
-              pace_adaptation: Optional[bool] = None, wer: Optional[float] = None,
-              progress: bool = False, desc: str = "episodes") -> List[EpisodeResult]:
-    """Every agent on every scenario, ``episodes`` seeds each (seed = scenario seed + 1000·k)."""
-    from tqdm import tqdm
-
-    jobs = [(name, sc, k) for name in agents for sc in scenarios for k in range(episodes)]
-    results = []
-    for name, sc, k in tqdm(jobs, desc=desc, disable=not progress, leave=False):
-        if wer is not None:
-            sc = with_word_error_rate(sc, wer)
-        results.append(run_episode(sc, agents[name], domain, keyword_filter, seed=sc.seed + 1000 * k,
-                                   pace_adaptation=pace_adaptation))
-    return results
-
-
-def plot_sweep(sweep: Dict[str, Dict[str, List[float]]], wers: Sequence[float], path) -> None:
-    """PNG: guidance success and wrong actions per episode vs word error rate, one line per policy."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.5))
-    for name, series in sweep.items():
-        left.plot(wers, series["success"], marker="o", label=name)
-        right.plot(wers, series["wrong"], marker="o", label=name)
-    left.set_xlabel("word error rate")
-    left.set_ylabel("guidance success rate")
-    left.set_ylim(-0.02, 1.02)
-    right.set_xlabel("word error rate")
-    right.set_ylabel("wrong actions per episode")
-    left.set_title("Guidances completed")
-    right.set_title("Wrong actions (unnecessary reminders, unasked answers, …)")
-    right.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)

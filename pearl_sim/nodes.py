@@ -1,4 +1,4 @@
-"""rclpy nodes that stand in for Pearl's hardware and residents (DESIGN.md §7).
+"""rclpy nodes that stand in for Pearl's hardware and residents (docs/design.md §7).
 
 The physics of the nursing home is one :class:`~pearl_sim.world.World` (one
 resident, one robot, one scheduler); each piece of hardware is a thin node that
@@ -20,7 +20,7 @@ real Pearl graph the robot of the episode loop (:func:`pearl_sim.loop.run_episod
 message the world produces is published by the node of its modality at its time, with
 ``/clock`` moved there first by the graph's
 :class:`~pearl_pomdp.nodes.sim_clock.SimClockDriver`; when nothing is heard the clock
-moves to the tracker's own deadline and its timer closes the step (DESIGN.md §6).
+moves to the tracker's own deadline and its timer closes the step (docs/design.md §6).
 Everything is seeded, so a scenario replays identically.
 """
 from __future__ import annotations

@@ -21,11 +21,14 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, field
-from typing import Dict, List, Sequence
+from typing import TYPE_CHECKING, Dict, List, Sequence
 
 import numpy as np
 
 from pearl_pomdp.errors import SpecError
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from pearl_sim.scenario import Scenario
 
 __all__ = ["Profile", "paper_residents", "generate_residents", "effective_word_error_rate", "resident_scenarios",
            "parse_population", "study_template", "StudyCase", "TASKS", "RANGES", "MAX_GENERATED"]
@@ -123,7 +126,7 @@ TASKS: List[dict] = [
 class StudyCase:
     """One resident on one task: the scenario and what the study needs besides it."""
 
-    scenario: object
+    scenario: "Scenario"
     resident: str
     task: str
     articulation_wer: float

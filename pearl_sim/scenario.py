@@ -31,7 +31,7 @@ import copy
 import functools
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Tuple, Union
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 
 
@@ -145,10 +145,10 @@ class Scenario:
         """Whether a drive from ``origin`` to ``goal`` started at ``t`` never arrives."""
         return origin != goal and any(b.blocks(origin, goal, t) for b in self.blocked)
 
-    def tracker_parameters(self) -> Dict[str, object]:
+    def tracker_parameters(self) -> Dict[str, Any]:
         """The belief tracker's parameters for this scenario: its step timeout and its map's
         places (drive deadlines are computed from the distances the simulated robot drives)."""
-        params: Dict[str, object] = {"step_timeout": float(self.step_timeout), "location_names": list(self.map)}
+        params: Dict[str, Any] = {"step_timeout": float(self.step_timeout), "location_names": list(self.map)}
         for name, (x, y) in self.map.items():
             params[f"locations.{name}"] = [float(x), float(y), 0.0]
         return params

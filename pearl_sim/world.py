@@ -1,10 +1,10 @@
-"""The simulated nursing home: a robot, one resident, a scheduler (DESIGN.md §7).
+"""The simulated nursing home: a robot, one resident, a scheduler (docs/design.md §7).
 
 :class:`World` is the ground truth that the POMDP only observes through noisy
 messages. It is richer than the Pearl model on purpose: positions in metres,
 walking speeds from 5 cm/s, rests, a resident who loses a robot that drives on
 without her, a recogniser with a word error rate. Its interface is the step
-protocol of DESIGN.md §6: the robot takes an action; the world answers with *one*
+protocol of docs/design.md §6: the robot takes an action; the world answers with *one*
 message (any modality) that closes the step, or ``None`` when nothing is heard
 before ``step_timeout`` (the tracker maps that to Speech ``unknown``).
 
@@ -67,9 +67,9 @@ def default_guide_pace():
     """``(GuidePaceConfig, lost_symbol)`` from ``config/pearl_nodes.yaml``'s ``guide_pace`` section
     (the settings the guide_pace node runs with), read once per process."""
     from pearl_pomdp.guide_pace import GuidePaceConfig
-    from pearl_pomdp.params import node_params
+    from pearl_pomdp.params import node_parameters
 
-    params = node_params("guide_pace")
+    params = node_parameters("guide_pace")
     return GuidePaceConfig.from_params(params), str(params.get("lost_symbol", "userLost"))
 
 
@@ -526,6 +526,7 @@ class World:
 
     def _walk_follower(self, dt: float, robot_pos: Optional[float], events: List[str]) -> None:
         f = self._follower
+        assert f is not None  # called only while a resident follows
         resident = self.scenario.resident
         if robot_pos is None:       # robot waiting at the destination
             robot_pos = f["length"]

@@ -1,19 +1,33 @@
-"""Shared fixtures: where the benchmark models live."""
+"""Shared fixtures: where the benchmark models live (``test/data/pomdp``, in the repository)."""
+import lzma
+import shutil
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
-BENCHMARKS = SHARED / "benchmarks" / "pomdp"
+#: The benchmark .pomdp files with their provenance (test/data/pomdp/README.md).
+MODELS = REPO / "test" / "data" / "pomdp"
+
+
+def unpacked_models(target: Path) -> Path:
+    """``target`` holding every model of :data:`MODELS` as a plain file: the plain ones linked,
+    the ``.xz`` ones (too large to keep as text) decompressed. Returns ``target``."""
+    target.mkdir(parents=True, exist_ok=True)
+    for path in sorted(MODELS.iterdir()):
+        if path.suffix == ".xz":
+            out = target / path.stem
+            with lzma.open(path) as src, open(out, "wb") as dst:
+                shutil.copyfileobj(src, dst)
+        elif path.suffix.lower() == ".pomdp":
+            (target / path.name).symlink_to(path)
+    return target
 
 
 @pytest.fixture(scope="session")
-def benchmarks_dir() -> Path:
-    """``../shared/benchmarks/pomdp`` (CI clones the repo with ``shared/`` beside it)."""
-    if not BENCHMARKS.is_dir():
-        pytest.fail(f"benchmark models not found at {BENCHMARKS}; clone with ../shared beside the repo")
-    return BENCHMARKS
+def benchmarks_dir(tmp_path_factory) -> Path:
+    """A folder with the benchmark models of ``test/data/pomdp`` as plain ``.pomdp`` files."""
+    return unpacked_models(tmp_path_factory.mktemp("pomdp"))
 
 
 # ROS fixtures (ros_context, pearl_policy) live in test/ros_helpers.py; registered here once so

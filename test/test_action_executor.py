@@ -17,7 +17,7 @@ import pytest
 from ros_helpers import DOMAIN, REPO, Probe, wait_for
 
 pytestmark = [pytest.mark.ros]
-rclpy = pytest.importorskip("rclpy")
+import rclpy
 
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 
@@ -73,7 +73,7 @@ def rig_factory(ros_context):
 
 
 def test_with_no_parameters_every_action_does_what_the_params_file_says(rig_factory):
-    expected = node_parameters(PARAMS, "action_executor")
+    expected = node_parameters("action_executor", PARAMS)
     rig = rig_factory()
     assert sorted(rig.node.behaviour) == sorted(expected["action_names"])
     assert rig.node.locations == {name: expected[f"locations.{name}"] for name in expected["location_names"]}

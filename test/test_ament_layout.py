@@ -1,4 +1,4 @@
-"""The ament layout colcon produces (ROS2-ON-PIP.md §7): executables in ``P/lib/pearl_pomdp``, the
+"""The ament layout colcon produces: executables in ``P/lib/pearl_pomdp``, the
 launch file and configuration in ``P/share/pearl_pomdp``, the ament index marker — what
 ``ros2 run pearl_pomdp belief_tracker`` and ``ros2 launch pearl_pomdp pearl.launch.xml`` look for."""
 from __future__ import annotations

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("pocketsphinx")
-pytest.importorskip("espeakng_loader")
+import pocketsphinx  # noqa: F401  (a missing install fails, it is not skipped)
+import espeakng_loader  # noqa: F401  (a missing install fails, it is not skipped)
 
 from pearl_pomdp.asr.audio import AudioError, mix_at_snr  # noqa: E402
 from pearl_pomdp.asr.grammar import CHATTER, build_language_model, filler_sentences  # noqa: E402

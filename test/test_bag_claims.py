@@ -16,7 +16,7 @@ import pytest
 from ros_helpers import REPO, allocate_domain_id, configure_test_process
 
 pytestmark = pytest.mark.ros
-pytest.importorskip("rclpy")
+import rclpy  # noqa: F401  (a missing install fails, it is not skipped)
 
 from pearl_pomdp.bags.reader import BagReader  # noqa: E402
 from pearl_pomdp.nodes.bag_replay import replay_bag  # noqa: E402

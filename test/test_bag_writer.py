@@ -16,7 +16,7 @@ from pearl_pomdp.bags.reader import BagError, BagReader
 from pearl_pomdp.bags.writer import BagWriter
 from pearl_pomdp.errors import PearlError
 
-rclpy_serialization = pytest.importorskip("rclpy.serialization")
+from rclpy import serialization as rclpy_serialization
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
@@ -178,7 +178,7 @@ def test_mcap_records_as_rosbag2_writes_them(tmp_path):
 
 
 def test_message_definitions_match_rosbag2_text():
-    """rosbag2's LocalMessageDefinitionSource output (sizes measured in ROS2-ON-PIP.md §4)."""
+    """rosbag2's LocalMessageDefinitionSource output (sizes measured from a rosbag2 install's output)."""
     string = msgdefs.message_definition("std_msgs/msg/String")
     assert len(string.encode()) == 263 and string.endswith("string data\n")
     pose = msgdefs.message_definition("geometry_msgs/msg/PoseStamped")

@@ -8,6 +8,15 @@ written before any policy ran on them (``test/data/scenarios``). Checked:
 * no RingDoorBell where the resident is not (the robot rings only at her door);
 * after the Figure 4 scenario (and the held-out walk) the robot drives home (Figure 4(f));
 * the walks that are wanted are completed.
+
+**Truly unseen** (``test/data/scenarios/fresh/``): written after the domain work and run once
+then, never used to tune anything. The three in ``test/data/scenarios/`` were written before
+any policy ran on them but were then run while the domain was corrected (issue 11), so they
+are held out from the study, not unseen. The fresh ones get the checks every scenario gets
+(no doorbell away from her, wrong actions and unprompted walk offers at most 0.1 per
+episode), specified before this test first ran them: ``evening_questions`` has no walk, and
+``reluctant_walker``'s resident may decline (willingness 0.6) and walks at 7 cm/s, so whether
+her walk ends within 40 steps is not a habit and is not checked.
 """
 from pathlib import Path
 
@@ -20,10 +29,15 @@ from pearl_sim.experiment import run_episode
 from pearl_sim.scenario import load_scenarios
 
 REPO = Path(__file__).resolve().parents[1]
+#: Seeds per scenario: the bounds below were set over 50 seeds (issue 11); fewer seeds would
+#: make a different test (a walk offer in 4 of the first 20 seeds of walk_then_time), not a faster one.
 SEEDS = 50
 NO_WALK = ["test/data/scenarios/no_walk_questions.yaml", "test/data/scenarios/checklist_quiet.yaml",
            "config/scenarios/info_request.yaml", "config/scenarios/table4_dialog.yaml"]
 WALK = ["config/scenarios/figure4.yaml", "test/data/scenarios/walk_then_time.yaml"]
+#: Truly unseen scenarios (see the module doc), and their seeds (fewer: the suite's budget).
+FRESH = ["test/data/scenarios/fresh/evening_questions.yaml", "test/data/scenarios/fresh/reluctant_walker.yaml"]
+FRESH_SEEDS = 20
 
 
 @pytest.fixture(scope="module")
@@ -33,12 +47,12 @@ def pearl():
     return domain, Controller("hierarchical", policy)
 
 
-def episodes(pearl, path):
+def episodes(pearl, path, seeds=SEEDS):
     """Every seed of the scenario: (result, rings away from her, offers while she has no wish)."""
     domain, controller = pearl
     scenario = load_scenarios(REPO / path)[0]
     out = []
-    for k in range(SEEDS):
+    for k in range(seeds):
         habits = {"rings_away": 0, "unwanted_offers": 0}
 
         def on_step(world, result, waits, executive, habits=habits):
@@ -73,3 +87,35 @@ def test_wanted_walks_are_completed_and_the_robot_goes_home(pearl, path):
         home += bool(drives) and drives[-1] == "GoHome" and "GuideToPhysio" in drives
     assert home / len(runs) >= 0.95, f"{path}: the robot drove home after the task in {home}/{len(runs)} episodes"
     assert sum(o for _r, _rings, o in runs) / len(runs) <= 0.1
+
+
+@pytest.fixture(scope="module")
+def fresh_runs(pearl):
+    return {path: episodes(pearl, path, FRESH_SEEDS) for path in FRESH}
+
+
+@pytest.mark.parametrize("path", FRESH)
+def test_the_unseen_scenarios_keep_the_habits(fresh_runs, path):
+    runs = fresh_runs[path]
+    assert all(rings == 0 for _r, rings, _o in runs), f"{path}: RingDoorBell away from her"
+    wrong = sum(r.wrong_actions for r, _rings, _o in runs) / len(runs)
+    assert wrong <= 0.1, f"{path}: {wrong:.2f} wrong actions per episode"
+
+
+#: The first run of the unseen scenarios missed this check for reluctant_walker (measured
+#: 2026-12-02: 29 unprompted walk offers in 20 episodes, 1.45 per episode; the 10 episodes in
+#: which she wanted the walk all completed it). Diagnosis: after the physiotherapy reminder the
+#: robot offers the walk (ConfirmGuideToPhysio); a resident who declines (willingness 0.6: 10 of
+#: 20 here) answers t_no, and the robot asks once more before it gives up — both offers count as
+#: unprompted, as does an offer to a resident who has not answered the door. A nurse would accept
+#: the first offer after the reminder and object to the second. Left as measured: changing the
+#: domain now would tune it on the scenario meant to be unseen (reported with issue 22).
+_MISSED = {"test/data/scenarios/fresh/reluctant_walker.yaml": "1.45 unprompted walk offers per episode (>0.1)"}
+
+
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.xfail(strict=True, reason=_MISSED[p]))
+                                  if p in _MISSED else p for p in FRESH])
+def test_the_unseen_scenarios_make_no_unprompted_walk_offers(fresh_runs, path):
+    runs = fresh_runs[path]
+    offers = sum(o for _r, _rings, o in runs) / len(runs)
+    assert offers <= 0.1, f"{path}: {offers:.2f} unprompted walk offers per episode"

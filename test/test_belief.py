@@ -12,7 +12,7 @@ from pearl_pomdp.model.pomdp import Pomdp
 
 
 def tiger(accuracy=0.85) -> Pomdp:
-    """tiger.95 written out by hand (same numbers as ../shared/benchmarks/pomdp/tiger.95.POMDP)."""
+    """tiger.95 written out by hand (same numbers as test/data/pomdp/tiger.95.POMDP)."""
     listen_T = np.eye(2)
     reset_T = np.full((2, 2), 0.5)
     O = np.array([
@@ -48,7 +48,7 @@ def test_tiger_listen_twice_hear_left():
 
 def test_tiger_file_listen_twice(benchmarks_dir):
     """The same number on the benchmark file itself, read by our .pomdp reader."""
-    pomdp_format = pytest.importorskip("pearl_pomdp.model.pomdp_format")
+    from pearl_pomdp.model import pomdp_format
     model = pomdp_format.read_pomdp(benchmarks_dir / "tiger.95.POMDP")
     f = BeliefFilter(model)
     listen, left = model.index("actions", "listen"), model.index("observations", "tiger-left")

@@ -50,7 +50,7 @@ def _pearl_actions():
 
 def test_flat_policy_budget_gives_the_same_study_beside_a_cpu_burner(tmp_path, capsys):
     """The flat point-based policy is planned with a trial budget, not the clock: the same seed
-    gives the same episodes on a quiet machine and beside three busy processes."""
+    gives the same episodes on a quiet machine and beside a busy process (one of the two cores)."""
     import subprocess
     import sys
 
@@ -62,7 +62,7 @@ def test_flat_policy_budget_gives_the_same_study_beside_a_cpu_burner(tmp_path, c
         return report["per_policy"], [(e["task"], e["actions"]) for e in report["episodes"]]
 
     quiet = study(tmp_path / "quiet")
-    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(3)]
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])]
     try:
         busy = study(tmp_path / "busy")
     finally:

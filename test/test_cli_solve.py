@@ -5,7 +5,7 @@ import pytest
 
 from pearl_pomdp.cli import main
 
-# pomdp-solve 5.5.2 on tiger.95 (RESULTS.md; AI-Toolbox's unit test expects the same).
+# pomdp-solve 5.5.2 on tiger.95 (run on this machine; AI-Toolbox's unit test expects the same).
 TIGER_H15_VECTORS = [3, 5, 9, 7, 13, 15, 19, 25, 27, 27, 37, 35, 39, 47, 47]
 TIGER_H15_VALUE = 9.72842474467767
 TIGER_INF_VALUE = 19.3713683743952
@@ -95,7 +95,7 @@ def test_pointbased_save_then_simulate(capsys, tmp_path, benchmarks_dir):
     model = str(benchmarks_dir / "tiger.95.POMDP")
     policy = tmp_path / "tiger.npz"
     r = run_json(capsys, "solve", model, "--method", "pointbased", "--time-limit", "20", "--out", str(policy))
-    # SARSOP's bounds [19.3711, 19.3721] bracket the exact 19.3713684 (pomdp-solve, RESULTS.md).
+    # SARSOP's bounds [19.3711, 19.3721] bracket the exact 19.3713684 (pomdp-solve, converged).
     assert r["method"] == "pointbased"
     assert TIGER_INF_VALUE - 1e-2 <= r["value_at_start"] <= TIGER_INF_VALUE + 1e-6
     assert r["upper_bound"] >= TIGER_INF_VALUE - 1e-6

@@ -14,6 +14,10 @@ from pearl_pomdp.executive import Executive, FlatPolicyDecider
 from pearl_pomdp.hierarchy import parse_hierarchy, plan
 from pearl_pomdp.solvers.base import AlphaVectorPolicy
 from pearl_pomdp.speech import KeywordFilter
+from pearl_pomdp.tracking import StepSettings
+
+#: The meds domain has no 'unknown' symbol for a timeout: scripted dialogs need none.
+UNTIMED = StepSettings(step_timeout=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -24,7 +28,7 @@ def hp():
 def test_observe_is_eq5_by_hand(hp):
     """b0 = (0.4, 0.4, 0.2), ClarifyTask (identity), hear o_meds (0.8 / 0.1 / 0.1):
     b' = (0.32, 0.04, 0.02) / 0.38."""
-    ex = Executive(meds_domain(), hp)
+    ex = Executive(meds_domain(), hp, settings=UNTIMED)
     b = ex.observe("ClarifyTask", "o_meds")
     np.testing.assert_allclose(b, [0.32 / 0.38, 0.04 / 0.38, 0.02 / 0.38], atol=1e-12)
     assert ex.updates == 1 and ex.zero_likelihood == 0
@@ -33,7 +37,7 @@ def test_observe_is_eq5_by_hand(hp):
 def test_decide_follows_the_belief(hp):
     """Hearing o_meds twice makes wantMeds near certain: Act → Help → CheckMeds."""
     model = meds_domain()
-    ex = Executive(model, hp)
+    ex = Executive(model, hp, settings=UNTIMED)
     ex.observe("ClarifyTask", "o_meds")
     ex.observe("ClarifyTask", "o_meds")
     d = ex.decide()
@@ -46,7 +50,7 @@ def test_decide_follows_the_belief(hp):
 
 def test_speech_text_goes_through_keyword_filter(hp):
     kf = KeywordFilter({"o_meds": ["pills", "medication"], "o_move": ["walk"]}, unknown_symbol="o_none")
-    ex = Executive(meds_domain(), hp, keyword_filter=kf)
+    ex = Executive(meds_domain(), hp, keyword_filter=kf, settings=UNTIMED)
     b_text = ex.observe("ClarifyTask", "where are my pills")
     np.testing.assert_allclose(b_text, [0.32 / 0.38, 0.04 / 0.38, 0.02 / 0.38], atol=1e-12)
     ex.observe("ClarifyTask", "blah blah")  # no keyword → o_none, counted
@@ -55,7 +59,7 @@ def test_speech_text_goes_through_keyword_filter(hp):
 
 
 def test_unknown_inputs_are_errors_without_a_filter(hp):
-    ex = Executive(meds_domain(), hp)
+    ex = Executive(meds_domain(), hp, settings=UNTIMED)
     with pytest.raises(BeliefError, match="unknown observation 'hello'"):
         ex.observe("ClarifyTask", "hello")
     with pytest.raises(BeliefError, match="unknown action 'Dance'"):
@@ -69,7 +73,7 @@ def test_zero_likelihood_is_counted_not_nan():
     model = meds_domain()
     model.O[0] = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     model.b0 = np.array([1.0, 0.0, 0.0])
-    ex = Executive(model, FlatPolicyDecider(AlphaVectorPolicy(np.zeros((1, 3)), [0]), model))
+    ex = Executive(model, FlatPolicyDecider(AlphaVectorPolicy(np.zeros((1, 3)), [0]), model), settings=UNTIMED)
     b = ex.observe("ClarifyTask", "o_none")
     assert ex.zero_likelihood == 1 and np.isfinite(b).all() and b.sum() == pytest.approx(1.0)
 

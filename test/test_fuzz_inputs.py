@@ -22,7 +22,8 @@ from pearl_pomdp.errors import ModelFormatError, PearlError, PolicyError, SpecEr
 from pearl_pomdp.model.pomdp_format import parse_pomdp
 
 REPO = Path(__file__).resolve().parents[1]
-BENCH = Path("/work/shared/benchmarks/pomdp")
+#: The benchmark models in the repository (test/data/pomdp/README.md); the fuzzed ones are plain text.
+BENCH = REPO / "test" / "data" / "pomdp"
 FUZZ = settings(max_examples=60, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture,
                                        HealthCheck.data_too_large])
@@ -81,8 +82,6 @@ POMDP_FILES = ["tiger.95.POMDP", "parr95.95.POMDP", "shuttle.95.POMDP", "4x3.95.
 
 @pytest.fixture(scope="module")
 def pomdp_texts():
-    if not BENCH.is_dir():
-        pytest.skip("benchmark files not present")
     return {name: (BENCH / name).read_text() for name in POMDP_FILES}
 
 
@@ -228,8 +227,6 @@ def saved_policy(tmp_path_factory):
     from pearl_pomdp.policy_io import save_policy
     from pearl_pomdp.solvers.base import AlphaVectorPolicy
 
-    if not BENCH.is_dir():
-        pytest.skip("benchmark files not present")
     from pearl_pomdp.model.pomdp_format import read_pomdp
 
     model = read_pomdp(BENCH / "tiger.95.POMDP")

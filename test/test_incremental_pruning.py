@@ -1,8 +1,8 @@
 """Incremental pruning reproduces pomdp-solve 5.5 (vector counts per epoch, values at b0).
 
 Reference numbers: pomdp-solve's README / AI-Toolbox's IncrementalPruningTests for
-tiger.95, and ../shared/benchmarks/RESULTS.md (pomdp-solve 5.5.2 -method incprune)
-for the other files. Horizon 15 on tiger.95 is the classic check because the
+tiger.95, and pomdp-solve 5.5.2 ``-method incprune`` run on this project's machine (built
+outside the repository) for the other files. Horizon 15 on tiger.95 is the classic check because the
 count sequence is irregular (it shrinks at epochs 4, 12) and ends at 47.
 """
 import numpy as np
@@ -26,7 +26,7 @@ def tiger(discount: float) -> Pomdp:
 
 
 def load(benchmarks_dir, name):
-    fmt = pytest.importorskip("pearl_pomdp.model.pomdp_format")
+    from pearl_pomdp.model import pomdp_format as fmt
     return fmt.read_pomdp(benchmarks_dir / name)
 
 
@@ -130,7 +130,7 @@ def test_undiscounted_needs_a_horizon():
     assert res.vectors_per_epoch[0] == 3
 
 
-# ------------------------------------------------- the benchmark files (RESULTS.md)
+# ------------------------------------------ the benchmark files (pomdp-solve's runs)
 FILE_CASES = [
     # file, horizon, vectors, V(b0)
     ("tiger.95.POMDP", 15, 47, 9.72842474467767),
@@ -152,7 +152,7 @@ def test_benchmark_files_match_pomdp_solve(benchmarks_dir, name, horizon, vector
     model = load(benchmarks_dir, name)
     res = solve_incremental_pruning(model, horizon=horizon)
     assert res.policy.num_vectors == vectors
-    # RESULTS.md prints 10 significant digits. 1d.POMDP has rows of 0.333333 that
+    # The pomdp-solve values are kept to 10 significant digits. 1d.POMDP has rows of 0.333333 that
     # our reader renormalises (pomdp-solve uses them as written): its values move
     # by ~9e-7, which is the model, not the solver.
     tol = 2e-6 if name == "1d.POMDP" else 1e-9 * abs(value) + 1e-9

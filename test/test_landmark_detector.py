@@ -14,7 +14,7 @@ import pytest
 from ros_helpers import Probe, wait_for
 
 pytestmark = [pytest.mark.ros]
-rclpy = pytest.importorskip("rclpy")
+import rclpy
 
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 

@@ -56,14 +56,15 @@ from rclpy.node import Node
 rclpy.init(args=sys.argv)
 n = Node("belief_tracker")
 print({k: n.declare_parameter(k, d).value for k, d in
-       [("step_timeout", 0.0), ("max_pending", 0), ("timeout_observation", "x"), ("policy", "x")]})
+       [("step_timeout", 0.0), ("domain", "x"), ("stale_after", 0.0), ("drive_speed", 0.0), ("policy", "x")]})
 """
 
 
 def test_a_later_param_beats_the_params_file_in_a_real_node(tmp_path):
-    """The params file sets step_timeout 10.0 for /belief_tracker; the launch file's later
-    <param> must win (with a plain `-p` rcl would let the file win)."""
-    pytest.importorskip("rclpy")
+    """The params file sets domain (relative) for every node and stale_after/drive_speed for
+    /belief_tracker; the launch file's later <param>s (domain as an absolute path, step_timeout)
+    must win (with a plain `-p` rcl would let the file win), the file's other values apply."""
+    import rclpy  # noqa: F401  (a missing install fails, it is not skipped)
     node = parse_launch_file(LAUNCH, {"step_timeout": "0.5"}).nodes[0]
     node.parameters.append(("value", "policy", ""))
     script = tmp_path / "node.py"
@@ -73,7 +74,8 @@ def test_a_later_param_beats_the_params_file_in_a_real_node(tmp_path):
                                           "ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"})
     assert out.returncode == 0, out.stderr
     assert ast.literal_eval(out.stdout.strip().splitlines()[-1]) == {
-        "step_timeout": 0.5, "max_pending": 8, "timeout_observation": "unknown", "policy": ""}
+        "step_timeout": 0.5, "domain": str(REPO / "config" / "pearl.domain.yaml"), "stale_after": 30.0,
+        "drive_speed": 0.6, "policy": ""}
 
 
 def test_groups_namespaces_let_and_conditions():

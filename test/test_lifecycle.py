@@ -15,7 +15,7 @@ from ros_helpers import (DISCOVERY_TIMEOUT, DOMAIN, Probe, Proc, allocate_domain
 
 pytestmark = [pytest.mark.ros]
 
-rclpy = pytest.importorskip("rclpy")
+import rclpy
 
 from lifecycle_msgs.msg import Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
@@ -78,7 +78,9 @@ def test_lifecycle_over_dds(tmp_path, pearl_policy):
             assert state(node, executor, name) == "unconfigured"
             assert transition(node, executor, name, Transition.TRANSITION_CONFIGURE)
             assert state(node, executor, name) == "inactive"
-        # Configured but inactive: nothing is published, nothing acts.
+        # Configured but inactive: nothing is published, nothing acts — checked once the probe's
+        # listeners see the nodes' publishers (which configure creates), so silence means something.
+        assert wait_for(lambda: not probe.unmatched(), DISCOVERY_TIMEOUT, executor), probe.unmatched()
         assert not wait_for(lambda: actions or beliefs, 1.0, executor)
         for name in ("hierarchical_policy", "belief_tracker"):
             assert transition(node, executor, name, Transition.TRANSITION_ACTIVATE)
@@ -153,8 +155,9 @@ def test_action_executor_lifecycle_over_dds(tmp_path):
         assert state(node, executor, name) == "unconfigured"
         assert transition(node, executor, name, Transition.TRANSITION_CONFIGURE)
         assert state(node, executor, name) == "inactive"
-        # The action subscription exists once configured: wait until it matches the probe.
-        assert wait_for(lambda: action.get_subscription_count() >= 1, DISCOVERY_TIMEOUT, executor)
+        # Its topics exist once configured: wait until every one matches the probe on both ends
+        # (the /pearl/say and /goal_pose listeners too), or "nothing said" would prove nothing.
+        assert wait_for(lambda: not probe.unmatched(), DISCOVERY_TIMEOUT, executor), probe.unmatched()
         act_and_count("TellTime")
         act_and_count("GoHome")
         assert not wait_for(lambda: said or goals, 1.0, executor), "an inactive executor acted"

@@ -45,17 +45,18 @@ def place_marginal(t: BeliefTracker) -> dict:
 # ------------------------------------------------------------------ core
 def test_a_drive_that_never_arrives_closes_at_its_deadline_with_navFailed(pearl):
     t = tracker(pearl)
-    assert t.on_action("GotoPatientRoom", 100.0) is None
+    assert t.on_action("GotoPatientRoom", 100.0).kind == "opened"
     expected = 10.0 + 1.5 * 1.4 * HOME_TO_ROOM / 0.6          # the params file's drive rule
     assert t.deadline() == pytest.approx(100.0 + expected)
     assert expected == pytest.approx(40.562, abs=1e-3)
-    assert t.on_tick(100.0 + expected - 0.01) is None and t.step_open
-    closed = t.on_tick(100.0 + expected)
+    assert t.on_tick(100.0 + expected - 0.01).closed is None and t.step_open
+    out = t.on_tick(100.0 + expected)
+    closed = out.closed
     assert (closed.action, closed.observation, closed.source) == ("GotoPatientRoom", "navFailed", "nav_deadline")
     assert t.counters()["nav_failures"] == 1 and t.counters()["timeouts"] == 0
     assert t.warnings() == 1                                   # /diagnostics turns WARN
-    assert "did not arrive within its deadline of 40.6 s" in t.protocol.last_nav_failure
-    assert any(e.level == "warn" and "navFailed" in e.text for e in t.take_events())
+    assert "did not arrive within its deadline of 40.6 s" in t.last_nav_failure
+    assert any(e.level == "warn" and "navFailed" in e.text for e in out.events)
     # The domain's rows: a failed drive most likely left the robot where it was.
     marginal = place_marginal(t)
     assert marginal["home"] == pytest.approx(0.03 * 0.9 / (0.03 * 0.9 + 0.97 * 0.01))
@@ -90,7 +91,7 @@ def test_guidance_is_timed_at_the_slowest_residents_pace_and_speech_still_times_
 def test_drive_speed_zero_keeps_drives_untimed(pearl):
     t = tracker(pearl, drive_speed=0.0)
     t.on_action("GotoPatientRoom", 0.0)
-    assert t.drive_timer is None and t.deadline() is None and t.on_tick(1e6) is None
+    assert t.drive_timer is None and t.deadline() is None and t.on_tick(1e6).closed is None
 
 
 def test_a_drive_goal_without_a_pose_is_a_named_error(pearl):
@@ -99,7 +100,7 @@ def test_a_drive_goal_without_a_pose_is_a_named_error(pearl):
         BeliefTracker(model, domain, step_settings(location_names=["home", "room"]))
     with pytest.raises(ValueError, match="place_feature 'Where' is not a feature"):
         BeliefTracker(model, domain, step_settings(place_feature="Where"))
-    with pytest.raises(ValueError, match="DriveDeadline.slack must be >= 1"):
+    with pytest.raises(ValueError, match=r"drive_slack must be in \[1, 10\], got 0.5"):
         BeliefTracker(model, domain, step_settings(drive_slack=0.5))
 
 
@@ -113,7 +114,7 @@ def test_a_domain_without_navFailed_keeps_drives_untimed_and_says_so():
     domain = parse_domain(old, "old.domain.yaml")
     t = BeliefTracker(domain.compile(), domain, step_settings())
     assert t.drive_timer is None
-    assert any("drives have no deadline" in e.text for e in t.take_events())
+    assert any("drives have no deadline" in e.text for e in t.startup_events)
 
 
 def _drop_symbol(text: str, symbol: str) -> str:
@@ -259,7 +260,7 @@ def test_over_dds_the_drive_closes_at_its_deadline_diagnostics_say_why_and_actio
         driver = SimClockDriver(graph, wait_s=20.0)
         trace = run_episode(world, GraphBackend(graph, sim, driver), max_steps=steps)
         assert trace.actions == fast_actions
-        updates = graph.tracker.protocol.counters["updates"]
+        updates = graph.tracker.core.counters()["updates"]
         assert graph.spin_until(lambda: len(beliefs) >= updates + 1, timeout_sec=10.0)
         for k, b in enumerate(beliefs[:updates + 1]):
             assert np.max(np.abs(b - fast_beliefs[k])) <= 1e-12, f"belief {k} differs"

@@ -1,8 +1,10 @@
-"""`.ci/run` fails when the install fails (issue 16 item 10).
+"""`.ci/run` tests a fresh clone that nothing beside it can reach, and fails when the install fails.
 
-In a scratch copy: a tiny package is installed once (so a `.venv` with pytest exists), then its
-setup.py is broken on purpose. The old script (`pip … | grep … || true`) went on and ran pytest
-in that stale venv, printing "1 passed" and exiting 0; the script must now stop with pip's error.
+In a scratch git repository with a ``shared/`` folder beside it (as on the project's machine): a
+tiny package whose one test asserts that ``../shared`` is out of reach passes under `.ci/run`
+(the script clones the checkout into an empty temporary folder and runs there). Then its setup.py
+is broken on purpose and committed: the old script (`pip … | grep … || true`) went on and ran pytest in a
+stale venv, printing "1 passed" and exiting 0; the script must stop with pip's error.
 """
 import shutil
 import subprocess
@@ -22,24 +24,42 @@ def _ci(repo: Path) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
-@pytest.mark.skipif(shutil.which("bash") is None, reason="needs bash")
-def test_ci_run_fails_on_a_broken_install_instead_of_testing_a_stale_venv(tmp_path):
+def _commit(repo: Path, message: str) -> None:
+    git = ["git", "-C", str(repo), "-c", "user.name=ci", "-c", "user.email=ci@example.org"]
+    subprocess.run(git + ["add", "-A"], check=True, capture_output=True)
+    subprocess.run(git + ["commit", "-q", "-m", message], check=True, capture_output=True)
+
+
+NO_SHARED_TEST = ("from pathlib import Path\n\n"
+                  "def test_nothing_beside_the_clone():\n"
+                  "    here = Path(__file__).resolve().parents[1]\n"
+                  "    assert not (here.parent / 'shared').exists(), here\n"
+                  "    assert 1 + 1 == 2\n")
+
+
+@pytest.mark.skipif(shutil.which("bash") is None or shutil.which("git") is None, reason="needs bash and git")
+def test_ci_run_tests_a_clone_out_of_reach_of_shared_and_fails_on_a_broken_install(tmp_path):
     repo = tmp_path / "scratch"
+    (tmp_path / "shared").mkdir()          # what the project's machine has beside a checkout
     (repo / ".ci").mkdir(parents=True)
     shutil.copy(REPO / ".ci" / "run", repo / ".ci" / "run")
     (repo / "ci_scratch_pkg").mkdir()
     (repo / "ci_scratch_pkg" / "__init__.py").write_text("")
     (repo / "test").mkdir()
-    (repo / "test" / "test_ok.py").write_text("def test_ok():\n    assert 1 + 1 == 2\n")
+    (repo / "test" / "test_ok.py").write_text(NO_SHARED_TEST)
     (repo / "setup.py").write_text(GOOD_SETUP)
     (repo / "mypy.ini").write_text("[mypy]\nfiles = ci_scratch_pkg\n")   # .ci/run type-checks what mypy.ini names
+    subprocess.run(["git", "init", "-q", str(repo)], check=True)
+    _commit(repo, "scratch")
 
     good = _ci(repo)
     assert good.returncode == 0, good.stdout + good.stderr
     assert "1 passed" in good.stdout
     assert "WARNING: Location" not in good.stdout + good.stderr
+    assert not (repo / ".venv").exists()   # the run happened in the clone, not in the checkout
 
     (repo / "setup.py").write_text('raise SystemExit("deliberately broken setup.py")\n')
+    _commit(repo, "broken")
     broken = _ci(repo)
     output = broken.stdout + broken.stderr
     assert broken.returncode != 0, output

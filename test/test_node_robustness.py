@@ -27,7 +27,7 @@ from ros_helpers import (DISCOVERY_TIMEOUT, DOMAIN, Probe, Proc, allocate_domain
                          ros_env, wait_for)
 
 pytestmark = [pytest.mark.ros]
-rclpy = pytest.importorskip("rclpy")
+import rclpy
 
 from pearl_pomdp.model.factored import load_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402

@@ -18,7 +18,7 @@ from ros_helpers import Probe
 
 pytestmark = pytest.mark.ros
 
-rclpy = pytest.importorskip("rclpy")
+import rclpy
 
 from pearl_pomdp.model.pomdp import Pomdp  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
@@ -166,7 +166,7 @@ def test_tiger_dialogue_in_one_process(ros_context):
                                       "value": pytest.approx(0.7225 / 0.745)}]
         assert decision["latency_s"] > 0
         assert len(decider.seen) == 3
-        assert g.tracker.protocol.counters["updates"] == 2
+        assert g.tracker.core.counters()["updates"] == 2
 
 
 def test_invalid_and_early_inputs_are_counted_not_lost(ros_context):
@@ -178,8 +178,8 @@ def test_invalid_and_early_inputs_are_counted_not_lost(ros_context):
         assert _steps(g, probe, 1)
         _say(probe, "touchscreen", "bogus", g)  # not a symbol: counted, reported, no step closed
         _say(probe, "speech", "the tiger is somewhere", g)  # flat model: speech must be a symbol
-        assert g.spin_until(lambda: g.tracker.mapper.invalid["touchscreen"] == 1
-                            and g.tracker.mapper.invalid["speech"] == 1, 10.0)
+        assert g.spin_until(lambda: g.tracker.core.counters()["invalid_touchscreen"] == 1
+                            and g.tracker.core.counters()["invalid_speech"] == 1, 10.0)
         assert g.spin_until(lambda: any(
             cv.msg_to_diagnostics(m).get("pearl: belief_tracker", {}).get("values", {}).get("invalid_touchscreen") == "1"
             for m in probe.received["/diagnostics"]), 10.0)
@@ -187,13 +187,13 @@ def test_invalid_and_early_inputs_are_counted_not_lost(ros_context):
                 if "pearl: belief_tracker" in cv.msg_to_diagnostics(m)][-1]
         assert diag["level"] == cv.DIAG_WARN and diag["values"]["updates"] == "0"
         # Two observations in one step: the first closes it, the second waits for the next action.
-        assert g.spin_until(lambda: g.tracker.protocol.step_open, 10.0)
+        assert g.spin_until(lambda: g.tracker.core.step_open, 10.0)
         _say(probe, "laser", "hear-right", g)
         _say(probe, "laser", "hear-right", g)
         assert _steps(g, probe, 3)
-        assert g.tracker.protocol.counters["queued"] == 1
-        assert g.tracker.protocol.counters["updates"] == 2
-        np.testing.assert_allclose(g.tracker.protocol.belief, [0.0225 / 0.745, 0.7225 / 0.745], rtol=1e-12)
+        assert g.tracker.core.counters()["queued"] == 1
+        assert g.tracker.core.counters()["updates"] == 2
+        np.testing.assert_allclose(g.tracker.core.belief, [0.0225 / 0.745, 0.7225 / 0.745], rtol=1e-12)
         assert _actions(probe) == ["listen", "listen", "open-left"]
 
 
@@ -205,18 +205,18 @@ def test_step_timeout_follows_sim_time(ros_context):
         probe = _probe(g)
         _set_clock(g, probe, 10.0)
         assert _steps(g, probe, 1)
-        assert g.spin_until(lambda: g.tracker.protocol.step_open, 10.0)  # the tracker got the action too
-        opened = g.tracker.protocol.opened_at
+        assert g.spin_until(lambda: g.tracker.core.step_open, 10.0)  # the tracker got the action too
+        opened = g.tracker.core.opened_at
         assert opened == pytest.approx(10.0)
         # Wall time passing does nothing while /clock stands still ...
-        assert not g.spin_until(lambda: g.tracker.protocol.counters["timeouts"] > 0, 0.5)
+        assert not g.spin_until(lambda: g.tracker.core.counters()["timeouts"] > 0, 0.5)
         # ... 1.5 s of sim time is not enough, 2.5 s is.
         _set_clock(g, probe, 11.5)
-        assert not g.spin_until(lambda: g.tracker.protocol.counters["timeouts"] > 0, 0.3)
+        assert not g.spin_until(lambda: g.tracker.core.counters()["timeouts"] > 0, 0.3)
         _set_clock(g, probe, 12.5)
-        assert g.spin_until(lambda: g.tracker.protocol.counters["timeouts"] == 1, 10.0)
+        assert g.spin_until(lambda: g.tracker.core.counters()["timeouts"] == 1, 10.0)
         assert _steps(g, probe, 2)
-        np.testing.assert_allclose(g.tracker.protocol.belief, [0.15, 0.85])
+        np.testing.assert_allclose(g.tracker.core.belief, [0.15, 0.85])
         last = cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])
         assert last["observation"] == "hear-right" and last["step"] == 1
 
@@ -237,12 +237,12 @@ def test_pearl_inputs_map_to_modality_symbols(ros_context, pearl_policy):
         probe = _probe(g)
         _set_clock(g, probe, 50.0)
         assert _steps(g, probe, 1)
-        assert g.spin_until(lambda: g.tracker.protocol.step_open, 10.0)
+        assert g.spin_until(lambda: g.tracker.core.step_open, 10.0)
         a0 = _actions(probe)[0]
         _say(probe, "touchscreen", "yes", g)  # a Speech symbol is not a Touchscreen symbol: invalid
         _say(probe, "speech", "Could you tell me what TIME it is?", g)
         assert _steps(g, probe, 2)
-        assert g.tracker.mapper.invalid["touchscreen"] == 1
+        assert g.tracker.core.counters()["invalid_touchscreen"] == 1
         last = cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])
         assert (last["action"], last["observation"]) == (a0, "time")
         expected = BeliefFilter(model).update(model.b0, model.actions.index(a0), model.observations.index("time"))
@@ -252,7 +252,7 @@ def test_pearl_inputs_map_to_modality_symbols(ros_context, pearl_policy):
             assert [last["marginals"][feature][v] for v in values] == pytest.approx(marginal.tolist(), abs=1e-12)
         assert _actions(probe)[1] == policy.execute(expected).action_name
         # Speech with no keyword is the `unknown` observation, counted (not a warning, not dropped).
-        assert g.spin_until(lambda: g.tracker.protocol.step_open, 10.0)
+        assert g.spin_until(lambda: g.tracker.core.step_open, 10.0)
         _say(probe, "speech", "hmm", g)
         assert _steps(g, probe, 3)
         assert cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])["observation"] == "unknown"

@@ -22,7 +22,7 @@ from ros_helpers import (DISCOVERY_TIMEOUT, DOMAIN, Probe, Proc, allocate_domain
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-rclpy = pytest.importorskip("rclpy")
+import rclpy
 
 from pearl_pomdp.belief import BeliefFilter  # noqa: E402
 from pearl_pomdp.hierarchy import load_hierarchical_policy  # noqa: E402

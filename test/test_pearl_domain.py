@@ -1,4 +1,4 @@
-"""The Pearl domain file (DESIGN.md §5; paper Table 3): sizes, well-formed rows, reasons, hand-checked entries."""
+"""The Pearl domain file (docs/design.md §5; paper Table 3): sizes, well-formed rows, reasons, hand-checked entries."""
 import re
 from pathlib import Path
 

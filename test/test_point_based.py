@@ -1,7 +1,7 @@
 """Point-based solver with bounds: the bounds bracket known optimal values and close.
 
-Reference values: pomdp-solve's converged incremental pruning and SARSOP's bounds
-(../shared/benchmarks/RESULTS.md).
+Reference values: pomdp-solve's converged incremental pruning and SARSOP's bounds, both run
+on this project's machine (the peers are built outside the repository; docs/solvers.md).
 """
 from pathlib import Path
 
@@ -24,7 +24,7 @@ def tiger() -> Pomdp:
 
 
 def read(path: Path) -> Pomdp:
-    fmt = pytest.importorskip("pearl_pomdp.model.pomdp_format")
+    from pearl_pomdp.model import pomdp_format as fmt
     return fmt.read_pomdp(path)
 
 
@@ -49,7 +49,7 @@ def test_tiger_bounds_bracket_exact_and_close():
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_bounds_bracket_incremental_pruning_on_random_models(seed):
-    ip = pytest.importorskip("pearl_pomdp.solvers.incremental_pruning")
+    from pearl_pomdp.solvers import incremental_pruning as ip
     rng = np.random.default_rng(seed)
     S, A, Z = 3, 2, 2
     T = rng.dirichlet(np.ones(S), size=(A, S))
@@ -262,7 +262,7 @@ def test_bounds_bracket_the_exact_value_after_every_trial(benchmarks_dir, name, 
 
 def test_exact_solver_value_is_bracketed_on_a_shared_file(benchmarks_dir):
     """Against our own exact solver, not a stored number: 1d at the exact solver's fixed point."""
-    ip = pytest.importorskip("pearl_pomdp.solvers.incremental_pruning")
+    from pearl_pomdp.solvers import incremental_pruning as ip
     m = read(benchmarks_dir / "1d.POMDP")
     exact = ip.solve_incremental_pruning(m, epsilon=1e-9, time_limit=60.0)
     assert exact.converged

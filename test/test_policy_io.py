@@ -144,7 +144,7 @@ def test_header_beside_path_without_npz_suffix(tmp_path):
 
 
 def test_most_likely_state_policy_round_trip(tmp_path):
-    mdp = pytest.importorskip("pearl_pomdp.solvers.mdp")
+    from pearl_pomdp.solvers import mdp
     policy = mdp.MostLikelyStatePolicy(np.array([2, 1]))
     save_policy(tmp_path / "mls.npz", policy, tiger(), {"method": "mls"})
     with np.load(tmp_path / "mls.npz", allow_pickle=False) as npz:

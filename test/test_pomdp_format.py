@@ -1,6 +1,6 @@
-"""The .pomdp reader/writer against the shared benchmark files and hand-made inputs.
+"""The .pomdp reader/writer against the benchmark files and hand-made inputs.
 
-Expected sizes and discounts are the table of ``shared/benchmarks/pomdp/SOURCES.md``; spot values
+Expected sizes and discounts are the table of ``test/data/pomdp/README.md``; spot values
 are read off the files by eye; the s'-dependent rewards are checked against a naive reference
 reduction written here (pomdp-solve's rule: last matching R line per (a, s, s', o), then
 ``Σ_s' T Σ_o O R``).
@@ -19,7 +19,7 @@ from pearl_pomdp.model import load_model
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.model.pomdp_format import format_pomdp, parse_pomdp, read_pomdp, write_pomdp
 
-# file: (S, A, Z, discount)  — SOURCES.md
+# file: (S, A, Z, discount)  — test/data/pomdp/README.md
 EXPECTED = {
     "1d.POMDP": (4, 2, 2, 0.75),
     "4x3.95.POMDP": (11, 4, 6, 0.95),
@@ -52,6 +52,28 @@ def _dense(m) -> np.ndarray:
 def test_every_benchmark_file_is_listed(benchmarks_dir):
     files = sorted(p.name for p in benchmarks_dir.iterdir() if p.suffix.lower() == ".pomdp")
     assert files == sorted(EXPECTED)
+
+
+def test_data_files_match_their_readme(benchmarks_dir):
+    """Every model file is the one its provenance row names: same bytes (SHA-256), same sizes."""
+    import hashlib
+
+    from conftest import MODELS
+
+    rows = {}
+    for line in (MODELS / "README.md").read_text(encoding="utf-8").splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 7 and re.fullmatch(r"`[0-9a-f]{64}`.*", cells[4]):
+            name = cells[0].split("`")[1]
+            rows[name] = (cells[1], int(cells[3]), cells[4][1:65])
+    assert sorted(rows) == sorted(EXPECTED)
+    stored = sorted(p.name for p in MODELS.iterdir() if p.name != "README.md")
+    assert stored == sorted(n + ".xz" if n == "RockSample_7_8.pomdp" else n for n in EXPECTED)
+    for name, (sizes, size, digest) in rows.items():
+        data = (benchmarks_dir / name).read_bytes()
+        assert (len(data), hashlib.sha256(data).hexdigest()) == (size, digest), name
+        S, A, Z, _ = EXPECTED[name]
+        assert sizes == f"{S}/{A}/{Z}", name
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED))

@@ -16,7 +16,7 @@ import pytest
 from ros_helpers import REPO, allocate_domain_id, configure_test_process
 
 pytestmark = pytest.mark.ros
-pytest.importorskip("rclpy")
+import rclpy  # noqa: F401  (a missing install fails, it is not skipped)
 
 from pearl_pomdp.bags.reader import BagError, BagReader  # noqa: E402
 from pearl_pomdp.nodes.bag_replay import replay_bag  # noqa: E402
@@ -41,6 +41,9 @@ def test_replay_matches_recorded_actions(bag, tmp_path):
     expected = json.loads((REPO / "bags" / f"{bag.name}.expected.json").read_text())["expected_actions"]
     assert result.expected_actions == expected  # what the bag holds is what was seen live
     assert result.actions == expected and result.match and result.first_mismatch is None
+    # Parity: the tracker publishes the beliefs it published when the bag was recorded (b0 and one per step).
+    assert result.expected_beliefs == len(expected) and result.beliefs == result.expected_beliefs
+    assert result.beliefs_match and result.max_belief_difference <= 1e-12, result.max_belief_difference
     reader = BagReader(bag)
     inputs = sum(1 for m in reader.messages if m.topic.startswith("/pearl/") and
                  m.topic in ("/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder"))

@@ -6,7 +6,7 @@ import pytest
 from pearl_pomdp.model.factored import load_domain
 from pearl_pomdp.speech import KeywordFilter
 from pearl_sim.agents import ScriptedAgent
-from pearl_sim.experiment import mean_ci, proportion_ci, run_episode, summarise, with_word_error_rate
+from pearl_sim.experiment import mean_ci, proportion_ci, run_episode, with_word_error_rate
 from pearl_sim.scenario import load_scenarios, parse_scenarios
 from pearl_sim.world import Message
 
@@ -39,7 +39,7 @@ def test_message_symbols_follow_the_tracker_rules():
     assert symbol(Message(0, "Laser", "atRoom")) == "atRoom"
     tracker.reset()                                             # (the three above wait in the queue)
     tracker.on_action("DoNothing", 10.0)
-    assert tracker.on_tick(15.0).observation == "unknown"      # nothing heard → the timeout symbol
+    assert tracker.on_tick(15.0).closed.observation == "unknown"      # nothing heard → the timeout symbol
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +70,7 @@ def test_fixed_pace_fails_slow_residents_where_adaptation_succeeds(pearl):
     fixed = [run_episode(s, ScriptedAgent(), domain, kf, pace_adaptation=False) for s in slow]
     assert sum(r.guidance_completed for r in adaptive) == len(slow)
     assert sum(r.guidance_completed for r in fixed) == 0
-    assert summarise(fixed)["scripted"]["residents_lost"] == len(slow)
+    assert sum(r.residents_lost for r in fixed) == len(slow)
 
 
 def test_with_word_error_rate_overrides_resident_setting():

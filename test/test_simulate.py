@@ -77,7 +77,7 @@ def test_default_steps_and_errors():
 
 
 def test_most_likely_state_policy_batched_like_its_action():
-    mdp = pytest.importorskip("pearl_pomdp.solvers.mdp")
+    from pearl_pomdp.solvers import mdp
     # Open the door opposite to the likelier tiger; at the uniform belief the tie goes to
     # state 0 (tiger-left), so the first action is open-right: +10 or −100, −45 on average.
     policy = mdp.MostLikelyStatePolicy([2, 1])

@@ -1,12 +1,12 @@
-"""The tracker's step protocol without ROS: every documented case, with tiger's hand-computed beliefs
-(listen + hear-left from uniform → [0.85, 0.15])."""
+"""The tracker's step protocol without ROS, through its façade: every documented case, with tiger's
+hand-computed beliefs (listen + hear-left from uniform → [0.85, 0.15]), and the outcome of each call."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.tracking import StepProtocol
+from pearl_pomdp.tracking import BeliefTracker, StepSettings
 
 
 def tiger(impossible: bool = False) -> Pomdp:
@@ -17,104 +17,182 @@ def tiger(impossible: bool = False) -> Pomdp:
                         np.array([[-1.0, -100.0, 10.0], [-1.0, 10.0, -100.0]]), name="tiger")
 
 
+def tracker(impossible: bool = False, **settings) -> BeliefTracker:
+    """A flat tiger: every symbol is valid on every input; no timeout unless asked for."""
+    settings.setdefault("step_timeout", 0.0)
+    return BeliefTracker(tiger(impossible), settings=StepSettings(**settings))
+
+
 def test_action_then_observation_closes_a_step():
-    p = StepProtocol(tiger())
-    assert p.on_action("listen", 1.0) is None and p.step_open
-    r = p.on_observation("hear-left", "speech", 2.0)
+    t = tracker()
+    opened = t.on_action("listen", 1.0)
+    assert (opened.kind, opened.closed) == ("opened", None) and t.step_open and t.open_action == "listen"
+    out = t.on_input("speech", "hear-left", 2.0)
+    r = out.closed
+    assert (out.kind, out.symbol, out.heard) == ("closed", "hear-left", "symbol")
     assert (r.step, r.action, r.observation, r.source, r.zero_likelihood) == (1, "listen", "hear-left", "speech", False)
     np.testing.assert_allclose(r.belief, [0.85, 0.15])
-    assert not p.step_open and p.counters["updates"] == 1
+    assert not t.step_open and t.counters()["updates"] == 1 and t.step == 1
 
 
 def test_observation_before_action_waits_for_it():
-    p = StepProtocol(tiger())
-    assert p.on_observation("hear-left", "laser", 0.5) is None
-    assert p.counters["queued"] == 1 and p.step == 0
-    r = p.on_action("listen", 1.0)
-    np.testing.assert_allclose(r.belief, [0.85, 0.15])
-    assert r.source == "laser" and not p.pending
+    t = tracker()
+    out = t.on_input("laser", "hear-left", 0.5)
+    assert (out.kind, out.closed) == ("queued", None) and [e.kind for e in out.events] == ["queued"]
+    assert t.counters()["queued"] == 1 and t.step == 0 and t.pending == 1
+    closing = t.on_action("listen", 1.0)
+    assert closing.kind == "closed"
+    np.testing.assert_allclose(closing.closed.belief, [0.85, 0.15])
+    assert closing.closed.source == "laser" and t.pending == 0
 
 
 def test_queue_overflow_drops_the_oldest():
-    p = StepProtocol(tiger(), max_pending=1)
-    p.on_observation("hear-right", "speech", 0.0)
-    p.on_observation("hear-left", "speech", 0.1)
-    assert p.counters["dropped_overflow"] == 1 and [x.symbol for x in p.pending] == ["hear-left"]
-    assert "dropped queued observation 'hear-right'" in p.take_events()[1].text
-    np.testing.assert_allclose(p.on_action("listen", 1.0).belief, [0.85, 0.15])
+    t = tracker(max_pending=1)
+    t.on_input("speech", "hear-right", 0.0)
+    out = t.on_input("speech", "hear-left", 0.1)
+    assert out.kind == "queued" and t.counters()["dropped_overflow"] == 1 and t.pending == 1
+    assert "dropped queued observation 'hear-right'" in out.events[0].text
+    np.testing.assert_allclose(t.on_action("listen", 1.0).closed.belief, [0.85, 0.15])
+
+
+def test_no_queue_drops_at_once():
+    t = tracker(max_pending=0)
+    out = t.on_input("speech", "hear-left", 0.0)
+    assert (out.kind, out.closed) == ("dropped", None) and t.counters()["dropped_overflow"] == 1
+    assert t.on_action("listen", 1.0).kind == "opened"
 
 
 def test_stale_observations_are_dropped_and_the_step_stays_open():
-    p = StepProtocol(tiger(), stale_after=5.0)
-    p.on_observation("hear-left", "speech", 0.0)
-    assert p.on_action("listen", 10.0) is None
-    assert p.counters["dropped_stale"] == 1 and p.step_open and p.step == 0
+    t = tracker(stale_after=5.0)
+    t.on_input("speech", "hear-left", 0.0)
+    out = t.on_action("listen", 10.0)
+    assert out.kind == "opened" and [e.kind for e in out.events] == ["stale"]
+    assert t.counters()["dropped_stale"] == 1 and t.step_open and t.step == 0
 
 
 def test_timeout_closes_the_step_with_the_timeout_observation():
-    p = StepProtocol(tiger(), step_timeout=2.0, timeout_observation="hear-right")
-    p.on_action("listen", 10.0)
-    assert p.on_tick(11.999) is None
-    r = p.on_tick(12.0)
-    assert (r.observation, r.source) == ("hear-right", "timeout") and p.counters["timeouts"] == 1
-    np.testing.assert_allclose(r.belief, [0.15, 0.85])
-    assert p.on_tick(100.0) is None  # no open step: nothing to close
+    t = tracker(step_timeout=2.0, timeout_observation="hear-right")
+    t.on_action("listen", 10.0)
+    assert t.deadline() == 12.0
+    assert t.on_tick(11.999).kind == "idle"
+    out = t.on_tick(12.0)
+    assert (out.kind, out.closed.observation, out.closed.source) == ("closed", "hear-right", "timeout")
+    assert t.counters()["timeouts"] == 1 and [e.kind for e in out.events] == ["timeout"]
+    np.testing.assert_allclose(out.closed.belief, [0.15, 0.85])
+    assert t.on_tick(100.0).closed is None  # no open step: nothing to close
 
 
 def test_second_action_replaces_the_open_one_and_unknown_actions_are_ignored():
-    p = StepProtocol(tiger())
-    p.on_action("open-left", 0.0)
-    p.on_action("listen", 0.1)
-    assert p.on_action("dance", 0.2) is None
-    assert p.counters["replaced_actions"] == 1 and p.counters["unknown_actions"] == 1
-    assert p.current_action == "listen"
-    np.testing.assert_allclose(p.on_observation("hear-left", "speech", 1.0).belief, [0.85, 0.15])
+    t = tracker()
+    t.on_action("open-left", 0.0)
+    replaced = t.on_action("listen", 0.1)
+    assert replaced.kind == "opened" and [e.kind for e in replaced.events] == ["replaced_action"]
+    unknown = t.on_action("dance", 0.2)
+    assert unknown.kind == "unknown" and [e.kind for e in unknown.events] == ["ignored_action"]
+    assert t.counters()["replaced_actions"] == 1 and t.counters()["unknown_actions"] == 1
+    assert t.open_action == "listen"
+    np.testing.assert_allclose(t.on_input("speech", "hear-left", 1.0).closed.belief, [0.85, 0.15])
+
+
+def test_an_input_that_is_no_symbol_is_invalid_and_observes_nothing():
+    t = tracker()
+    t.on_action("listen", 0.0)
+    out = t.on_input("touchscreen", "roar", 0.1)
+    assert (out.kind, out.symbol, out.closed, out.heard) == ("invalid", None, None, "invalid")
+    assert t.counters()["invalid_touchscreen"] == 1 and t.step_open and t.warnings() == 1
+    with pytest.raises(ValueError, match="unknown input 'smell'; inputs: speech, touchscreen, laser, reminder"):
+        t.on_input("smell", "hear-left", 0.2)
 
 
 def test_zero_likelihood_is_counted():
-    p = StepProtocol(tiger(impossible=True))
-    p.on_action("listen", 0.0)
-    p.on_observation("hear-left", "speech", 0.1)  # now certain: tiger-left
-    p.on_action("listen", 0.2)
-    r = p.on_observation("hear-right", "speech", 0.3)  # impossible from tiger-left
-    assert r.zero_likelihood and p.counters["zero_likelihood"] == 1
+    t = tracker(impossible=True)
+    t.on_action("listen", 0.0)
+    t.on_input("speech", "hear-left", 0.1)  # now certain: tiger-left
+    t.on_action("listen", 0.2)
+    r = t.on_input("speech", "hear-right", 0.3).closed  # impossible from tiger-left
+    assert r.zero_likelihood and t.counters()["zero_likelihood"] == 1
     assert np.isfinite(r.belief).all() and r.belief.sum() == pytest.approx(1.0)
 
 
 def test_bad_settings_name_the_parameter():
     with pytest.raises(ValueError, match=r"timeout_observation 'unknown' is not an observation of tiger "
-                                         r"\(valid: hear-left, hear-right\)"):
-        StepProtocol(tiger(), step_timeout=1.0)
-    with pytest.raises(ValueError, match="step_timeout must be >= 0"):
-        StepProtocol(tiger(), step_timeout=-1.0)
-    with pytest.raises(ValueError, match="'roar' is not an observation of tiger"):
-        StepProtocol(tiger()).on_observation("roar", "speech", 0.0)
+                                         r"\(valid: hear-left, hear-right; or step_timeout 0\)"):
+        tracker(step_timeout=1.0)
+    with pytest.raises(ValueError, match=r"step_timeout must be in \[0, 3600\], got -1.0"):
+        StepSettings(step_timeout=-1.0)
+    with pytest.raises(ValueError, match=r"max_pending must be in \[0, 1000\], got 5000"):
+        StepSettings(max_pending=5000)
 
 
 def test_no_timeout_actions_wait_for_an_input_however_long():
     # A drive ends with a laser landmark, never with silence: the step stays open.
-    p = StepProtocol(tiger(), step_timeout=2.0, timeout_observation="hear-right", no_timeout_actions=["open-left"])
-    p.on_action("open-left", 0.0)
-    assert p.on_tick(500.0) is None and p.step_open and p.counters["timeouts"] == 0
-    r = p.on_observation("hear-left", "laser", 501.0)
+    t = tracker(step_timeout=2.0, timeout_observation="hear-right", no_timeout_actions=("open-left",))
+    t.on_action("open-left", 0.0)
+    assert t.on_tick(500.0).kind == "idle" and t.step_open and t.counters()["timeouts"] == 0
+    r = t.on_input("laser", "hear-left", 501.0).closed
     assert (r.action, r.observation, r.source) == ("open-left", "hear-left", "laser")
-    p2 = StepProtocol(tiger(), step_timeout=2.0, timeout_observation="hear-right", no_timeout_actions=["open-left"])
-    p2.on_action("listen", 0.0)
-    assert p2.on_tick(2.0).source == "timeout"      # other actions still time out
-    with pytest.raises(ValueError, match="no_timeout_actions names 'fly'"):
-        StepProtocol(tiger(), step_timeout=2.0, timeout_observation="hear-right", no_timeout_actions=["fly"])
+    t2 = tracker(step_timeout=2.0, timeout_observation="hear-right", no_timeout_actions=("open-left",))
+    t2.on_action("listen", 0.0)
+    assert t2.on_tick(2.0).closed.source == "timeout"      # other actions still time out
+    # Names the model does not have are ignored (a params file shared between domains).
+    assert tracker(no_timeout_actions=("fly",)).no_timeout_actions == frozenset()
+
+
+def test_abandon_step_leaves_the_belief_and_the_queue():
+    t = tracker(step_timeout=2.0, timeout_observation="hear-right")
+    t.on_action("listen", 0.0)
+    out = t.abandon_step()
+    assert out.kind == "abandoned" and not t.step_open and t.deadline() is None and t.step == 0
+    np.testing.assert_allclose(t.belief, [0.5, 0.5])
+    assert t.abandon_step().kind == "idle"
+
+
+def test_set_live_checks_everything_before_changing_anything():
+    t = tracker(step_timeout=2.0, timeout_observation="hear-right")
+    t.on_action("listen", 0.0)
+    t.set_live(step_timeout=5.0, stale_after=1.0, confidence_floor=0.5)
+    assert t.deadline() == 5.0 and t.settings.stale_after == 1.0 and t.settings.confidence_floor == 0.5
+    with pytest.raises(ValueError, match=r"confidence_floor must be in \[0, 1\], got 2.0"):
+        t.set_live(step_timeout=7.0, confidence_floor=2.0)
+    assert t.deadline() == 5.0 and t.settings.step_timeout == 5.0     # nothing applied
+    no_unknown = tracker()
+    with pytest.raises(ValueError, match="timeout_observation 'unknown' is not an observation"):
+        no_unknown.set_live(step_timeout=3.0)
+    assert no_unknown.settings.step_timeout == 0.0
+
+
+def test_reset_zeroes_every_counter():
+    t = tracker()
+    t.on_action("listen", 0.0)
+    t.on_input("speech", "hear-left", 0.1)
+    t.on_input("touchscreen", "roar", 0.2)
+    t.reset()
+    assert set(t.counters().values()) == {0} and t.step == 0 and not t.step_open
+    np.testing.assert_allclose(t.belief, [0.5, 0.5])
 
 
 def test_zero_likelihood_is_reported_once(caplog):
     """The step loop reports a recovery as one event (the node logs it); the filter does not log it again."""
     import logging
 
-    p = StepProtocol(tiger(impossible=True))
-    p.on_action("listen", 0.0)
-    p.on_observation("hear-left", "speech", 0.1)
-    p.on_action("listen", 1.0)
+    t = tracker(impossible=True)
+    t.on_action("listen", 0.0)
+    t.on_input("speech", "hear-left", 0.1)
+    t.on_action("listen", 1.0)
     with caplog.at_level(logging.WARNING, logger="pearl_pomdp.belief"):
-        p.on_observation("hear-right", "speech", 1.1)  # impossible after a certain tiger-left
-    events = [e for e in p.take_events() if "zero likelihood" in e.text]
-    assert p.counters["zero_likelihood"] == 1 and len(events) == 1
+        out = t.on_input("speech", "hear-right", 1.1)  # impossible after a certain tiger-left
+    events = [e for e in out.events if "zero likelihood" in e.text]
+    assert t.counters()["zero_likelihood"] == 1 and len(events) == 1
     assert "pearl_pomdp.belief" not in {r.name for r in caplog.records}
+
+
+def test_history_keeps_every_closed_step_whichever_route_closed_it():
+    t = tracker(step_timeout=2.0, timeout_observation="hear-right")
+    t.keep_history()
+    t.on_input("laser", "hear-left", 0.0)
+    t.on_action("listen", 0.1)                    # closed by the queued input
+    t.on_action("listen", 1.0)
+    t.on_tick(3.0)                                # closed by the timeout
+    t.on_action("listen", 4.0)
+    t.on_input("speech", "hear-left", 4.5)        # closed by an input
+    assert [(r.step, r.source) for r in t.history] == [(1, "laser"), (2, "timeout"), (3, "speech")]

@@ -31,21 +31,61 @@ def test_paired_differences_match_cells_and_use_student_t():
     assert d["success"]["n"] == 4 and d["time_to_goal"]["mean"] == 0.0
 
 
-def test_acceptance_is_evaluated_not_assumed():
+def _acceptance_episodes(levels, quiet_success=True, quiet_return=50.0, noisy_wrong=1, noisy_success=True):
+    """Six seeds per level; the baseline: success, 2 wrong actions at noisy levels, return 50+seed.
+    The hierarchical policy: what the arguments say (defaults: every check of the goal holds)."""
     eps = []
-    for noise in (0.0, 0.3, 0.6):
+    quiet = levels[0]
+    for noise in levels:
         for seed in range(6):
             eps.append(study.StudyEpisode("behaviour_tree", "A", "walk", noise, noise, seed,
-                                          _result("behaviour_tree", True, 2 if noise else 0, 50.0 + seed)))
+                                          _result("behaviour_tree", True, 0 if noise == quiet else 2, 50.0 + seed)))
+            if noise == quiet:
+                done, wrong, ret = quiet_success, 0, quiet_return + seed
+            else:
+                done, wrong, ret = noisy_success, noisy_wrong, 50.0 + seed
             eps.append(study.StudyEpisode("hierarchical", "A", "walk", noise, noise, seed,
-                                          _result("hierarchical", True, 1 if noise else 0, 50.0 + seed)))
-    goal = study.acceptance(study.per_policy(eps), study.paired(eps))
-    assert goal["met"] is True and set(goal["noisiest_levels"]) == {"0.3", "0.6"}
-    worse = [e for e in eps if not (e.policy == "hierarchical" and e.noise == 0.6)]
-    worse += [study.StudyEpisode("hierarchical", "A", "walk", 0.6, 0.6, s, _result("hierarchical", False, 0, 0.0))
-              for s in range(6)]
-    goal = study.acceptance(study.per_policy(worse), study.paired(worse))
-    assert goal["met"] is False and goal["noisiest_levels"]["0.6"]["at_least_equal_success"] is False
+                                          _result("hierarchical", done, wrong, ret)))
+    return eps
+
+
+def _goal(eps, snr=False):
+    return study.acceptance(study.per_policy(eps), study.paired(eps), snr=snr)
+
+
+def test_acceptance_is_evaluated_not_assumed():
+    """Met when every check holds; each check made false on its own makes it not met, and says which."""
+    levels = (0.0, 0.3, 0.6)
+    goal = _goal(_acceptance_episodes(levels))
+    assert goal["met"] is True and goal["quietest_level"] == "0" and set(goal["noisiest_levels"]) == {"0.3", "0.6"}
+    assert goal["success_within_baseline_ci"] and goal["return_within_baseline_ci"]
+    # Quietest level, success: none completed against the baseline's 6/6 (Wilson CI [0.61, 1]).
+    goal = _goal(_acceptance_episodes(levels, quiet_success=False))
+    assert goal["met"] is False and goal["success_within_baseline_ci"] is False
+    assert goal["return_within_baseline_ci"] is True
+    # Quietest level, return: 20 below the baseline's mean (its CI is ±1.9).
+    goal = _goal(_acceptance_episodes(levels, quiet_return=30.0))
+    assert goal["met"] is False and goal["return_within_baseline_ci"] is False
+    assert goal["success_within_baseline_ci"] is True
+    # Noisiest levels, wrong actions: as many as the baseline (paired CI not below 0).
+    goal = _goal(_acceptance_episodes(levels, noisy_wrong=2))
+    assert goal["met"] is False
+    assert [v["fewer_wrong_actions"] for v in goal["noisiest_levels"].values()] == [False, False]
+    assert all(v["at_least_equal_success"] for v in goal["noisiest_levels"].values())
+    # Noisiest levels, success: none completed.
+    goal = _goal(_acceptance_episodes(levels, noisy_success=False))
+    assert goal["met"] is False
+    assert [v["at_least_equal_success"] for v in goal["noisiest_levels"].values()] == [False, False]
+    assert all(v["fewer_wrong_actions"] for v in goal["noisiest_levels"].values())
+
+
+def test_acceptance_on_the_snr_axis_takes_the_highest_snr_as_quietest():
+    """--snr: the quietest level is the highest SNR (30 dB), the noisiest the two lowest."""
+    eps = _acceptance_episodes((30.0, 10.0, 5.0))
+    goal = _goal(eps, snr=True)
+    assert goal["quietest_level"] == "30" and set(goal["noisiest_levels"]) == {"10", "5"} and goal["met"] is True
+    # Read as word error rates, the same levels would put 5 first.
+    assert _goal(eps, snr=False)["quietest_level"] == "5"
 
 
 def test_jobs_2_gives_the_numbers_of_jobs_1(tmp_path):
@@ -73,6 +113,6 @@ def test_snr_axis_runs_through_the_measured_recogniser_channel(tmp_path, capsys)
     report = json.loads(capsys.readouterr().out)
     assert report["protocol"]["noise_axis"] == "snr_db" and report["protocol"]["channel"].endswith("pearl_channel.json")
     assert set(report["per_policy"]["qmdp"]) == {"30", "5"}
-    assert report["acceptance"] is None or report["acceptance"]["quietest_level"] == "30"
+    assert report["acceptance"] is None   # no hierarchical policy in this run (its SNR ordering: above)
     assert main(["experiment", "--snr", "99", "--out", str(tmp_path / "x")]) == 2
     assert "--snr: 99.0 dB is outside [-20, 60]" in capsys.readouterr().err

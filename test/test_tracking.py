@@ -28,9 +28,9 @@ def test_a_keyword_heard_below_the_confidence_floor_is_unknown():
 
 def test_drives_never_time_out_and_come_from_category_move():
     t = pearl(step_timeout=5.0)
-    assert t.protocol.no_timeout_actions == {"GotoPatientRoom", "GuideToPhysio", "GoHome"}
+    assert t.no_timeout_actions == {"GotoPatientRoom", "GuideToPhysio", "GoHome"}
     t.on_action("GuideToPhysio", 0.0)
-    assert t.deadline() is None and t.on_tick(1000.0) is None
+    assert t.deadline() is None and t.on_tick(1000.0).closed is None
     t.on_input("laser", "atPhysio", 200.0)
     t.on_action("DoNothing", 200.0)
-    assert t.deadline() == 205.0 and t.on_tick(205.0).source == "timeout"
+    assert t.deadline() == 205.0 and t.on_tick(205.0).closed.source == "timeout"

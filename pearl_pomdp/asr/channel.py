@@ -32,7 +32,7 @@ from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Uni
 import numpy as np
 
 from pearl_pomdp.asr.audio import mix_at_snr
-from pearl_pomdp.errors import PearlError
+from pearl_pomdp.errors import PearlError, SpecError
 
 __all__ = ["ChannelTable", "MeasuredChannel", "ChannelError", "calibrate", "default_utterances", "babble_track",
            "trial_seed", "FORMAT", "MAX_SAMPLES"]
@@ -362,9 +362,15 @@ def fit_observation_rows(domain_path: Union[str, Path], table: ChannelTable, snr
     data = _plain(parse_yaml(Path(domain_path).read_text(encoding="utf-8"), str(domain_path)))
     changed = 0
 
+    def probability(value) -> float:
+        number = _number(value)
+        if number is None:   # (load_domain has checked every row: not reached for a domain it loaded)
+            raise SpecError(domain_path, "observations", f"{value!r} is not a probability")
+        return number
+
     def fit(row):
         nonlocal changed
-        probs = {row: 1.0} if isinstance(row, str) else {str(k): float(_number(v)) for k, v in row.items()}
+        probs = {row: 1.0} if isinstance(row, str) else {str(k): probability(v) for k, v in row.items()}
         out = {o: p for o, p in probs.items() if o not in speech}
         for m, p in probs.items():
             if m not in speech:
@@ -374,7 +380,7 @@ def fit_observation_rows(domain_path: Union[str, Path], table: ChannelTable, snr
                     out[o] = out.get(o, 0.0) + p * q
         total = sum(probs.values())
         rounded = {o: round(p, 9) for o, p in out.items() if round(p, 9) > 0}
-        top = max(rounded, key=rounded.get)
+        top = max(rounded, key=lambda o: rounded[o])
         rounded[top] = round(rounded[top] + total - sum(rounded.values()), 9)
         if rounded != {o: round(p, 9) for o, p in probs.items()}:
             changed += 1

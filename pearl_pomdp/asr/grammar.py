@@ -117,7 +117,7 @@ def _pronounce(word: str, lookup: Callable[[str], Optional[str]]) -> Optional[st
 
 def keyword_sentences(keywords: Mapping[str, Sequence[str]]) -> List[str]:
     """Every keyword phrase in every carrier (normalised words)."""
-    out = []
+    out: List[str] = []
     for phrases in keywords.values():
         for phrase in phrases:
             k = " ".join(tokens(phrase))

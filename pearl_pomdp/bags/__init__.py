@@ -1,4 +1,4 @@
-"""Record, inspect and replay rosbag2 bags (MCAP, 'ros2' profile) — DESIGN.md §8.
+"""Record, inspect and replay rosbag2 bags (MCAP, 'ros2' profile) — docs/design.md §8.
 
 ROS-free (usable without rclpy): :mod:`.writer` (:class:`BagWriter`), :mod:`.reader`
 (:class:`BagReader`, salvages truncated files), :mod:`.info`, :mod:`.msgdefs` (rosbag2's

@@ -140,7 +140,8 @@ class BagReader:
     @property
     def duration(self) -> int:
         """``end_time - start_time`` in ns (0 for an empty bag)."""
-        return (self.end_time - self.start_time) if self.messages else 0
+        start, end = self.start_time, self.end_time
+        return end - start if (start is not None and end is not None) else 0
 
     def read_messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """Messages in file order, optionally only those of ``topics``."""
@@ -261,8 +262,8 @@ class BagReader:
                         self._record(path, pos, r, schemas, channels, scan)
                 elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.HEADER, Opcode.METADATA,
                                 Opcode.STATISTICS):
-                    parser = {Opcode.SCHEMA: rec.Schema, Opcode.CHANNEL: rec.Channel, Opcode.HEADER: rec.Header,
-                              Opcode.METADATA: rec.Metadata, Opcode.STATISTICS: rec.Statistics}[opcode]
+                    parser: Any = {Opcode.SCHEMA: rec.Schema, Opcode.CHANNEL: rec.Channel, Opcode.HEADER: rec.Header,
+                                   Opcode.METADATA: rec.Metadata, Opcode.STATISTICS: rec.Statistics}[Opcode(opcode)]
                     r = parser.read(_strict(body))
                     # The summary repeats schemas and channels; only ones not seen are new
                     # (a writer may put a channel without messages only there).

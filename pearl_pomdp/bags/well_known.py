@@ -57,7 +57,7 @@ DURATION_INFINITE = (9223372036, 854775807)
 #: RMW_DURATION_UNSPECIFIED ("use the default").
 DURATION_UNSPECIFIED = (0, 0)
 
-# --- topics of the Pearl graph (DESIGN.md §6) ---------------------------------------------
+# --- topics of the Pearl graph (docs/design.md §6) ---------------------------------------------
 CLOCK_TOPIC = "/clock"
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
 STRING_TYPE = "std_msgs/msg/String"

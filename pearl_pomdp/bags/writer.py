@@ -208,7 +208,7 @@ class BagWriter:
     def metadata(self) -> Dict:
         """The ``rosbag2_bagfile_information`` mapping for what has been written so far."""
         start = self._start or 0
-        duration = (self._end - self._start) if self._start is not None else 0
+        duration = (self._end - self._start) if (self._start is not None and self._end is not None) else 0
         return md.bag_metadata(
             files=[(self.mcap_path.name, start, duration, self.message_count)],
             topics=[(t.meta, t.count) for t in self._topics.values()],

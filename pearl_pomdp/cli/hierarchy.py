@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 from pearl_pomdp.cli._progress import add_progress_arguments, show_progress
 
@@ -83,7 +83,7 @@ def layout(hierarchy) -> Tuple[List[tuple], List[tuple]]:
     depth-first order) and a subtask sits at the middle of its children's rows, so labels
     never overlap however many primitives a subtask has.
     """
-    nodes: List[tuple] = []
+    nodes: List[Any] = []   # (x, y, name, abstract) per node; a subtask's slot is filled after its children
     edges: List[tuple] = []
     next_row = [0.0]
 

@@ -106,15 +106,24 @@ PR_SET_PDEATHSIG = 1
 
 
 def _die_with(launcher_pid: int):
-    """``preexec_fn`` for a node: SIGTERM when the launcher dies, however it dies (Linux).
+    """``preexec_fn`` for a node: default stop signals, and SIGTERM when the launcher dies.
 
-    The launcher starts nodes from its main thread, which lives as long as the launcher, so
-    the kernel sends the signal when the launcher process ends (SIGKILL included). SIGTERM,
-    not SIGKILL: our nodes then stop within ``SHUTDOWN_DEADLINE`` and release their DDS
-    shared memory. If the launcher died between fork and ``prctl``, no signal would ever
-    come: the child sees another parent and exits before running the node.
+    * SIGINT and SIGTERM start at their default disposition, whatever the launcher inherited
+      (a background job of a non-interactive shell has SIGINT ignored, and an ignored signal
+      is inherited across exec): the node's own handlers take over once its package is
+      imported, and before that a stop signal still ends the process instead of being lost.
+    * On Linux, SIGTERM when the launcher dies, however it dies. The launcher starts nodes
+      from its main thread, which lives as long as the launcher, so the kernel sends the
+      signal when the launcher process ends (SIGKILL included). SIGTERM, not SIGKILL: our
+      nodes then stop within ``SHUTDOWN_DEADLINE`` and release their DDS shared memory. If the
+      launcher died between fork and ``prctl``, no signal would ever come: the child sees
+      another parent and exits before running the node.
     """
     def preexec() -> None:  # pragma: no cover - runs in the child between fork and exec
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        if _LIBC is None:
+            return
         _LIBC.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
         if os.getppid() != launcher_pid:
             os._exit(1)
@@ -130,7 +139,7 @@ class _Child:
         self.last_err = ""
         self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      stdin=subprocess.DEVNULL, start_new_session=True,
-                                     preexec_fn=_die_with(os.getpid()) if _LIBC is not None else None)
+                                     preexec_fn=_die_with(os.getpid()))
         screen = node.output in ("screen", "both")
         self.threads = [threading.Thread(target=self._pump, args=(self.proc.stdout, sys.stdout if screen else None,
                                                                   False), daemon=True),

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import signal
 import time
+from typing import Dict, Optional
 
 COMMAND = "record"
 HELP = "record topics into a rosbag2 MCAP bag (raw bytes; SIGINT/SIGTERM close it cleanly)"
@@ -55,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.cli import print_json
 
     writer = BagWriter(args.out, chunk_size=args.chunk_size, custom_data=custom)
-    stop = {"why": None}
+    stop: Dict[str, Optional[str]] = {"why": None}
 
     def on_signal(signum, _frame):
         stop["why"] = signal.Signals(signum).name

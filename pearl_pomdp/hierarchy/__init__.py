@@ -1,4 +1,4 @@
-"""Hierarchical POMDPs (Pineau & Thrun 2002; DESIGN.md §4).
+"""Hierarchical POMDPs (Pineau & Thrun 2002; docs/design.md §4).
 
 * :mod:`.spec` — the action hierarchy (YAML) and its validation: :func:`load_hierarchy`.
 * :mod:`.parameterize` — PARAMETERIZE, eq. 11–17: a subtask's model from its children.

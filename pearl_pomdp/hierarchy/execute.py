@@ -27,7 +27,7 @@ import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Union
+from typing import Any, Dict, List, Optional, Union, cast
 
 import numpy as np
 import scipy.sparse as sp
@@ -187,7 +187,7 @@ class SubtaskPolicy:
         self._projection_t = self._projection.T.tocsr()
 
     def _q_values(self, B: np.ndarray) -> np.ndarray:
-        return self.lookahead.q_values(np.asarray((self._projection_t @ B.T).T))
+        return cast(Lookahead, self.lookahead).q_values(np.asarray((self._projection_t @ B.T).T))
 
     def choose(self, belief: np.ndarray):
         """``(action index in self.actions, value)`` at a full belief ``[S]``."""

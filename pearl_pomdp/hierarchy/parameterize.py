@@ -10,7 +10,7 @@ abstraction) and the actions ``A_h`` = its children in the hierarchy.
   actions) at the belief concentrated on ``s``. Then
   ``T_h(s,â_j,s') = T(s,π_j(s),s')``, ``R_h(s,â_j) = R(s,π_j(s))`` and the observation
   model is that of the primitive chosen in the *previous* state:
-  ``P(o | s, â_j, s') = O(s', π_j(s), o)`` (state-pair form, DESIGN.md §4).
+  ``P(o | s, â_j, s') = O(s', π_j(s), o)`` (state-pair form, docs/design.md §4).
 
 Both cases are one representation: a ``source`` array ``[A_h, S]`` giving, for each
 action of ``h`` and each state, the primitive executed there (constant for a

@@ -1,4 +1,4 @@
-"""PLAN / SOLVE over an action hierarchy (Pineau & Thrun, Table 2; DESIGN.md §4).
+"""PLAN / SOLVE over an action hierarchy (Pineau & Thrun, Table 2; docs/design.md §4).
 
 ``PLAN(h)`` runs bottom-up: for every abstract child ``â_j`` of ``h``, ``PLAN(h_j)``
 first, then PARAMETERIZE ``â_j`` with ``h_j``'s solved local policy (eq. 15–17);

@@ -1,4 +1,4 @@
-"""The action hierarchy: a designer-given tree over a domain's actions (DESIGN.md §4).
+"""The action hierarchy: a designer-given tree over a domain's actions (docs/design.md §4).
 
 Pineau & Thrun partition the *action* set, not the state set: each leaf of the tree
 is a primitive action of the domain (every primitive appears at least once), and each

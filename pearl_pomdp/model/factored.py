@@ -6,7 +6,7 @@ parent features of the current state (default: the feature persists),
 observation *symbols* grouped by *modality* with per-action tables over a few
 features of the next state, additive *reward rules*, a factorised *start*
 distribution and the *discount*. The full format is documented in
-``docs/domain-format.md``; DESIGN.md §3 explains why the structure is kept
+``docs/domain-format.md``; docs/design.md §3 explains why the structure is kept
 (automatic abstraction in the hierarchy, per-feature marginals on the belief topic).
 
 State index convention (mixed radix, first feature most significant)::
@@ -16,7 +16,7 @@ State index convention (mixed radix, first feature most significant)::
 so for Pearl ``s = 0`` is ``RobotLocation=home,UserLocation=room,…`` (every
 feature at its first value) and the last feature changes fastest.
 
-Compiled arrays follow the project conventions (DESIGN.md §2):
+Compiled arrays follow the project conventions (docs/design.md §2):
 ``T[a][s, s'] = Π_f P(s'_f | parents_f(s), a)``, ``O[a, s', o] = P(o | parents(s'), a)``,
 ``R[s, a] = Σ`` of the rewards of all rules matching ``(s, a)``,
 ``b0[s] = Π_f start_f(s_f)``.

@@ -1,4 +1,4 @@
-"""The flat POMDP and its array conventions (DESIGN.md §2).
+"""The flat POMDP and its array conventions (docs/design.md §2).
 
 Conventions, used by every module of the project:
 
@@ -12,13 +12,16 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass, field
-from typing import List, Optional, Sequence, Union
+from typing import Any, List, Optional, Sequence, Union
 
 import sys
 
 import numpy as np
 
-Matrix = Union[np.ndarray, "scipy.sparse.csr_matrix"]
+#: One action's ``T[a]``: a dense ``np.ndarray`` or a ``scipy.sparse.csr_matrix``. scipy ships no
+#: type stubs, so the union of the two cannot be checked member by member: it is ``Any``, and
+#: code that needs one form tests :func:`issparse` first.
+Matrix = Any
 
 
 def issparse(x) -> bool:
@@ -134,9 +137,9 @@ class Pomdp:
             a, s, o = np.argwhere(self.O < -tolerance)[0]
             raise ValueError(f"O[{self.actions[a]}, {self.states[s]}, {self.observations[o]}] is negative")
         sums = self.O.sum(axis=2)
-        bad = np.argwhere(np.abs(sums - 1.0) > tolerance)
-        if bad.size:
-            a, s = bad[0]
+        bad_rows = np.argwhere(np.abs(sums - 1.0) > tolerance)
+        if bad_rows.size:
+            a, s = bad_rows[0]
             raise ValueError(f"O[{self.actions[a]}, {self.states[s]}, :] sums to {sums[a, s]:.9g}, expected 1")
         if (self.b0 < -tolerance).any() or abs(self.b0.sum() - 1.0) > tolerance:
             raise ValueError(f"b0 sums to {self.b0.sum():.9g} (or has a negative entry), expected a distribution")

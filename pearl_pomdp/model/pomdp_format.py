@@ -54,7 +54,7 @@ from __future__ import annotations
 import bisect
 import re
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, NoReturn, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -199,7 +199,7 @@ class _Parser:
         self.toks.extend([_EOF] * 12)  # sentinels: look-ahead never runs off the end
         self._line_ends: Optional[List[int]] = None
         self.i = 0
-        self.names: Dict[str, Optional[List[str]]] = {k: None for k in _KINDS}
+        self.names: Dict[str, Optional[Sequence[str]]] = {k: None for k in _KINDS}
         self.index: Dict[str, Dict[str, int]] = {}
         self.counts: Dict[str, int] = {}
         self.discount: Optional[float] = None
@@ -210,8 +210,9 @@ class _Parser:
         self.seq = 0
         self.ev_tok: List[int] = []
         # concrete single-entry events, the bulk of large files
-        self.t_pts: Tuple[List[int], ...] = ([], [], [], [], [])  # a, s, s', p, seq
-        self.o_pts: Tuple[List[int], ...] = ([], [], [], [], [])
+        # a, s, s' (or o), p, seq: indices and sequence numbers are ints, p a float.
+        self.t_pts: Tuple[List[Any], ...] = ([], [], [], [], [])
+        self.o_pts: Tuple[List[Any], ...] = ([], [], [], [], [])
         self.t_special: List[tuple] = []
         self.o_special: List[tuple] = []
         self.r_cell: Tuple[List, ...] = ([], [], [], [])  # a, s, v, seq  (R: a : s : * : * v)
@@ -232,7 +233,7 @@ class _Parser:
             k = max(self.n - 1, 0)
         return bisect.bisect_right(self._line_ends, k) + 1
 
-    def fail(self, k: Optional[int], where: str, problem: str):
+    def fail(self, k: Optional[int], where: str, problem: str) -> NoReturn:
         raise ModelFormatError(self.source, where, problem, line=None if k is None else self.line_of(k))
 
     def show(self, k: int) -> str:
@@ -829,6 +830,7 @@ class _Parser:
                     key = (np.repeat(asel.astype(np.int64) * S * K, base.size) + np.tile(base, asel.size))
                     val = np.tile(rows[r_s, r_k], asel.size)
                 else:
+                    assert row is not None   # (a row that is None and no rows was skipped above)
                     nz = np.flatnonzero(row)
                     n = asel.size * ssel.size * nz.size
                     if n > budget:
@@ -862,7 +864,9 @@ class _Parser:
             r = int(bad[0])
             a, s = divmod(r, S)
             last_seq = max(int(seq[row_of == r].max(initial=-1)), int(clear[a, s]))
-            where = f"{label}: {self.names['actions'][a]} : {self.names['states'][s]}"
+            actions, states = self.names["actions"], self.names["states"]
+            assert actions is not None and states is not None   # the preamble named them
+            where = f"{label}: {actions[a]} : {states[s]}"
             if last_seq < 0:
                 self.fail(None, where, f"row sums to 0: no {label} entries for this action and state "
                           f"({bad.size} such row{'s' if bad.size != 1 else ''} in all)")
@@ -912,17 +916,18 @@ class _Parser:
                 lo, hi = bounds[a], bounds[a + 1]
                 indptr = np.searchsorted(ts[lo:hi], np.arange(S + 1)).astype(np.int64)
                 T.append(sp.csr_matrix((tval[lo:hi], tsp[lo:hi], indptr), shape=(S, S)))
-        O = np.zeros(A * S * Z)
-        O[okey] = oval
-        O = O.reshape(A, S, Z)
+        O_flat = np.zeros(A * S * Z)
+        O_flat[okey] = oval
+        O = O_flat.reshape(A, S, Z)
 
         R, depends = self.rewards(A, S, Z, T, O)
         values = self.values or "reward"
         if values == "cost":
             R = -R
-        try:
-            model = Pomdp.create(list(self.names["states"]), list(self.names["actions"]),
-                                 list(self.names["observations"]),
+        states, actions, observations = self.names["states"], self.names["actions"], self.names["observations"]
+        assert states is not None and actions is not None and observations is not None and self.discount is not None
+        try:   # (the preamble checks made every name list and the discount present)
+            model = Pomdp.create(list(states), list(actions), list(observations),
                                  T, O, R, b0=b0, discount=self.discount, name=name, tolerance=1e-6)
         except ValueError as err:  # should not happen after our checks; keep the contract
             raise ModelFormatError(self.source, "", str(err)) from None
@@ -955,12 +960,12 @@ class _Parser:
         key, val, seq = key[order], val[order], seq[order]
         last = np.ones(key.size, bool)
         last[:-1] = key[1:] != key[:-1]
-        cell_val = np.zeros(A * S)
-        cell_seq = np.full(A * S, -1, dtype=np.int64)
-        cell_val[key[last]] = val[last]
-        cell_seq[key[last]] = seq[last]
-        cell_val = cell_val.reshape(A, S)
-        cell_seq = cell_seq.reshape(A, S)
+        flat_val = np.zeros(A * S)
+        flat_seq = np.full(A * S, -1, dtype=np.int64)
+        flat_val[key[last]] = val[last]
+        flat_seq[key[last]] = seq[last]
+        cell_val = flat_val.reshape(A, S)
+        cell_seq = flat_seq.reshape(A, S)
         R = cell_val.T.copy()
 
         fa, fs, fsp, fo, fv, fq = [np.asarray(x) for x in self.r_fine_pts]
@@ -1194,8 +1199,8 @@ def format_pomdp(model: Pomdp) -> str:
         if c != 0.0:
             w(f"R: {ac[a]} : * : * : * {_r(c)}")
         # a cell differs from the default if its value or the sign of a zero differs
-        for s in np.flatnonzero((col != c) | (np.signbit(col) != np.signbit(c))):
-            w(f"R: {ac[a]} : {st[s]} : * : * {_r(col[s])}")
+        for cell in np.flatnonzero((col != c) | (np.signbit(col) != np.signbit(c))):
+            w(f"R: {ac[a]} : {st[cell]} : * : * {_r(col[cell])}")
     w("")
     return "\n".join(out)
 

@@ -32,7 +32,7 @@ from __future__ import annotations
 import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from typing import List, Optional, Sequence, Tuple, Union
+from typing import List, NoReturn, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import scipy.sparse as sp
@@ -151,8 +151,8 @@ def format_pomdpx(model: Pomdp) -> str:
     R = np.asarray(model.R, dtype=float)
     written = 0
     for a in range(A):
-        for s in np.flatnonzero((R[:, a] != 0) | np.signbit(R[:, a])):
-            entry(f"{ac[a]} {st[s]}", _r(R[s, a]), "ValueTable")
+        for cell in np.flatnonzero((R[:, a] != 0) | np.signbit(R[:, a])):
+            entry(f"{ac[a]} {st[cell]}", _r(R[cell, a]), "ValueTable")
             written += 1
     if not written:
         entry("* *", "0", "ValueTable")
@@ -199,7 +199,7 @@ class _Reader:
         if root.tag != "pomdpx":
             self.fail("", f"root element is <{root.tag}>, expected <pomdpx>")
 
-    def fail(self, where: str, problem: str):
+    def fail(self, where: str, problem: str) -> NoReturn:
         raise ModelFormatError(self.source, where, problem)
 
     def text(self, el: Optional[ET.Element], where: str) -> str:
@@ -240,12 +240,13 @@ class _Reader:
         if len(ovars) != 1 or len(avars) != 1:
             self.fail("Variable", "needs exactly one ObsVar and one ActionVar")
         sv = svars[0]
-        self.prev, self.curr = sv.get("vnamePrev"), sv.get("vnameCurr")
-        self.oname, self.aname = ovars[0].get("vname"), avars[0].get("vname")
-        vnames = [self.prev, self.curr, self.oname, self.aname]
-        for label, vn in zip(("StateVar.vnamePrev", "StateVar.vnameCurr", "ObsVar.vname", "ActionVar.vname"), vnames):
+        given = [sv.get("vnamePrev"), sv.get("vnameCurr"), ovars[0].get("vname"), avars[0].get("vname")]
+        vnames: List[str] = []
+        for label, vn in zip(("StateVar.vnamePrev", "StateVar.vnameCurr", "ObsVar.vname", "ActionVar.vname"), given):
             if not vn or not vn.strip() or vn.split() != [vn] or vn in ("null", "-", "*"):
                 self.fail(f"Variable.{label}", f"missing or invalid variable name {vn!r}")
+            vnames.append(vn)
+        self.prev, self.curr, self.oname, self.aname = vnames
         if len(set(vnames)) != 4:
             self.fail("Variable", f"variable names must be distinct, got {' '.join(vnames)}")
         states = self.values(sv, "StateVar", "s")
@@ -346,13 +347,13 @@ class _Reader:
             if len(inst) == len(dims_names) and " " not in table:
                 try:
                     k = sum(lk[t] * st for lk, t, st in zip(lookups, inst, pstrides))
-                    v = float(table)
+                    number = float(table)
                 except (KeyError, ValueError):
                     pass
                 else:
-                    if np.isfinite(v) and (not prob or 0.0 <= v <= 1.0):
+                    if np.isfinite(number) and (not prob or 0.0 <= number <= 1.0):
                         fast_k.append(k)
-                        fast_v.append(v)
+                        fast_v.append(number)
                         fast_q.append(seq)
                         continue
             # fast path: a row "v1 … vn -" with the variable last
@@ -433,11 +434,11 @@ class _Reader:
         seqs.append(np.array(fast_q, dtype=np.int64))
         if sum(k.size for k in keys) == 0:
             self.fail(section, "has no <Entry>")
-        key, val, seq = np.concatenate(keys), np.concatenate(vals), np.concatenate(seqs)
-        keep = seq >= clear[key // last_size]
-        key, val, seq = key[keep], val[keep], seq[keep]
-        order = np.lexsort((seq, key))
-        key, val = key[order], val[order]
-        last = np.ones(key.size, bool)
-        last[:-1] = key[1:] != key[:-1]
-        return key[last], val[last]
+        all_key, all_val, all_seq = np.concatenate(keys), np.concatenate(vals), np.concatenate(seqs)
+        keep = all_seq >= clear[all_key // last_size]
+        all_key, all_val, all_seq = all_key[keep], all_val[keep], all_seq[keep]
+        order = np.lexsort((all_seq, all_key))
+        all_key, all_val = all_key[order], all_val[order]
+        last = np.ones(all_key.size, bool)
+        last[:-1] = all_key[1:] != all_key[:-1]
+        return all_key[last], all_val[last]

@@ -26,6 +26,7 @@ from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS, NodeSetupError, Param, run_node
 from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
+from pearl_pomdp.navigation import places_from_parameters
 
 __all__ = ["ActionExecutorNode", "ACTION_FIELDS", "main"]
 
@@ -122,11 +123,11 @@ class ActionExecutorNode(ManagedPearlNode):
     def configure_node(self) -> None:
         """Check the places and the action table; create the topics and the diagnostics timer."""
         p, defaults = self.params, self._defaults
-        self.locations = {}
-        for name, pose in self._poses.items():
-            if len(pose) != 3:
-                raise NodeSetupError(f"parameter locations.{name}: expected [x, y, yaw], got {list(pose)}")
-            self.locations[name] = [float(v) for v in pose]
+        try:
+            places = places_from_parameters(list(self._poses), self._poses)   # the one place parser
+        except ValueError as err:
+            raise NodeSetupError(f"parameter {err}") from None
+        self.locations = {name: [place.x, place.y, place.yaw] for name, place in places.items()}
         for key in defaults.under("actions"):
             action, _, field = key.rpartition(".")
             if field not in ACTION_FIELDS:

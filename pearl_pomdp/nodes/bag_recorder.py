@@ -16,7 +16,7 @@ from __future__ import annotations
 import importlib
 import sys
 import threading
-from typing import Callable, Dict, Iterable, List, Optional, Set
+from typing import Any, Callable, Dict, Iterable, List, Optional, Set
 
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -96,7 +96,7 @@ class Recorder:
         self.wanted: Optional[Set[str]] = None if topics is None else {self._fq(t) for t in topics}
         self.exclude = {self._fq(t) for t in exclude}
         self.on_subscribe = on_subscribe
-        self.subscriptions: Dict[str, object] = {}
+        self.subscriptions: Dict[str, Any] = {}   # topic → rclpy Subscription
         self.counts: Dict[str, int] = {}
         self._lock = threading.Lock()
         self._warned: Set[str] = set()

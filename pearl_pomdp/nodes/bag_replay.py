@@ -1,6 +1,6 @@
 """Replay a bag's recorded inputs through the belief tracker and hierarchical policy.
 
-One process, one executor, simulated time (DESIGN.md §6 "In one process", §8): the real
+One process, one executor, simulated time (docs/design.md §6 "One loop, and in one process", §8): the real
 node classes of :mod:`pearl_pomdp.nodes` (built by :class:`~pearl_pomdp.nodes.graph.PearlGraph`)
 receive, in file order,
 
@@ -10,7 +10,9 @@ receive, in file order,
 
 published as the recorded bytes (``publish`` of raw CDR: nothing is re-serialised). The
 actions the policy publishes on ``/pearl/action`` are collected and compared with the
-``/pearl/action`` messages recorded in the bag.
+``/pearl/action`` messages recorded in the bag, and the beliefs the tracker publishes on
+``/pearl/belief`` with the recorded ones (``max_belief_difference``: the parity check of a
+change to the tracker — the shipped bags replay to the same beliefs within 1e-12).
 
 Lock-step, not wall-clock pacing: after each ``/clock`` the replay waits until the nodes'
 clocks show the new time and every timer that became due has run; after each input it
@@ -48,6 +50,9 @@ from pearl_pomdp.errors import PearlError
 
 INPUT_TOPICS = ("/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder")
 ACTION_TOPIC = "/pearl/action"
+BELIEF_TOPIC = "/pearl/belief"
+#: Beliefs equal to this (max abs difference) count as the same in :attr:`ReplayResult.beliefs_match`.
+BELIEF_TOLERANCE = 1e-12
 DECISION_TOPIC = "/pearl/decision"
 #: custom_data keys of a replayable bag.
 KEY_DOMAIN, KEY_POLICY, KEY_TRACKER = "pearl.domain", "pearl.policy", "pearl.tracker_params"
@@ -68,6 +73,11 @@ class ReplayResult:
         messages_per_second: ``messages / seconds``.
         first_mismatch: index of the first differing action, or ``None``.
         counters: the tracker's counters at the end (updates, timeouts, unknown words, …).
+        beliefs: how many beliefs the tracker published (b0 and one per closed step).
+        expected_beliefs: how many ``/pearl/belief`` messages the bag holds.
+        max_belief_difference: the largest ``|b_replayed − b_recorded|`` over the beliefs both have
+            (``None`` when the bag recorded none).
+        beliefs_match: as many beliefs as recorded, each within :data:`BELIEF_TOLERANCE`.
     """
 
     bag: str
@@ -83,13 +93,18 @@ class ReplayResult:
     clock_skipped: int = 0
     explanation: Optional[List[Dict[str, Any]]] = None
     divergence: Optional[Dict[str, Any]] = None
+    beliefs: int = 0
+    expected_beliefs: int = 0
+    max_belief_difference: Optional[float] = None
+    beliefs_match: bool = False
 
     def to_dict(self) -> Dict[str, Any]:
         out = {"bag": self.bag, "match": self.match, "actions": self.actions,
                "expected_actions": self.expected_actions, "first_mismatch": self.first_mismatch,
                "messages": self.messages, "fed": self.fed, "seconds": round(self.seconds, 6),
                "messages_per_second": round(self.messages_per_second, 1), "clock_skipped": self.clock_skipped,
-               "counters": self.counters}
+               "counters": self.counters, "beliefs": self.beliefs, "expected_beliefs": self.expected_beliefs,
+               "max_belief_difference": self.max_belief_difference, "beliefs_match": self.beliefs_match}
         if self.explanation is not None:
             out["steps"] = self.explanation
             out["divergence"] = self.divergence
@@ -117,6 +132,15 @@ def _clock_ns(data: bytes) -> int:
     fmt = "<iI" if data[1] == 1 else ">iI"
     sec, nsec = struct.unpack_from(fmt, data, 4)
     return sec * 1_000_000_000 + nsec
+
+
+def recorded_beliefs(reader: BagReader) -> List[List[float]]:
+    """The ``/pearl/belief`` messages recorded in the bag (std_msgs/Float64MultiArray), in order."""
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import Float64MultiArray
+
+    return [list(deserialize_message(m.data, Float64MultiArray).data) for m in reader.messages
+            if m.topic == BELIEF_TOPIC]
 
 
 def expected_actions(reader: BagReader) -> List[str]:
@@ -271,11 +295,24 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
         actions = driver.actions
         node = driver.node
         decisions: List[Dict[str, Any]] = []
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from std_msgs.msg import Float64MultiArray
+
+        beliefs: List[List[float]] = []
+        # Transient-local: b0, published when the tracker activated, arrives on matching.
+        keep_all = QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
+                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        belief_sub = node.create_subscription(Float64MultiArray, BELIEF_TOPIC, lambda m: beliefs.append(list(m.data)),
+                                              keep_all)
+        core = graph.tracker.core
+        assert core is not None  # the graph's tracker is configured (autostart)
         if explain:
-            graph.tracker.core.keep_history()
+            core.keep_history()
             node.create_subscription(String, DECISION_TOPIC, lambda m: decisions.append(json.loads(m.data)), 1000)
         pubs = {t: node.create_publisher(String, t, EVENT_QOS) for t in INPUT_TOPICS if t in reader.topics}
         driver.wait_until_matched(list(pubs.values()))
+        # b0 before any input: the latched writer keeps only the latest belief.
+        driver.wait(lambda: belief_sub.get_publisher_count() > 0 and bool(beliefs), "the tracker's b0")
 
         messages = fed = skipped = 0
         pending = None  # (bytes, t) of a /clock not yet fed: see coalesce_clock
@@ -320,32 +357,42 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
             driver.set_time(pending[1], raw=pending[0])
             fed += 1
         tracker = graph.tracker
+        driver.wait(lambda: len(beliefs) >= 1 + core.step, "the beliefs")
         explanation = None
         if explain:
             driver.wait(lambda: len(decisions) >= graph.policy.decisions, "the decision traces")
-            explanation = explain_steps(list(tracker.core.history or []), decisions, tracker.core.marginals)
+            explanation = explain_steps(list(core.history or []), decisions, core.marginals)
         seconds = time.perf_counter() - start
         if bar is not None:
             bar.close()
         counters = dict(tracker.counters())
     finally:
         graph.shutdown()
+    recorded = recorded_beliefs(reader)
+    differences = [max((abs(x - y) for x, y in zip(a, b)), default=0.0) if len(a) == len(b) else float("inf")
+                   for a, b in zip(beliefs, recorded)]
+    max_difference = max(differences) if differences else None
+    beliefs_match = (len(beliefs) == len(recorded) and
+                     (max_difference is None or max_difference <= BELIEF_TOLERANCE))
     mismatch = next((i for i, (a, b) in enumerate(zip(actions, expected)) if a != b), None)
     if mismatch is None and len(actions) != len(expected):
         mismatch = min(len(actions), len(expected))
     divergence = None
     if explain and mismatch is not None:
-        recorded = _recorded_decisions(reader)
+        recorded_traces = _recorded_decisions(reader)
         divergence = {"action_index": mismatch,
                       "replayed": actions[mismatch] if mismatch < len(actions) else None,
                       "recorded": expected[mismatch] if mismatch < len(expected) else None,
                       "replayed_trace": (explanation[mismatch]["decision"]["trace"]
                                          if explanation and mismatch < len(explanation) else None),
-                      "recorded_trace": (recorded[mismatch].get("trace") if mismatch < len(recorded) else None),
+                      "recorded_trace": (recorded_traces[mismatch].get("trace")
+                                         if mismatch < len(recorded_traces) else None),
                       "closed_by": (explanation[mismatch]["closed_by"]
                                     if explanation and mismatch < len(explanation) else None)}
     return ReplayResult(bag=str(path), actions=actions, expected_actions=expected, match=actions == expected,
                         messages=messages, fed=fed, seconds=seconds,
                         messages_per_second=messages / seconds if seconds > 0 else 0.0,
                         first_mismatch=mismatch, counters=counters, clock_skipped=skipped,
-                        explanation=explanation, divergence=divergence)
+                        explanation=explanation, divergence=divergence, beliefs=len(beliefs),
+                        expected_beliefs=len(recorded), max_belief_difference=max_difference,
+                        beliefs_match=beliefs_match)

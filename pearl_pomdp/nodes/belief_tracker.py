@@ -1,4 +1,4 @@
-"""The belief tracker node: observations in, beliefs out (DESIGN.md §6).
+"""The belief tracker node: observations in, beliefs out (docs/design.md §6).
 
 A thin rclpy wrapper of the core :class:`~pearl_pomdp.tracking.BeliefTracker` — the same
 object the simulator and the study drive (input → symbol, what closes a step, queueing,
@@ -14,43 +14,50 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Callable, Dict, List, Optional
-
-import numpy as np
+from typing import Any, Callable, Dict, List, Optional
 
 from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import (EVENT_QOS, INPUT_QOS, LATCHED_QOS, NodeSetupError, Param,
                                       load_domain_and_model, resolve_path, run_node)
+from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
-from pearl_pomdp.tracking import SYMBOL_INPUTS, BeliefTracker, ObservationMapper, StepResult, StepSettings
+from pearl_pomdp.tracking import SYMBOL_INPUTS, BeliefTracker, InputOutcome, StepSettings
 
-__all__ = ["BeliefTrackerNode", "ObservationMapper", "main", "SYMBOL_INPUTS"]
+__all__ = ["BeliefTrackerNode", "main", "step_parameters"]
+
+
+#: ROS cannot type an empty list from its value (``[]`` would be a byte array): an empty string
+#: list is declared as ``[""]``, and :meth:`StepSettings.from_params` drops the ``""`` entries.
+EMPTY_STRINGS = [""]
+
+
+def step_parameters() -> List[Param]:
+    """The node parameters of :class:`~pearl_pomdp.tracking.StepSettings`, generated from its
+    fields (name, default, range, description; the ``live`` ones changeable at run time)."""
+    return [Param(spec.name, spec.default if spec.default != [] else EMPTY_STRINGS,
+                  spec.description + ("; changeable at run time" if spec.live else ""),
+                  read_only=not spec.live, range=spec.range)
+            for spec in StepSettings.parameters()]
 
 
 class BeliefTrackerNode(ManagedPearlNode):
     """Tracks the belief over the domain's states from the robot's inputs.
 
-    Parameters (all read-only, declared with descriptions and ranges):
+    Parameters (declared with descriptions and ranges; ``ros2 param describe`` shows them):
         * ``domain`` (str): factored domain ``.yaml`` or flat ``.pomdp``; relative paths are
           tried in the working directory, then in the package share directory.
-        * ``step_timeout`` (double, s, ≥ 0): close an open step with ``timeout_observation``
-          after this long without input; 0 waits forever.
-        * ``timeout_observation`` (str): the symbol used on timeout (default ``unknown``).
-        * ``no_timeout_actions`` (str[]): actions never timed out (empty: the domain's
-          ``category: Move`` actions).
-        * ``confidence_floor`` (double, 0–1): speech recognised with a lower confidence
-          counts as ``unknown`` (see :mod:`pearl_pomdp.tracking`).
-        * ``max_pending`` (int, 0–1000): observations that may wait for the next action.
-        * ``stale_after`` (double, s, ≥ 0): drop a waiting observation older than this; 0 never.
-        * ``drive_speed`` (double, 0–5 m/s): drives get a deadline at this speed
-          (:class:`~pearl_pomdp.navigation.DriveTimer`) and are closed with
-          ``nav_failed_observation`` when it passes; 0: drives have no deadline.
-        * ``guide_speed`` (double, 0.005–3 m/s), ``guide_actions`` (str[]): guidances are timed
-          at the slowest resident's pace.
-        * ``drive_path_factor`` (≥ 1), ``drive_slack`` (≥ 1), ``drive_margin`` (s),
-          ``drive_max_seconds`` (s): the rest of :class:`~pearl_pomdp.navigation.DriveDeadline`.
-        * ``nav_failed_observation`` (str, ``navFailed``), ``place_feature`` (str, ``RobotLocation``).
+        * The step rules: one parameter per field of :class:`~pearl_pomdp.tracking.StepSettings`
+          (:func:`step_parameters`: the same names, defaults, ranges and descriptions) —
+          ``step_timeout``, ``timeout_observation``, ``no_timeout_actions``, ``max_pending``,
+          ``stale_after``, ``confidence_floor``, ``drive_speed``, ``guide_speed``,
+          ``guide_actions``, ``drive_path_factor``, ``drive_slack``, ``drive_margin``,
+          ``drive_max_seconds``, ``nav_failed_observation``, ``place_feature``.
+          ``step_timeout``, ``stale_after`` and ``confidence_floor`` may change at run time
+          (:meth:`~pearl_pomdp.tracking.BeliefTracker.set_live`); the others are read-only.
         * ``location_names`` (str[]), ``locations.<name>`` (double[3]): the places (shared ``/**``).
+        * ``defaults_file`` (str, ``config/pearl_nodes.yaml``): the params file whose ``/**`` and
+          ``belief_tracker`` sections give the defaults (:mod:`pearl_pomdp.nodes.defaults`), so
+          ``ros2 run pearl_pomdp belief_tracker`` behaves as under the launch file; ``''``: none.
         * ``diagnostics_period`` (double, s, > 0): period of the /diagnostics summary.
         * ``speech_topic``, ``touchscreen_topic``, ``laser_topic``, ``reminder_topic``,
           ``action_topic``, ``belief_topic``, ``marginals_topic`` (str): topic names.
@@ -77,9 +84,9 @@ class BeliefTrackerNode(ManagedPearlNode):
     In-process use (tests, replay): ``BeliefTrackerNode(context=ctx,
     parameter_overrides={"domain": path, "use_sim_time": True}, domain=dom, model=model)``;
     ``domain``/``model`` are optional preloaded objects that skip loading the file
-    (``model`` alone for a flat model). After construction, :attr:`protocol` is the
-    :class:`~pearl_pomdp.tracking.StepProtocol` (belief, counters), :attr:`mapper` the
-    :class:`~pearl_pomdp.tracking.ObservationMapper` and :attr:`core` the :class:`~pearl_pomdp.tracking.BeliefTracker`.
+    (``model`` alone for a flat model). Once configured, :attr:`core` is the
+    :class:`~pearl_pomdp.tracking.BeliefTracker` the node drives (read its belief, counters and
+    deadline there; the node reaches it only through its public methods).
 
     Raises:
         NodeSetupError: missing domain file or invalid parameter combination (one line).
@@ -89,31 +96,8 @@ class BeliefTrackerNode(ManagedPearlNode):
     DEFAULT_NAME = "belief_tracker"
     PARAMETERS = (
         Param("domain", "config/pearl.domain.yaml", "Factored domain (.yaml) or flat model (.pomdp) file"),
-        Param("step_timeout", 10.0, "Seconds without input after an action before the step is closed "
-                                    "with timeout_observation (0: wait forever; changeable at run time)",
-              range=(0.0, 3600.0), read_only=False),
-        Param("timeout_observation", "unknown", "Observation symbol that closes a step on timeout"),
-        Param("no_timeout_actions", [""],
-              "Actions whose step only an input closes (drives end with a laser landmark); "
-              "empty: the domain's category: Move actions; names the model does not have are ignored"),
-        Param("max_pending", 8, "Observations that may wait for the next action (FIFO)", range=(0, 1000)),
-        Param("stale_after", 0.0, "Drop a waiting observation older than this many seconds (0: never; "
-                                  "changeable at run time)", range=(0.0, 3600.0), read_only=False),
-        Param("confidence_floor", 0.0, "Speech recognised with a lower confidence counts as unknown "
-                                       "(changeable at run time)", range=(0.0, 1.0), read_only=False),
-        Param("drive_speed", 0.0, "Drives get a deadline from distance at this speed (m/s) and are closed "
-                                  "with nav_failed_observation when it passes; 0: no drive deadline",
-              range=(0.0, 5.0)),
-        Param("guide_speed", 0.03, "Speed (m/s) guide_actions are timed at: the slowest pace, rests included, "
-                                   "of a resident the robot still guides", range=(0.005, 3.0)),
-        Param("guide_actions", [""], "Drives that walk the resident along (timed at guide_speed)"),
-        Param("drive_path_factor", 1.4, "Path length over straight-line distance", range=(1.0, 10.0)),
-        Param("drive_slack", 1.5, "Multiplier on a drive's expected time", range=(1.0, 10.0)),
-        Param("drive_margin", 10.0, "Seconds added to every drive's deadline", range=(0.0, 3600.0)),
-        Param("drive_max_seconds", 1800.0, "No drive deadline is longer than this (s)", range=(1.0, 86400.0)),
-        Param("nav_failed_observation", "navFailed", "Observation symbol that closes a drive at its deadline"),
-        Param("place_feature", "RobotLocation", "State feature whose values are the places the drives go to"),
-        Param("location_names", [""], "Named places (locations.<name> = [x, y, yaw] in the map frame)"),
+        *step_parameters(),
+        Param("location_names", EMPTY_STRINGS, "Named places (locations.<name> = [x, y, yaw] in the map frame)"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
         Param("speech_topic", "/pearl/speech", "Recognised speech text (std_msgs/String)"),
         Param("touchscreen_topic", "/pearl/touchscreen", "Touchscreen symbols (std_msgs/String)"),
@@ -128,12 +112,14 @@ class BeliefTrackerNode(ManagedPearlNode):
 
     def __init__(self, *, domain=None, model=None, keyword_filter=None, **kwargs):
         super().__init__(**kwargs)
-        self.params = p = self.declare_table(self.PARAMETERS)
+        defaults = FileDefaults(self)
+        self.params = p = self.declare_table(defaults.apply(self.PARAMETERS))
         for name in [n for n in p["location_names"] if n]:
-            p.update(self.declare_table([Param(f"locations.{name}", [0.0, 0.0, 0.0],
-                                               f"Pose of {name}: x, y (m), yaw (rad) in the map frame")]))
+            p.update(self.declare_table(defaults.apply([Param(f"locations.{name}", [0.0, 0.0, 0.0],
+                                                              f"Pose of {name}: x, y (m), yaw (rad) in the map frame")])))
         self._preloaded = (domain, model, keyword_filter)
-        self.core = None
+        #: The core tracker (:class:`~pearl_pomdp.tracking.BeliefTracker`) once configured, else ``None``.
+        self.core: Optional[BeliefTracker] = None
         self._reported_warnings = 0
         self._event_logged: Dict[str, float] = {}   # kind → node-clock second it was last logged
         self.actions_received = 0  # /pearl/action messages taken (the sim-clock driver waits on it)
@@ -143,8 +129,9 @@ class BeliefTrackerNode(ManagedPearlNode):
         self.lost_inputs = 0
         self._last_seq: Dict[str, int] = {}
         self._last_diag = -1.0
-        self._deadline_timer = None
-        self._flush_timer = None
+        self._deadline_timer: Optional[Any] = None
+        self._flush_timer: Optional[Any] = None
+        self._reset_srv: Optional[Any] = None
         self._armed_for: Optional[float] = None
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -159,14 +146,11 @@ class BeliefTrackerNode(ManagedPearlNode):
             domain, model = load_domain_and_model(resolve_path(p["domain"], "domain"))
         self.domain, self.model = domain, model
         try:
-            given = [name for name in p["no_timeout_actions"] if name]
-            settings = StepSettings.from_params({**p, "no_timeout_actions": given,
-                                                 "location_names": [n for n in p["location_names"] if n]})
-            self.core = BeliefTracker(model, domain, settings, keyword_filter)
+            self.core = core = BeliefTracker(model, domain, StepSettings.from_params(p), keyword_filter)
         except ValueError as err:
             raise NodeSetupError(f"parameter {str(err)}") from None
-        self.protocol = self.core.protocol
-        self.mapper = self.core.mapper
+        for event in core.startup_events:
+            self._log(event.level, event.text)
 
         self.belief_pub = self.lifecycle_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
         self.marginals_pub = self.lifecycle_publisher(cv.TextMsg, p["marginals_topic"], LATCHED_QOS)
@@ -181,7 +165,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         self._deadline_timer = None
         self._armed_for = None
         self._configured_timeout = p["step_timeout"] > 0
-        if p["step_timeout"] > 0 or self.core.drive_timer is not None:
+        if p["step_timeout"] > 0 or core.drive_timer is not None:
             self._deadline_timer = self.managed_timer(p["step_timeout"] or 1.0, self._on_tick)
             self._deadline_timer.cancel()
         self.managed_timer(p["diagnostics_period"], self.publish_diagnostics)
@@ -196,7 +180,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         from std_srvs.srv import Trigger
 
         self._reset_srv = self.create_service(Trigger, p["reset_service"], self._on_reset)
-        drives = self.core.drive_timer
+        drives = core.drive_timer
         self.get_logger().info(f"tracking {model.name}: {model.num_states} states, {model.num_observations} "
                                f"observations; step_timeout {p['step_timeout']} s → {p['timeout_observation']!r}; "
                                + (f"drives {', '.join(drives.goals)} timed at {p['drive_speed']} m/s → "
@@ -204,19 +188,17 @@ class BeliefTrackerNode(ManagedPearlNode):
 
     def activate_node(self) -> None:
         """Publish the current belief (b0 at first): the policy answers it and the loop runs."""
-        self._publish_belief(None)
+        self._publish_belief()
 
     def deactivate_node(self) -> None:
         """Stop tracking; keep the belief. An open step is abandoned (no update): the robot
         stops doing what it was doing, and on activation the policy decides afresh."""
         if self.core is not None:
-            self.core.protocol.current_action = None
-            self.core.protocol.opened_at = None
-            self._arm_deadline()
+            self._handle(self.core.abandon_step())
 
     def cleanup_node(self) -> None:
         self._flush_timer = None
-        if getattr(self, "_reset_srv", None) is not None:
+        if self._reset_srv is not None:
             self.destroy_service(self._reset_srv)
             self._reset_srv = None
         self.core = None
@@ -228,36 +210,31 @@ class BeliefTrackerNode(ManagedPearlNode):
             return response
         self.core.reset()
         self._arm_deadline()
-        self._publish_belief(None)
+        self._publish_belief()
         response.success = True
         response.message = f"belief reset to b0 of {self.model.name}" + ("" if self.active else " (inactive)")
         self.get_logger().info(response.message)
         return response
 
     def _on_set_parameters(self, params):
-        """Run-time changes of step_timeout, stale_after and confidence_floor, validated; others are read-only."""
+        """Run-time changes of the live step settings (step_timeout, stale_after, confidence_floor),
+        checked by the core before any is applied; the others are read-only."""
         from rcl_interfaces.msg import SetParametersResult
 
-        for param in params:
-            if param.name == "step_timeout" and self.core is not None and not self._configured_timeout \
-                    and param.value > 0:
-                return SetParametersResult(successful=False, reason="step_timeout: this node was configured "
-                                           "without a timeout (0); set it before configure")
-            if param.name == "confidence_floor" and not 0.0 <= param.value <= 1.0:
-                return SetParametersResult(successful=False, reason=f"confidence_floor must be in [0, 1], "
-                                                                    f"got {param.value}")
-        for param in params:
-            if self.core is None:
-                continue
-            if param.name == "step_timeout":
-                self.core.protocol.step_timeout = float(param.value)
-                # The one-shot timer is re-armed for the open step's new deadline.
-                self._armed_for = None
-                self._arm_deadline()
-            elif param.name == "stale_after":
-                self.core.protocol.stale_after = float(param.value)
-            elif param.name == "confidence_floor":
-                self.core.mapper.confidence_floor = float(param.value)
+        live = {param.name: param.value for param in params if param.name in StepSettings.live_names()}
+        if not live or self.core is None:
+            return SetParametersResult(successful=True)   # not configured: the value is read at configure
+        if live.get("step_timeout", 0) > 0 and not self._configured_timeout:
+            return SetParametersResult(successful=False, reason="step_timeout: this node was configured "
+                                       "without a timeout (0); set it before configure")
+        try:
+            self.core.set_live(**live)
+        except ValueError as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        if "step_timeout" in live:
+            # The one-shot timer is re-armed for the open step's new deadline.
+            self._armed_for = None
+            self._arm_deadline()
         return SetParametersResult(successful=True)
 
     # ----------------------------------------------------------- callbacks
@@ -290,37 +267,40 @@ class BeliefTrackerNode(ManagedPearlNode):
         if self._inactive():
             return
         self.actions_received += 1
+        assert self.core is not None  # _inactive() is True otherwise
         self._handle(self.core.on_action(cv.msg_to_action(msg), self.now_s()))
 
     def _on_speech(self, msg) -> None:
         if self._inactive():
             return
-        before = self.mapper.unknown_speech
+        assert self.core is not None
         outcome = self.core.on_input("speech", cv.msg_to_text(msg), self.now_s())
-        if self.mapper.unknown_speech > before:
+        if outcome.heard == "no_keyword":
             self.get_logger().info(f"speech {outcome.text!r} has no keyword: observation {outcome.symbol!r} "
-                                   f"({self.mapper.unknown_speech} such texts so far)", throttle_duration_sec=1.0)
-        if outcome.symbol is None:
+                                   f"({self.core.counters()['unknown_speech']} such texts so far)",
+                                   throttle_duration_sec=1.0)
+        if outcome.kind == "invalid":
             self.get_logger().warning(f"speech {outcome.text!r} maps to no observation symbol of {self.model.name}; "
-                                      f"ignored (invalid speech inputs: {self.mapper.invalid['speech']})",
+                                      f"ignored (invalid speech inputs: {self.core.counters()['invalid_speech']})",
                                       throttle_duration_sec=1.0)
             self._diagnostics_soon()
             return
-        self._handle(outcome.closed)
+        self._handle(outcome)
 
     def _symbol_callback(self, key: str) -> Callable:
         def callback(msg) -> None:
             if self._inactive():
                 return
+            assert self.core is not None
             outcome = self.core.on_input(key, cv.msg_to_text(msg), self.now_s())
-            if outcome.symbol is None:
-                valid = ", ".join(sorted(self.mapper.allowed[key]))
+            if outcome.kind == "invalid":
+                valid = ", ".join(sorted(self.core.symbols(key)))
                 self.get_logger().warning(f"{key} input {cv.msg_to_text(msg)!r} is not a {key} symbol "
                                           f"(valid: {valid}); ignored (invalid {key} inputs: "
-                                          f"{self.mapper.invalid[key]})", throttle_duration_sec=1.0)
+                                          f"{self.core.counters()[f'invalid_{key}']})", throttle_duration_sec=1.0)
                 self._diagnostics_soon()
                 return
-            self._handle(outcome.closed)
+            self._handle(outcome)
 
         return callback
 
@@ -337,29 +317,31 @@ class BeliefTrackerNode(ManagedPearlNode):
             self._handle(self.core.on_tick(self.now_s()))
 
     # -------------------------------------------------------------- output
-    def _handle(self, result: Optional[StepResult]) -> None:
+    def _handle(self, outcome: InputOutcome) -> None:
+        """Act on what the core did: publish a closed step's belief, follow the deadline, log."""
         # The belief goes out first: logging and diagnostics must not delay the policy.
-        if result is not None:
-            self._publish_belief(result)
+        if outcome.closed is not None:
+            self._publish_belief(outcome.closed.action, outcome.closed.observation)
         self._arm_deadline()
-        logger = self.get_logger()
-        for event in self.protocol.take_events():
+        for event in outcome.events:
             # One line per event; a flood of one kind is cut to one line per second of the
             # node's clock (sim time under /clock, so a fast-forwarded demo still shows each
             # of its events; rclpy's own throttle counts wall time). The counters are exact.
-            if not self._event_due(event.kind or event.text, self.now_s()):
-                continue
-            if event.level == "warn":
-                logger.warning(event.text)
-            else:
-                logger.info(event.text)
+            if self._event_due(event.kind or event.text, self.now_s()):
+                self._log(event.level, event.text)
         if self._warning_total() > self._reported_warnings:
             self._diagnostics_soon()
+
+    def _log(self, level: str, text: str) -> None:
+        if level == "warn":
+            self.get_logger().warning(text)
+        else:
+            self.get_logger().info(text)
 
     def _arm_deadline(self) -> None:
         """Keep the one-shot timer in step with the core's deadline (armed while a step can time out)."""
         timer = self._deadline_timer
-        deadline = self.core.deadline()
+        deadline = self.core.deadline() if self.core is not None else None
         if timer is None or deadline == self._armed_for:
             return
         self._armed_for = deadline
@@ -386,16 +368,13 @@ class BeliefTrackerNode(ManagedPearlNode):
         elif self._flush_timer is not None and self._flush_timer.is_canceled():
             self._flush_timer.reset()
 
-    def _publish_belief(self, result: Optional[StepResult]) -> None:
-        belief = self.protocol.belief
+    def _publish_belief(self, action: Optional[str] = None, observation: Optional[str] = None) -> None:
+        """The current belief and its marginals (with the step's action and observation, if one closed)."""
+        assert self.core is not None
+        belief = self.core.belief
         self.belief_pub.publish(cv.belief_to_msg(belief))
-        self.marginals_pub.publish(cv.marginals_to_msg(self.marginals(belief), self.protocol.step,
-                                                       result.action if result else None,
-                                                       result.observation if result else None))
-
-    def marginals(self, belief: np.ndarray) -> Dict[str, Dict[str, float]]:
-        """``{feature: {value: P}}``; a flat model reports the pseudo-feature ``"state"``."""
-        return self.core.marginals(belief)
+        self.marginals_pub.publish(cv.marginals_to_msg(self.core.marginals(belief), self.core.step, action,
+                                                       observation))
 
     def counters(self) -> Dict[str, int]:
         """Every counter reported on /diagnostics."""
@@ -414,15 +393,15 @@ class BeliefTrackerNode(ManagedPearlNode):
         warnings = self._warning_total()
         self._reported_warnings = warnings
         self._last_diag = time.monotonic()
-        step, open_action, pending = self.protocol.snapshot()
+        step, open_action, pending = self.core.snapshot()
         values = {"step": step, "open_action": open_action or "", "pending": pending, **self.counters()}
-        if self.protocol.last_nav_failure:
-            values["last_nav_failure"] = self.protocol.last_nav_failure
+        if self.core.last_nav_failure:
+            values["last_nav_failure"] = self.core.last_nav_failure
         level = cv.DIAG_WARN if warnings else cv.DIAG_OK
         text = f"{warnings} input(s) dropped, invalid or recovered" if warnings else "tracking"
-        nav = self.protocol.counters.get("nav_failures", 0)
+        nav = values.get("nav_failures", 0)
         if nav:
-            text = f"{text}; {nav} drive(s) missed their deadline (last: {self.protocol.last_nav_failure})"
+            text = f"{text}; {nav} drive(s) missed their deadline (last: {self.core.last_nav_failure})"
         self.diag_pub.publish(cv.diagnostics_to_msg(f"pearl: {self.get_name()}", self.model.name, level, text,
                                                     values, self.now_s()))
 

@@ -35,7 +35,7 @@ from __future__ import annotations
 import array
 import json
 import math
-from typing import Callable, Dict, Mapping, Optional, Sequence
+from typing import Dict, Mapping, Optional, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time as TimeMsg
@@ -51,7 +51,7 @@ from pearl_pomdp.errors import BeliefError
 __all__ = [
     "BELIEF_LABEL", "BeliefMsg", "TextMsg", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
     "belief_to_msg", "msg_to_belief", "marginals_to_msg", "msg_to_marginals",
-    "text_to_msg", "msg_to_text", "msg_to_observation", "action_to_msg", "msg_to_action",
+    "text_to_msg", "msg_to_text", "action_to_msg", "msg_to_action",
     "decision_to_msg", "msg_to_decision", "pose_to_msg", "msg_to_pose",
     "diagnostics_to_msg", "msg_to_diagnostics", "seconds_to_time", "time_to_seconds",
     "clock_to_msg", "DIAG_OK", "DIAG_WARN", "DIAG_ERROR",
@@ -151,17 +151,6 @@ def text_to_msg(text: str) -> String:
 def msg_to_text(msg: String) -> str:
     """The text of a ``std_msgs/String``."""
     return msg.data
-
-
-def msg_to_observation(msg: String, classify: Callable[[str], str]) -> str:
-    """The observation symbol a ``std_msgs/String`` input stands for.
-
-    Args:
-        msg: the input (recognised speech text, or a symbol such as ``t_yes``).
-        classify: maps the text to a symbol (the speech keyword filter, or the symbol
-            validator of a modality); it decides what an unknown input becomes.
-    """
-    return classify(msg.data)
 
 
 def action_to_msg(action_name: str) -> String:

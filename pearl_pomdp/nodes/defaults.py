@@ -1,15 +1,18 @@
 """Parameter defaults from the package's params file (``config/pearl_nodes.yaml``).
 
-Nodes whose configuration is a table — what each action says and where it drives, where
-each place is and which landmark it is — keep no such table in code: they declare a
-``defaults_file`` parameter (default ``config/pearl_nodes.yaml``, looked up like every file
-parameter: working directory, then the package share directory), read the ``/**`` and
-``<node default name>`` sections of it (:func:`pearl_pomdp.params.node_parameters`)
-and declare each parameter with the file's value as its default. So
+The code holds every default (for the tracker: :class:`pearl_pomdp.tracking.StepSettings`);
+the shipped params file holds only what the Pearl robot sets differently — its places, what
+each action says and where it drives, which landmark each place is, the guidances, the
+tracker's stale and drive rules — each with its reason. Every Pearl node of the launch file
+declares a ``defaults_file`` parameter (default ``config/pearl_nodes.yaml``, looked up like
+every file parameter: working directory, then the package share directory), reads the
+``/**`` and ``<node default name>`` sections of it (:func:`pearl_pomdp.params.node_parameters`)
+and declares each parameter with the file's value as its default. So
 
-* ``ros2 run pearl_pomdp action_executor`` with no parameters behaves as the launch file;
+* ``ros2 run pearl_pomdp belief_tracker`` (or any node) with no parameters behaves as under the
+  launch file (``test/test_node_params.py`` checks every node);
 * ``--params-file`` and ``-p`` still override every value (they are overrides in rclpy);
-* ``-p defaults_file:=''`` starts from the code's empty defaults (nothing configured).
+* ``-p defaults_file:=''`` starts from the code's defaults (no places, no action table).
 """
 from __future__ import annotations
 
@@ -81,7 +84,7 @@ class FileDefaults:
         self.values: Dict[str, Any] = {}
         if self.path is not None:
             try:
-                self.values = node_parameters(self.path, self.section)
+                self.values = node_parameters(self.section, self.path)
             except SpecError as err:
                 raise NodeSetupError(f"parameter defaults_file: {err}") from None
 

@@ -1,6 +1,6 @@
 """All three Pearl nodes in one process, on one executor, under simulated time.
 
-For tests, replay and demos that must be deterministic (DESIGN.md §6 "In one process"):
+For tests, replay and demos that must be deterministic (docs/design.md §6 "One loop, and in one process"):
 the same node classes as the separate processes, on one ``SingleThreadedExecutor``, with
 ``use_sim_time`` on, so time only moves when someone publishes ``/clock``.
 
@@ -49,10 +49,10 @@ class PearlGraph:
             parameter in ``shared``, or from the package's ``config/pearl.domain.yaml``).
         decider: preloaded policy for the policy node (skips loading/planning).
         executor: False to leave out the action executor.
-        params_file: the ROS 2 params file whose belief_tracker and hierarchical_policy
-            sections (and ``/**``) are applied first, as ``--params-file`` does for the
-            launched nodes (default: the shipped ``config/pearl_nodes.yaml``; ``None``
-            keeps the nodes' built-in defaults). ``shared`` and ``overrides`` win over it.
+        params_file: the ROS 2 params file whose ``/**`` and node sections give every node its
+            defaults (each node's ``defaults_file`` parameter; default: the shipped
+            ``config/pearl_nodes.yaml``, as for a node started alone; ``None``: the code's
+            defaults only). ``shared`` and ``overrides`` win over it.
         parameter_services: False builds the nodes without parameter services (faster
             executor iterations; no remote ``ros2 param`` access).
 
@@ -82,21 +82,17 @@ class PearlGraph:
                 domain, model = load_domain_and_model(resolve_path(path, "domain"))
             self.domain, self.model = domain, model
 
-            from_file: Dict[str, Dict[str, Any]] = {}
-            if params_file is not None:
-                from pearl_pomdp.params import node_params
-
-                path = None if params_file == "default" else params_file
-                for name, cls in (("belief_tracker", BeliefTrackerNode), ("hierarchical_policy", HierarchicalPolicyNode)):
-                    # The parameters the node declares (the shared /** section also holds the
-                    # executor's places); the domain is loaded once for all nodes, above.
-                    declared = {p.name for p in cls.PARAMETERS}
-                    from_file[name] = {k: v for k, v in node_params(name, path).items()
-                                       if (k in declared or (name == "belief_tracker" and k.startswith("locations.")))
-                                       and k != "domain"}
+            # Every node reads its defaults from a params file itself (``defaults_file``,
+            # pearl_pomdp.nodes.defaults): the shipped one unless told otherwise, as under
+            # ``ros2 run`` and the launch file.
+            base: Dict[str, Any] = {}
+            if params_file is None:
+                base["defaults_file"] = ""
+            elif params_file != "default":
+                base["defaults_file"] = str(params_file)
 
             def params(name: str) -> Dict[str, Any]:
-                return {**from_file.get(name, {}), **shared, **dict(overrides.get(name, {}))}
+                return {**base, **shared, **dict(overrides.get(name, {}))}
 
             common = {"context": context, "start_parameter_services": parameter_services}
             managed = {**common, "lifecycle_services": parameter_services}

@@ -25,6 +25,9 @@ from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Pa
 from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.landmark_detector import POSE_QOS
 
+#: The filter's default settings (the one source of the parameters' defaults below).
+_CONFIG = GuidePaceConfig()
+
 __all__ = ["GuidePaceNode", "main"]
 
 #: Velocity commands: reliable, volatile, keep-last 1 (only the newest command matters).
@@ -63,16 +66,17 @@ class GuidePaceNode(PearlNode):
     """
 
     DEFAULT_NAME = "guide_pace"
+    #: The filter's settings are GuidePaceConfig's fields: their defaults and reasons live there.
     PARAMETERS = (
         Param("guide_actions", [], "Actions during which the robot guides the resident",
               type=Parameter.Type.STRING_ARRAY),
-        Param("cruise_speed", 0.6, "m/s when the navigation gives none", range=(0.05, 3.0)),
-        Param("follow_gap", 1.0, "m behind the robot at which she is held", range=(0.2, 10.0)),
-        Param("resume_gap", 1.5, "m: waiting ends once she is this close (> follow_gap)", range=(0.3, 20.0)),
-        Param("stop_gap", 2.5, "m: the robot stops when she is farther behind (> resume_gap)", range=(0.5, 30.0)),
-        Param("gain", 0.5, "1/s: speed per metre she is closer than follow_gap", range=(0.01, 10.0)),
-        Param("pace_time_constant", 3.0, "s: smoothing of her pace estimate", range=(0.1, 60.0)),
-        Param("lost_timeout", 60.0, "s of waiting after which she is lost", range=(1.0, 3600.0)),
+        Param("cruise_speed", _CONFIG.cruise_speed, "m/s when the navigation gives none", range=(0.05, 3.0)),
+        Param("follow_gap", _CONFIG.follow_gap, "m behind the robot at which she is held", range=(0.2, 10.0)),
+        Param("resume_gap", _CONFIG.resume_gap, "m: waiting ends once she is this close (> follow_gap)", range=(0.3, 20.0)),
+        Param("stop_gap", _CONFIG.stop_gap, "m: the robot stops when she is farther behind (> resume_gap)", range=(0.5, 30.0)),
+        Param("gain", _CONFIG.gain, "1/s: speed per metre she is closer than follow_gap", range=(0.01, 10.0)),
+        Param("pace_time_constant", _CONFIG.pace_time_constant, "s: smoothing of her pace estimate", range=(0.1, 60.0)),
+        Param("lost_timeout", _CONFIG.lost_timeout, "s of waiting after which she is lost", range=(1.0, 3600.0)),
         Param("person_topic", "/pearl/resident_position", "Resident position (PointStamped, robot frame)"),
         Param("person_frame", "base_link", "Frame the resident position must be in"),
         Param("person_timeout", 1.0, "s: an older position means she is not seen", range=(0.05, 10.0)),

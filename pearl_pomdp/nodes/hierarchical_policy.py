@@ -1,4 +1,4 @@
-"""The hierarchical policy node: beliefs in, primitive actions out (DESIGN.md §4, §6).
+"""The hierarchical policy node: beliefs in, primitive actions out (docs/design.md §4, §6).
 
 For every belief it runs EXECUTE top-down (root → … → primitive) and publishes the
 primitive action and the trace. All planning happens at start-up, before spinning: a
@@ -17,6 +17,7 @@ from pearl_pomdp.errors import BeliefError
 from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Param,
                                       load_domain_and_model, resolve_path, run_node)
+from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
 
 __all__ = ["HierarchicalPolicyNode", "load_decider", "main"]
@@ -70,6 +71,8 @@ class HierarchicalPolicyNode(ManagedPearlNode):
           (hierarchical) or an ``.npz`` file (flat); empty: plan at start-up.
         * ``diagnostics_period`` (double, s): period of the /diagnostics summary.
         * ``belief_topic``, ``action_topic``, ``decision_topic`` (str): topic names.
+        * ``defaults_file`` (str, ``config/pearl_nodes.yaml``): params file giving the defaults
+          (:mod:`pearl_pomdp.nodes.defaults`; ``''``: none).
         * ``use_sim_time`` (bool): follow /clock.
 
     Subscribers:
@@ -107,7 +110,9 @@ class HierarchicalPolicyNode(ManagedPearlNode):
 
     def __init__(self, *, domain=None, model=None, decider=None, **kwargs):
         super().__init__(**kwargs)
-        self.params = p = self.declare_table(self.PARAMETERS)
+        # Defaults from the params file's /** and hierarchical_policy sections (``defaults_file``),
+        # so a node started alone behaves as under the launch file.
+        self.params = p = self.declare_table(FileDefaults(self).apply(self.PARAMETERS))
         self._preloaded = (domain, model, decider)
         self.decider = None
         self.decisions = 0

@@ -63,13 +63,17 @@ class LandmarkDetectorNode(PearlNode):
     PARAMETERS = (
         Param("location_names", [], "Named places (see locations.<name>)", type=Parameter.Type.STRING_ARRAY),
         Param("frame_id", "map", "Frame of the places and of the accepted poses"),
+        # 1 m: Nav2's default xy_goal_tolerance is 0.25 m, and 1 m also takes a stop in the doorway.
         Param("entry_radius", 1.0, "Metres from a place within which the robot has arrived", range=(0.05, 50.0)),
+        # 1 m of hysteresis is well above AMCL's jitter (a few cm) and a turn in place.
         Param("exit_radius", 2.0, "Metres from a place beyond which the robot has left it (> entry_radius)",
               range=(0.1, 100.0)),
+        # A pose less certain than 1 m cannot tell the door from the corridor.
         Param("max_position_stddev", 1.0, "Ignore poses less certain than this (m, x/y standard deviation; 0: off)",
               range=(0.0, 100.0)),
         Param("report_initial", False, "Report a place the first pose is already in"),
         Param("domain", "", "Domain whose Laser observations the symbols must be ('': no check)"),
+        # Nav2's AMCL; set odom_topic: /odom (and pose_topic: '') for a robot localised by odometry in the map frame.
         Param("pose_topic", "/amcl_pose", "Localised pose input (PoseWithCovarianceStamped; '': off)"),
         Param("odom_topic", "", "Odometry input (nav_msgs/Odometry; '': off)"),
         Param("laser_topic", "/pearl/laser", "Landmark symbol output (std_msgs/String)"),

@@ -79,7 +79,7 @@ class SimClockDriver:
         """Every belief answered, every answer back at the tracker (see the module doc)."""
         tracker, policy = self.graph.tracker, self.graph.policy
         decisions = policy.decisions
-        return (decisions == 1 + tracker.protocol.counters["updates"] and len(self.actions) >= decisions
+        return (tracker.core is not None and decisions == 1 + tracker.core.step and len(self.actions) >= decisions
                 and tracker.actions_received >= decisions)
 
     def settle(self) -> bool:

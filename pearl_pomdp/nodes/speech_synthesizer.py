@@ -22,7 +22,7 @@ from __future__ import annotations
 import queue
 import sys
 import threading
-from typing import Dict, List, Optional
+from typing import Any, Dict, List, Optional
 
 import numpy as np
 
@@ -74,12 +74,13 @@ class SpeechSynthesizerNode(PearlNode):
             self.synth.synthesize("ok", self.voice)  # an unknown voice fails here, at start-up
         except Exception as err:
             raise NodeSetupError(f"parameter voice: {err}") from None
-        self._sd = None
+        self._sd: Any = None   # the sounddevice module, for output:=device
         if p["output"] == "device":
             self._sd = self._check_device(p["device"])
         self.counts: Dict[str, int] = {"sentences": 0, "spoken": 0, "dropped": 0, "errors": 0, "samples": 0}
         self._queue: "queue.Queue[Optional[str]]" = queue.Queue(maxsize=p["max_queue"])
-        self.audio_pub = self.create_publisher(AudioMsg, p["audio_topic"], AUDIO_QOS) if p["output"] == "topic" else None
+        self.audio_pub: Any = (self.create_publisher(AudioMsg, p["audio_topic"], AUDIO_QOS)
+                               if p["output"] == "topic" else None)
         self.create_subscription(cv.TextMsg, p["say_topic"], self._on_say, EVENT_QOS)
         self._worker = threading.Thread(target=self._speak_loop, name="speech_synth", daemon=True)
         self._worker.start()

@@ -1,7 +1,7 @@
 """What every solver returns: an α-vector policy and a result record.
 
 A value function is a set Γ of α-vectors, each labelled with an action
-(DESIGN.md §2): ``V(b) = max_k Γ[k]·b`` and the policy takes the action of the
+(docs/design.md §2): ``V(b) = max_k Γ[k]·b`` and the policy takes the action of the
 maximising vector, a single matrix-vector product.
 """
 from __future__ import annotations

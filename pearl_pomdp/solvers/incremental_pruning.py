@@ -5,7 +5,7 @@ Fast, Exact Method for Partially Observable Markov Decision Processes", UAI 1997
 (§3, the "normal" variant that pomdp-solve runs with ``-method incprune``).
 
 Value iteration ``V'(b) = max_a [ b·R[:,a] + γ Σ_o P(o|b,a) V(b^{a,o}) ]``
-(DESIGN.md §2) keeps ``V`` as a set Γ of α-vectors. One epoch, in the paper's
+(docs/design.md §2) keeps ``V`` as a set Γ of α-vectors. One epoch, in the paper's
 order:
 
 1. **Project** every vector of Γ through each action a and observation o::

@@ -11,7 +11,7 @@
   exact value of a policy, so ``max_a b·α_a`` is a lower bound.
 * **Most-likely-state** policy: the MDP action of the most probable state.
 
-Array conventions (DESIGN.md §2): ``T[a][s, s'] = P(s'|s,a)`` (dense or scipy
+Array conventions (docs/design.md §2): ``T[a][s, s'] = P(s'|s,a)`` (dense or scipy
 sparse CSR), ``O[a, s', o] = P(o|s',a)``, ``R[s, a]``, ``b0[s]``.
 
 All iterations start on the safe side (upper bounds from ``R_max/(1-γ)``, lower

@@ -11,7 +11,7 @@ References:
     * M. Spaan, N. Vlassis. "Perseus: randomized point-based value iteration
       for POMDPs", JAIR 24, 2005.
 
-Conventions (DESIGN.md §2): ``T[a][s, s'] = P(s'|s,a)`` (dense or scipy CSR),
+Conventions (docs/design.md §2): ``T[a][s, s'] = P(s'|s,a)`` (dense or scipy CSR),
 ``O[a, s', o] = P(o|s',a)``, ``R[s, a]``, ``b0[s]``, discount ``γ < 1``.
 
 The solver keeps
@@ -62,7 +62,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple, cast
 
 import numpy as np
 
@@ -216,12 +216,12 @@ class _Node:
         self.idx = idx        # support of b (state indices)
         self.val = val        # b on that support
         self.key = key
-        self.p = None         # [A, Z] P(o | b, a), set on first expansion
-        self.Rb = None        # [A] expected immediate reward
-        self.ub_c = None      # [A, Z] cached upper bounds at the successors
+        self.p: Any = None    # [A, Z] P(o | b, a), set on first expansion (Any: None until then)
+        self.Rb: Any = None   # [A] expected immediate reward
+        self.ub_c: Any = None  # [A, Z] cached upper bounds at the successors
         self.ub = np.inf      # upper bound at b
         self.children = {}    # flat (a*Z + o) -> _Node, created when the search goes there
-        self.ub_seen = None   # [A] sawtooth version ub_c[a] was last read at (-1: never)
+        self.ub_seen: Any = None  # [A] sawtooth version ub_c[a] was last read at (-1: never)
         self.reach = 0.0      # max over the trials' paths to b of γ^d Π P(o|b,a): b's weight in V(b0)
         self.allowed = None   # [A] bool: the actions the action filter allows at b (None: all)
 
@@ -781,9 +781,10 @@ class PointBasedSolver:
             if self._p_todo is None or not self._p_todo.any():
                 if not self._perseus_start():
                     return
-            todo = np.flatnonzero(self._p_todo)  # type: ignore[arg-type]  # set by _perseus_start above
+            todo_mask = cast(np.ndarray, self._p_todo)   # set by _perseus_start above
+            todo = np.flatnonzero(todo_mask)
             i = int(todo[self.rng.integers(todo.size)])
-            self._p_todo[i] = False
+            todo_mask[i] = False
             node = self._p_nodes[i]
             U, C, live = self._successors(node)
             lb, best = self._lower_children(U, C, live)
@@ -800,7 +801,7 @@ class PointBasedSolver:
                 self._add_alpha(alpha, a)
             values = np.bincount(self._p_seg, weights=self._p_val * alpha[self._p_idx], minlength=len(self._p_nodes))
             covered = values >= self._p_lb
-            self._p_todo &= ~covered
+            todo_mask &= ~covered
 
     def _pick_arm(self) -> int:
         n = len(self.trial_kappa)

@@ -54,7 +54,7 @@ Array convention: ``alphas`` is ``[K, S]``, one vector per row.
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence, Tuple, Union
+from typing import Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
 
@@ -127,9 +127,9 @@ def pointwise_dominated(candidates: np.ndarray, by: np.ndarray, slack: float = 0
     for i in range(0, N, step):
         blk = candidates[i:i + step]
         if slack > 0.0:
-            out[i:i + step] = (by[None, :, :] + slack > blk[:, None, :]).all(axis=2).any(axis=1)
+            out[i:i + step] = cast(np.ndarray, (by[None, :, :] + slack > blk[:, None, :]).all(axis=2)).any(axis=1)
         else:
-            out[i:i + step] = (by[None, :, :] >= blk[:, None, :]).all(axis=2).any(axis=1)
+            out[i:i + step] = cast(np.ndarray, (by[None, :, :] >= blk[:, None, :]).all(axis=2)).any(axis=1)
     return out
 
 

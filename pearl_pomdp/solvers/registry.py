@@ -17,14 +17,21 @@ name           solver
 """
 from __future__ import annotations
 
-from typing import Any, Callable, Dict, Optional
+from typing import TYPE_CHECKING, Any, Dict, Optional, Tuple
 
 from pearl_pomdp.errors import PearlError
+
+if TYPE_CHECKING:  # pragma: no cover - typing only (interfaces imports numpy: `pearl --help` must not)
+    from pearl_pomdp.interfaces import Solver
+    from pearl_pomdp.model.pomdp import Pomdp
+    from pearl_pomdp.solvers.base import SolveResult
 
 __all__ = ["SOLVERS", "solve", "solver_names"]
 
 
-def _incprune(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False, trials=None):
+def _incprune(model: "Pomdp", *, horizon: Optional[int] = None, epsilon: Optional[float] = None,
+              time_limit: Optional[float] = None, seed: Optional[int] = None, progress: bool = False,
+              trials: Optional[int] = None) -> "SolveResult":
     if trials is not None:
         raise PearlError("a trial budget applies to pointbased only, not to incprune")
     from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
@@ -35,7 +42,9 @@ def _incprune(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, 
     return solve_incremental_pruning(model, **kwargs)
 
 
-def _pointbased(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False, trials=None):
+def _pointbased(model: "Pomdp", *, horizon: Optional[int] = None, epsilon: Optional[float] = None,
+                time_limit: Optional[float] = None, seed: Optional[int] = None, progress: bool = False,
+                trials: Optional[int] = None) -> "SolveResult":
     from pearl_pomdp.solvers.point_based import solve_point_based
 
     if horizon is not None:
@@ -49,7 +58,9 @@ def _pointbased(model, *, horizon=None, epsilon=None, time_limit=None, seed=None
     return solve_point_based(model, **kwargs)
 
 
-def _qmdp(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, progress=False, trials=None):
+def _qmdp(model: "Pomdp", *, horizon: Optional[int] = None, epsilon: Optional[float] = None,
+          time_limit: Optional[float] = None, seed: Optional[int] = None, progress: bool = False,
+          trials: Optional[int] = None) -> "SolveResult":
     if trials is not None:
         raise PearlError("a trial budget applies to pointbased only, not to qmdp")
     from pearl_pomdp.solvers.mdp import solve_qmdp
@@ -60,17 +71,17 @@ def _qmdp(model, *, horizon=None, epsilon=None, time_limit=None, seed=None, prog
 
 
 #: name → solver (see the module doc).
-SOLVERS: Dict[str, Callable[..., Any]] = {"incprune": _incprune, "pointbased": _pointbased, "qmdp": _qmdp}
+SOLVERS: Dict[str, "Solver"] = {"incprune": _incprune, "pointbased": _pointbased, "qmdp": _qmdp}
 
 
-def solver_names():
+def solver_names() -> Tuple[str, ...]:
     """The registered names, in table order."""
     return tuple(SOLVERS)
 
 
 def solve(model, name: str, *, horizon: Optional[int] = None, epsilon: Optional[float] = None,
           time_limit: Optional[float] = None, seed: Optional[int] = None, progress: bool = False,
-          trials: Optional[int] = None, where: str = "solver"):
+          trials: Optional[int] = None, where: str = "solver") -> "SolveResult":
     """Run the solver called ``name`` on ``model``.
 
     Args:

@@ -16,9 +16,15 @@ under a Dirichlet prior equal to the designer's table ("heard as meant") worth
 --prior-strength trials, so rows move from the designer's numbers towards the measured
 ones as trials accumulate (docs/speech.md).
 
+Each trial is one espeak-ng synthesis and one pocketsphinx decode (~0.1-0.3 s), so the
+defaults (5 SNRs x 4 voices x the residents' and carrier sentences) take several minutes;
+the shipped config/speech/pearl_channel.json is
+`pearl calibrate-speech config/pearl.domain.yaml --snr 30,20,10,5 --no-carriers` (352 trials,
+docs/speech.md). The examples below are small (seconds).
+
 Examples:
-  pearl calibrate-speech config/pearl.domain.yaml --out channel.json
-  pearl calibrate-speech config/pearl.domain.yaml --snr 20,10 --voices clear,slow --repeats 2 --json
+  pearl calibrate-speech config/pearl.domain.yaml --snr 20 --voices clear --no-carriers --out channel.json
+  pearl calibrate-speech config/pearl.domain.yaml --snr 20,10 --voices clear --no-carriers --json
 """
 from __future__ import annotations
 

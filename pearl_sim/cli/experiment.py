@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from typing import Any, Dict
 from pathlib import Path
 
 from pearl_pomdp.cli._inputs import require_file
@@ -134,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     agents = build_agents(domain, args.hierarchy, flat_time_limit=args.flat_time_limit, flat_trials=flat_trials,
                           policies=policies,
                           log=log if terminal else None)
-    plan_seconds = dict(build_agents.timings)
+    plan_seconds = dict(agents.timings)
     grid = study.cells(len(cases), noise, args.episodes)
     # The tracker's recoveries from impossible observations are logged per step; in a study of
     # thousands of episodes they drown the progress bar (the counters stay in each tracker).
@@ -151,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     study.plot_study(table, diffs, png, snr=snr)
     csv_path = out / "episodes.csv"
     study.write_csv(episodes, csv_path)
-    report = {
+    report: Dict[str, Any] = {
         "protocol": {"residents": [p.name for p in profiles], "resident_spec": args.residents, "resident_seed": args.seed,
                      "tasks": sorted({c.task for c in cases}), "noise_levels": noise,
                      "noise_axis": "snr_db" if snr else "word_error_rate", "channel": channel,
