@@ -357,13 +357,13 @@ class PointBasedSolver:
         # policy). With an action filter only those of the actions it allows at every start
         # belief (a policy the filter forbids somewhere is no lower bound of the restricted
         # problem), and the worst case R_min / (1 − γ) of any policy, so Γ is never empty.
-        if self.action_filter is None:
-            seeds = range(A)
-        else:
-            for n in self.starts:
-                n.allowed = self._allowed_at(n.idx, n.val)
-            seeds = np.flatnonzero(np.logical_and.reduce([n.allowed for n in self.starts]))
-            first = int(np.flatnonzero(self.root.allowed)[0])
+        seeds: np.ndarray = np.arange(A)
+        if self.action_filter is not None:
+            masks = [self._allowed_at(n.idx, n.val) for n in self.starts]
+            for n, mask in zip(self.starts, masks):
+                n.allowed = mask
+            seeds = np.flatnonzero(np.logical_and.reduce(masks))
+            first = int(np.flatnonzero(masks[0])[0])
             self._add_alpha(np.full(S, float(self.R.min()) / (1.0 - self.g)), first)
         for a in seeds:
             self._add_alpha(blind[a], int(a))
