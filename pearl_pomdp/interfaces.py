@@ -47,12 +47,15 @@ class Decision:
     action: int
     action_name: str
     trace: List[TraceStep] = field(default_factory=list)
+    #: Beliefs a forward search expanded for this decision (0: none beyond the one step).
+    expansions: int = 0
 
     def as_dict(self) -> dict:
         """JSON-ready form (``value`` NaN becomes ``None``)."""
         return {"action": self.action, "action_name": self.action_name,
                 "trace": [{"subtask": t.subtask, "choice": t.choice,
-                           "value": None if math.isnan(t.value) else t.value} for t in self.trace]}
+                           "value": None if math.isnan(t.value) else t.value} for t in self.trace],
+                "expansions": self.expansions}
 
 
 @runtime_checkable

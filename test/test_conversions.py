@@ -60,8 +60,8 @@ def test_decision_trace_from_objects_and_dicts():
             self.subtask, self.choice, self.value = subtask, choice, value
 
     msg = cv.decision_to_msg(7, "TellTime", [Step("Act", "Assist", 12.5), {"subtask": "Inform", "choice": "TellTime",
-                                                                          "value": float("nan")}], 0.00025)
-    assert cv.msg_to_decision(msg) == {"step": 7, "action": "TellTime", "latency_s": 0.00025, "trace": [
+                                                                          "value": float("nan")}], 0.00025, 12)
+    assert cv.msg_to_decision(msg) == {"step": 7, "action": "TellTime", "latency_s": 0.00025, "expansions": 12, "trace": [
         {"subtask": "Act", "choice": "Assist", "value": 12.5},
         {"subtask": "Inform", "choice": "TellTime", "value": None}]}  # NaN is not JSON: null
 

@@ -69,6 +69,7 @@ def test_batch_agrees_with_execute(planned):
 
 LOOKAHEAD_HIERARCHY = """
 root: Act
+parameterize: corner
 defaults: {solver: incprune, horizon: 4}
 subtasks:
   Act: {actions: [ClarifyTask, Help], horizon: 2, lookahead: 2}
@@ -189,6 +190,7 @@ rewards:
 """
 PROBE_HIERARCHY = """
 root: Top
+parameterize: corner
 defaults: {solver: incprune, horizon: 5}
 subtasks:
   Top: {actions: [Ask, Do]}

@@ -9,6 +9,7 @@ from pearl_pomdp.hierarchy import load_hierarchy, parse_hierarchy
 PRIMS = ["ClarifyTask", "CheckMeds", "Move"]
 GOOD = """\
 root: Act
+parameterize: corner
 defaults: {solver: incprune, horizon: 5}
 subtasks:
   Act:
@@ -37,20 +38,20 @@ def test_root_is_inferred_when_unique():
 
 
 @pytest.mark.parametrize("text, where, line, problem", [
-    (GOOD.replace("[CheckMeds, Move]", "[CheckMeds, Move, Fly]"), "subtasks.Help.actions[2]", 7, "unknown action 'Fly'"),
-    (GOOD.replace("    actions: [CheckMeds, Move]\n", "    actions: []\n"), "subtasks.Help.actions", 7,
+    (GOOD.replace("[CheckMeds, Move]", "[CheckMeds, Move, Fly]"), "subtasks.Help.actions[2]", 8, "unknown action 'Fly'"),
+    (GOOD.replace("    actions: [CheckMeds, Move]\n", "    actions: []\n"), "subtasks.Help.actions", 8,
      "abstract action has no children"),
-    (GOOD.replace("[CheckMeds, Move]", "[CheckMeds, Help]"), "subtasks.Help.actions[1]", 7, "cycle in the hierarchy"),
-    (GOOD.replace("[CheckMeds, Move]", "[CheckMeds, Move, Move]"), "subtasks.Help.actions[2]", 7, "duplicate action 'Move'"),
-    (GOOD.replace("[CheckMeds, Move]", "[CheckMeds]"), "subtasks", 3, "missing from the tree: Move"),
-    (GOOD.replace("solver: pointbased", "solver: magic"), "subtasks.Help.solver", 8, "unknown solver 'magic'"),
-    (GOOD.replace("horizon: 5", "horizon: -1"), "defaults.horizon", 2, "positive integer"),
-    (GOOD.replace("horizon: 5", "horizon: 5, lookahead: 4"), "defaults.lookahead", 2, "from 0 to 3"),
-    (GOOD.replace("horizon: 5", "horizon: 5, lookahead: yes"), "defaults.lookahead", 2, "got 'yes'"),
-    (GOOD.replace("time_limit: 2", "timelimit: 2"), "subtasks.Help.timelimit", 9, "unknown key"),
+    (GOOD.replace("[CheckMeds, Move]", "[CheckMeds, Help]"), "subtasks.Help.actions[1]", 8, "cycle in the hierarchy"),
+    (GOOD.replace("[CheckMeds, Move]", "[CheckMeds, Move, Move]"), "subtasks.Help.actions[2]", 8, "duplicate action 'Move'"),
+    (GOOD.replace("[CheckMeds, Move]", "[CheckMeds]"), "subtasks", 4, "missing from the tree: Move"),
+    (GOOD.replace("solver: pointbased", "solver: magic"), "subtasks.Help.solver", 9, "unknown solver 'magic'"),
+    (GOOD.replace("horizon: 5", "horizon: -1"), "defaults.horizon", 3, "positive integer"),
+    (GOOD.replace("horizon: 5", "horizon: 5, lookahead: 4"), "defaults.lookahead", 3, "from 0 to 3"),
+    (GOOD.replace("horizon: 5", "horizon: 5, lookahead: yes"), "defaults.lookahead", 3, "got 'yes'"),
+    (GOOD.replace("time_limit: 2", "timelimit: 2"), "subtasks.Help.timelimit", 10, "unknown key"),
     (GOOD.replace("root: Act", "root: Top"), "root", 1, "root 'Top' is not a subtask"),
-    (GOOD + "  Spare:\n    actions: [Move]\n", "subtasks.Spare", 10, "not reachable from the root"),
-    (GOOD.replace("  Help:\n", "  Move:\n"), "subtasks.Move", 6, "also a primitive"),
+    (GOOD + "  Spare:\n    actions: [Move]\n", "subtasks.Spare", 11, "not reachable from the root"),
+    (GOOD.replace("  Help:\n", "  Move:\n"), "subtasks.Move", 7, "also a primitive"),
 ])
 def test_errors_name_file_line_and_field(text, where, line, problem):
     with pytest.raises(SpecError) as info:
@@ -114,3 +115,48 @@ def test_pearl_hierarchy_file_is_valid():
     assert set(h.descendants("Act")) == set(domain.actions)
     assert h.subtasks["Contact"].children == ["RingDoorBell", "GotoPatientRoom"]
     assert set(h.subtasks["Act"].children) == {"Remind", "Assist", "Rest"}
+
+
+POLICY = """\
+root: Act
+defaults: {trials: 50}
+subtasks:
+  Act:
+    actions: [ClarifyTask, Help]
+    lookahead: 1
+    expansions: 10
+  Help:
+    actions: [CheckMeds, Move]
+    solver: incprune
+"""
+
+
+def test_policy_parameterization_defaults_and_settings():
+    h = parse_hierarchy(POLICY, PRIMS, source="h.yaml")
+    assert h.parameterize == "policy"
+    act, helper = h.subtasks["Act"], h.subtasks["Help"]
+    assert (act.solver, act.trials, act.epsilon, act.time_limit, act.horizon) == ("pointbased", 50, 0.01, None, None)
+    assert (act.lookahead, act.expansions) == (1, 10)
+    assert (helper.solver, helper.expansions) == ("incprune", 256)
+
+
+@pytest.mark.parametrize("text, where, problem", [
+    (POLICY.replace("parameterize", "x").replace("root: Act", "root: Act\nparameterize: magic"), "parameterize",
+     "unknown parameterisation 'magic'"),
+    (POLICY.replace("    lookahead: 1\n", "    solver: incprune\n"), "subtasks.Act.solver",
+     "incprune cannot solve 'Act': it has abstract children (Help)"),
+    (POLICY.replace("    solver: incprune\n", "    horizon: 3\n"), "subtasks.Help.horizon", "applies to incprune only"),
+    (POLICY.replace("{trials: 50}", "{trials: 0}"), "defaults.trials", "a positive integer or null"),
+    (POLICY.replace("expansions: 10", "expansions: -1"), "subtasks.Act.expansions", "a non-negative integer"),
+    (POLICY.replace("    expansions: 10\n", "    shaping: [{action: Help, reward: 1}]\n"),
+     "subtasks.Act.shaping[0].action", "'Help' is not a primitive below 'Act'"),
+])
+def test_policy_parameterization_errors(text, where, problem):
+    with pytest.raises(SpecError) as info:
+        parse_hierarchy(text, PRIMS, source="h.yaml")
+    assert info.value.where == where and problem in info.value.problem, str(info.value)
+
+
+def test_policy_shaping_names_a_primitive_below_the_subtask():
+    text = POLICY.replace("    expansions: 10\n", "    shaping: [{action: Move, reward: 2}]\n")
+    assert parse_hierarchy(text, PRIMS).subtasks["Act"].shaping[0].action == "Move"

@@ -32,6 +32,7 @@ R = np.array([[-1.0, 10.0, -5.0],
 
 HIERARCHY = """
 root: Act
+parameterize: corner
 defaults: {solver: incprune, horizon: 4}
 subtasks:
   Act: {actions: [ClarifyTask, Help]}

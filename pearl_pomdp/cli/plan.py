@@ -7,8 +7,15 @@ Examples:
 
 Hierarchy: --hierarchy FILE, else DOMAIN's sibling NAME.hierarchy.yaml (for NAME.domain.yaml
 or NAME.yaml). When there is none, the domain is planned flat (one root subtask over every
-primitive) with a warning naming the file that was looked for; --flat plans flat on purpose
-(no warning). A flat plan of a large domain is slow and inexact: its solver hits its time limit.
+primitive, the point-based solver with its default trial budget) with a warning naming the
+file that was looked for; --flat plans flat on purpose (no warning).
+
+Budgets: each subtask's solver stops at its own budget (the hierarchy file's `trials`, a count
+that does not depend on the machine, so the same files give the same policy anywhere).
+--time-limit S is a guard over the whole plan: a subtask gets at most what is left of S, and
+the report says which were cut short. A subtask asked to be solved exactly (`solver:
+incprune`) that does not converge within its budget is planned point-based instead, and says
+so. Every subtask reports the bounds it reached at b0 (LB, UB and their gap).
 
 The policy is saved to --out DIR, by default out/policies/NAME under the current directory,
 where `pearl explain DOMAIN` and `pearl hierarchy DOMAIN` look for it; --no-save keeps nothing.
@@ -43,6 +50,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-abstraction", action="store_true", help="solve every subtask on the full state/observation sets")
     parser.add_argument("--solver", choices=["incprune", "pointbased"], help="override every subtask's solver")
     parser.add_argument("--seed", type=int, default=0, help="seed of the point-based solver")
+    parser.add_argument("--time-limit", type=float, metavar="S",
+                        help="seconds for the whole plan: a guard over the subtasks' own budgets (default: none)")
     parser.add_argument("--strict", action="store_true", help="fail on a local reward assumption violation")
     add_progress_arguments(parser)
 
@@ -135,11 +144,15 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.hierarchy.plan import horizon_text
 
     logging.basicConfig(level=logging.WARNING, format="pearl plan: warning: %(message)s", stream=sys.stderr)
+    if args.time_limit is not None and not args.time_limit > 0:
+        from pearl_pomdp.errors import PearlError
+
+        raise PearlError(f"--time-limit must be a positive number of seconds, got {args.time_limit}")
     domain = load_domain_any(args.domain)
     hierarchy_file = resolve_hierarchy_path(args.domain, args.hierarchy, flat=args.flat, warn=warn_on_stderr("plan"))
     hierarchy = load_hierarchy_for(domain, args.domain, hierarchy_file, flat=hierarchy_file is None)
     policy = plan(domain, hierarchy, abstraction=not args.no_abstraction, solver=args.solver, seed=args.seed,
-                  progress=show_progress(args), strict_local_reward=args.strict)
+                  progress=show_progress(args), strict_local_reward=args.strict, time_limit=args.time_limit)
     policy.report["hierarchy_file"] = None if hierarchy_file is None else str(hierarchy_file)
     report = dict(policy.report)
     report["out"] = None if args.no_save else str(policy.save(args.out or default_policy_dir(args.domain)))
@@ -148,11 +161,17 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"{report['domain']} / {report['hierarchy']}: {len(report['subtasks'])} subtasks in "
           f"{report['total_seconds']:.2f} s")
-    print(f"{'subtask':<12} {'states':>11} {'obs':>8} {'actions':>7} {'solver':>10} {'exact':>5} {'h':>4} {'|Γ|':>5} {'s':>7}  relevant features")
+    print(f"{'subtask':<12} {'states':>11} {'obs':>8} {'actions':>7} {'solver':>10} {'stop':>9} {'h':>4} {'LB':>9} "
+          f"{'UB':>9} {'gap':>8} {'|Γ|':>5} {'s':>7}  relevant features")
     for r in report["subtasks"]:
+        ub = r.get("upper_bound")
+        stop = r.get("stop_reason") or ("exact" if r["exact"] else "-")
+        ub_text = "-" if ub is None else f"{ub:.3f}"
+        gap_text = "-" if ub is None else f"{ub - r['value_at_start']:.3g}"
         print(f"{r['name']:<12} {r['states_full']:>5}→{r['states_abstract']:<5} {r['observations_full']:>3}→{r['observations_abstract']:<4}"
-              f" {len(r['actions']):>7} {r['solver']:>10} {('yes' if r['exact'] else 'no'):>5} {horizon_text(r):>4} {r['alpha_vectors']:>5}"
-              f" {r['seconds']:>7.2f}  {', '.join(r['relevant_features']) or '-'}")
+              f" {len(r['actions']):>7} {r['solver']:>10} {stop:>9} {horizon_text(r):>4} {r['value_at_start']:>9.3f}"
+              f" {ub_text:>9} {gap_text:>8} {r['alpha_vectors']:>5} {r['seconds']:>7.2f}"
+              f"  {', '.join(r['relevant_features']) or '-'}")
         for w in r["warnings"]:
             print(f"  warning: {w}")
     if report["out"]:

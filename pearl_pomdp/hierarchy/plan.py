@@ -1,10 +1,24 @@
 """PLAN / SOLVE over an action hierarchy (Pineau & Thrun, Table 2; docs/design.md §4).
 
-``PLAN(h)`` runs bottom-up: for every abstract child ``â_j`` of ``h``, ``PLAN(h_j)``
-first, then PARAMETERIZE ``â_j`` with ``h_j``'s solved local policy (eq. 15–17);
-PARAMETERIZE every primitive child (eq. 11–14); abstract the subtask (eq. 18); then
-``SOLVE(h)`` with the solver its spec names: exact incremental pruning (Cassandra,
-Littman & Zhang 1997) by default, as in the paper, or the point-based solver.
+``PLAN(h)`` runs bottom-up: every child subtask is solved before its parent. How a parent
+models an abstract child is the hierarchy file's ``parameterize`` (docs/hierarchy.md):
+
+**policy** (the default). Every subtask but the root is an *option* that may stop
+(:mod:`pearl_pomdp.hierarchy.options`): its model is the full model restricted to the
+primitives below it, abstracted exactly (eq. 18), plus ``Exit``; it is solved for the
+discounted infinite horizon by the point-based solver under a deterministic trial budget
+(exact incremental pruning where the subtask's actions are all primitive and it converges).
+A parent's solve is **policy-contingent**: at every belief its backups may use only the
+primitives its children would execute at that belief (their own EXECUTE, recursively), so
+the parent's values are those of the children as they act — not eq. 17's "the child knows
+the state". EXECUTE is the same rule (:meth:`HierarchicalPolicy.execute`). Trials start from
+``b0``, from every corner of a small subtask, and from beliefs a cheap policy (QMDP) visits
+in the full model, so each child is solved where a parent will consult it.
+
+**corner** (the paper's). PARAMETERIZE ``â_j`` with ``h_j``'s solved local policy at the
+belief concentrated on each state (eq. 15–17), every primitive child (eq. 11–14); abstract
+the subtask (eq. 18); then ``SOLVE(h)`` with the solver its spec names: exact incremental
+pruning (Cassandra, Littman & Zhang 1997) by default, as in the paper, or point-based.
 
 Subtasks that violate the local reward assumption are reported at plan time (a
 warning on the ``pearl_pomdp.hierarchy`` logger and in the report); the hierarchy spec
@@ -12,6 +26,7 @@ can add reward shaping to fix them.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from typing import Dict, Optional
@@ -26,7 +41,16 @@ from pearl_pomdp.hierarchy.spec import Hierarchy, SubtaskSpec
 from pearl_pomdp.solvers.base import SolveResult
 from pearl_pomdp.model.factored import FactoredDomain
 
-__all__ = ["plan", "solve_subtask", "horizon_text"]
+__all__ = ["plan", "solve_subtask", "horizon_text", "entry_beliefs", "CORNER_LIMIT"]
+
+#: A subtask with at most this many abstract states also starts trials from each of its
+#: corners (the beliefs certain of one state): its policy is then solved everywhere a parent
+#: can meet it with certainty, at ~one short trial per corner.
+CORNER_LIMIT = 64
+#: The entry beliefs: ``ENTRY_EPISODES`` episodes of ``ENTRY_STEPS`` steps of QMDP in the full
+#: model, one belief in ``ENTRY_EVERY`` kept (30 beliefs): the situations of the whole task
+#: (waiting, a reminder heard, contact, a walk, a question) at a cost of a few milliseconds.
+ENTRY_EPISODES, ENTRY_STEPS, ENTRY_EVERY = 20, 60, 40
 
 log = logging.getLogger("pearl_pomdp.hierarchy")
 
@@ -34,6 +58,8 @@ log = logging.getLogger("pearl_pomdp.hierarchy")
 def horizon_text(info: dict) -> str:
     """A subtask's planning horizon for tables: ``"4"``, ``"1+1"`` (horizon + lookahead), ``"∞"`` (until converged)."""
     horizon = info.get("horizon")
+    if info.get("parameterize") == "policy":
+        return f"∞+{info['lookahead']}" if info.get("lookahead") else "∞"
     text = "∞" if horizon is None else str(horizon)
     return f"{text}+{info['lookahead']}" if info.get("lookahead") else text
 
@@ -52,7 +78,8 @@ def solve_subtask(model, spec: SubtaskSpec, seed: int = 0, solver: Optional[str]
 
 
 def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optional[str] = None,
-         seed: int = 0, progress: bool = False, strict_local_reward: bool = False) -> HierarchicalPolicy:
+         seed: int = 0, progress: bool = False, strict_local_reward: bool = False,
+         time_limit: Optional[float] = None) -> HierarchicalPolicy:
     """PLAN(root): parameterize, abstract and solve every subtask bottom-up.
 
     Args:
@@ -63,16 +90,42 @@ def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optiona
         abstraction: apply eq. 18 (``False``: every subtask keeps the full state and
             observation sets; used to check the abstraction).
         solver: override every subtask's solver (``"incprune"`` / ``"pointbased"``).
-        seed: seed of the point-based solver.
+        seed: seed of the point-based solver (and of the entry beliefs).
         progress: a tqdm bar over subtasks on stderr.
         strict_local_reward: raise instead of warn when a subtask violates the local
             reward assumption.
+        time_limit: seconds for the whole plan, a guard over the subtasks' own budgets:
+            each subtask's solver gets at most what is left (the plan then says which
+            subtasks it cut short). ``None``: the budgets alone (deterministic).
 
     Returns:
         The :class:`~pearl_pomdp.hierarchy.execute.HierarchicalPolicy`; its ``report`` is the
         ``pearl plan --json`` object (``subtasks`` list and ``total_seconds``).
+
+    Raises:
+        PearlError: a solver the parameterisation cannot use, or a time limit that is not
+            positive.
     """
+    if time_limit is not None and not time_limit > 0:
+        raise PearlError(f"the plan's time limit must be positive, got {time_limit!r}")
+    if hierarchy.parameterize == "policy":
+        return _plan_policy(domain, hierarchy, abstraction, solver, seed, progress, strict_local_reward, time_limit)
+    return _plan_corner(domain, hierarchy, abstraction, solver, seed, progress, strict_local_reward, time_limit)
+
+
+def _left(deadline: Optional[float], own: Optional[float]) -> Optional[float]:
+    """The smaller of a subtask's own limit and what is left of the plan's (``None``: none)."""
+    if deadline is None:
+        return own
+    left = max(0.05, deadline - time.perf_counter())
+    return left if own is None else min(own, left)
+
+
+def _plan_corner(domain, hierarchy: Hierarchy, abstraction: bool, solver: Optional[str], seed: int, progress: bool,
+                 strict_local_reward: bool, time_limit: Optional[float]) -> HierarchicalPolicy:
+    """The paper's PLAN with eq. 15–17 (``parameterize: corner``)."""
     t_start = time.perf_counter()
+    deadline = None if time_limit is None else t_start + time_limit
     model = domain.compile() if isinstance(domain, FactoredDomain) else domain
     factored = domain if isinstance(domain, FactoredDomain) else None
     factors = StateFactors.from_domain(domain)
@@ -98,7 +151,8 @@ def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optiona
         child_relevant = sorted({f for c in spec.children if c in abstracts for f in abstracts[c].relevant})
         abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder)
         t1 = time.perf_counter()
-        result = solve_subtask(abst.model, spec, seed=seed, solver=solver)
+        limited = spec if deadline is None else dataclasses.replace(spec, time_limit=_left(deadline, spec.time_limit))
+        result = solve_subtask(abst.model, limited, seed=seed, solver=solver)
         t2 = time.perf_counter()
         pol = SubtaskPolicy(name=name, actions=list(spec.children), abstract=list(sub.abstract),
                             alphas=result.policy.alphas, alpha_actions=result.policy.actions,
@@ -117,7 +171,10 @@ def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optiona
             eff[rows] = policies[child].effective[rows] if child in policies else model.actions.index(child)
         pol.effective = eff
         method = result.method
-        timed_out = bool(result.extra.get("timed_out", False))
+        # Exact when the exact solver ended by its own rule (converged, or its finite horizon),
+        # not by the clock or a vector cap.
+        timed_out = result.extra.get("stop_reason", "time_limit" if result.extra.get("timed_out") else None) in \
+            ("time_limit", "vector_cap")
         info = {
             "name": name,
             "states_full": model.num_states,
@@ -136,8 +193,12 @@ def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optiona
             "converged": bool(result.converged),
             "value_at_start": float(result.value_at_start),
             "upper_bound": None if result.upper_bound is None else float(result.upper_bound),
-            "warnings": list(sub.warnings) + ([f"subtask {name!r}: the solver hit its time limit "
-                                               f"({spec.time_limit} s); the policy is not exact"] if timed_out else []),
+            "parameterize": "corner",
+            "stop_reason": result.extra.get("stop_reason"),
+            "warnings": list(sub.warnings) + ([f"subtask {name!r}: the solver stopped by "
+                                               f"{result.extra.get('stop_reason', 'its time limit')} "
+                                               f"({limited.time_limit} s); the policy is not exact"]
+                                              if timed_out else []),
             **abst.summary(),
         }
         if timed_out:
@@ -155,11 +216,269 @@ def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optiona
         "domain": model.name,
         "hierarchy": hierarchy.name,
         "root": hierarchy.root,
+        "parameterize": "corner",
+        "time_limit": time_limit,
         "abstraction": abstraction,
         "subtasks": reports,
         "total_seconds": round(time.perf_counter() - t_start, 6),
     }
     hp = HierarchicalPolicy(hierarchy.root, {n: policies[n] for n in order}, list(model.actions),
                             model.fingerprint(), report, hierarchy.name, model.name)
+    hp.abstract_models = abstracts  # kept for inspection (tests, `pearl hierarchy`); not saved
+    return hp
+
+
+# ------------------------------------------------------------------ policy-contingent PLAN
+def entry_beliefs(model, seed: int = 0, episodes: int = ENTRY_EPISODES, steps: int = ENTRY_STEPS,
+                  every: int = ENTRY_EVERY) -> np.ndarray:
+    """Beliefs a cheap policy meets in the full model: ``[N, S]``, deterministic for ``seed``.
+
+    QMDP (one α-vector per action, solved in milliseconds) is run for ``episodes`` episodes
+    of ``steps`` steps — start state from ``b0``, next state from ``T``, observation from
+    ``O``, belief by eq. 5 — and every ``every``-th belief is kept. QMDP does every service of
+    the task (it reminds, walks, answers; it only never asks), so these beliefs are the
+    situations in which parents will consult their children."""
+    from pearl_pomdp.belief import BeliefFilter
+    from pearl_pomdp.simulate import _RowSampler
+    from pearl_pomdp.solvers.mdp import solve_qmdp
+
+    policy = solve_qmdp(model).policy
+    rng = np.random.default_rng(seed)
+    S, Z = model.num_states, model.num_observations
+    filt = BeliefFilter(model)
+    trans = [_RowSampler(t) for t in model.T]
+    ocum = np.cumsum(model.O, axis=2)
+    b0 = np.asarray(model.b0, dtype=float)
+    states = np.clip(np.searchsorted(np.cumsum(b0), rng.random(episodes) * b0.sum(), side="right"), 0, S - 1)
+    B = np.tile(b0, (episodes, 1))
+    kept = []
+    for t in range(steps):
+        if t % every == 0 or (t * episodes) % every < episodes:
+            kept.append(B.copy())
+        actions = policy.actions_batch(B)
+        u_s, u_o = rng.random(episodes), rng.random(episodes)
+        nxt = np.empty_like(states)
+        for a in np.unique(actions):
+            rows = np.flatnonzero(actions == a)
+            nxt[rows] = trans[a].sample(states[rows], u_s[rows])
+        cum = ocum[actions, nxt]
+        obs = np.minimum((cum <= (u_o * cum[:, -1])[:, None]).sum(axis=1), Z - 1)
+        B = filt.update_batch(B, actions, obs)
+        states = nxt
+    flat = np.concatenate(kept)
+    return flat[::max(1, len(flat) // max(1, (episodes * steps) // every))]
+
+
+def _starts(abst: AbstractSubtask, n_model: int, entries: np.ndarray) -> np.ndarray:
+    """The start beliefs of a subtask's trials besides its b0: every corner of a small
+    subtask (:data:`CORNER_LIMIT`), and the entry beliefs projected onto its states,
+    rounded to 1e-6 and deduplicated (rows over the model's ``n_model`` states)."""
+    X = abst.model.num_states
+    rows = []
+    if abst.lumped_states <= CORNER_LIMIT:
+        for x in range(X):
+            e = np.zeros(n_model)
+            e[x] = 1.0
+            rows.append(e)
+    if entries.size:
+        projected = np.stack([np.bincount(abst.state_to_model, weights=b, minlength=X) for b in entries])
+        projected = np.unique(np.round(projected, 6), axis=0)
+        for p in projected:
+            if p.sum() > 0:
+                e = np.zeros(n_model)
+                e[:X] = p / p.sum()
+                rows.append(e)
+    return np.array(rows) if rows else np.zeros((0, n_model))
+
+
+class _ChildOffers:
+    """The action filter of a policy-contingent parent: at a belief over the parent's model,
+    the primitives its children would execute there (and ``Exit`` for an option)."""
+
+    def __init__(self, solved: HierarchicalPolicy, spec: SubtaskSpec, model_actions, state_to_model: np.ndarray,
+                 n_states: int, has_exit: bool):
+        self.solved = solved
+        self.children = list(spec.children)
+        self.index = {a: i for i, a in enumerate(model_actions)}
+        self.n_model = len(model_actions) and None
+        self.has_exit = has_exit
+        self.A = len(model_actions)
+        X = int(state_to_model.max()) + 1
+        self.representative = np.full(n_states + (1 if has_exit else 0), -1, dtype=np.int64)
+        order = np.arange(state_to_model.shape[0] - 1, -1, -1)
+        self.representative[state_to_model[order]] = order
+        self.X = X
+        self.S = state_to_model.shape[0]
+        self.asked = 0
+
+    def __call__(self, idx: np.ndarray, val: np.ndarray) -> np.ndarray:
+        self.asked += 1
+        mask = np.zeros(self.A, dtype=bool)
+        if self.has_exit:
+            mask[-1] = True                         # stopping is always possible
+        real = idx < self.X
+        if not real.any():
+            return mask                             # all mass on `done`: nothing else to do
+        b = np.zeros(self.S)
+        b[self.representative[idx[real]]] = val[real]
+        b /= b.sum()
+        memo: Dict[str, tuple] = {}
+        for child in self.children:
+            name = self.solved.action_names[self.solved._pick(child, b, memo)[0]] if child in self.solved.subtasks \
+                else child
+            mask[self.index[name]] = True
+        return mask
+
+
+def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Optional[str], seed: int, progress: bool,
+                 strict_local_reward: bool, time_limit: Optional[float]) -> HierarchicalPolicy:
+    """PLAN with policy-contingent parents and options (``parameterize: policy``; module doc)."""
+    from pearl_pomdp.hierarchy.options import with_exit
+    from pearl_pomdp.solvers.point_based import PointBasedSettings, PointBasedSolver
+
+    if solver not in (None, "pointbased", "incprune"):
+        raise PearlError(f"unknown solver {solver!r}; choose pointbased or incprune")
+    t_start = time.perf_counter()
+    deadline = None if time_limit is None else t_start + time_limit
+    model = domain.compile() if isinstance(domain, FactoredDomain) else domain
+    factored = domain if isinstance(domain, FactoredDomain) else None
+    factors = StateFactors.from_domain(domain)
+    builder = KernelBuilder(model)
+    entries = entry_beliefs(model, seed=seed)
+    policies: Dict[str, SubtaskPolicy] = {}
+    abstracts: Dict[str, AbstractSubtask] = {}
+    reports = []
+    order = hierarchy.postorder()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(order), desc="plan", unit="subtask", leave=False)
+    for name in order:
+        spec = hierarchy.subtasks[name]
+        is_root = name == hierarchy.root
+        t0 = time.perf_counter()
+        below = hierarchy.descendants(name)
+        # The subtask over the primitives below it (eq. 11–14 for each), abstracted exactly.
+        flat_spec = dataclasses.replace(spec, children=list(below))
+        sub = parameterize(model, flat_spec, {}, factors)
+        for problem in sub.warnings:
+            if strict_local_reward:
+                raise PearlError(f"{hierarchy.source}: subtasks.{name}: {problem}")
+            log.warning("%s", problem)
+        child_relevant = sorted({f for c in spec.children if c in abstracts for f in abstracts[c].relevant})
+        abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder)
+        solve_model = abst.model if is_root else with_exit(abst.model)
+        starts = _starts(abst, solve_model.num_states, entries)
+        abstract_children = [c for c in spec.children if c in policies]
+        offers = None
+        if abstract_children:
+            solved = HierarchicalPolicy(abstract_children[0], dict(policies), list(model.actions))
+            offers = _ChildOffers(solved, spec, solve_model.actions, abst.state_to_model, abst.model.num_states,
+                                  not is_root)
+        which = solver or spec.solver
+        if which == "incprune" and abstract_children:
+            which = "pointbased"   # a parent's offers depend on the belief (only the solver override gets here)
+        t1 = time.perf_counter()
+        notes = []
+        result = None
+        if which == "incprune":
+            from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
+
+            result = solve_incremental_pruning(solve_model, horizon=spec.horizon, epsilon=spec.epsilon,
+                                               time_limit=_left(deadline, spec.time_limit))
+            if result.extra.get("stop_reason") in ("time_limit", "vector_cap"):
+                notes.append(f"subtask {name!r}: incremental pruning stopped by {result.extra['stop_reason']} after "
+                             f"{result.iterations} epochs; planned point-based instead")
+                log.warning("%s", notes[-1])
+                result = None
+        if result is None:
+            limit = _left(deadline, spec.time_limit)
+            # FIB (the first upper bound) only to within the target gap: every iterate is a bound.
+            pb = PointBasedSolver(solve_model, seed=seed, fib_time=None if limit is None else max(0.05, 0.1 * limit),
+                                  settings=PointBasedSettings(fib_epsilon=max(spec.epsilon, 1e-6)),
+                                  action_filter=offers, starts=starts)
+            result = pb.run(time_limit=float("inf") if limit is None else max(0.0, limit - (time.perf_counter() - t1)),
+                            epsilon=spec.epsilon, max_trials=spec.trials)
+            result.extra["setup_seconds"] = pb.setup_seconds
+            stopped = "converged" if result.converged else (
+                "trials" if spec.trials is not None and result.iterations >= spec.trials else "time_limit")
+            result.extra["stop_reason"] = stopped
+            if stopped == "time_limit":
+                notes.append(f"subtask {name!r}: the point-based solve stopped at the time limit after "
+                             f"{result.iterations} trials (gap {result.extra['gap']:.3g} at b0)")
+                log.warning("%s", notes[-1])
+        t2 = time.perf_counter()
+        alphas = result.policy.alphas
+        pol = SubtaskPolicy(name=name, actions=list(spec.children), abstract=[c in policies for c in spec.children],
+                            alphas=alphas, alpha_actions=result.policy.actions, state_to_model=abst.state_to_model,
+                            effective=np.zeros(model.num_states, dtype=np.int64),
+                            lookahead=Lookahead(solve_model.T, solve_model.O, solve_model.R, solve_model.discount,
+                                                alphas, 1),
+                            model_actions=list(solve_model.actions), exit=not is_root,
+                            search_depth=1 + spec.lookahead, expansions=spec.expansions)
+        exact = result.method == "incprune" and result.extra.get("stop_reason") in ("converged", "horizon")
+        ub = None if result.upper_bound is None else float(result.upper_bound)
+        info = {
+            "name": name,
+            "parameterize": "policy",
+            "states_full": model.num_states,
+            "states_abstract": abst.model.num_states,
+            "model_states": solve_model.num_states,
+            "observations_full": model.num_observations,
+            "observations_abstract": abst.model.num_observations,
+            "actions": list(spec.children),
+            "primitives": list(below),
+            "option": not is_root,
+            "solver": result.method,
+            "alpha_vectors": int(result.policy.num_vectors),
+            "seconds": round(t2 - t0, 6),
+            "solve_seconds": round(t2 - t1, 6),
+            "exact": bool(exact),
+            "horizon": spec.horizon,
+            "lookahead": spec.lookahead,
+            "expansions": spec.expansions,
+            "trials_budget": spec.trials,
+            "iterations": result.iterations,
+            "converged": bool(result.converged),
+            "stop_reason": result.extra.get("stop_reason"),
+            "value_at_start": float(result.value_at_start),
+            "upper_bound": ub,
+            "gap": None if ub is None else ub - float(result.value_at_start),
+            "epsilon": spec.epsilon,
+            "starts": int(result.extra.get("starts", 1)),
+            "max_start_gap": result.extra.get("max_start_gap"),
+            "offers_asked": 0 if offers is None else offers.asked,
+            "warnings": list(sub.warnings) + notes,
+            **abst.summary(),
+        }
+        pol.info = info
+        policies[name] = pol
+        abstracts[name] = abst
+        reports.append(info)
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(subtask=name, states=abst.model.num_states)
+    if bar is not None:
+        bar.close()
+    report = {
+        "domain": model.name,
+        "hierarchy": hierarchy.name,
+        "root": hierarchy.root,
+        "parameterize": "policy",
+        "time_limit": time_limit,
+        "abstraction": abstraction,
+        "entry_beliefs": int(entries.shape[0]),
+        "subtasks": reports,
+        "total_seconds": round(time.perf_counter() - t_start, 6),
+    }
+    hp = HierarchicalPolicy(hierarchy.root, {n: policies[n] for n in order}, list(model.actions),
+                            model.fingerprint(), report, hierarchy.name, model.name)
+    # π_h(s) for the record (`pearl explain`, `pearl hierarchy`): the primitive each subtask
+    # picks at the belief certain of s.
+    for name in order:
+        eff = np.concatenate([hp._pick_batch(name, np.eye(model.num_states)[lo:lo + 256], {})
+                              for lo in range(0, model.num_states, 256)])
+        policies[name].effective = eff.astype(np.int64)
     hp.abstract_models = abstracts  # kept for inspection (tests, `pearl hierarchy`); not saved
     return hp

@@ -9,15 +9,18 @@ The YAML form (``config/pearl.hierarchy.yaml`` is a complete example)::
 
     name: pearl                     # optional
     root: Act                       # the top subtask
+    parameterize: policy            # policy (default) | corner: how a parent models a child
     defaults:                       # optional; per-subtask keys override
-      solver: incprune              # incprune (exact, default) | pointbased
-      horizon: 20                   # incprune: epochs (null = until converged)
-      lookahead: 0                  # EXECUTE: exact forward search this many steps deep (see below)
-      epsilon: 1.0e-6               # incprune: convergence / pointbased: target gap
-      time_limit: 10                # seconds, per subtask
+      solver: pointbased            # pointbased (default) | incprune (exact; subtasks of primitives)
+      trials: 100                   # pointbased: trial budget (deterministic; null: until epsilon)
+      epsilon: 0.01                 # pointbased: target gap at every start belief / incprune: tolerance
+      horizon: null                 # incprune: epochs (null = until converged)
+      lookahead: 0                  # EXECUTE: this many more steps of forward search (see below)
+      expansions: 256               # ... at most this many beliefs expanded per decision
+      time_limit: null              # seconds: a guard only (the budget is `trials`)
     subtasks:
       Act:
-        actions: [Remind, Assist, Rest]        # names of subtasks or primitives
+        actions: [Remind, Assist, Rest, DoNothing]   # names of subtasks or primitives
       Contact:
         actions: [RingDoorBell, GotoPatientRoom]
         shaping:                               # optional reward shaping (Dietterich 2000)
@@ -25,11 +28,20 @@ The YAML form (``config/pearl.hierarchy.yaml`` is a complete example)::
           # adds `reward` to R_h(s, action) in the states matching every `when` entry
           # (a value or a list of values); without `when`, in every state.
 
-``lookahead: d`` (default 0) makes EXECUTE choose the subtask's action by exact forward
-search over its abstract model, ``d`` steps deep, with the solved horizon-``h`` α-vectors at
-the leaves: the action maximising the exact horizon-``h + d`` value at the current belief
-(see :class:`~pearl_pomdp.hierarchy.execute.Lookahead`). It is for a subtask whose model
-is too large for incremental pruning beyond a few epochs (Pearl's root).
+``parameterize: policy`` (the default; :mod:`pearl_pomdp.hierarchy.plan`): every subtask
+but the root is an option that may stop (:mod:`pearl_pomdp.hierarchy.options`), solved for
+the discounted infinite horizon over the primitives below it; a parent at a belief chooses
+among the primitives its children would execute *at that belief*, valued in its own model
+(policy-contingent), so it sees each child as the child acts. Shaping rules then name
+primitives below the subtask. ``lookahead: d`` adds ``d`` steps of forward search over the
+children's choices at execution, within ``expansions`` expanded beliefs per decision.
+
+``parameterize: corner`` is the paper's PARAMETERIZE (eq. 15–17): an abstract action is the
+primitive its child picks at the belief concentrated on each state; the subtask is solved
+to ``horizon`` by incremental pruning (or point-based), and ``lookahead: d`` makes EXECUTE
+choose the subtask's action by exact forward search over its abstract model, ``d`` steps
+deep, with the solved horizon-``h`` α-vectors at the leaves (see
+:class:`~pearl_pomdp.hierarchy.execute.Lookahead`).
 
 A name in ``actions`` is abstract when it is a key of ``subtasks``, otherwise it must
 be a primitive action of the domain. Each subtask is used once (the structure is a
@@ -51,16 +63,27 @@ from pearl_pomdp.errors import SpecError
 from pearl_pomdp.model.factored import FactoredDomain
 
 __all__ = ["Hierarchy", "SubtaskSpec", "ShapingRule", "load_hierarchy", "parse_hierarchy",
-           "flat_hierarchy", "SOLVERS"]
+           "flat_hierarchy", "SOLVERS", "PARAMETERIZATIONS", "BUILTIN_DEFAULTS"]
 
 #: Solver names a subtask may ask for.
 SOLVERS = ("incprune", "pointbased")
-_SUBTASK_KEYS = {"actions", "solver", "horizon", "lookahead", "epsilon", "time_limit", "shaping", "description"}
-_DEFAULT_KEYS = {"solver", "horizon", "lookahead", "epsilon", "time_limit"}
+_SUBTASK_KEYS = {"actions", "solver", "horizon", "lookahead", "epsilon", "time_limit", "trials", "expansions",
+                 "shaping", "description"}
+_DEFAULT_KEYS = {"solver", "horizon", "lookahead", "epsilon", "time_limit", "trials", "expansions"}
+#: How a parent models an abstract child (the hierarchy file's top-level ``parameterize``).
+PARAMETERIZATIONS = ("policy", "corner")
 #: Deepest forward search allowed: its cost grows as (|A|·|Z|)^d per decision.
 MAX_LOOKAHEAD = 3
-_TOP_KEYS = {"name", "root", "defaults", "subtasks", "description"}
-_BUILTIN_DEFAULTS = {"solver": "incprune", "horizon": None, "lookahead": 0, "epsilon": 1e-6, "time_limit": 30.0}
+_TOP_KEYS = {"name", "root", "defaults", "subtasks", "description", "parameterize"}
+#: The settings of a subtask the file does not set, per parameterisation (the one source of them).
+BUILTIN_DEFAULTS = {
+    # Policy-contingent: point-based with a deterministic trial budget, no clock.
+    "policy": {"solver": "pointbased", "horizon": None, "lookahead": 0, "epsilon": 0.01, "time_limit": None,
+               "trials": 100, "expansions": 256},
+    # The paper's eq. 15–17: exact incremental pruning, as in the paper.
+    "corner": {"solver": "incprune", "horizon": None, "lookahead": 0, "epsilon": 1e-6, "time_limit": 30.0,
+               "trials": None, "expansions": 256},
+}
 
 
 @dataclass(frozen=True)
@@ -84,9 +107,12 @@ class SubtaskSpec:
         children: its action set, in file order (primitive or abstract names).
         solver: ``"incprune"`` or ``"pointbased"``.
         horizon: incremental-pruning epochs (``None``: until the ε-convergence test).
-        lookahead: depth of EXECUTE's exact forward search over the subtask model (0: none).
+        lookahead: steps of EXECUTE's forward search over the subtask model (0: none beyond
+            the policy-contingent one-step choice).
         epsilon: incprune convergence tolerance, or point-based target gap.
-        time_limit: seconds allowed to this subtask's solver.
+        time_limit: seconds allowed to this subtask's solver (``None``: no clock).
+        trials: point-based trial budget (``None``: until ``epsilon`` at every start belief).
+        expansions: beliefs the forward search may expand per decision (``lookahead`` > 0).
         shaping: reward-shaping rules added to the subtask's reward.
     """
 
@@ -99,6 +125,8 @@ class SubtaskSpec:
     time_limit: Optional[float] = 30.0
     shaping: List[ShapingRule] = field(default_factory=list)
     description: str = ""
+    trials: Optional[int] = None
+    expansions: int = 256
 
 
 @dataclass
@@ -118,6 +146,8 @@ class Hierarchy:
     subtasks: Dict[str, SubtaskSpec]
     primitives: List[str]
     source: str = "<hierarchy>"
+    #: ``"policy"`` (policy-contingent parents, options) or ``"corner"`` (eq. 15–17).
+    parameterize: str = "policy"
 
     def is_abstract(self, name: str) -> bool:
         """True when ``name`` is a subtask (abstract action), False for a primitive."""
@@ -201,6 +231,13 @@ def _setting(chk: _Checker, where: str, key: str, value):
             raise chk.fail(where, f"lookahead must be an integer from 0 to {MAX_LOOKAHEAD} (steps of forward "
                                   f"search), got {value!r}")
         return int(value)
+    if key in ("trials", "expansions"):
+        if value is None and key == "trials":
+            return None
+        if isinstance(value, bool) or not isinstance(value, int) or value < (0 if key == "expansions" else 1):
+            raise chk.fail(where, f"{key} must be {'a non-negative' if key == 'expansions' else 'a positive'} "
+                                  f"integer{' or null' if key == 'trials' else ''}, got {value!r}")
+        return int(value)
     if key in ("epsilon", "time_limit"):
         if value is None and key == "time_limit":
             return None
@@ -233,7 +270,11 @@ def parse_hierarchy(text: str, primitives: Sequence[str], features: Optional[Map
     raw_subtasks = data.get("subtasks")
     if not isinstance(raw_subtasks, dict) or not raw_subtasks:
         raise chk.fail("subtasks", "missing or empty: expected a mapping of subtask name → {actions: [...]}")
-    defaults = dict(_BUILTIN_DEFAULTS)
+    parameterize = data.get("parameterize", "policy")
+    if parameterize not in PARAMETERIZATIONS:
+        raise chk.fail("parameterize", f"unknown parameterisation {parameterize!r}; expected one of: "
+                                       f"{', '.join(PARAMETERIZATIONS)}")
+    defaults = dict(BUILTIN_DEFAULTS[parameterize])
     raw_defaults = data.get("defaults") or {}
     if not isinstance(raw_defaults, dict):
         raise chk.fail("defaults", "expected a mapping")
@@ -274,10 +315,11 @@ def parse_hierarchy(text: str, primitives: Sequence[str], features: Optional[Map
                 raise chk.fail(cw, f"unknown action {child!r}: neither a primitive of the domain nor a subtask "
                                    f"(subtasks: {', '.join(raw_subtasks)})")
         settings: Dict[str, Any] = dict(defaults)
-        for key in ("solver", "horizon", "lookahead", "epsilon", "time_limit"):
+        for key in sorted(_DEFAULT_KEYS):
             if key in body:
                 settings[key] = _setting(chk, f"{where}.{key}", key, body[key])
-        shaping = _parse_shaping(chk, f"{where}.shaping", body.get("shaping"), children, features)
+        shaping = _parse_shaping(chk, f"{where}.shaping", body.get("shaping"), children, features,
+                                 list(primitives) if parameterize == "policy" else ())
         subtasks[name] = SubtaskSpec(name=name, children=list(children), shaping=shaping,
                                      description=str(body.get("description", "")), **settings)
 
@@ -316,7 +358,9 @@ def parse_hierarchy(text: str, primitives: Sequence[str], features: Optional[Map
         if name != root and name not in used_at:
             raise chk.fail(f"subtasks.{name}", f"subtask {name!r} is not reachable from the root {root!r}")
     hierarchy = Hierarchy(name=str(data.get("name", Path(source).stem)), root=root, subtasks=subtasks,
-                          primitives=list(primitives), source=source)
+                          primitives=list(primitives), source=source, parameterize=parameterize)
+    if parameterize == "policy":
+        _check_policy_settings(chk, hierarchy)
     covered = set(hierarchy.descendants(root))
     missing = [p for p in primitives if p not in covered]
     if missing:
@@ -325,8 +369,33 @@ def parse_hierarchy(text: str, primitives: Sequence[str], features: Optional[Map
     return hierarchy
 
 
+def _check_policy_settings(chk: _Checker, hierarchy: Hierarchy) -> None:
+    """What policy-contingent planning cannot do: incremental pruning of a parent (its
+    children's picks depend on the belief, which only a point-based solver sees), and shaping
+    of an abstract action (the parent's actions are the primitives below it)."""
+    for name, spec in hierarchy.subtasks.items():
+        where = f"subtasks.{name}"
+        abstract = [c for c in spec.children if c in hierarchy.subtasks]
+        if spec.solver == "incprune" and abstract:
+            raise chk.fail(f"{where}.solver", f"incprune cannot solve {name!r}: it has abstract children "
+                                              f"({', '.join(abstract)}), whose picks depend on the belief; use "
+                                              "pointbased (or parameterize: corner, the paper's eq. 15-17)")
+        if spec.solver == "pointbased" and spec.horizon is not None:
+            raise chk.fail(f"{where}.horizon", "a finite horizon applies to incprune only (pointbased solves the "
+                                               "discounted infinite horizon)")
+        if spec.solver == "pointbased" and spec.trials is None and spec.time_limit is None and not spec.epsilon > 0:
+            raise chk.fail(f"{where}.trials", "with trials: null give an epsilon > 0 or a time_limit")
+        below = hierarchy.descendants(name)
+        for i, rule in enumerate(spec.shaping):
+            if rule.action not in below:
+                raise chk.fail(f"{where}.shaping[{i}].action",
+                               f"{rule.action!r} is not a primitive below {name!r}; with parameterize: policy a "
+                               f"subtask's actions are the primitives below it ({', '.join(below)})")
+
+
 def _parse_shaping(chk: _Checker, where: str, raw, children: Sequence[str],
-                   features: Optional[Mapping[str, Sequence[str]]]) -> List[ShapingRule]:
+                   features: Optional[Mapping[str, Sequence[str]]],
+                   descendants: Sequence[str] = ()) -> List[ShapingRule]:
     if raw is None:
         return []
     if not isinstance(raw, list):
@@ -340,7 +409,7 @@ def _parse_shaping(chk: _Checker, where: str, raw, children: Sequence[str],
             if key not in ("action", "reward", "when"):
                 raise chk.fail(f"{rw}.{key}", "unknown key; expected action, reward, when")
         action = rule.get("action")
-        if action not in children:
+        if action not in children and action not in descendants:
             raise chk.fail(f"{rw}.action", f"{action!r} is not an action of this subtask ({', '.join(children)})")
         reward = rule.get("reward")
         if isinstance(reward, bool) or not isinstance(reward, (int, float)):
@@ -394,7 +463,9 @@ def load_hierarchy(path: Union[str, Path], domain) -> Hierarchy:
     return parse_hierarchy(path.read_text(), list(domain.actions), features, source=str(path))
 
 
-def flat_hierarchy(primitives: Sequence[str], root: str = "Root", **settings) -> Hierarchy:
+def flat_hierarchy(primitives: Sequence[str], root: str = "Root", parameterize: str = "policy",
+                   **settings) -> Hierarchy:
     """A one-level hierarchy (root → every primitive): the flat problem in hierarchy form."""
-    spec = SubtaskSpec(name=root, children=list(primitives), **{**_BUILTIN_DEFAULTS, **settings})
-    return Hierarchy(name="flat", root=root, subtasks={root: spec}, primitives=list(primitives))
+    spec = SubtaskSpec(name=root, children=list(primitives), **{**BUILTIN_DEFAULTS[parameterize], **settings})
+    return Hierarchy(name="flat", root=root, subtasks={root: spec}, primitives=list(primitives),
+                     parameterize=parameterize)

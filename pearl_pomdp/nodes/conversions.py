@@ -163,11 +163,12 @@ def msg_to_action(msg: String) -> str:
     return msg.data.strip()
 
 
-def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: float) -> String:
+def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: float, expansions: int = 0) -> String:
     """The EXECUTE trace as JSON on a String (root → … → primitive).
 
     Args:
         trace: items with ``subtask``, ``choice`` and ``value`` attributes (``TraceStep``) or dicts.
+        expansions: beliefs the decision's forward search expanded (``Decision.expansions``).
     """
     steps = []
     for t in trace:
@@ -175,7 +176,8 @@ def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: flo
         value = float(get("value"))
         steps.append({"subtask": str(get("subtask")), "choice": str(get("choice")),
                       "value": value if math.isfinite(value) else None})
-    body = {"step": int(step), "action": action_name, "trace": steps, "latency_s": float(latency_s)}
+    body = {"step": int(step), "action": action_name, "trace": steps, "latency_s": float(latency_s),
+            "expansions": int(expansions)}
     return String(data=json.dumps(body, separators=(",", ":")))
 
 

@@ -81,8 +81,9 @@ class HierarchicalPolicyNode(ManagedPearlNode):
     Publishers:
         * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL depth 1): the primitive action.
         * ``/pearl/decision`` (std_msgs/String JSON): ``{"step", "action", "trace": [{"subtask",
-          "choice", "value"}], "latency_s"}`` — the EXECUTE trace and the decision's step latency
-          (belief message received → action published, wall clock).
+          "choice", "value"}], "latency_s", "expansions"}`` — the EXECUTE trace, the decision's step
+          latency (belief message received → action published, wall clock) and the beliefs its
+          forward search expanded (0: the one-step choice only).
         * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): decisions, rejected beliefs and
           latency p50/p99/max over the last 1000 decisions.
 
@@ -158,7 +159,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         latency = time.perf_counter() - start
         self.latencies.append(latency)
         self.decision_pub.publish(cv.decision_to_msg(self.decisions, decision.action_name,
-                                                     decision.trace, latency))
+                                                     decision.trace, latency, getattr(decision, "expansions", 0)))
         self.decisions += 1
         self.last_decision = decision
 

@@ -47,15 +47,24 @@ static int check_len(Py_buffer *b, Py_ssize_t itemsize, Py_ssize_t need, const c
  *                 where p <= 1e-300)
  *   p_out[a*Z+o] = P(o | b, a);  live_out[:nlive] = the flat indices a*Z+o with p > 1e-300.
  * nlive = -1 (and only U_out filled) when C_out is shorter than A*Z*nU doubles.
- * pos: int64 [S] scratch, all -1 on entry and on exit. */
+ * pos: int64 [S] scratch, all -1 on entry and on exit.
+ * allowed (optional, uint8 [A]; empty or absent: every action): the actions whose successors
+ * are wanted; the others get p = 0, zero rows of C and no live entries, and their mass does
+ * not put a state into U (the policy-contingent parents of the hierarchy planner). */
 static PyObject *successors(PyObject *Py_UNUSED(self), PyObject *args) {
     Py_buffer idx, val, tptr, tind, tdat, O, bT, pos, Uo, Co, po, lo;
+    Py_buffer alb = {0};
     Py_ssize_t A, S, Z;
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*nnnw*w*w*w*w*w*", &idx, &val, &tptr, &tind, &tdat, &O, &A, &S,
-                          &Z, &bT, &pos, &Uo, &Co, &po, &lo))
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*nnnw*w*w*w*w*w*|y*", &idx, &val, &tptr, &tind, &tdat, &O, &A, &S,
+                          &Z, &bT, &pos, &Uo, &Co, &po, &lo, &alb))
         return NULL;
     PyObject *ret = NULL;
+    const unsigned char *al = (alb.buf != NULL && alb.len > 0) ? (const unsigned char *)alb.buf : NULL;
     Py_ssize_t n = idx.len / (Py_ssize_t)sizeof(i64);
+    if (al != NULL && alb.len < A) {
+        PyErr_Format(PyExc_ValueError, "_pointbased_kernel: buffer allowed holds %zd bytes, needs %zd", alb.len, A);
+        goto done;
+    }
     if (!check_len(&val, 8, n, "val") || !check_len(&tptr, 8, S + 1, "t_ptr") || !check_len(&O, 8, A * S * Z, "O")
         || !check_len(&bT, 8, A * S, "bT") || !check_len(&pos, 8, S, "pos") || !check_len(&Uo, 8, S, "U_out")
         || !check_len(&po, 8, A * Z, "p_out") || !check_len(&lo, 8, A * Z, "live_out"))
@@ -74,6 +83,7 @@ static PyObject *successors(PyObject *Py_UNUSED(self), PyObject *args) {
             for (i64 e = tp[s]; e < tp[s + 1]; e++) {
                 if (e < 0 || e >= ntind) { PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.successors: bad t_ptr"); goto clean_bt; }
                 i64 c = ti[e];
+                if (al != NULL && !al[c / S]) continue;
                 bt[c] += w * td[e];
                 ps[c % S] = 0;
             }
@@ -114,6 +124,10 @@ static PyObject *successors(PyObject *Py_UNUSED(self), PyObject *args) {
             const double *Oa = Ob + a * S * Z;
             double *rows = C + a * Z * nU;
             for (Py_ssize_t o = 0; o < Z; o++) p[a * Z + o] = 0.0;
+            if (al != NULL && !al[a]) {
+                memset(rows, 0, sizeof(double) * (size_t)(Z * nU));
+                continue;
+            }
             for (Py_ssize_t j = 0; j < nU; j++) {
                 double w = bt[a * S + U[j]];
                 const double *Os = Oa + U[j] * Z;
@@ -149,6 +163,7 @@ static PyObject *successors(PyObject *Py_UNUSED(self), PyObject *args) {
     }
 done:
     REL(idx); REL(val); REL(tptr); REL(tind); REL(tdat); REL(O); REL(bT); REL(pos); REL(Uo); REL(Co); REL(po); REL(lo);
+    if (alb.obj != NULL) REL(alb);
     return ret;
 }
 

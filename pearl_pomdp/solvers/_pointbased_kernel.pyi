@@ -9,7 +9,8 @@ import numpy as np
 
 def successors(idx: np.ndarray, val: np.ndarray, t_ptr: np.ndarray, t_ind: np.ndarray, t_dat: np.ndarray,
                O: np.ndarray, A: int, S: int, Z: int, bT: np.ndarray, pos: np.ndarray, U_out: np.ndarray,
-               C_out: np.ndarray, p_out: np.ndarray, live_out: np.ndarray) -> Tuple[int, int]: ...
+               C_out: np.ndarray, p_out: np.ndarray, live_out: np.ndarray,
+               allowed: bytes | np.ndarray = ...) -> Tuple[int, int]: ...
 def lower_rows(C: np.ndarray, nU: int, U: np.ndarray, rows: np.ndarray, GT: np.ndarray, cap: int, k0: int, K: int,
                lb: np.ndarray, best: np.ndarray, only_better: bool) -> None: ...
 def sawtooth(C: np.ndarray, nU: int, U: np.ndarray, rows: np.ndarray, with_fib: bool, since: int, pos: np.ndarray,

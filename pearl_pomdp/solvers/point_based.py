@@ -71,7 +71,7 @@ from . import _pointbased_kernel as _kernel
 from .base import AlphaVectorPolicy, SolveResult
 from .mdp import blind_lower_bound, fib_q
 
-__all__ = ["solve_point_based", "PointBasedSolver", "PointBasedSettings"]
+__all__ = ["solve_point_based", "PointBasedSolver", "PointBasedSettings", "transition_block"]
 
 
 @dataclass(frozen=True)
@@ -111,6 +111,10 @@ class PointBasedSettings:
                                        the last (0: never): a trial lowers UB along one
                                        path, the sweep carries it to the siblings it
                                        passed by (tiger.95: 65 → 49 trials, 4x3: 128 → 46)
+    ``fib_epsilon``            —       the FIB upper bound's stopping tolerance (with no
+                                       ``fib_time``): every FIB iterate is an upper bound,
+                                       so a looser tolerance is only a looser start (the
+                                       hierarchy planner uses its target gap)
     ``spread_backoff``         —       a sweep or Perseus round that raised neither LB(b0)
                                        nor the LB at any belief by more than the target
                                        gap ε, weighted by the belief's reach γ^d·P(path)
@@ -134,6 +138,7 @@ class PointBasedSettings:
     max_gamma_entries: int = 40_000_000
     spread_backoff: int = 16
     ub_sweep_ratio: float = 0.5
+    fib_epsilon: float = 1e-6
 
     def __post_init__(self) -> None:
         kappa = tuple(float(k) for k in self.trial_kappa) if isinstance(self.trial_kappa, (tuple, list)) else None
@@ -149,6 +154,7 @@ class PointBasedSettings:
             ("sweep_max_flops", _finite(self.sweep_max_flops) and self.sweep_max_flops >= 0, "a number >= 0"),
             ("prune_keeps_successors", isinstance(self.prune_keeps_successors, bool), "True or False"),
             ("ub_sweep_ratio", _finite(self.ub_sweep_ratio) and self.ub_sweep_ratio >= 0, "a number >= 0"),
+            ("fib_epsilon", _finite(self.fib_epsilon) and self.fib_epsilon > 0, "a number > 0"),
             ("spread_backoff", isinstance(self.spread_backoff, int) and not isinstance(self.spread_backoff, bool)
              and self.spread_backoff >= 0, "an integer >= 0"),
             ("max_gamma_entries", isinstance(self.max_gamma_entries, int)
@@ -171,6 +177,21 @@ def _nonzeros(t) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     d = np.asarray(t, dtype=float)
     r, col = np.nonzero(d)
     return r.astype(np.int64), col.astype(np.int64), d[r, col]
+
+
+def transition_block(T, coo=None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``T`` (one ``S×S`` matrix per action, dense or scipy) as the kernel reads it: one CSR
+    ``S × (A·S)`` block ``(t_ptr, t_ind, t_dat)`` whose row ``s`` holds ``T[a][s, :]`` for every
+    ``a`` at columns ``a·S + s'`` (the successors of a belief are one gather over its support).
+    ``coo``: the per-action ``(rows, cols, values)`` when the caller has them already."""
+    S = T[0].shape[0]
+    coo = [_nonzeros(t) for t in T] if coo is None else coo
+    rows = np.concatenate([r for r, _, _ in coo])
+    cols = np.concatenate([c + a * S for a, (_, c, _) in enumerate(coo)])
+    vals = np.concatenate([v for _, _, v in coo])
+    order = np.lexsort((cols, rows))
+    return (_row_pointers(rows[order], S), np.ascontiguousarray(cols[order], dtype=np.int64),
+            np.ascontiguousarray(vals[order], dtype=float))
 
 
 def _row_pointers(rows: np.ndarray, n: int) -> np.ndarray:
@@ -271,14 +292,8 @@ class PointBasedSolver:
         # T[a] as (rows, cols, values) of its non-zeros, row-major (no scipy for a dense model:
         # importing scipy.sparse costs more than solving a small file).
         coo = [_nonzeros(t) for t in model.T]
-        # S × (A·S): row s holds T[a][s, :] for every a, at columns a·S + s'.
-        rows = np.concatenate([r for r, _, _ in coo])
-        cols = np.concatenate([c + a * S for a, (_, c, _) in enumerate(coo)])
         vals = np.concatenate([v for _, _, v in coo])
-        order = np.lexsort((cols, rows))
-        self.t_ptr = _row_pointers(rows[order], S)
-        self.t_ind = np.ascontiguousarray(cols[order], dtype=np.int64)
-        self.t_dat = np.ascontiguousarray(vals[order], dtype=float)
+        self.t_ptr, self.t_ind, self.t_dat = transition_block(model.T, coo)
         # (A·S) × S: row a·S + s is T[a][s, :] (the backed-up vector's product).
         self.tv_ptr = _row_pointers(np.concatenate([r + a * S for a, (r, _, _) in enumerate(coo)]), A * S)
         self.tv_ind = np.ascontiguousarray(np.concatenate([c for _, c, _ in coo]), dtype=np.int64)
@@ -295,7 +310,8 @@ class PointBasedSolver:
 
         # ---- upper bound: FIB vectors + sawtooth points over corner values.
         t0 = time.perf_counter()
-        Q, self.fib_iterations, self.fib_converged = fib_q(model, epsilon=1e-6, time_limit=fib_time)
+        Q, self.fib_iterations, self.fib_converged = fib_q(model, epsilon=self.settings.fib_epsilon,
+                                                          time_limit=fib_time)
         self.fib_seconds = time.perf_counter() - t0
         self.Qfib = np.ascontiguousarray(Q, dtype=float)   # [S, A]
         self.Vc = np.ascontiguousarray(Q.max(axis=1))      # corner values
@@ -534,20 +550,22 @@ class PointBasedSolver:
         Fills ``node.p`` and ``node.Rb`` on the first call."""
         A, Z, S = self.A, self.Z, self.S
         idx, val = node.idx, node.val
+        allowed = b""
+        if self.action_filter is not None:
+            if node.allowed is None:
+                node.allowed = self._allowed_at(idx, val)
+            # Successors of the actions not allowed here are not even computed (nor read, nor
+            # backed up through): the kernel skips them.
+            allowed = node.allowed.astype(np.uint8).tobytes()
         while True:
             nU, nl = _kernel.successors(idx, val, self.t_ptr, self.t_ind, self.t_dat, self.O, A, S, Z, self._bT,
-                                        self.pos, self._U_buf, self._C_buf, self._p_buf, self._live_buf)
+                                        self.pos, self._U_buf, self._C_buf, self._p_buf, self._live_buf, allowed)
             if nl >= 0:
                 break
             self._C_buf = np.zeros(2 * A * Z * nU)
         U = self._U_buf[:nU].copy()
         C = self._C_buf[: A * Z * nU].reshape(A * Z, nU).copy()
         live = self._live_buf[:nl].copy()
-        if self.action_filter is not None:
-            if node.allowed is None:
-                node.allowed = self._allowed_at(idx, val)
-            # Successors of the actions not allowed here are never read (nor backed up through).
-            live = live[node.allowed[live // Z]]
         if node.p is None:
             node.p = self._p_buf.reshape(A, Z).copy()
             node.Rb = val @ self.R[idx]

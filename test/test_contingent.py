@@ -1,0 +1,234 @@
+"""Policy-contingent PLAN and EXECUTE (``parameterize: policy``): options, offers, values by hand.
+
+The probe domain has one hidden goal (a or b, equally likely) and three actions: Ask (−1,
+observes the goal with 85 % accuracy), DoA and DoB (+10 on the right goal, −100 on the wrong
+one; either ends the task: the goal becomes ``done``). The hierarchy is Top → {Ask, Do},
+Do → {DoA, DoB}.
+
+The paper's eq. 15–17 model Do as "DoA in a, DoB in b" — the child's choice where it knows the
+goal — so the parent believes Do earns +10 whatever it knows, and never asks
+(test_execute.py::test_cli_plan_json_save_and_explain shows that plan). Policy-contingent, the
+parent values what Do would actually do at its belief: at 50/50 that is a gamble worth
+(10 − 100)/2, so it asks first.
+"""
+import io
+import json
+
+import numpy as np
+import pytest
+
+from pearl_pomdp.hierarchy import load_hierarchical_policy, parse_hierarchy, plan
+from pearl_pomdp.hierarchy.options import DONE, EXIT, with_exit
+from pearl_pomdp.model.factored import parse_domain
+from pearl_pomdp.model.pomdp import Pomdp
+
+PROBE_DOMAIN = """
+name: probe
+discount: 0.95
+features:
+  Goal: [a, b, done]
+start: {Goal: {a: 0.5, b: 0.5}}
+modalities:
+  Answer: [sayA, sayB, silent]
+actions:
+  Ask: {}
+  DoA:
+    effects: {Goal: {set: done}}
+  DoB:
+    effects: {Goal: {set: done}}
+observations:
+  Ask:
+    parents: [Goal]
+    table:
+      a: {sayA: 0.85, sayB: 0.15}
+      b: {sayA: 0.15, sayB: 0.85}
+      done: silent
+  default:
+    parents: [Goal]
+    table:
+      "*": silent
+rewards:
+  - {action: DoA, when: {Goal: a}, reward: 10, why: right}
+  - {action: DoA, when: {Goal: b}, reward: -100, why: wrong}
+  - {action: DoB, when: {Goal: b}, reward: 10, why: right}
+  - {action: DoB, when: {Goal: a}, reward: -100, why: wrong}
+  - {action: Ask, reward: -1, why: asking costs}
+"""
+HIERARCHY = """
+root: Top
+defaults: {trials: 200}
+subtasks:
+  Top: {actions: [Ask, Do]}
+  Do: {actions: [DoA, DoB]}
+"""
+
+
+@pytest.fixture(scope="module")
+def probe():
+    domain = parse_domain(PROBE_DOMAIN)
+    return domain, domain.compile(), plan(domain, parse_hierarchy(HIERARCHY, domain.actions))
+
+
+def belief(model, **p):
+    b = np.zeros(model.num_states)
+    for name, mass in p.items():
+        b[model.states.index(f"Goal={name}")] = mass
+    return b
+
+
+def test_options_add_a_free_stop_and_an_absorbing_done_state():
+    model = Pomdp.create(["x", "y"], ["go", "stay"], ["o1", "o2"],
+                         [np.array([[0.0, 1.0], [0.0, 1.0]]), np.eye(2)],
+                         np.array([[[0.7, 0.3], [0.2, 0.8]], [[0.5, 0.5], [0.5, 0.5]]]),
+                         np.array([[1.0, 0.0], [-2.0, 3.0]]), b0=[1.0, 0.0], discount=0.9)
+    opt = with_exit(model)
+    assert opt.states == ["x", "y", DONE] and opt.actions == ["go", "stay", EXIT]
+    T = [np.asarray(t) for t in opt.T]
+    assert np.array_equal(T[0][:2, :2], model.T[0]) and np.array_equal(T[1][:2, :2], model.T[1])
+    assert all(t[2, 2] == 1.0 for t in T[:2])                     # done stays done
+    assert np.array_equal(T[2], np.array([[0, 0, 1.0]] * 3))      # Exit: every state → done
+    assert np.array_equal(opt.R, np.array([[1.0, 0.0, 0.0], [-2.0, 3.0, 0.0], [0.0, 0.0, 0.0]]))
+    assert np.array_equal(opt.O[:2, :2], model.O) and opt.O[2, 0, 0] == 1.0 and opt.O[0, 2, 0] == 1.0
+    assert list(opt.b0) == [1.0, 0.0, 0.0]
+    with pytest.raises(ValueError, match="already has"):
+        with_exit(opt)
+
+
+def test_without_a_stop_an_infinite_horizon_reminder_is_never_delivered():
+    """Why subtasks are options: a reminder subtask with only 'deliver' (+50 once due, −200
+    when nothing is due) and 'wrong' (−100 while due) prefers never delivering for ever
+    (−100/step) to delivering once and then being forced to deliver for nothing (−200/step)."""
+    from pearl_pomdp.solvers.point_based import solve_point_based
+
+    model = Pomdp.create(["due", "none"], ["deliver", "wrong"], ["-"],
+                         [np.array([[0.0, 1.0], [0.0, 1.0]]), np.eye(2)], np.ones((2, 2, 1)),
+                         np.array([[50.0, -100.0], [-200.0, -200.0]]), b0=[1.0, 0.0], discount=0.95)
+    forced = solve_point_based(model, time_limit=None, epsilon=1e-3, max_trials=500)
+    assert model.actions[forced.policy.action(model.b0)] == "wrong"
+    option = solve_point_based(with_exit(model), time_limit=None, epsilon=1e-3, max_trials=500)
+    assert option.value_at_start == pytest.approx(50.0, abs=1e-3)  # deliver, then stop
+    assert option.upper_bound == pytest.approx(50.0, abs=2e-3)
+
+
+def test_the_parent_sees_the_child_as_it_acts(probe):
+    _, model, hp = probe
+    assert hp.contingent and hp.report["parameterize"] == "policy"
+    top, do = hp.report["subtasks"][1], hp.report["subtasks"][0]
+    assert (do["name"], do["option"], top["name"], top["option"]) == ("Do", True, "Top", False)
+    # At 50/50 Do would gamble; Top asks. Sure of the goal, Top lets Do act and Do picks right.
+    assert hp.execute(belief(model, a=0.5, b=0.5)).action_name == "Ask"
+    for goal, act in (("a", "DoA"), ("b", "DoB")):
+        d = hp.execute(belief(model, **{goal: 1.0}))
+        assert (d.action_name, [t.subtask for t in d.trace], d.trace[0].choice) == (act, ["Top", "Do"], "Do")
+    # One clear answer (0.85/0.15) is enough to act: the expected loss of the remaining doubt
+    # (0.15·110 = 16.5) is above the cost of another question, so Top asks once more only below that.
+    assert hp.execute(belief(model, a=0.85, b=0.15)).action_name == "Ask"
+    assert hp.execute(belief(model, a=0.98, b=0.02)).action_name == "DoA"
+
+
+def test_trace_values_are_one_step_values_of_the_offers(probe):
+    """Top's value of each child is b·R_a + γ Σ_o max_k α_k·(b T_a diag O_ao) for the primitive
+    the child offers, computed here by hand from the saved arrays."""
+    _, model, hp = probe
+    top = hp.subtasks["Top"]
+    b = belief(model, a=0.7, b=0.3)
+    bh = top.project(b)[0]
+    la = top.lookahead
+
+    def q(action):
+        a = top.model_actions.index(action)
+        pred = np.asarray(la._Tt[a] @ bh)
+        total = float(bh @ la.R[:, a])
+        for o in range(la.O.shape[2]):
+            succ = pred * la.O[a, :, o]
+            if succ.sum() > 0:
+                total += la.discount * float((top.alphas @ succ).max())
+        return total
+
+    offer = hp.execute(np.where(np.arange(model.num_states) >= 0, b, 0)).trace
+    values = hp.values(b)
+    child_offer = hp.subtasks["Do"].actions[hp._pick("Do", b, {})[1]]
+    assert values["Top"] == pytest.approx(max(q("Ask"), q(child_offer)), abs=1e-12)
+    assert offer[0].value == pytest.approx(values["Top"], abs=1e-12)
+
+
+def test_batch_decides_as_the_robot_does(probe):
+    _, model, hp = probe
+    rng = np.random.default_rng(3)
+    B = np.zeros((300, model.num_states))
+    B[:, :3] = rng.dirichlet(np.ones(3), size=300)
+    assert list(hp.actions_batch(B)) == [hp.execute(b).action for b in B]
+
+
+def test_save_load_round_trip_keeps_every_decision(probe, tmp_path):
+    domain, model, hp = probe
+    hp.save(tmp_path / "pol")
+    back = load_hierarchical_policy(tmp_path / "pol", domain)
+    assert back.contingent
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        b = np.zeros(model.num_states)
+        b[:3] = rng.dirichlet(np.ones(3))
+        assert back.execute(b).as_dict() == hp.execute(b).as_dict()
+
+
+def test_plans_are_byte_identical_run_to_run(probe):
+    domain, _, hp = probe
+    again = plan(domain, parse_hierarchy(HIERARCHY, domain.actions))
+    for name in hp.subtasks:
+        assert np.array_equal(hp.subtasks[name].alphas, again.subtasks[name].alphas)
+    first, second = io.BytesIO(), io.BytesIO()
+    np.savez(first, *[s.alphas for s in hp.subtasks.values()])
+    np.savez(second, *[s.alphas for s in again.subtasks.values()])
+    assert first.getvalue() == second.getvalue()
+
+
+def test_deeper_search_counts_its_expansions_within_the_budget(probe):
+    """lookahead: 1 searches two steps over the children's offers; the budget caps the beliefs
+    expanded, and with enough budget the value is the two-step expectimax over the offers."""
+    domain, model, _ = probe
+    deep = plan(domain, parse_hierarchy(HIERARCHY.replace("Top: {actions: [Ask, Do]}",
+                                                          "Top: {actions: [Ask, Do], lookahead: 1, expansions: 100}"),
+                                        domain.actions))
+    b = belief(model, a=0.6, b=0.4)
+    d = deep.execute(b)
+    assert 0 < d.expansions <= 100 and d.as_dict()["expansions"] == d.expansions
+    # By hand: two steps over the offers, the vectors after them.
+    top = deep.subtasks["Top"]
+    la = top.lookahead
+
+    def value(bf, depth):
+        bh = top.project(bf)[0]
+        best = -np.inf
+        for k, child in enumerate(top.actions):
+            prim = deep._pick(child, bf, {})[0] if top.abstract[k] else deep._index[child]
+            a = top.model_actions.index(deep.action_names[prim])
+            pred = np.asarray(la._Tt[a] @ bh)
+            total = float(bh @ la.R[:, a])
+            for o in la._live_obs[a]:
+                succ = pred * la.O[a, :, o]
+                m = succ.sum()
+                if m <= 1e-300:
+                    continue
+                if depth == 1:
+                    total += la.discount * float((top.alphas @ succ).max())
+                else:
+                    total += la.discount * m * value(top.lift(succ / m), depth - 1)
+            best = max(best, total)
+        return best
+
+    assert d.trace[0].value == pytest.approx(value(b, 2), abs=1e-9)
+    starved = plan(domain, parse_hierarchy(HIERARCHY.replace("Top: {actions: [Ask, Do]}",
+                                                             "Top: {actions: [Ask, Do], lookahead: 2, expansions: 3}"),
+                                           domain.actions))
+    assert starved.execute(b).expansions == 3
+
+
+def test_plan_report_has_the_bounds_of_every_subtask(probe):
+    _, _, hp = probe
+    for info in hp.report["subtasks"]:
+        assert info["solver"] == "pointbased" and info["upper_bound"] is not None
+        assert info["gap"] == pytest.approx(info["upper_bound"] - info["value_at_start"])
+        assert info["stop_reason"] in ("converged", "trials")
+        assert info["starts"] >= 1
+    json.dumps(hp.report)  # JSON-ready
