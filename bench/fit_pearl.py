@@ -27,6 +27,10 @@ sys.path.insert(0, str(REPO))
 #: The task without a walk (the study's tasks all include one): what residents also do.
 NO_WALK_TASK = {"label": "info", "appointments": [{"at": 5, "kind": "vitamin"}],
                 "questions": [{"ask": "time", "at": 60}]}
+#: Requests that arise while the robot is away (issue 21, specified before any run): no
+#: appointment, a weather question after a minute and a time question after four, in her
+#: room — how often her wishes arise out of earshot is then in the data, not guessed.
+AWAY_TASK = {"label": "away", "appointments": [], "questions": [{"ask": "weather", "at": 60}, {"ask": "time", "at": 250}]}
 PAPER_NOISE = 0.25
 
 
@@ -56,7 +60,7 @@ def main() -> int:
     domain = load_domain(args.domain)
     model = domain.compile()
     template = study_template(REPO / "config/scenarios/study.yaml")
-    cases = resident_scenarios(template, generate_residents(args.residents, seed=args.seed), TASKS + [NO_WALK_TASK])
+    cases = resident_scenarios(template, generate_residents(args.residents, seed=args.seed), TASKS + [NO_WALK_TASK, AWAY_TASK])
     scenarios = [replace(c.scenario, word_error_rate=effective_word_error_rate(PAPER_NOISE, c.articulation_wer))
                  for c in cases]
     t0 = time.perf_counter()

@@ -58,6 +58,47 @@ def paired(a: np.ndarray, b: np.ndarray) -> dict:
     return {"mean": round(float(d.mean()), 4), "ci95": round(float(1.96 * d.std(ddof=1) / np.sqrt(d.size)), 4)}
 
 
+def flat_bounds(model, path_policies, time_limit: float = 120.0, refine_share: float = 1 / 3, refine_episodes: int = 30,
+                refine_depth: int = 40, refine_rounds: int = 2, seed: int = 0, note=lambda msg: None):
+    """The flat point-based solve behind the bounds: trials for all but ``refine_share`` of
+    ``time_limit``, then bound updates along the episodes of ``path_policies`` and (from the
+    second round) of the flat policy itself. Returns ``(solver, (LB, UB) after the trials,
+    refine summary or None, setup seconds, solve seconds)``; the solver is pruned."""
+    import numpy as np
+
+    from pearl_pomdp.solvers.base import AlphaVectorPolicy
+    from pearl_pomdp.solvers.point_based import PointBasedSolver
+    from pearl_pomdp.solvers.refine import policy_paths, refine_along_paths
+
+    t0 = time.perf_counter()
+    solver = PointBasedSolver(model, seed=seed, fib_time=max(0.5, 0.1 * time_limit))
+    setup = time.perf_counter() - t0
+    solver.setup_seconds = setup
+    solver.run(time_limit=max(0.0, (1.0 - refine_share) * time_limit - setup), epsilon=1e-3)
+    after_trials = solver.bounds_at_start()
+    note(f"flat trials: LB {after_trials[0]:.4f} UB {after_trials[1]:.4f} after {solver.trials} trials, "
+         f"{time.perf_counter() - t0:.1f} s")
+    refine = None
+    if refine_share > 0:
+        paths = np.vstack([policy_paths(model, p, refine_episodes, refine_depth, seed=seed + 1) for p in path_policies])
+        rounds = max(1, refine_rounds)
+        refine = {"backups": 0, "sweeps": 0, "seconds": 0.0, "rounds": []}
+        for k in range(rounds):
+            if k > 0:
+                current = AlphaVectorPolicy(solver.GT[:, : solver.K].T.copy(), solver.gact[: solver.K].copy())
+                paths = np.vstack([paths, policy_paths(model, current, refine_episodes, refine_depth,
+                                                       seed=seed + 1 + k)])
+            left = max(0.0, time_limit - (time.perf_counter() - t0))
+            got = refine_along_paths(solver, paths, seconds=left / (rounds - k))
+            for key in ("backups", "sweeps", "seconds"):
+                refine[key] += got[key]
+            refine["rounds"].append({"paths": int(paths.shape[0]), "lb": round(got["lb"], 4), "ub": round(got["ub"], 4)})
+            note(f"updates along the policies' beliefs, round {k + 1}: LB {got['lb']:.4f} UB {got['ub']:.4f}, "
+                 f"{got['backups']} backups in {got['seconds']:.1f} s")
+    solver.prune()
+    return solver, after_trials, refine, setup, time.perf_counter() - t0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--domain", default=str(REPO / "config" / "pearl.domain.yaml"))
@@ -86,8 +127,6 @@ def main() -> int:
     from pearl_pomdp.model.factored import load_domain
     from pearl_pomdp.solvers.base import AlphaVectorPolicy
     from pearl_pomdp.solvers.mdp import solve_fib, solve_qmdp
-    from pearl_pomdp.solvers.point_based import PointBasedSolver
-    from pearl_pomdp.solvers.refine import policy_paths, refine_along_paths
 
     def note(msg: str) -> None:
         if args.progress:
@@ -102,35 +141,10 @@ def main() -> int:
     note(f"planned the hierarchy in {plan_seconds:.1f} s")
     qmdp = solve_qmdp(model)
     fib = solve_fib(model)
-    t0 = time.perf_counter()
-    solver = PointBasedSolver(model, seed=args.seed, fib_time=max(0.5, 0.1 * args.time_limit))
-    setup = time.perf_counter() - t0
-    solver.setup_seconds = setup
-    trial_seconds = max(0.0, (1.0 - args.refine_share) * args.time_limit - setup)
-    solver.run(time_limit=trial_seconds, epsilon=1e-3)
-    after_trials = solver.bounds_at_start()
-    note(f"flat trials: LB {after_trials[0]:.4f} UB {after_trials[1]:.4f} after {solver.trials} trials, "
-         f"{time.perf_counter() - t0:.1f} s")
-    refine = None
-    if args.refine_share > 0:
-        paths = np.vstack([policy_paths(model, p, args.refine_episodes, args.refine_depth, seed=args.seed + 1)
-                           for p in (hp, qmdp.policy)])
-        rounds = max(1, args.refine_rounds)
-        refine = {"backups": 0, "sweeps": 0, "seconds": 0.0, "rounds": []}
-        for k in range(rounds):
-            if k > 0:
-                current = AlphaVectorPolicy(solver.GT[:, : solver.K].T.copy(), solver.gact[: solver.K].copy())
-                paths = np.vstack([paths, policy_paths(model, current, args.refine_episodes, args.refine_depth,
-                                                       seed=args.seed + 1 + k)])
-            left = max(0.0, args.time_limit - (time.perf_counter() - t0))
-            got = refine_along_paths(solver, paths, seconds=left / (rounds - k))
-            for key in ("backups", "sweeps", "seconds"):
-                refine[key] += got[key]
-            refine["rounds"].append({"paths": int(paths.shape[0]), "lb": round(got["lb"], 4), "ub": round(got["ub"], 4)})
-            note(f"updates along the policies' beliefs, round {k + 1}: LB {got['lb']:.4f} UB {got['ub']:.4f}, "
-                 f"{got['backups']} backups in {got['seconds']:.1f} s")
-    solver.prune()
-    solve_seconds = time.perf_counter() - t0
+    solver, after_trials, refine, setup, solve_seconds = flat_bounds(
+        model, [hp, qmdp.policy], time_limit=args.time_limit, refine_share=args.refine_share,
+        refine_episodes=args.refine_episodes, refine_depth=args.refine_depth, refine_rounds=args.refine_rounds,
+        seed=args.seed, note=note)
     lb, ub = solver.bounds_at_start()
     flat_policy = AlphaVectorPolicy(solver.GT[:, : solver.K].T.copy(), solver.gact[: solver.K].copy())
 

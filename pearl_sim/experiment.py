@@ -51,6 +51,8 @@ class EpisodeResult:
     guidance_wanted: bool = False
     #: Questions she came to have (the world's count), of which ``questions_answered`` were answered.
     questions_raised: int = 0
+    #: Simulated seconds the episode lasted (the world's clock at its end).
+    seconds: float = 0.0
 
 
 def episode_executive(controller, domain, scenario: Scenario, model=None):
@@ -103,7 +105,7 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
         wrong_actions=m.wrong_actions, residents_lost=m.residents_lost,
         walking_speed=scenario.resident.walking_speed, actions=list(trace.actions),
         questions_answered=m.questions_answered, reminders_delivered=m.reminders_delivered,
-        guidance_wanted=m.walk_wishes > 0, questions_raised=m.questions_raised,
+        guidance_wanted=m.walk_wishes > 0, questions_raised=m.questions_raised, seconds=float(world.time),
     )
 
 
