@@ -374,8 +374,11 @@ def fit_domain(domain, episodes: Sequence[Episode], prior_strength: float = 10.0
 
 
 # ------------------------------------------------------------------ writing
-def _fmt(dist: Dict[str, float]) -> str:
-    return "{" + ", ".join(f"{json.dumps(k)}: {p:.6g}" for k, p in dist.items()) + "}"
+def _fmt(dist: Dict[str, float], digits: int = 6) -> str:
+    """A row as YAML flow; ``digits`` significant digits. The fitted rows are written with 12,
+    so that they still sum to 1 within the loader's tolerance after rounding (with 6, a row of
+    eight small entries summed to 0.999999 and the fitted file did not load)."""
+    return "{" + ", ".join(f"{json.dumps(k)}: {p:.{digits}g}" for k, p in dist.items()) + "}"
 
 
 def fitted_section(result: FitResult, prior_strength: float) -> str:
@@ -405,7 +408,7 @@ def fitted_section(result: FitResult, prior_strength: float) -> str:
                     lines.append(f"      {feature}:")
                     indent = "        "
                 for r in rs:
-                    lines.append(f"{indent}{json.dumps(r.row)}: {_fmt(r.after)}   "
+                    lines.append(f"{indent}{json.dumps(r.row)}: {_fmt(r.after, 12)}   "
                                  f"# fitted: n={r.n:.4g}, was {_fmt(r.before)}")
     return "\n".join(lines) + "\n"
 

@@ -9,11 +9,24 @@ import numpy as np
 import pytest
 
 from pearl_pomdp.errors import PearlError
-from pearl_pomdp.fit import Episode, fit_domain, load_episodes, simulate_episodes, write_fitted
+from pearl_pomdp.fit import FITTED_MARKER, Episode, fit_domain, load_episodes, simulate_episodes, write_fitted
 from pearl_pomdp.model.factored import load_domain, parse_domain
 
 REPO = Path(__file__).resolve().parents[1]
-PEARL = REPO / "config" / "pearl.domain.yaml"
+SHIPPED = REPO / "config" / "pearl.domain.yaml"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _designer(tmp_path_factory):
+    """The designer's Pearl domain: the shipped file without its ``fitted:`` section (issue 21
+    appended one fitted to the world), so these tests fit the designer's tables."""
+    global PEARL
+    PEARL = tmp_path_factory.mktemp("designer") / "pearl.domain.yaml"
+    PEARL.write_text(SHIPPED.read_text().split(FITTED_MARKER)[0])
+    yield
+
+
+PEARL = SHIPPED
 TABLE4 = REPO / "config" / "table4.domain.yaml"
 
 #: The world as it "really" is: two Pearl rows unlike the designer's (a resident who asks to be
@@ -152,3 +165,18 @@ def test_world_episodes_round_trip_into_the_fit(tmp_path):
     assert episodes[0].actions[0] == "DoNothing" and "GotoPatientRoom" in episodes[0].actions
     result = fit_domain(designer, episodes, min_count=3)
     assert result.with_truth and result.rows
+
+
+def test_fitted_rows_with_many_small_entries_still_sum_to_one(tmp_path):
+    """The fitted section is written with 12 significant digits: with 6, a row of seven equal
+    entries (1/7 each) summed to 0.999999 and the written file did not load."""
+    from pearl_pomdp.fit import FitResult, RowChange, fitted_section
+
+    designer = load_domain(PEARL)
+    symbols = ["yes", "no", "time", "weather", "go", "unknown", "t_yes"]
+    after = {k: 1 / 7 for k in symbols}
+    before = {k: (1.0 if k == "unknown" else 0.0) for k in symbols}
+    row = RowChange("observation DoNothing", "none,no,none,none", 10.0, before, after)
+    result = FitResult(designer, [row], [], True, [], 1, 1)
+    text = PEARL.read_text() + "\n" + fitted_section(result, 5.0)
+    parse_domain(text, source="seven")  # loads: the row sums to 1 within the tolerance

@@ -114,7 +114,10 @@ def test_pearl_hierarchy_file_is_valid():
     assert h.root == "Act"
     assert set(h.descendants("Act")) == set(domain.actions)
     assert h.subtasks["Contact"].children == ["RingDoorBell", "GotoPatientRoom"]
-    assert set(h.subtasks["Act"].children) == {"Remind", "Assist", "Rest"}
+    assert set(h.subtasks["Act"].children) == {"Remind", "Assist", "Rest", "DoNothing"}
+    assert h.parameterize == "policy"
+    assert all(spec.solver == "pointbased" and spec.shaping == [] for spec in h.subtasks.values())
+    assert h.subtasks["Act"].trials == 60 and h.subtasks["Assist"].trials == 30
 
 
 POLICY = """\

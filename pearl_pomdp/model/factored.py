@@ -23,6 +23,8 @@ Compiled arrays follow the project conventions (docs/design.md §2):
 """
 from __future__ import annotations
 
+import copy
+
 import itertools
 import math
 import re
@@ -390,8 +392,13 @@ class FactoredDomain:
 
 
 # ====================================================================== loading and validation
-def load_domain(path: Union[str, Path]) -> FactoredDomain:
+def load_domain(path: Union[str, Path], fitted: bool = True) -> FactoredDomain:
     """Read and validate a domain YAML file.
+
+    Args:
+        fitted: apply the file's ``fitted:`` section (rows ``pearl fit`` estimated from
+            episodes); ``False`` gives the designer's tables alone (the section is still
+            validated). The shipped Pearl domain has one (issue 21).
 
     Raises:
         SpecError: the file is not valid; the message names the file, the line when
@@ -401,22 +408,24 @@ def load_domain(path: Union[str, Path]) -> FactoredDomain:
     """
     path = Path(path)
     text = path.read_text(encoding="utf-8")
-    return parse_domain(text, source=str(path), default_name=path.name.split(".")[0])
+    return parse_domain(text, source=str(path), default_name=path.name.split(".")[0], fitted=fitted)
 
 
-def parse_domain(text: str, source: str = "<string>", default_name: str = "domain") -> FactoredDomain:
+def parse_domain(text: str, source: str = "<string>", default_name: str = "domain",
+                 fitted: bool = True) -> FactoredDomain:
     """Parse and validate a domain from YAML text (see :func:`load_domain`)."""
     data = parse_yaml(text, source)
-    return _Builder(source, data, default_name).build()
+    return _Builder(source, data, default_name, fitted).build()
 
 
 class _Builder:
     """Validates the parsed YAML and builds the :class:`FactoredDomain` (one method per section)."""
 
-    def __init__(self, source: str, data: Any, default_name: str):
+    def __init__(self, source: str, data: Any, default_name: str, fitted: bool = True):
         self.source = source
         self.data = data
         self.default_name = default_name
+        self.use_fitted = fitted
 
     # ------------------------------------------------------------ error helpers
     def fail(self, where: str, problem: str, container: Any = None, key: Any = None) -> SpecError:
@@ -482,7 +491,10 @@ class _Builder:
             transitions.append(self.build_action(a, spec, actions_node, default_effects, categories))
         observations = self.build_observations(d["observations"], d)
         if d.get("fitted") is not None:
-            self.apply_fitted(d["fitted"], d, transitions, observations)
+            if self.use_fitted:
+                self.apply_fitted(d["fitted"], d, transitions, observations)
+            else:   # still checked: a broken section is an error either way
+                self.apply_fitted(d["fitted"], d, copy.deepcopy(transitions), copy.deepcopy(observations))
         rewards = self.build_rewards(d["rewards"], d)
         start = self.build_start(d.get("start"), d)
         explicit = self.build_explicit_start(d.get("start"), d)
