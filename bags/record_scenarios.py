@@ -16,7 +16,7 @@ checks against the bag's replay (actions in order, the true state at each RingDo
 Scenarios:
 
 * ``figure4_guidance`` — ``config/scenarios/figure4.yaml``: the paper's Figure 4, from the
-  reminder to "Pearl leaves".
+  reminder to the answered weather question.
 * ``table4_clarification`` — ``config/scenarios/table4_dialog.yaml``: the checklist, then
   mumbled information requests (45 % word errors) that call for clarification.
 
@@ -40,7 +40,7 @@ PEARL = BAGS / "pearl"
 #: bag name → (scenario file, one-line description).
 SCENARIOS: Dict[str, tuple] = {
     "figure4_guidance": ("config/scenarios/figure4.yaml",
-                         "Figure 4: reminder, contact, guidance of a slow resident, weather question, Pearl leaves"),
+                         "Figure 4: reminder, contact, guidance of a slow resident, weather question"),
     "table4_clarification": ("config/scenarios/table4_dialog.yaml",
                              "Table 4-style dialog: checklist, then mumbled information requests and clarifications"),
 }
