@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from pearl_pomdp.hierarchy import load_hierarchy, plan
+from pearl_pomdp.hierarchy import load_hierarchical_policy
 from pearl_pomdp.model.factored import load_domain
 from pearl_sim.agents import Controller
 from pearl_sim.experiment import run_episode
@@ -41,9 +41,10 @@ FRESH_SEEDS = 20
 
 
 @pytest.fixture(scope="module")
-def pearl():
+def pearl(pearl_policy):
+    # The session's planned Pearl policy (test/ros_helpers.py: planned once, cached by the sources).
     domain = load_domain(REPO / "config/pearl.domain.yaml")
-    policy = plan(domain, load_hierarchy(REPO / "config/pearl.hierarchy.yaml", domain))
+    policy = load_hierarchical_policy(pearl_policy, domain)
     return domain, Controller("hierarchical", policy)
 
 

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from pearl_pomdp.executive import Executive
-from pearl_pomdp.hierarchy import load_hierarchy, plan
+from pearl_pomdp.hierarchy import load_hierarchical_policy
 from pearl_pomdp.model.factored import load_domain
 from pearl_pomdp.speech import KeywordFilter
 
-pytestmark = pytest.mark.slow  # plans the whole hierarchy (~30 s)
+pytestmark = pytest.mark.slow  # drives the planned policy through many episodes
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 REMINDERS = {"RemindPhysioAppt", "RemindVitamin", "UpdateChecklist"}
@@ -24,9 +24,10 @@ LANDMARK = {"GotoPatientRoom": "atRoom", "GuideToPhysio": "atPhysio", "GoHome": 
 
 
 @pytest.fixture(scope="module")
-def pearl():
+def pearl(pearl_policy):
+    # The session's planned Pearl policy (test/ros_helpers.py: planned once, cached by the sources).
     domain = load_domain(CONFIG / "pearl.domain.yaml")
-    policy = plan(domain, load_hierarchy(CONFIG / "pearl.hierarchy.yaml", domain))
+    policy = load_hierarchical_policy(pearl_policy, domain)
     return domain, domain.compile(), policy
 
 
