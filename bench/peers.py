@@ -18,10 +18,10 @@ paths (without them the bench prints our figures alone)::
         --sarsop /work/peers/sarsop/src/pomdpsol [--set small|medium] [--repeat 3]
 
 Options: ``--exact FILE:H,...`` / ``--pointbased FILE,...`` pick the runs (``H`` a horizon
-or ``inf``; a FILE without a directory is looked up in ``../shared/benchmarks/pomdp``);
+or ``inf``; a FILE without a directory is looked up in ``test/data/pomdp``);
 ``--set small|medium|large|all`` (medium adds shuttle h10 and ∞, large network ∞);
 ``--no-exact`` / ``--no-pointbased``; ``--time-limit`` (seconds per run, both sides;
-default 300 for exact runs, pomdp-solve's limit in RESULTS.md, and 60 for point-based ones);
+default 300 for exact runs, the limit pomdp-solve's reference runs used, and 60 for point-based ones);
 ``--base DIR`` also runs the solvers of another checkout (say ``git archive main``
 unpacked in DIR) between the peer and ours, and reports ``ours_vs_base`` (wall and
 solver ratios, and for the exact runs whether the two policies are identical).
@@ -49,9 +49,10 @@ from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
 REPO = Path(__file__).resolve().parents[1]
-BENCHMARKS = REPO.parent / "shared" / "benchmarks" / "pomdp"
+#: The benchmark models ship with the repository (each file's source: its README.md).
+BENCHMARKS = REPO / "test" / "data" / "pomdp"
 
-#: Exact runs: small = the files on which pomdp-solve needs at most a few seconds (RESULTS.md);
+#: Exact runs: small = the files on which pomdp-solve needs at most a few seconds;
 #: medium = shuttle h10 (~10 s) and shuttle ∞ (pomdp-solve ~130-180 s; the run issue 26 fixed);
 #: large = network ∞ (pomdp-solve ~300 s, at the edge of its limit). Every infinite-horizon
 #: run pomdp-solve finishes within 300 s is here; 4x3.95 ∞ is not (it does not).
@@ -62,8 +63,8 @@ EXACT_SETS = {
     "medium": ["shuttle.95.POMDP:10", "shuttle.95.POMDP:inf"],
     "large": ["network.POMDP:inf"],
 }
-#: Seconds per run (both sides) unless --time-limit says otherwise: RESULTS.md killed
-#: pomdp-solve after 300 s; SARSOP reaches its gap on the point-based files in under a second.
+#: Seconds per run (both sides) unless --time-limit says otherwise: pomdp-solve's reference runs
+#: were stopped after 300 s; SARSOP reaches its gap on the point-based files in under a second.
 DEFAULT_TIME_LIMIT = {"exact": 300.0, "pointbased": 60.0}
 #: Values at b0 closer than this count as the same (issue 26's acceptance).
 SAME_VALUE = 1e-6
