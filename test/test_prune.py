@@ -297,3 +297,17 @@ def test_near_duplicate_clusters_lose_no_useful_vector(seed):
     # each kept vector is best (to tol) at its witness among all vectors
     assert np.all((wit * alphas[kept]).sum(axis=1) >= (wit @ alphas.T).max(axis=1) - tol)
     assert stats.lp_failures == 0
+
+
+def test_more_states_than_vectors_on_the_large_set_path():
+    # N²·S > 1e7 sends the dominance filter through its corner-based branch, which once kept
+    # one entry per STATE in a buffer of one per VECTOR: with S > K it wrote past the end and
+    # the heap corrupted (seen planning Pearl's eq. 15-17 hierarchy: "free(): invalid next
+    # size"; .ci/sanitize-kernels reports the overflow, this test crashes or fails without the fix).
+    K, S = 120, 700
+    assert K * K * S > 1e7 and S > K
+    alphas = np.zeros((K, S))
+    alphas[np.arange(60), np.arange(60)] = 1.0         # vector i is best at corner i only
+    alphas[60:] = alphas[:60] - 0.5                     # pointwise dominated copies
+    kept = prune(alphas, tol=1e-9)
+    assert sorted(kept.tolist()) == list(range(60))

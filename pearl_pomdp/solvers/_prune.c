@@ -527,6 +527,7 @@ static int over_time(PruneJob *J, double work) {
 
 typedef struct {
     int *cand, *kord, *queue, *wit_point;
+    int *corner_best; /* [S]: the best row at each corner (large sets' dominance filter) */
     char *is_kept, *alive;
     double *wit, *R, *b, *vals;
     LP lp;
@@ -534,7 +535,7 @@ typedef struct {
 } Work;
 
 static void work_free(Work *w) {
-    free(w->cand); free(w->kord); free(w->queue); free(w->wit_point); free(w->is_kept); free(w->alive);
+    free(w->cand); free(w->kord); free(w->corner_best); free(w->queue); free(w->wit_point); free(w->is_kept); free(w->alive);
     free(w->wit); free(w->R); free(w->b); free(w->vals);
     if (w->lp_ready) lp_free(&w->lp);
 }
@@ -583,6 +584,7 @@ static int prune_run(PruneJob *J) {
     int rc = NOMEM;
     w.cand = malloc(sizeof(int) * K);
     w.kord = malloc(sizeof(int) * K);
+    w.corner_best = malloc(sizeof(int) * (size_t)S);
     w.queue = malloc(sizeof(int) * 2 * (size_t)K);
     w.wit_point = malloc(sizeof(int) * K);
     w.is_kept = calloc(K, 1);
@@ -590,7 +592,7 @@ static int prune_run(PruneJob *J) {
     w.wit = malloc(sizeof(double) * (size_t)K * S);
     w.b = malloc(sizeof(double) * S);
     w.vals = malloc(sizeof(double) * K);
-    if (!w.cand || !w.kord || !w.queue || !w.wit_point || !w.is_kept || !w.alive || !w.wit || !w.b || !w.vals)
+    if (!w.cand || !w.kord || !w.corner_best || !w.queue || !w.wit_point || !w.is_kept || !w.alive || !w.wit || !w.b || !w.vals)
         goto done;
 
     /* 1. duplicates (the first copy stays) and 2. weak pointwise dominance. In lexicographic
@@ -613,7 +615,8 @@ static int prune_run(PruneJob *J) {
                 if (geq_all(A + (size_t)order[q] * S, a, S)) { dominated[order[r]] = 1; break; }
         }
     } else { /* large sets: only the best rows at the corners dominate (the LPs do the rest) */
-        int *by = w.kord;
+        /* (S entries: not kord's K, which is shorter whenever the states outnumber the rows) */
+        int *by = w.corner_best;
         for (int s = 0; s < S; s++) {
             int bi = order[0];
             for (int r = 1; r < N; r++)
