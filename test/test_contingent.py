@@ -183,6 +183,49 @@ def test_plans_are_byte_identical_run_to_run(probe):
     assert first.getvalue() == second.getvalue()
 
 
+def test_plans_are_byte_identical_beside_a_cpu_burner(probe):
+    # The budget is a trial count, so a busy machine changes the plan's time, never its vectors.
+    import subprocess
+    import sys
+
+    domain, _, hp = probe
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        busy = plan(domain, parse_hierarchy(HIERARCHY, domain.actions))
+    finally:
+        for p in burners:
+            p.kill()
+            p.wait(timeout=10)
+    for name in hp.subtasks:
+        assert hp.subtasks[name].alphas.tobytes() == busy.subtasks[name].alphas.tobytes()
+        assert np.array_equal(hp.subtasks[name].alpha_actions, busy.subtasks[name].alpha_actions)
+
+
+def test_an_exact_solve_that_cannot_finish_falls_back_to_point_based_without_losing_value(caplog):
+    """Table 4's dialogue (8 states, 14 actions, 12 observations): exact pruning at the infinite
+    horizon does not converge in a second, so the plan falls back to point-based — and the
+    fallback's plan is the point-based plan itself (same trials, same vectors), not a
+    truncated exact one (before the fix the fallback inherited the spent clock: 0 trials,
+    V(b0) = -20 against 84.39)."""
+    from pathlib import Path
+
+    from pearl_pomdp.hierarchy import flat_hierarchy
+    from pearl_pomdp.model.factored import load_domain
+
+    domain = load_domain(Path(__file__).resolve().parents[1] / "config/table4.domain.yaml")
+    exact_first = plan(domain, flat_hierarchy(list(domain.actions), solver="incprune", time_limit=2.0, horizon=None))
+    point_based = plan(domain, flat_hierarchy(list(domain.actions)))
+    first, pb = exact_first.report["subtasks"][-1], point_based.report["subtasks"][-1]
+    assert first["solver"] == "pointbased" and not first["exact"]
+    assert any("incremental pruning stopped by time_limit" in w and "planned point-based instead" in w
+               for w in first["warnings"])
+    assert first["stop_reason"] == pb["stop_reason"] == "converged"
+    assert first["value_at_start"] == pb["value_at_start"] and first["value_at_start"] > 84.0
+    assert first["gap"] <= 0.01
+    root = exact_first.root
+    assert exact_first.subtasks[root].alphas.tobytes() == point_based.subtasks[root].alphas.tobytes()
+
+
 def test_deeper_search_counts_its_expansions_within_the_budget(probe):
     """lookahead: 1 searches two steps over the children's offers; the budget caps the beliefs
     expanded, and with enough budget the value is the two-step expectimax over the offers."""

@@ -33,7 +33,8 @@ def _forbid_planning(monkeypatch):
 
 @pytest.fixture
 def short_flat_plans(monkeypatch):
-    """Plan the flat hierarchy with horizon 5 (its built-in infinite horizon runs to the 30 s limit)."""
+    """Record which hierarchies are planned (the flat one is the built-in point-based plan: a
+    fraction of a second on the probe; it was a 30 s exact solve before issue 21)."""
     import pearl_pomdp.hierarchy as hierarchy_package
 
     real_plan = hierarchy_package.plan
@@ -42,8 +43,9 @@ def short_flat_plans(monkeypatch):
     def plan(domain, hierarchy, **kwargs):
         seen.append(hierarchy.name)
         if hierarchy.name == "flat":
-            assert hierarchy.subtasks[hierarchy.root].children == list(domain.actions)
-            hierarchy = hierarchy_package.flat_hierarchy(list(domain.actions), horizon=5)
+            root = hierarchy.subtasks[hierarchy.root]
+            assert root.children == list(domain.actions)
+            assert root.solver == "pointbased" and root.horizon is None   # never a truncated exact solve
         return real_plan(domain, hierarchy, **kwargs)
 
     monkeypatch.setattr(hierarchy_package, "plan", plan)
@@ -197,3 +199,18 @@ def test_bad_inputs_fail_at_once_before_any_work(argv, message, tmp_path, monkey
     assert captured.out == ""            # no "planning the policy and starting the graph…"
     assert captured.err.startswith(f"pearl {argv[0]}: error: ") and message in captured.err
     assert not (tmp_path / "out").exists()   # nothing was created
+
+
+def test_json_into_a_reader_that_left_ends_quietly(probe):
+    # `pearl plan --json | head -c 50`: the pipe closes before the report is written; the command
+    # ends with the shell's SIGPIPE status and no traceback (it printed two before).
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-c", "import sys; from pearl_pomdp.cli import main; sys.exit(main())",
+           "plan", "probe.domain.yaml", "--flat", "--no-save", "--json"]
+    proc = subprocess.Popen(cmd, cwd=probe, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()          # the reader is gone before the plan is done
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141
+    assert "Traceback" not in err and "BrokenPipe" not in err, err

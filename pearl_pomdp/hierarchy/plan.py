@@ -385,20 +385,28 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
         if which == "incprune":
             from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
 
+            # The exact attempt gets half of the subtask's time (and of what is left of the plan's):
+            # if it does not converge, the point-based fallback must still have time for its
+            # trials, or an early stop would leave a policy worse than point-based alone.
+            own = None if spec.time_limit is None else 0.5 * spec.time_limit
+            plan_share = None if deadline is None else 0.5 * max(0.05, deadline - time.perf_counter())
+            exact_limit = min((x for x in (own, plan_share) if x is not None), default=None)
             result = solve_incremental_pruning(solve_model, horizon=spec.horizon, epsilon=spec.epsilon,
-                                               time_limit=_left(deadline, spec.time_limit))
+                                               time_limit=exact_limit)
             if result.extra.get("stop_reason") in ("time_limit", "vector_cap"):
                 notes.append(f"subtask {name!r}: incremental pruning stopped by {result.extra['stop_reason']} after "
                              f"{result.iterations} epochs; planned point-based instead")
                 log.warning("%s", notes[-1])
                 result = None
         if result is None:
-            limit = _left(deadline, spec.time_limit)
+            t_fallback = time.perf_counter()   # its own clock: what an exact attempt spent is not its
+            own = spec.time_limit if spec.time_limit is None or which != "incprune" else 0.5 * spec.time_limit
+            limit = _left(deadline, own)
             # FIB (the first upper bound) only to within the target gap: every iterate is a bound.
             pb = PointBasedSolver(solve_model, seed=seed, fib_time=None if limit is None else max(0.05, 0.1 * limit),
                                   settings=PointBasedSettings(fib_epsilon=max(spec.epsilon, 1e-6)),
                                   action_filter=offers, starts=starts)
-            result = pb.run(time_limit=float("inf") if limit is None else max(0.0, limit - (time.perf_counter() - t1)),
+            result = pb.run(time_limit=float("inf") if limit is None else max(0.0, limit - (time.perf_counter() - t_fallback)),
                             epsilon=spec.epsilon, max_trials=spec.trials)
             result.extra["setup_seconds"] = pb.setup_seconds
             stopped = "converged" if result.converged else (
