@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
 import pkgutil
 import sys
 from typing import List, Optional
@@ -112,6 +113,11 @@ def main(argv: Optional[List[str]] = None) -> int:
         return 2
     try:
         return int(args._run(args) or 0)
+    except BrokenPipeError:
+        # `pearl plan --json | head`: the reader left; say nothing more (Python would print a
+        # traceback, then fail again flushing stdout at exit). 141 = 128 + SIGPIPE, as a shell reports.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except PearlError as err:
         print(f"pearl {args.command}: error: {err}", file=sys.stderr)
         return 2
