@@ -197,7 +197,7 @@ class DriveTimer:
 
     @classmethod
     def for_domain(cls, domain, drives: Iterable[str], places: Dict[str, Place], deadline: DriveDeadline,
-                   place_feature: str = "RobotLocation", guide_actions: Iterable[str] = (),
+                   place_feature: str, guide_actions: Iterable[str] = (),
                    guide_speed: float = 0.03) -> Optional["DriveTimer"]:
         """The timer of ``drives`` in ``domain``: each one's goal is the value it (most likely) sets
         on ``place_feature``. Drives without such a value are left out (never timed);
