@@ -342,7 +342,8 @@ class InputOutcome:
             * ``"opened"``: an action opened a step and nothing closed it yet;
             * ``"unknown"``: the action is not one of the model's (counted, ignored);
             * ``"abandoned"``: :meth:`~BeliefTracker.abandon_step` left the open step without an update;
-            * ``"idle"``: nothing happened (a tick before any deadline, nothing to abandon).
+            * ``"idle"``: nothing happened (a tick before any deadline, nothing to abandon, a
+              number input's reading that kept its symbol).
         closed: the step closed by this call, or ``None``.
         symbol: the observation symbol the input was taken as (``None`` for an invalid input,
             an action or a tick).
@@ -350,7 +351,9 @@ class InputOutcome:
             a Speech symbol), ``"keyword"`` (speech through the keyword filter),
             ``"no_keyword"`` (speech with no keyword: the unknown symbol, counted),
             ``"low_confidence"`` (a keyword below ``confidence_floor``: the unknown symbol,
-            counted), ``"invalid"``; ``""`` for actions and ticks.
+            counted), ``"number"`` (a number input's reading gave a new symbol),
+            ``"unchanged"`` (a number input's reading kept its symbol: kind ``"idle"``, nothing
+            observed, counted), ``"invalid"``; ``""`` for actions and ticks.
         text: the input's text (speech as recognised, without its confidence).
         confidence: the recogniser's confidence (1.0 when none was given).
         events: what the call has to report, oldest first (the node logs each).
