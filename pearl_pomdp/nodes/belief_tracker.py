@@ -66,7 +66,7 @@ class BeliefTrackerNode(ManagedPearlNode):
           tried in the working directory, then in the package share directory.
         * The step rules: one parameter per field of :class:`~pearl_pomdp.tracking.StepSettings`
           (:func:`step_parameters`: the same names, defaults, ranges and descriptions) —
-          ``step_timeout``, ``timeout_observation``, ``no_timeout_actions``, ``max_pending``,
+          ``step_timeout``, ``timeout_observation``, ``no_timeout_actions``, ``drive_category``, ``max_pending``,
           ``stale_after``, ``confidence_floor``, ``drive_speed``, ``guide_speed``,
           ``guide_actions``, ``drive_path_factor``, ``drive_slack``, ``drive_margin``,
           ``drive_max_seconds``, ``nav_failed_observation``, ``place_feature``.
