@@ -923,7 +923,7 @@ class BeliefTracker:
             text, confidence = parse_speech_message(str(data))
             symbol, heard = self._mapper.speech(key, text, confidence)
         elif kind == "number":
-            text, confidence = (data if isinstance(data, str) else repr(float(data))), 1.0
+            text, confidence = (data if isinstance(data, str) else str(data)), 1.0
             symbol, heard = self._mapper.number(key, data)
             if heard == "unchanged":
                 return self._outcome("idle", None, symbol, heard, text, confidence)
