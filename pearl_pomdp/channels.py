@@ -208,7 +208,7 @@ def parse_input(modality: str, symbols: Sequence[str], node: Any, keywords: Mapp
         symbol, bins that overlap, leave gaps or do not cover the range, a bad hysteresis.
     """
     if not isinstance(node, dict):
-        raise fail(where, "expected a mapping such as {kind: symbol, topic: /pearl/touchscreen}", container, key)
+        raise fail(where, "expected a mapping such as {kind: symbol, topic: /robot/door}", container, key)
     for k in node:
         if k not in INPUT_KEYS:
             raise fail(f"{where}.{k}", f"unknown key; expected one of {', '.join(INPUT_KEYS)}", node, k)
@@ -270,7 +270,7 @@ def parse_input(modality: str, symbols: Sequence[str], node: Any, keywords: Mapp
         raise fail(f"{where}.hysteresis", f"{hysteresis!r} is not a number >= 0", node, "hysteresis")
     if len(bins) > 1 and h >= width:
         raise fail(f"{where}.hysteresis", f"{h:g} is not smaller than the narrowest bin ({width:g} wide): "
-                                          "the channel could never leave it", node, "hysteresis")
+                                          "a reading in a neighbouring bin could never move the input to it", node, "hysteresis")
     report = node.get("report", "change")
     if report not in REPORTS:
         raise fail(f"{where}.report", f"unknown report {report!r}; expected one of {', '.join(REPORTS)}", node,
