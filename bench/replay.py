@@ -34,14 +34,15 @@ def build_long_bag(src: Path, out: Path, steps: int, clock_hz: float) -> int:
     """Write the synthetic bag; returns its message count."""
     from pearl_pomdp.bags import well_known as wk
     from pearl_pomdp.bags.reader import BagReader
-    from pearl_pomdp.nodes.bag_replay import INPUT_TOPICS
     from pearl_pomdp.bags.writer import BagWriter
+    from pearl_pomdp.model.factored import load_domain
     from rclpy.serialization import serialize_message
     from rosgraph_msgs.msg import Clock
 
     reader = BagReader(src, salvage=False)
-    inputs = [m for m in reader.messages if m.topic in INPUT_TOPICS]
     custom = dict((reader.metadata or {}).get("custom_data") or {})
+    input_topics = {c.topic for c in load_domain(src / custom["pearl.domain"]).inputs}   # the domain's inputs
+    inputs = [m for m in reader.messages if m.topic in input_topics]
     for key in ("pearl.domain", "pearl.policy"):  # paths stay valid from the new location
         custom[key] = str((src / custom[key]).resolve())
     with BagWriter(out, custom_data=custom) as bag:

@@ -9,10 +9,11 @@
   circle therefore reports nothing more: hysteresis of ``exit_radius − entry_radius``.
 * :class:`DriveDeadline` — how long a drive may take before the manager calls it failed:
   ``margin + slack · path_factor · distance / speed``, capped at ``max_seconds``.
-* :class:`DriveTimer` — the deadline of each of a domain's drives (``category: Move``
-  actions): from the place the robot most likely is to the place the drive sets. The
-  belief tracker (:mod:`pearl_pomdp.tracking`) closes a drive that misses it with the
-  ``navFailed`` observation — on the robot, in the demo and in the study alike.
+* :class:`DriveTimer` — the deadline of each of a domain's drives (the actions of the
+  tracker's ``drive_category``; Pearl's are ``category: Move``): from the place the robot
+  most likely is to the place the drive sets. The belief tracker (:mod:`pearl_pomdp.tracking`)
+  closes a drive that misses it with its ``nav_failed_observation`` (Pearl's ``navFailed``)
+  — on the robot, in the demo and in the study alike.
 """
 from __future__ import annotations
 
@@ -197,7 +198,7 @@ class DriveTimer:
 
     @classmethod
     def for_domain(cls, domain, drives: Iterable[str], places: Dict[str, Place], deadline: DriveDeadline,
-                   place_feature: str = "RobotLocation", guide_actions: Iterable[str] = (),
+                   place_feature: str, guide_actions: Iterable[str] = (),
                    guide_speed: float = 0.03) -> Optional["DriveTimer"]:
         """The timer of ``drives`` in ``domain``: each one's goal is the value it (most likely) sets
         on ``place_feature``. Drives without such a value are left out (never timed);

@@ -126,14 +126,19 @@ class KeywordFilter:
     def from_domain(cls, domain, unknown_symbol: Optional[str] = None) -> "KeywordFilter":
         """The filter of a :class:`~pearl_pomdp.model.factored.FactoredDomain` (its ``keywords:`` section).
 
-        ``unknown_symbol`` defaults to ``"unknown"`` when the domain has that symbol.
+        ``unknown_symbol`` defaults to the ``unknown`` symbol of the domain's first speech input
+        (``modalities.<M>.input.unknown``; :mod:`pearl_pomdp.channels`).
 
         Raises:
             ValueError: the domain has no keywords, or no such unknown symbol.
         """
         if not domain.keywords:
             raise ValueError(f"domain {domain.name!r} ({domain.source}) has no 'keywords' section")
-        symbol = unknown_symbol or "unknown"
+        symbol = unknown_symbol or next((c.unknown for c in getattr(domain, "inputs", ())
+                                         if c.kind == "speech" and c.unknown), None)
+        if symbol is None:
+            raise ValueError(f"domain {domain.name!r} ({domain.source}) declares no unknown symbol for unmatched "
+                             "speech (modalities.<Speech>.input.unknown)")
         if symbol not in domain.observations:
             raise ValueError(f"domain {domain.name!r} has no observation symbol {symbol!r} for unmatched speech")
         return cls(domain.keywords, unknown_symbol=symbol)

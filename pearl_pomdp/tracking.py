@@ -20,40 +20,47 @@ thousands of episodes — so a change to the rules below shows up in both. Its s
 :class:`StepSettings`, whose fields are the node's parameters (name, type, range,
 description, whether it may change at run time): one source for every default.
 
-**Inputs → observation symbols** (the one place this is done):
+**Inputs → observation symbols** (the one place this is done). The inputs are the domain's
+channels (:attr:`FactoredDomain.inputs <pearl_pomdp.model.factored.FactoredDomain.inputs>`, one
+per modality, declared in the domain file: :mod:`pearl_pomdp.channels`); the code lists none.
+Each input is read by its kind:
 
-* Speech text that is exactly a Speech symbol of the model is that symbol (a script or a
+* ``speech``: text that is exactly a symbol of the input is that symbol (a script or a
   recogniser that sends the symbol itself); other text goes through the domain's keyword
-  filter (:class:`pearl_pomdp.speech.KeywordFilter`): text with no keyword becomes the
-  ``unknown`` symbol (still an observation: the robot heard something it did not understand)
-  and is counted. A recogniser may attach its confidence
+  filter (:class:`pearl_pomdp.speech.KeywordFilter`, over the input's symbols): text with no
+  keyword becomes the input's ``unknown`` symbol (still an observation: the robot heard
+  something it did not understand) and is counted. A recogniser may attach its confidence
   (:func:`pearl_pomdp.speech.parse_speech_message`): a keyword heard with confidence below
-  ``confidence_floor`` is taken as ``unknown`` too (counter ``low_confidence``) — a mumbled
-  "yes" is weaker evidence than a clear one, and the model's speech noise already
-  describes how often ``unknown`` goes with each true state.
-* Touchscreen / laser / reminder strings must be symbols of their modality (``t_yes``,
-  ``atRoom``, ``g_physio`` …; blanks around them are ignored); anything else is *invalid*:
-  counted per input, reported, and no observation is made.
-* For a flat model without modalities every symbol is valid on every input, and speech
-  text must itself be a symbol (there are no keywords).
+  ``confidence_floor`` is taken as the unknown symbol too (counter ``low_confidence``) — a
+  mumbled "yes" is weaker evidence than a clear one, and the model's speech noise already
+  describes how often the unknown symbol goes with each true state.
+* ``symbol``: the string must be a symbol of the input's modality (blanks around it are
+  ignored); anything else is *invalid*: counted per input, reported, and no observation is made.
+* ``number``: the number is discretised into the symbol of its bin, with hysteresis
+  (:class:`~pearl_pomdp.channels.NumberDiscretiser`); a reading outside the declared range is
+  invalid. With ``report: change`` a reading that keeps the input's symbol makes no observation
+  (counter ``unchanged_<input>``); one of the input's symbols given as text is taken as it is.
+* A flat model (no domain) has one input, ``observation``, on which every symbol is valid.
 
 **The cases the paper leaves open**, each counted in :meth:`BeliefTracker.counters`:
 
 * *Nothing is heard.* With ``step_timeout > 0`` a step still open ``step_timeout`` seconds
-  after its action is closed with ``timeout_observation`` (default ``unknown``: silence
-  carries no more information than unrecognised speech). :meth:`BeliefTracker.deadline`
+  after its action is closed with ``timeout_observation`` (default: the domain's silence
+  symbol, :attr:`FactoredDomain.silence_symbol <pearl_pomdp.model.factored.FactoredDomain.silence_symbol>`
+  — the symbol an input declares as ``silence:``, else a speech input's unknown symbol:
+  silence carries no more information than unrecognised speech). :meth:`BeliefTracker.deadline`
   says when; the node arms a one-shot timer for that instant, the simulator jumps its
   clock to it. Counter ``timeouts``. Actions listed in ``no_timeout_actions`` (by
-  default the domain's ``category: Move`` actions) are not closed by ``step_timeout``:
-  a drive takes as long as it takes and navigation ends it with a landmark.
+  default the domain's actions of ``drive_category``, none unless it is set) are not closed
+  by ``step_timeout``: a drive takes as long as it takes and navigation ends it with a landmark.
 * *A drive that never arrives* (a blocked corridor, lost localisation). With
   ``drive_speed > 0`` each drive gets its own deadline from
   :class:`~pearl_pomdp.navigation.DriveTimer`: the distance from the place the robot most
   likely is (the belief's ``place_feature`` marginal when the drive starts) to the drive's
   goal, at ``drive_speed`` (``guide_speed`` for ``guide_actions``), through
   :class:`~pearl_pomdp.navigation.DriveDeadline`. When it passes without an observation
-  the step closes with ``nav_failed_observation`` (``navFailed``, a Laser symbol of the
-  domain whose rows say the robot is most likely still where it started), counter
+  the step closes with ``nav_failed_observation`` (a symbol of the domain whose rows say the
+  robot is most likely still where it started; Pearl's ``navFailed``), counter
   ``nav_failures``, a warning; the policy decides what next (retry, ask, go home).
 * *Observation before any action / several in one step.* Inputs have no header, so
   arrival order is the only order there is. An observation while no step is open is
@@ -77,36 +84,33 @@ import collections
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from pearl_pomdp.belief import BeliefFilter
+from pearl_pomdp.channels import InputChannel, NumberDiscretiser, flat_channels
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.navigation import DriveTimer, places_from_parameters
 from pearl_pomdp.speech import KeywordFilter, parse_speech_message
 
 __all__ = ["BeliefTracker", "InputOutcome", "StepResult", "StepSettings", "SettingSpec", "Event",
-           "COUNTERS", "SYMBOL_INPUTS", "INPUTS", "drive_actions"]
+           "COUNTERS", "drive_actions"]
 
 #: Names of the step rules' counters (reported on /diagnostics; :meth:`BeliefTracker.counters`
-#: adds the input mapping's: ``unknown_speech``, ``low_confidence``, ``invalid_<input>``).
+#: adds the input mapping's: ``unknown_speech``, ``low_confidence``, ``invalid_<input>`` for
+#: every input and ``unchanged_<input>`` for every number input).
 COUNTERS = ("updates", "timeouts", "nav_failures", "queued", "dropped_stale", "dropped_overflow",
             "replaced_actions", "unknown_actions", "zero_likelihood")
-
-#: Symbol inputs: input name → the domain modality (lower-cased) whose symbols it carries.
-SYMBOL_INPUTS = {"touchscreen": "touchscreen", "laser": "laser", "reminder": "reminder"}
-
-#: Every input of the tracker: speech text plus the symbol inputs.
-INPUTS = ("speech", *SYMBOL_INPUTS)
 
 #: A step may close this much before its deadline (clock rounding: sim time travels in ns).
 _DEADLINE_SLACK = 1e-9
 
 
-def drive_actions(domain) -> List[str]:
-    """The actions of ``domain`` tagged ``category: Move`` (drives: never timed out)."""
-    return domain.actions_in("Move")
+def drive_actions(domain, category: str) -> List[str]:
+    """The actions of ``domain`` tagged ``category: <category>`` (drives: never timed out);
+    none for an empty ``category``."""
+    return domain.actions_in(category) if category else []
 
 
 def _setting(default: Any, description: str, *, range: Optional[Tuple[float, float]] = None,
@@ -153,10 +157,15 @@ class StepSettings:
               "(0: wait forever): a resident answering a question takes a few seconds; 10 s of silence is "
               "no answer", range=(0.0, 3600.0), live=True)
     timeout_observation: str = _setting(
-        "unknown", "Observation symbol that closes a step on timeout: silence is taken as unrecognised speech")
+        "", "Observation symbol that closes a step on timeout; empty: the domain's silence symbol (the one an "
+            "input declares as silence:, else a speech input's unknown symbol: silence is taken as unrecognised "
+            "speech)")
     no_timeout_actions: Optional[Tuple[str, ...]] = _setting(
-        None, "Actions whose step only an input closes (drives end with a laser landmark); empty: the "
-              "domain's category: Move actions; names the model does not have are ignored")
+        None, "Actions whose step only an input closes (drives end with a landmark); empty: the domain's "
+              "actions of drive_category; names the model does not have are ignored")
+    drive_category: str = _setting(
+        "", "Action category (the domain's category:) whose actions are drives when no_timeout_actions is "
+            "empty; empty: no category, a domain's drives are named in no_timeout_actions")
     max_pending: int = _setting(
         8, "Observations that may wait for the next action (FIFO): a burst longer than this is a fault",
         range=(0, 1000))
@@ -188,9 +197,9 @@ class StepSettings:
         1800.0, "No drive deadline is longer than this (s): no drive waits longer than half an hour",
         range=(1.0, 86400.0))
     nav_failed_observation: str = _setting(
-        "navFailed", "Observation symbol (a Laser symbol of the domain) that closes a drive at its deadline")
+        "", "Observation symbol of the domain that closes a drive at its deadline (needed when drive_speed > 0)")
     place_feature: str = _setting(
-        "RobotLocation", "State feature whose values are the places the drives go to")
+        "", "State feature whose values are the places the drives go to (needed when drive_speed > 0)")
     places: Tuple[Tuple[str, float, float], ...] = _setting((), "", parameter=False)
 
     def __post_init__(self) -> None:
@@ -259,6 +268,11 @@ class StepSettings:
             return None
         from pearl_pomdp.navigation import DriveDeadline, Place
 
+        for name in ("nav_failed_observation", "place_feature"):
+            if not getattr(self, name):
+                raise ValueError(f"{name}: drive deadlines (drive_speed > 0) need it (the domain's "
+                                 + ("symbol that closes a drive at its deadline)" if name == "nav_failed_observation"
+                                    else "state feature whose values are the drives' places)"))
         deadline = DriveDeadline(speed=self.drive_speed, path_factor=self.drive_path_factor, slack=self.drive_slack,
                                  margin=self.drive_margin, max_seconds=self.drive_max_seconds)
         places = {name: Place(name, x, y) for name, x, y in self.places}
@@ -328,7 +342,8 @@ class InputOutcome:
             * ``"opened"``: an action opened a step and nothing closed it yet;
             * ``"unknown"``: the action is not one of the model's (counted, ignored);
             * ``"abandoned"``: :meth:`~BeliefTracker.abandon_step` left the open step without an update;
-            * ``"idle"``: nothing happened (a tick before any deadline, nothing to abandon).
+            * ``"idle"``: nothing happened (a tick before any deadline, nothing to abandon, a
+              number input's reading that kept its symbol).
         closed: the step closed by this call, or ``None``.
         symbol: the observation symbol the input was taken as (``None`` for an invalid input,
             an action or a tick).
@@ -336,7 +351,9 @@ class InputOutcome:
             a Speech symbol), ``"keyword"`` (speech through the keyword filter),
             ``"no_keyword"`` (speech with no keyword: the unknown symbol, counted),
             ``"low_confidence"`` (a keyword below ``confidence_floor``: the unknown symbol,
-            counted), ``"invalid"``; ``""`` for actions and ticks.
+            counted), ``"number"`` (a number input's reading gave a new symbol),
+            ``"unchanged"`` (a number input's reading kept its symbol: kind ``"idle"``, nothing
+            observed, counted), ``"invalid"``; ``""`` for actions and ticks.
         text: the input's text (speech as recognised, without its confidence).
         confidence: the recogniser's confidence (1.0 when none was given).
         events: what the call has to report, oldest first (the node logs each).
@@ -376,13 +393,13 @@ class _StepProtocol:
             and the valid values).
     """
 
-    def __init__(self, model: Pomdp, *, step_timeout: float = 0.0, timeout_observation: str = "unknown",
+    def __init__(self, model: Pomdp, *, step_timeout: float = 0.0, timeout_observation: str = "",
                  no_timeout_actions: Sequence[str] = (), max_pending: int = 8, stale_after: float = 0.0,
                  belief_filter: Optional[BeliefFilter] = None, nav_failed_observation: Optional[str] = None):
         self.check_timeout(model, step_timeout, timeout_observation)
         if nav_failed_observation is not None and nav_failed_observation not in model.observations:
             raise ValueError(f"nav_failed_observation {nav_failed_observation!r} is not an observation of "
-                             f"{model.name} (add it to the domain's Laser modality, or set drive_speed 0 "
+                             f"{model.name} (add it to a modality of the domain, or set drive_speed 0 "
                              f"to give drives no deadline)")
         #: The symbol a drive is closed with at its deadline (``None``: drives have none).
         self.nav_failed_observation = nav_failed_observation
@@ -405,6 +422,10 @@ class _StepProtocol:
     @staticmethod
     def check_timeout(model: Pomdp, step_timeout: float, timeout_observation: str) -> None:
         """A timeout needs its observation in the model (raises ``ValueError`` naming both)."""
+        if step_timeout > 0 and not timeout_observation:
+            raise ValueError(f"timeout_observation: step_timeout {step_timeout:g} s needs the symbol a silent step "
+                             f"closes with; set it (valid: {', '.join(model.observations)}), declare silence: on an "
+                             "input of the domain, or set step_timeout 0")
         if step_timeout > 0 and timeout_observation not in model.observations:
             raise ValueError(f"timeout_observation {timeout_observation!r} is not an observation of "
                              f"{model.name} (valid: {', '.join(model.observations)}; or step_timeout 0)")
@@ -560,69 +581,116 @@ class _StepProtocol:
 
 
 class _ObservationMapper:
-    """Turns input strings into observation symbols of the model (see the module doc).
+    """Turns input messages into observation symbols of the model (see the module doc).
 
     Private: :class:`BeliefTracker` is its only user.
 
     Args:
         model: the compiled :class:`~pearl_pomdp.model.pomdp.Pomdp`.
-        domain: the :class:`FactoredDomain` (modalities, keywords), or ``None``.
-        keyword_filter: a ready keyword filter (default: built from ``domain.keywords``).
+        channels: the inputs (:class:`~pearl_pomdp.channels.InputChannel`), each with its own name.
+        keywords: the domain's ``keywords:`` (symbol → phrases), or ``{}``.
+        keyword_filter: a ready keyword filter for every speech input (default: the domain's
+            keywords over the input's symbols, with its unknown symbol).
         confidence_floor: speech below this recogniser confidence counts as the unknown symbol.
+
+    Raises:
+        ValueError: two inputs with one name, or an input symbol the model does not have.
     """
 
-    def __init__(self, model: Pomdp, domain=None, keyword_filter: Optional[KeywordFilter] = None,
-                 confidence_floor: float = 0.0):
+    def __init__(self, model: Pomdp, channels: Sequence[InputChannel], keywords: Mapping[str, Sequence[str]],
+                 keyword_filter: Optional[KeywordFilter] = None, confidence_floor: float = 0.0):
         self.model = model
         symbols = set(model.observations)
+        self.channels: Dict[str, InputChannel] = {}
         self.allowed: Dict[str, FrozenSet[str]] = {}
-        modalities = {m.lower(): list(v) for m, v in (domain.modalities if domain is not None else {}).items()}
-        for key, modality in SYMBOL_INPUTS.items():
-            self.allowed[key] = frozenset(modalities.get(modality, symbols))
-        self.keyword_filter = keyword_filter
-        if keyword_filter is None and domain is not None and domain.keywords:
-            self.keyword_filter = KeywordFilter.from_domain(domain)
-        self.speech_symbols = frozenset(s for s in modalities.get("speech", symbols) if s in symbols)
-        self.allowed["speech"] = self.speech_symbols
+        self.filters: Dict[str, Optional[KeywordFilter]] = {}
+        self.numbers: Dict[str, NumberDiscretiser] = {}
+        for c in channels:
+            if c.name in self.channels:
+                raise ValueError(f"two inputs are called {c.name!r} (modalities {self.channels[c.name].modality} "
+                                 f"and {c.modality})")
+            missing = [z for z in c.symbols if z not in symbols]
+            if missing:
+                raise ValueError(f"input {c.name!r} carries {missing[0]!r}, which is not an observation of {model.name}")
+            self.channels[c.name] = c
+            self.allowed[c.name] = frozenset(c.symbols)
+            if c.kind == "speech":
+                own = {z: list(keywords[z]) for z in keywords if z in c.symbols}
+                # No unknown symbol: text without a keyword classifies as "" (no symbol: invalid).
+                self.filters[c.name] = keyword_filter if keyword_filter is not None else (
+                    KeywordFilter(own, unknown_symbol=c.unknown or "") if own else None)
+            elif c.kind == "number":
+                self.numbers[c.name] = NumberDiscretiser(c)
         self.confidence_floor = float(confidence_floor)
         self.reset()
 
     def reset(self) -> None:
-        """Zero the counts."""
-        self.invalid: Dict[str, int] = {key: 0 for key in INPUTS}
+        """Zero the counts; number inputs forget their current bin."""
+        self.invalid: Dict[str, int] = {key: 0 for key in self.channels}
+        self.unchanged: Dict[str, int] = {key: 0 for key in self.numbers}
+        self.last_number: Dict[str, Optional[str]] = {key: None for key in self.numbers}
+        for discretiser in self.numbers.values():
+            discretiser.reset()
         self.no_keyword = 0
         self.low_confidence = 0
 
-    def speech(self, text: str, confidence: float = 1.0) -> Tuple[Optional[str], str]:
+    def speech(self, key: str, text: str, confidence: float = 1.0) -> Tuple[Optional[str], str]:
         """``(symbol or None, how it was heard)`` of recognised text (see :attr:`InputOutcome.heard`)."""
         stripped = text.strip()
-        if stripped in self.speech_symbols:
+        allowed, keyword_filter = self.allowed[key], self.filters[key]
+        if stripped in allowed:
             symbol, heard = stripped, "symbol"
-        elif self.keyword_filter is not None:
-            symbol = self.keyword_filter.classify(text)
-            heard = "no_keyword" if symbol == self.keyword_filter.unknown_symbol else "keyword"
+        elif keyword_filter is not None:
+            symbol = keyword_filter.classify(text)
+            heard = "no_keyword" if symbol == keyword_filter.unknown_symbol else "keyword"
             if heard == "no_keyword":
                 self.no_keyword += 1
         else:
-            self.invalid["speech"] += 1
+            self.invalid[key] += 1
             return None, "invalid"
-        unknown = self.keyword_filter.unknown_symbol if self.keyword_filter is not None else None
-        if heard in ("symbol", "keyword") and confidence < self.confidence_floor and unknown is not None \
+        unknown = keyword_filter.unknown_symbol if keyword_filter is not None else None
+        if heard in ("symbol", "keyword") and confidence < self.confidence_floor and unknown \
                 and symbol != unknown:
             self.low_confidence += 1
             symbol, heard = unknown, "low_confidence"
-        if symbol not in self.speech_symbols:
-            self.invalid["speech"] += 1
+        if symbol not in allowed:
+            self.invalid[key] += 1
             return None, "invalid"
         return symbol, heard
 
     def symbol(self, key: str, text: str) -> Optional[str]:
-        """The symbol of a touchscreen/laser/reminder string, or ``None`` (counted) if invalid."""
+        """The symbol of a symbol input's string, or ``None`` (counted) if invalid."""
         symbol = text.strip()
         if symbol not in self.allowed[key]:
             self.invalid[key] += 1
             return None
         return symbol
+
+    def number(self, key: str, data: Any) -> Tuple[Optional[str], str]:
+        """``(symbol or None, how it was read)`` of a number input's reading: ``"number"`` (a new
+        symbol), ``"unchanged"`` (``report: change`` and the symbol stays: no observation),
+        ``"symbol"`` (one of its symbols given as text) or ``"invalid"``."""
+        channel, discretiser = self.channels[key], self.numbers[key]
+        if isinstance(data, str) and data.strip() in self.allowed[key]:
+            symbol = data.strip()
+            # The hysteresis goes on from the symbol given (the next reading may keep it).
+            discretiser.current = [b.symbol for b in channel.bins].index(symbol)
+            self.last_number[key] = symbol
+            return symbol, "symbol"
+        value: Optional[float]
+        try:
+            value = float(data)   # a number, or a number as text
+        except (TypeError, ValueError):
+            value = None
+        read = discretiser.read(value) if value is not None else None
+        if read is None:
+            self.invalid[key] += 1
+            return None, "invalid"
+        if channel.report == "change" and read == self.last_number[key]:
+            self.unchanged[key] += 1
+            return read, "unchanged"
+        self.last_number[key] = read
+        return read, "number"
 
 
 class BeliefTracker:
@@ -632,10 +700,15 @@ class BeliefTracker:
         model: the compiled model (beliefs are ``[S]`` over its states).
         domain: the FactoredDomain (modalities, keywords, drives, marginals), or ``None``.
         settings: the step rules (:class:`StepSettings`; its defaults when ``None``).
-        keyword_filter: overrides the domain's keyword filter.
+        keyword_filter: overrides the domain's keyword filter (for every speech input).
+        channels: the inputs (:class:`~pearl_pomdp.channels.InputChannel`); default: the
+            domain's (:attr:`FactoredDomain.inputs`), or a flat model's one ``observation`` input
+            (a speech input when ``keyword_filter`` is given).
 
     Attributes:
         settings: the settings in force (:meth:`set_live` replaces them).
+        timeout_observation: the symbol a timed-out step closes with (the setting, else the
+            domain's silence symbol; ``""`` when there is none).
         startup_events: what construction has to report (e.g. drives left without deadlines).
         history: the last closed steps, oldest first, once :meth:`keep_history` was called.
 
@@ -644,11 +717,13 @@ class BeliefTracker:
     """
 
     def __init__(self, model: Pomdp, domain=None, settings: Optional[StepSettings] = None,
-                 keyword_filter: Optional[KeywordFilter] = None):
+                 keyword_filter: Optional[KeywordFilter] = None, channels: Optional[Sequence[InputChannel]] = None):
         self.settings = settings = settings or StepSettings()
         self.model, self.domain = model, domain
+        self.timeout_observation = settings.timeout_observation or (
+            (domain.silence_symbol or "") if domain is not None else "")
         if settings.no_timeout_actions is None:
-            no_timeout = drive_actions(domain) if domain is not None else []
+            no_timeout = drive_actions(domain, settings.drive_category) if domain is not None else []
         else:
             no_timeout = [a for a in settings.no_timeout_actions if a in model.actions]
         self._drive_timer = settings.drive_timer(domain, no_timeout)
@@ -660,15 +735,19 @@ class BeliefTracker:
             self._drive_timer = None
             startup.append(Event("warn", f"drives have no deadline: nav_failed_observation "
                                          f"{settings.nav_failed_observation!r} is not an observation of "
-                                         f"{model.name} (add it to the domain's Laser modality)", kind="no_deadline"))
+                                         f"{model.name} (add it to a modality of the domain)", kind="no_deadline"))
         self.startup_events: Tuple[Event, ...] = tuple(startup)
         self._protocol = _StepProtocol(model, step_timeout=settings.step_timeout,
-                                       timeout_observation=settings.timeout_observation,
+                                       timeout_observation=self.timeout_observation,
                                        no_timeout_actions=no_timeout, max_pending=settings.max_pending,
                                        stale_after=settings.stale_after,
                                        nav_failed_observation=(settings.nav_failed_observation
                                                                if self._drive_timer is not None else None))
-        self._mapper = _ObservationMapper(model, domain, keyword_filter, settings.confidence_floor)
+        if channels is None:
+            channels = domain.inputs if domain is not None else \
+                flat_channels(model.observations, "speech" if keyword_filter is not None else "symbol")
+        self._mapper = _ObservationMapper(model, channels, domain.keywords if domain is not None else {},
+                                          keyword_filter, settings.confidence_floor)
         self._marginal_index: Optional[list] = None
         self.history: Optional[Deque[StepResult]] = None
 
@@ -720,28 +799,37 @@ class BeliefTracker:
 
     @property
     def keyword_filter(self) -> Optional[KeywordFilter]:
-        """The speech keyword filter, or ``None`` (no keywords: speech text must be a symbol)."""
-        return self._mapper.keyword_filter
+        """The first speech input's keyword filter, or ``None`` (no speech input with keywords:
+        speech text must be a symbol)."""
+        return next((f for f in self._mapper.filters.values() if f is not None), None)
+
+    @property
+    def channels(self) -> Tuple[InputChannel, ...]:
+        """The inputs, in the domain's modality order (the node subscribes to each)."""
+        return tuple(self._mapper.channels.values())
 
     def symbols(self, key: str) -> FrozenSet[str]:
-        """The observation symbols input ``key`` may carry (speech: the Speech symbols).
+        """The observation symbols input ``key`` may carry.
 
         Raises:
             ValueError: ``key`` is not an input (names the inputs).
         """
-        if key not in self._mapper.allowed:
-            raise ValueError(f"unknown input {key!r}; inputs: {', '.join(INPUTS)}")
-        return self._mapper.allowed[key]
+        return self._mapper.allowed[self._check_input(key)]
+
+    def _check_input(self, key: str) -> str:
+        if key not in self._mapper.channels:
+            raise ValueError(f"unknown input {key!r}; inputs: {', '.join(self._mapper.channels)}")
+        return key
 
     def input_for(self, observation: str) -> str:
-        """The input that carries ``observation``: the symbol input whose modality has it, else
-        ``speech`` (a Speech symbol, or recognised text for the keyword filter)."""
-        if observation.strip() in self._mapper.speech_symbols:
-            return "speech"
-        for key in SYMBOL_INPUTS:
-            if observation.strip() in self._mapper.allowed[key]:
+        """The input that carries ``observation``: the one whose symbols have it, else the first
+        speech input (recognised text for its keyword filter), else the first input."""
+        stripped = observation.strip()
+        for key, allowed in self._mapper.allowed.items():
+            if stripped in allowed:
                 return key
-        return "speech"
+        speech = [c.name for c in self._mapper.channels.values() if c.kind == "speech"]
+        return speech[0] if speech else next(iter(self._mapper.channels))
 
     def deadline(self) -> Optional[float]:
         """When the open step times out (clock seconds), or ``None`` (no open step, no timeout,
@@ -759,6 +847,8 @@ class BeliefTracker:
         out["low_confidence"] = self._mapper.low_confidence
         for key, n in self._mapper.invalid.items():
             out[f"invalid_{key}"] = n
+        for key, n in self._mapper.unchanged.items():
+            out[f"unchanged_{key}"] = n
         return out
 
     def warnings(self) -> int:
@@ -766,7 +856,7 @@ class BeliefTracker:
         deadline (the /diagnostics WARN condition)."""
         c = self.counters()
         return (c["dropped_stale"] + c["dropped_overflow"] + c["replaced_actions"] + c["unknown_actions"]
-                + c["zero_likelihood"] + c["nav_failures"] + sum(c[f"invalid_{k}"] for k in INPUTS))
+                + c["zero_likelihood"] + c["nav_failures"] + sum(self._mapper.invalid.values()))
 
     def marginals(self, belief: Optional[np.ndarray] = None) -> Dict[str, Dict[str, float]]:
         """``{feature: {value: P}}`` of ``belief`` (default: the current one); a flat model
@@ -818,24 +908,29 @@ class BeliefTracker:
         closed = self._protocol.on_tick(now)
         return self._outcome("closed" if closed is not None else "idle", closed)
 
-    def on_input(self, key: str, data: str, now: float) -> InputOutcome:
-        """One input message: ``key`` is ``speech``, ``touchscreen``, ``laser`` or ``reminder``.
+    def on_input(self, key: str, data: Union[str, float], now: float) -> InputOutcome:
+        """One input message on input ``key`` (one of :attr:`channels`' names).
 
-        Speech ``data`` is recogniser text, optionally with its confidence
-        (:func:`~pearl_pomdp.speech.parse_speech_message`); the others carry a symbol.
+        A speech input's ``data`` is recogniser text, optionally with its confidence
+        (:func:`~pearl_pomdp.speech.parse_speech_message`); a symbol input's is a symbol; a number
+        input's is the reading (a float, or one of its symbols as text).
 
         Raises:
             ValueError: ``key`` is not an input (names the inputs).
         """
-        if key == "speech":
-            text, confidence = parse_speech_message(data)
-            symbol, heard = self._mapper.speech(text, confidence)
-        elif key in SYMBOL_INPUTS:
-            text, confidence = data, 1.0
-            symbol = self._mapper.symbol(key, data)
-            heard = "symbol" if symbol is not None else "invalid"
+        kind = self._mapper.channels[self._check_input(key)].kind
+        if kind == "speech":
+            text, confidence = parse_speech_message(str(data))
+            symbol, heard = self._mapper.speech(key, text, confidence)
+        elif kind == "number":
+            text, confidence = (data if isinstance(data, str) else str(data)), 1.0
+            symbol, heard = self._mapper.number(key, data)
+            if heard == "unchanged":
+                return self._outcome("idle", None, symbol, heard, text, confidence)
         else:
-            raise ValueError(f"unknown input {key!r}; inputs: {', '.join(INPUTS)}")
+            text, confidence = str(data), 1.0
+            symbol = self._mapper.symbol(key, text)
+            heard = "symbol" if symbol is not None else "invalid"
         if symbol is None:
             return self._outcome("invalid", None, None, heard, text, confidence)
         kind, closed = self._protocol.on_observation(symbol, key, now, text, confidence)
@@ -859,7 +954,7 @@ class BeliefTracker:
             step_timeout=self.settings.step_timeout if step_timeout is None else float(step_timeout),
             stale_after=self.settings.stale_after if stale_after is None else float(stale_after),
             confidence_floor=self.settings.confidence_floor if confidence_floor is None else float(confidence_floor))
-        _StepProtocol.check_timeout(self.model, new.step_timeout, new.timeout_observation)
+        _StepProtocol.check_timeout(self.model, new.step_timeout, self.timeout_observation)
         self.settings = new
         self._protocol.step_timeout = new.step_timeout
         self._protocol.stale_after = new.stale_after

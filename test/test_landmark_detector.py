@@ -82,8 +82,8 @@ def test_poses_in_another_frame_or_too_uncertain_are_ignored(rig):
 
 @pytest.mark.parametrize("overrides, message", [
     ({"landmarks.physio": "atGym"},
-     "parameter landmarks.physio: 'atGym' is not a Laser observation of pearl (valid: atRoom, atPhysio, atHome, "
-     "navFailed, userLost)"),
+     "parameter landmarks.physio: 'atGym' is not a symbol of the Laser input (/pearl/laser) of pearl (valid: "
+     "atRoom, atPhysio, atHome, navFailed, userLost)"),
     ({"entry_radius": 2.0, "exit_radius": 1.5},
      "parameter exit_radius: must be > entry_radius (2.0 m) for hysteresis, got 1.5 m"),
     ({"landmarks.home": "", "landmarks.room": "", "landmarks.physio": ""},

@@ -31,8 +31,10 @@ def test_pearl_launch_file_graph():
     assert package_share_dir("pearl_pomdp") == REPO  # editable install: the source tree
     params = str(REPO / "config" / "pearl_nodes.yaml")
     assert d.values["params_file"] == params and d.values["policy"] == "/plans/pearl"
+    # Each node takes its defaults from params_file too (defaults_file): another robot's
+    # params file is the only one its nodes read.
     assert d.nodes[1].parameters == [
-        ("file", params), ("value", "domain", str(REPO / "config" / "pearl.domain.yaml")),
+        ("file", params), ("value", "defaults_file", params), ("value", "domain", str(REPO / "config" / "pearl.domain.yaml")),
         ("value", "hierarchy", str(REPO / "config" / "pearl.hierarchy.yaml")),
         ("value", "policy", "/plans/pearl"), ("value", "use_sim_time", "false")]
     assert set(d.arguments) == {"params_file", "domain", "hierarchy", "policy", "step_timeout", "use_sim_time",
@@ -47,7 +49,8 @@ def test_params_are_written_like_launch_ros(tmp_path):
     assert files[0] == str(REPO / "config" / "pearl_nodes.yaml")
     written = yaml.safe_load(Path(files[1]).read_text())
     assert written == {"/belief_tracker": {"ros__parameters": {
-        "domain": str(REPO / "config" / "pearl.domain.yaml"), "step_timeout": 2.5, "use_sim_time": True}}}
+        "defaults_file": files[0], "domain": str(REPO / "config" / "pearl.domain.yaml"), "step_timeout": 2.5,
+        "use_sim_time": True}}}
 
 
 PRECEDENCE_NODE = """

@@ -118,7 +118,7 @@ def test_a_domain_without_navFailed_keeps_drives_untimed_and_says_so():
     from pearl_pomdp.fit import FITTED_MARKER
 
     text = (REPO / "config" / "pearl.domain.yaml").read_text().split(FITTED_MARKER)[0]
-    old = text.replace("Laser: [atRoom, atPhysio, atHome, navFailed, userLost]", "Laser: [atRoom, atPhysio, atHome]")
+    old = text.replace("symbols: [atRoom, atPhysio, atHome, navFailed, userLost]", "symbols: [atRoom, atPhysio, atHome]")
     for symbol in ("navFailed", "userLost"):   # as the domain was before issue 14 (a recorded bag's copy)
         old = _drop_symbol(old, symbol)
     domain = parse_domain(old, "old.domain.yaml")

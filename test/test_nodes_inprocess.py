@@ -20,6 +20,7 @@ pytestmark = pytest.mark.ros
 
 import rclpy
 
+from pearl_pomdp.channels import InputChannel  # noqa: E402
 from pearl_pomdp.model.pomdp import Pomdp  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS  # noqa: E402
@@ -66,13 +67,20 @@ class ThresholdDecider:
         return _Decision(self.model.actions.index(name), name, [_Step("root", name, float(belief.max()))])
 
 
+#: The tiger's inputs: four that each carry either symbol (a flat model alone has one input,
+#: ``observation``), so the tests can show which input a message came in on.
+TIGER_INPUTS = [InputChannel(name, name, "speech" if name == "speech" else "symbol", ("hear-left", "hear-right"),
+                             f"/pearl/{name}") for name in ("speech", "touchscreen", "laser", "reminder")]
+
+
 def _graph(context, model, decider, tracker=None, executor_params=None):
     executor = {"location_names": ["left", "right"], "locations.left": [1.0, 2.0, 0.0],
                 "locations.right": [3.0, -1.0, 1.5707963267948966],
                 "actions.open-right.say": "opening the right door at {time}",
                 "actions.open-right.goal": "right", "actions.listen.display": "listening"}
     executor.update(executor_params or {})
-    return PearlGraph(context=context, model=model, decider=decider, shared={"use_sim_time": True},
+    channels = TIGER_INPUTS if model.name == "tiger" else None
+    return PearlGraph(context=context, model=model, decider=decider, shared={"use_sim_time": True}, channels=channels,
                       overrides={"belief_tracker": {"step_timeout": 0.0, **(tracker or {})},
                                  "action_executor": executor})
 

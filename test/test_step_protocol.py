@@ -5,8 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pearl_pomdp.channels import InputChannel
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.tracking import BeliefTracker, StepSettings
+
+#: Three inputs that may each carry every symbol (a flat model has one, ``observation``; these
+#: show the rules hold per input and name the input that closed a step).
+TIGER_INPUTS = [InputChannel(name, name, kind, ("hear-left", "hear-right"), f"/tiger/{name}")
+                for name, kind in (("speech", "speech"), ("touchscreen", "symbol"), ("laser", "symbol"))]
 
 
 def tiger(impossible: bool = False) -> Pomdp:
@@ -20,7 +26,7 @@ def tiger(impossible: bool = False) -> Pomdp:
 def tracker(impossible: bool = False, **settings) -> BeliefTracker:
     """A flat tiger: every symbol is valid on every input; no timeout unless asked for."""
     settings.setdefault("step_timeout", 0.0)
-    return BeliefTracker(tiger(impossible), settings=StepSettings(**settings))
+    return BeliefTracker(tiger(impossible), settings=StepSettings(**settings), channels=TIGER_INPUTS)
 
 
 def test_action_then_observation_closes_a_step():
@@ -100,7 +106,7 @@ def test_an_input_that_is_no_symbol_is_invalid_and_observes_nothing():
     out = t.on_input("touchscreen", "roar", 0.1)
     assert (out.kind, out.symbol, out.closed, out.heard) == ("invalid", None, None, "invalid")
     assert t.counters()["invalid_touchscreen"] == 1 and t.step_open and t.warnings() == 1
-    with pytest.raises(ValueError, match="unknown input 'smell'; inputs: speech, touchscreen, laser, reminder"):
+    with pytest.raises(ValueError, match="unknown input 'smell'; inputs: speech, touchscreen, laser$"):
         t.on_input("smell", "hear-left", 0.2)
 
 
@@ -117,6 +123,10 @@ def test_zero_likelihood_is_counted():
 def test_bad_settings_name_the_parameter():
     with pytest.raises(ValueError, match=r"timeout_observation 'unknown' is not an observation of tiger "
                                          r"\(valid: hear-left, hear-right; or step_timeout 0\)"):
+        tracker(step_timeout=1.0, timeout_observation="unknown")
+    # No domain, so no silence symbol: a timeout needs one named.
+    with pytest.raises(ValueError, match=r"timeout_observation: step_timeout 1 s needs the symbol a silent step "
+                                         r"closes with; set it \(valid: hear-left, hear-right\)"):
         tracker(step_timeout=1.0)
     with pytest.raises(ValueError, match=r"step_timeout must be in \[0, 3600\], got -1.0"):
         StepSettings(step_timeout=-1.0)
@@ -155,8 +165,8 @@ def test_set_live_checks_everything_before_changing_anything():
     with pytest.raises(ValueError, match=r"confidence_floor must be in \[0, 1\], got 2.0"):
         t.set_live(step_timeout=7.0, confidence_floor=2.0)
     assert t.deadline() == 5.0 and t.settings.step_timeout == 5.0     # nothing applied
-    no_unknown = tracker()
-    with pytest.raises(ValueError, match="timeout_observation 'unknown' is not an observation"):
+    no_unknown = tracker()   # no domain, no silence symbol: a timeout cannot be turned on
+    with pytest.raises(ValueError, match="timeout_observation: step_timeout 3 s needs the symbol"):
         no_unknown.set_live(step_timeout=3.0)
     assert no_unknown.settings.step_timeout == 0.0
 

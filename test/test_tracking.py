@@ -26,8 +26,11 @@ def test_a_keyword_heard_below_the_confidence_floor_is_unknown():
     assert plain.on_input("speech", "yes", 0.0).symbol == "yes"      # plain text: confidence 1
 
 
-def test_drives_never_time_out_and_come_from_category_move():
-    t = pearl(step_timeout=5.0)
+def test_drives_never_time_out_and_come_from_the_drive_category():
+    # The code names no category (a generic domain has no drives unless it says so); Pearl's
+    # params file sets drive_category: Move (test_node_defaults checks the file is applied).
+    assert pearl(step_timeout=5.0).no_timeout_actions == frozenset()
+    t = pearl(step_timeout=5.0, drive_category="Move")
     assert t.no_timeout_actions == {"GotoPatientRoom", "GuideToPhysio", "GoHome"}
     t.on_action("GuideToPhysio", 0.0)
     assert t.deadline() is None and t.on_tick(1000.0).closed is None

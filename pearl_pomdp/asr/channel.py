@@ -354,7 +354,8 @@ def fit_observation_rows(domain_path: Union[str, Path], table: ChannelTable, snr
     from pearl_pomdp.yaml_lines import parse_yaml
 
     domain = load_domain(domain_path)
-    speech = list((domain.modalities or {}).get("Speech", []))
+    # The symbols of the domain's speech inputs (Pearl's Speech modality).
+    speech = [z for c in domain.inputs if c.kind == "speech" for z in c.symbols]
     if not speech or set(table.symbols) - set(speech):
         raise ChannelError(f"channel symbols {', '.join(table.symbols)} are not the Speech symbols of "
                            f"{domain.name} ({', '.join(speech) or 'none'})")

@@ -36,6 +36,7 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Set, Tuple, Un
 import numpy as np
 import scipy.sparse as sp
 
+from pearl_pomdp.channels import InputChannel, check_topics, default_channel, parse_input
 from pearl_pomdp.errors import SpecError
 from pearl_pomdp.model.pomdp import DENSE_LIMIT, Pomdp
 from pearl_pomdp.yaml_lines import LineMap as _Map
@@ -121,6 +122,8 @@ class FactoredDomain:
         rewards: the reward rules, in file order.
         reward_shaping: always ``None`` here; shaping belongs to the hierarchy spec.
         categories: action → category string (``Communicate``, ``Move``…), when given.
+        inputs: one :class:`~pearl_pomdp.channels.InputChannel` per modality, in modality order:
+            how its symbols reach the tracker (``modalities.<M>.input``; generic when not declared).
     """
 
     name: str
@@ -138,6 +141,7 @@ class FactoredDomain:
     description: str = ""
     categories: Dict[str, str] = field(default_factory=dict)
     reward_shaping: Any = None
+    inputs: List[InputChannel] = field(default_factory=list)
     _start_explicit: Optional[np.ndarray] = field(default=None, repr=False)  # [S] when `start: {states: …}`
     _compiled: Optional[Pomdp] = field(default=None, repr=False)
     _state_values: Optional[np.ndarray] = field(default=None, repr=False)
@@ -286,6 +290,26 @@ class FactoredDomain:
         """Next-state features the observation table of ``action`` reads."""
         a = self._action_index(action)
         return {self.feature_names[p] for p in self._observations[a].parents}
+
+    def input(self, name: str) -> InputChannel:
+        """The input channel called ``name`` (a modality's name, lower-cased).
+
+        Raises:
+            KeyError: no such input (the message names the domain's inputs).
+        """
+        for channel in self.inputs:
+            if channel.name == name:
+                return channel
+        raise KeyError(f"{self.name} has no input {name!r}; inputs: {', '.join(c.name for c in self.inputs)}")
+
+    @property
+    def silence_symbol(self) -> Optional[str]:
+        """The symbol a step closes with when nothing arrives in time: the one an input declares
+        as ``silence:``, else the ``unknown`` symbol of the first speech input, else ``None``."""
+        for channel in self.inputs:
+            if channel.silence is not None:
+                return channel.silence
+        return next((c.unknown for c in self.inputs if c.kind == "speech" and c.unknown is not None), None)
 
     def modality_of(self, symbol: str) -> str:
         """The modality a symbol belongs to (``KeyError`` for an unknown symbol)."""
@@ -499,12 +523,13 @@ class _Builder:
         start = self.build_start(d.get("start"), d)
         explicit = self.build_explicit_start(d.get("start"), d)
         keywords = self.build_keywords(d.get("keywords"), d)
+        inputs = self.build_inputs(keywords)
         description = d.get("description", "")
         return FactoredDomain(
             name=name, source=self.source, features=self.features, actions=self.actions,
             modalities=self.modalities, discount=float(discount), keywords=keywords, rewards=rewards,
             _transitions=transitions, _observations=observations, _start=start, _start_explicit=explicit, horizon=horizon,
-            description=str(description or ""), categories=categories,
+            description=str(description or ""), categories=categories, inputs=inputs,
         )
 
     def apply_fitted(self, node: Any, parent: Any, transitions: List[List[_Cpt]], observations: List[_Cpt]) -> None:
@@ -579,24 +604,83 @@ class _Builder:
         return out
 
     def build_modalities(self, node: Any) -> Dict[str, List[str]]:
+        """``modalities:``: each a list of symbols, or ``{symbols: [...], input: {...}}`` (the
+        ``input:`` is parsed by :meth:`build_inputs` once the keywords are known)."""
         node = self.need_map(node, "modalities", self.data, "modalities")
         if not node:
             raise self.fail("modalities", "no modalities (a POMDP needs at least one observation symbol)", self.data, "modalities")
         out: Dict[str, List[str]] = {}
         seen: Dict[str, str] = {}
-        for modality, syms in node.items():
+        names: Dict[str, str] = {}
+        #: modality → (its input: mapping, where, container, key) for build_inputs.
+        self.input_nodes: Dict[str, Tuple[Any, str, Any, Any]] = {}
+        for modality, spec in node.items():
             where = f"modalities.{modality}"
-            syms = self.need_list(syms, where, node, modality)
+            if not isinstance(modality, str) or not _NAME.match(modality):
+                raise self.fail(where, "modality names are identifiers (letters, digits, _ - .)", node, modality)
+            if modality.lower() in names:
+                raise self.fail(where, f"modality names must differ in more than case ({names[modality.lower()]} "
+                                       "names the same input)", node, modality)
+            names[modality.lower()] = modality
+            syms, swhere, scontainer, skey = spec, where, node, modality
+            if isinstance(spec, dict):
+                for k in spec:
+                    if k not in ("symbols", "input"):
+                        raise self.fail(f"{where}.{k}", "unknown key; expected symbols and input", spec, k)
+                if "symbols" not in spec:
+                    raise self.fail(f"{where}.symbols", "missing (required): the modality's observation symbols",
+                                    node, modality)
+                syms, swhere, scontainer, skey = spec["symbols"], f"{where}.symbols", spec, "symbols"
+                if "input" in spec:
+                    self.input_nodes[modality] = (spec["input"], f"{where}.input", spec, "input")
+            syms = self.need_list(syms, swhere, scontainer, skey)
             if not syms:
-                raise self.fail(where, "a modality needs at least one symbol", node, modality)
+                raise self.fail(swhere, "a modality needs at least one symbol", scontainer, skey)
             for i, z in enumerate(syms):
                 if not isinstance(z, str) or not _NAME.match(z):
-                    raise self.fail(f"{where}[{i}]", f"symbol {z!r} is not a name", syms, i)
+                    raise self.fail(f"{swhere}[{i}]", f"symbol {z!r} is not a name", syms, i)
                 if z in seen:
-                    raise self.fail(f"{where}[{i}]", f"symbol {z!r} already belongs to modality {seen[z]} "
+                    raise self.fail(f"{swhere}[{i}]", f"symbol {z!r} already belongs to modality {seen[z]} "
                                     "(symbols are unique across modalities)", syms, i)
                 seen[z] = str(modality)
             out[str(modality)] = [str(z) for z in syms]
+        return out
+
+    def build_inputs(self, keywords: Dict[str, List[str]]) -> List[InputChannel]:
+        """One input channel per modality (declared, or generic: :mod:`pearl_pomdp.channels`),
+        checked as a whole: every topic its own, one silence symbol, keywords on speech inputs."""
+        out: List[InputChannel] = []
+        for modality, syms in self.modalities.items():
+            if modality in self.input_nodes:
+                spec, where, container, key = self.input_nodes[modality]
+                out.append(parse_input(modality, syms, spec, keywords, where, self.fail, container, key))
+            else:
+                out.append(default_channel(modality, syms, keywords))
+        modalities = self.data["modalities"]
+
+        def where_of(channel: InputChannel, field: str) -> Tuple[str, Any, Any]:
+            if channel.modality in self.input_nodes:
+                spec = self.input_nodes[channel.modality][0]
+                return f"modalities.{channel.modality}.input.{field}", spec, field if field in spec else None
+            return f"modalities.{channel.modality}", modalities, channel.modality
+
+        clash = check_topics(out)
+        if clash is not None:
+            first, second = clash
+            where, container, key = where_of(second, "topic")
+            raise self.fail(where, f"topic {second.topic} is declared twice (also by modality {first.modality}); "
+                                   "each input needs its own topic", container, key)
+        silent = [c for c in out if c.silence is not None]
+        if len(silent) > 1:
+            where, container, key = where_of(silent[1], "silence")
+            raise self.fail(where, f"a second silence symbol ({silent[0].modality} declares {silent[0].silence!r}); "
+                                   "a step that times out closes with one symbol", container, key)
+        for channel in out:
+            spoken = [z for z in channel.symbols if z in keywords]
+            if spoken and channel.kind != "speech":
+                raise self.fail(f"keywords.{spoken[0]}", f"{spoken[0]!r} is a symbol of the {channel.kind} input "
+                                                         f"{channel.modality}; keywords belong to speech inputs",
+                                self.data.get("keywords"), spoken[0])
         return out
 
     # ------------------------------------------------------------ transitions

@@ -5,8 +5,9 @@ node classes of :mod:`pearl_pomdp.nodes` (built by :class:`~pearl_pomdp.nodes.gr
 receive, in file order,
 
 * every ``/clock`` message of the bag (``rosgraph_msgs/Clock``), and
-* every message of the input topics ``/pearl/speech``, ``/pearl/touchscreen``,
-  ``/pearl/laser``, ``/pearl/reminder`` (``std_msgs/String``),
+* every message of the tracker's input topics — the inputs its domain declares (Pearl's:
+  ``/pearl/speech``, ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder``, all
+  ``std_msgs/String``), each with its declared message type,
 
 published as the recorded bytes (``publish`` of raw CDR: nothing is re-serialised). The
 actions the policy publishes on ``/pearl/action`` are collected and compared with the
@@ -48,7 +49,6 @@ from pearl_pomdp.bags import well_known as wk
 from pearl_pomdp.bags.reader import BagError, BagReader
 from pearl_pomdp.errors import PearlError
 
-INPUT_TOPICS = ("/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder")
 ACTION_TOPIC = "/pearl/action"
 BELIEF_TOPIC = "/pearl/belief"
 #: Beliefs equal to this (max abs difference) count as the same in :attr:`ReplayResult.beliefs_match`.
@@ -155,8 +155,9 @@ def expected_actions(reader: BagReader) -> List[str]:
     return out
 
 
-def _check_topics(reader: BagReader) -> None:
-    want = {t: wk.STRING_TYPE for t in (*INPUT_TOPICS, ACTION_TOPIC)}
+def _check_topics(reader: BagReader, inputs: Optional[Dict[str, str]] = None) -> None:
+    """The recorded types of the action, clock and (given ``{topic: type}``) input topics."""
+    want = {ACTION_TOPIC: wk.STRING_TYPE, **(inputs or {})}
     want[wk.CLOCK_TOPIC] = wk.CLOCK_TYPE
     for name, info in reader.topics.items():
         if name in want and info.type != want[name]:
@@ -306,10 +307,19 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
                                               keep_all)
         core = graph.tracker.core
         assert core is not None  # the graph's tracker is configured (autostart)
+        # The inputs are the tracker's (its domain's declarations, as its parameters remap them).
+        from pearl_pomdp.nodes.channel_messages import reader_for
+
+        input_types = {}
+        for channel in core.channels:
+            topic = graph.tracker.resolve_topic_name(graph.tracker.get_parameter(f"inputs.{channel.name}.topic").value)
+            input_types[topic] = (channel.type, reader_for(channel, cfg["domain"]).msg_type)
+        _check_topics(reader, {t: type_name for t, (type_name, _) in input_types.items()})
         if explain:
             core.keep_history()
             node.create_subscription(String, DECISION_TOPIC, lambda m: decisions.append(json.loads(m.data)), 1000)
-        pubs = {t: node.create_publisher(String, t, EVENT_QOS) for t in INPUT_TOPICS if t in reader.topics}
+        pubs = {t: node.create_publisher(msg_type, t, EVENT_QOS) for t, (_, msg_type) in input_types.items()
+                if t in reader.topics}
         driver.wait_until_matched(list(pubs.values()))
         # b0 before any input: the latched writer keeps only the latest belief.
         driver.wait(lambda: belief_sub.get_publisher_count() > 0 and bool(beliefs), "the tracker's b0")

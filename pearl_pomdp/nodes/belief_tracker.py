@@ -4,7 +4,10 @@ A thin rclpy wrapper of the core :class:`~pearl_pomdp.tracking.BeliefTracker` �
 object the simulator and the study drive (input → symbol, what closes a step, queueing,
 timeouts, stale input: all documented in :mod:`pearl_pomdp.tracking`). Subscriptions feed
 it inputs and actions, a one-shot timer armed at the open step's deadline feeds it the
-clock, and the belief is published after every closed step.
+clock, and the belief is published after every closed step. It subscribes to exactly the
+inputs the domain declares (``modalities.<M>.input``: :mod:`pearl_pomdp.channels`; message
+types: :mod:`pearl_pomdp.nodes.channel_messages`), each on a topic and QoS that the
+``inputs.<name>.*`` parameters can remap.
 
 Run it with ``belief_tracker --ros-args -p domain:=config/pearl.domain.yaml`` (console
 script), ``pearl run belief_tracker …``, ``ros2 run pearl_pomdp belief_tracker`` or from a
@@ -16,14 +19,17 @@ import sys
 import time
 from typing import Any, Callable, Dict, List, Optional
 
+from pearl_pomdp.channels import RELIABILITIES, InputChannel
+from pearl_pomdp.errors import SpecError
 from pearl_pomdp.nodes import conversions as cv
-from pearl_pomdp.nodes.common import (EVENT_QOS, INPUT_QOS, LATCHED_QOS, NodeSetupError, Param,
-                                      load_domain_and_model, resolve_path, run_node)
+from pearl_pomdp.nodes.channel_messages import qos_profile, reader_for
+from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Param, load_domain_and_model,
+                                      resolve_path, run_node)
 from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
-from pearl_pomdp.tracking import SYMBOL_INPUTS, BeliefTracker, InputOutcome, StepSettings
+from pearl_pomdp.tracking import BeliefTracker, InputOutcome, StepSettings
 
-__all__ = ["BeliefTrackerNode", "main", "step_parameters"]
+__all__ = ["BeliefTrackerNode", "main", "step_parameters", "input_parameters"]
 
 
 #: ROS cannot type an empty list from its value (``[]`` would be a byte array): an empty string
@@ -40,6 +46,18 @@ def step_parameters() -> List[Param]:
             for spec in StepSettings.parameters()]
 
 
+def input_parameters(channel: InputChannel) -> List[Param]:
+    """The node parameters of one input (declared at configure, when the domain is known): its
+    topic, reliability and queue depth, defaulting to the domain's declaration."""
+    prefix, what = f"inputs.{channel.name}", f"{channel.modality} input ({channel.kind}, {channel.type})"
+    return [Param(f"{prefix}.topic", channel.topic, f"Topic of the {what}; default: the domain's"),
+            Param(f"{prefix}.qos", channel.qos, f"Reliability of the {what}'s subscription: "
+                                                f"{' or '.join(RELIABILITIES)} (a best-effort sensor driver needs "
+                                                "best_effort); default: the domain's"),
+            Param(f"{prefix}.depth", channel.depth, f"Keep-last queue depth of the {what}'s subscription",
+                  range=(1, 1000))]
+
+
 class BeliefTrackerNode(ManagedPearlNode):
     """Tracks the belief over the domain's states from the robot's inputs.
 
@@ -48,7 +66,7 @@ class BeliefTrackerNode(ManagedPearlNode):
           tried in the working directory, then in the package share directory.
         * The step rules: one parameter per field of :class:`~pearl_pomdp.tracking.StepSettings`
           (:func:`step_parameters`: the same names, defaults, ranges and descriptions) —
-          ``step_timeout``, ``timeout_observation``, ``no_timeout_actions``, ``max_pending``,
+          ``step_timeout``, ``timeout_observation``, ``no_timeout_actions``, ``drive_category``, ``max_pending``,
           ``stale_after``, ``confidence_floor``, ``drive_speed``, ``guide_speed``,
           ``guide_actions``, ``drive_path_factor``, ``drive_slack``, ``drive_margin``,
           ``drive_max_seconds``, ``nav_failed_observation``, ``place_feature``.
@@ -59,13 +77,19 @@ class BeliefTrackerNode(ManagedPearlNode):
           ``belief_tracker`` sections give the defaults (:mod:`pearl_pomdp.nodes.defaults`), so
           ``ros2 run pearl_pomdp belief_tracker`` behaves as under the launch file; ``''``: none.
         * ``diagnostics_period`` (double, s, > 0): period of the /diagnostics summary.
-        * ``speech_topic``, ``touchscreen_topic``, ``laser_topic``, ``reminder_topic``,
-          ``action_topic``, ``belief_topic``, ``marginals_topic`` (str): topic names.
+        * ``inputs.<name>.topic`` (str), ``inputs.<name>.qos`` (str: ``reliable`` or
+          ``best_effort``), ``inputs.<name>.depth`` (int): one set per input of the domain
+          (:func:`input_parameters`; ``<name>`` is the modality's name in lower case), declared at
+          configure with the domain's declaration as default — a remap of an input's topic or QoS.
+        * ``action_topic``, ``belief_topic``, ``marginals_topic`` (str): topic names.
         * ``use_sim_time`` (bool): follow /clock (rclpy's own parameter).
 
     Subscribers:
-        * ``/pearl/speech`` (std_msgs/String): recognised text → keyword filter → Speech symbol.
-        * ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder`` (std_msgs/String): symbols.
+        * One per input the domain declares, on its topic with its message type and QoS
+          (Pearl: ``/pearl/speech`` recognised text → keyword filter → Speech symbol;
+          ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder`` symbols; all
+          ``std_msgs/String``). A number input reads its message's number and discretises it.
+          A flat model (no domain) has one input, ``observation`` on ``/pearl/observation``.
         * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL): the action that opens a step.
 
     Publishers:
@@ -89,7 +113,9 @@ class BeliefTrackerNode(ManagedPearlNode):
     deadline there; the node reaches it only through its public methods).
 
     Raises:
-        NodeSetupError: missing domain file or invalid parameter combination (one line).
+        NodeSetupError: missing or invalid domain file, an input the node cannot read (a message
+            type that is not installed, a field it lacks), two inputs on one topic after
+            remapping, or an invalid parameter combination (one line).
         rclpy.exceptions.ParameterException: an override of the wrong type or out of range.
     """
 
@@ -99,10 +125,6 @@ class BeliefTrackerNode(ManagedPearlNode):
         *step_parameters(),
         Param("location_names", EMPTY_STRINGS, "Named places (locations.<name> = [x, y, yaw] in the map frame)"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
-        Param("speech_topic", "/pearl/speech", "Recognised speech text (std_msgs/String)"),
-        Param("touchscreen_topic", "/pearl/touchscreen", "Touchscreen symbols (std_msgs/String)"),
-        Param("laser_topic", "/pearl/laser", "Landmark symbols from navigation (std_msgs/String)"),
-        Param("reminder_topic", "/pearl/reminder", "Reminder goal symbols (std_msgs/String)"),
         Param("action_topic", "/pearl/action", "Primitive actions, which open steps (std_msgs/String)"),
         Param("belief_topic", "/pearl/belief", "Belief output (std_msgs/Float64MultiArray)"),
         Param("marginals_topic", "/pearl/belief_marginals", "Per-feature marginals output (JSON String)"),
@@ -110,14 +132,15 @@ class BeliefTrackerNode(ManagedPearlNode):
         AUTOSTART,
     )
 
-    def __init__(self, *, domain=None, model=None, keyword_filter=None, **kwargs):
+    def __init__(self, *, domain=None, model=None, keyword_filter=None, channels=None, **kwargs):
         super().__init__(**kwargs)
-        defaults = FileDefaults(self)
+        self._defaults = defaults = FileDefaults(self)
         self.params = p = self.declare_table(defaults.apply(self.PARAMETERS))
         for name in [n for n in p["location_names"] if n]:
             p.update(self.declare_table(defaults.apply([Param(f"locations.{name}", [0.0, 0.0, 0.0],
                                                               f"Pose of {name}: x, y (m), yaw (rad) in the map frame")])))
         self._preloaded = (domain, model, keyword_filter)
+        self._preloaded_channels = channels
         #: The core tracker (:class:`~pearl_pomdp.tracking.BeliefTracker`) once configured, else ``None``.
         self.core: Optional[BeliefTracker] = None
         self._reported_warnings = 0
@@ -143,21 +166,26 @@ class BeliefTrackerNode(ManagedPearlNode):
         p = self.params
         domain, model, keyword_filter = self._preloaded
         if model is None:
-            domain, model = load_domain_and_model(resolve_path(p["domain"], "domain"))
+            try:
+                domain, model = load_domain_and_model(resolve_path(p["domain"], "domain"))
+            except SpecError as err:
+                raise NodeSetupError(f"parameter domain: {err}") from None
         self.domain, self.model = domain, model
         try:
-            self.core = core = BeliefTracker(model, domain, StepSettings.from_params(p), keyword_filter)
+            self.core = core = BeliefTracker(model, domain, StepSettings.from_params(p), keyword_filter,
+                                             self._preloaded_channels)
         except ValueError as err:
             raise NodeSetupError(f"parameter {str(err)}") from None
+        inputs = self._input_subscriptions(core.channels, domain.source if domain is not None else p["domain"])
         for event in core.startup_events:
             self._log(event.level, event.text)
 
         self.belief_pub = self.lifecycle_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
         self.marginals_pub = self.lifecycle_publisher(cv.TextMsg, p["marginals_topic"], LATCHED_QOS)
-        self.managed_subscription(cv.TextMsg, p["speech_topic"], self._counted("speech", self._on_speech), INPUT_QOS)
-        for key in SYMBOL_INPUTS:
-            self.managed_subscription(cv.TextMsg, p[f"{key}_topic"], self._counted(key, self._symbol_callback(key)),
-                                      INPUT_QOS)
+        for reader, topic, qos in inputs:
+            key = reader.channel.name
+            callback = self._on_speech(key) if reader.channel.kind == "speech" else self._input_callback(key)
+            self.managed_subscription(reader.msg_type, topic, self._counted(key, callback, reader.read), qos)
         self.managed_subscription(cv.TextMsg, p["action_topic"], self._on_action, LATCHED_QOS)
         # One-shot timer for the open step's deadline (node clock, so sim time in replay and demo):
         # armed when a step opens, cancelled when it closes, so a step times out exactly
@@ -181,10 +209,38 @@ class BeliefTrackerNode(ManagedPearlNode):
 
         self._reset_srv = self.create_service(Trigger, p["reset_service"], self._on_reset)
         drives = core.drive_timer
+        listening = ", ".join(f"{r.channel.name} ({r.channel.kind}) on {topic}" for r, topic, _ in inputs)
         self.get_logger().info(f"tracking {model.name}: {model.num_states} states, {model.num_observations} "
-                               f"observations; step_timeout {p['step_timeout']} s → {p['timeout_observation']!r}; "
+                               f"observations; inputs: {listening}; step_timeout {p['step_timeout']} s → "
+                               f"{core.timeout_observation!r}; "
                                + (f"drives {', '.join(drives.goals)} timed at {p['drive_speed']} m/s → "
                                   f"{p['nav_failed_observation']!r}" if drives is not None else "drives have no deadline"))
+
+    def _input_subscriptions(self, channels, source: str) -> list:
+        """``(reader, topic, qos)`` of every input: the domain's declaration, remapped by the
+        ``inputs.<name>.*`` parameters (declared here, once: the domain is known only now).
+
+        Raises:
+            NodeSetupError: an unreadable message type or field, an unknown qos, two inputs on one topic.
+        """
+        out = []
+        owner: Dict[str, str] = {}
+        for channel in channels:
+            reader = reader_for(channel, source)
+            table = input_parameters(channel)
+            if not self.has_parameter(table[0].name):
+                self.params.update(self.declare_table(self._defaults.apply(table)))
+            values = {param.name: self.get_parameter(param.name).value for param in table}
+            topic, qos, depth = values[table[0].name], values[table[1].name], values[table[2].name]
+            if qos not in RELIABILITIES:
+                raise NodeSetupError(f"parameter {table[1].name}: {qos!r} is not one of {', '.join(RELIABILITIES)}")
+            resolved = self.resolve_topic_name(topic)
+            if resolved in owner:
+                raise NodeSetupError(f"parameter {table[0].name}: topic {resolved} is already the topic of input "
+                                     f"{owner[resolved]!r}; each input needs its own topic")
+            owner[resolved] = channel.name
+            out.append((reader, topic, qos_profile(qos, depth)))
+        return out
 
     def activate_node(self) -> None:
         """Publish the current belief (b0 at first): the policy answers it and the loop runs."""
@@ -238,7 +294,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         return SetParametersResult(successful=True)
 
     # ----------------------------------------------------------- callbacks
-    def _counted(self, key: str, callback: Callable) -> Callable:
+    def _counted(self, key: str, callback: Callable, read: Callable) -> Callable:
         """Wrap an input callback: count messages lost before it (sequence-number gaps).
 
         rclpy's message info has the writer's sequence number but not the writer's id, so
@@ -252,7 +308,7 @@ class BeliefTrackerNode(ManagedPearlNode):
                 if last is not None and seq > last + 1:
                     self.lost_inputs += seq - last - 1
                 self._last_seq[key] = seq
-            callback(msg)
+            callback(read(msg))
 
         return on_input
 
@@ -270,32 +326,38 @@ class BeliefTrackerNode(ManagedPearlNode):
         assert self.core is not None  # _inactive() is True otherwise
         self._handle(self.core.on_action(cv.msg_to_action(msg), self.now_s()))
 
-    def _on_speech(self, msg) -> None:
-        if self._inactive():
-            return
-        assert self.core is not None
-        outcome = self.core.on_input("speech", cv.msg_to_text(msg), self.now_s())
-        if outcome.heard == "no_keyword":
-            self.get_logger().info(f"speech {outcome.text!r} has no keyword: observation {outcome.symbol!r} "
-                                   f"({self.core.counters()['unknown_speech']} such texts so far)",
-                                   throttle_duration_sec=1.0)
-        if outcome.kind == "invalid":
-            self.get_logger().warning(f"speech {outcome.text!r} maps to no observation symbol of {self.model.name}; "
-                                      f"ignored (invalid speech inputs: {self.core.counters()['invalid_speech']})",
-                                      throttle_duration_sec=1.0)
-            self._diagnostics_soon()
-            return
-        self._handle(outcome)
-
-    def _symbol_callback(self, key: str) -> Callable:
-        def callback(msg) -> None:
+    def _on_speech(self, key: str) -> Callable:
+        def callback(text: str) -> None:
             if self._inactive():
                 return
             assert self.core is not None
-            outcome = self.core.on_input(key, cv.msg_to_text(msg), self.now_s())
+            outcome = self.core.on_input(key, text, self.now_s())
+            if outcome.heard == "no_keyword":
+                self.get_logger().info(f"{key} {outcome.text!r} has no keyword: observation {outcome.symbol!r} "
+                                       f"({self.core.counters()['unknown_speech']} such texts so far)",
+                                       throttle_duration_sec=1.0)
             if outcome.kind == "invalid":
-                valid = ", ".join(sorted(self.core.symbols(key)))
-                self.get_logger().warning(f"{key} input {cv.msg_to_text(msg)!r} is not a {key} symbol "
+                self.get_logger().warning(f"{key} {outcome.text!r} maps to no observation symbol of {self.model.name}; "
+                                          f"ignored (invalid {key} inputs: {self.core.counters()[f'invalid_{key}']})",
+                                          throttle_duration_sec=1.0)
+                self._diagnostics_soon()
+                return
+            self._handle(outcome)
+
+        return callback
+
+    def _input_callback(self, key: str) -> Callable:
+        """A symbol or number input's callback (``data``: the text, or the message's number)."""
+        def callback(data) -> None:
+            if self._inactive():
+                return
+            assert self.core is not None
+            outcome = self.core.on_input(key, data, self.now_s())
+            if outcome.kind == "invalid":
+                channel = next(c for c in self.core.channels if c.name == key)
+                valid = (", ".join(sorted(self.core.symbols(key))) if channel.kind == "symbol"
+                         else f"a number in {list(channel.range or ())}, or one of {', '.join(channel.symbols)}")
+                self.get_logger().warning(f"{key} input {data!r} is not a {key} {channel.kind} "
                                           f"(valid: {valid}); ignored (invalid {key} inputs: "
                                           f"{self.core.counters()[f'invalid_{key}']})", throttle_duration_sec=1.0)
                 self._diagnostics_soon()

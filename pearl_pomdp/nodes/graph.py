@@ -48,6 +48,8 @@ class PearlGraph:
         domain, model: preloaded domain/model (default: loaded once from the ``domain``
             parameter in ``shared``, or from the package's ``config/pearl.domain.yaml``).
         decider: preloaded policy for the policy node (skips loading/planning).
+        channels: the tracker's inputs (:class:`~pearl_pomdp.channels.InputChannel`; default: the
+            domain's, or a flat model's one ``observation`` input).
         executor: False to leave out the action executor.
         params_file: the ROS 2 params file whose ``/**`` and node sections give every node its
             defaults (each node's ``defaults_file`` parameter; default: the shipped
@@ -64,7 +66,8 @@ class PearlGraph:
                  args: Optional[List[str]] = None, use_sim_time: bool = True,
                  shared: Optional[Mapping[str, Any]] = None,
                  overrides: Optional[Mapping[str, Mapping[str, Any]]] = None,
-                 domain=None, model=None, decider=None, executor: bool = True, parameter_services: bool = True,
+                 domain=None, model=None, decider=None, channels=None, executor: bool = True,
+                 parameter_services: bool = True,
                  params_file: Any = "default"):
         self._own_context = context is None
         if context is None:
@@ -97,7 +100,7 @@ class PearlGraph:
             common = {"context": context, "start_parameter_services": parameter_services}
             managed = {**common, "lifecycle_services": parameter_services}
             self.tracker = BeliefTrackerNode(parameter_overrides=params("belief_tracker"), domain=domain, model=model,
-                                             **managed)
+                                             channels=channels, **managed)
             self.nodes.append(self.tracker)
             self.policy = HierarchicalPolicyNode(parameter_overrides=params("hierarchical_policy"), domain=domain,
                                                  model=model, decider=decider, **managed)

@@ -51,8 +51,8 @@ class GuidePaceNode(PearlNode):
         * ``cmd_in_topic`` (``/cmd_vel_nav``), ``cmd_out_topic`` (``/cmd_vel``).
         * ``cmd_timeout`` (0.05–10 s, 0.5): an older navigation command is not repeated.
         * ``control_rate`` (1–100 Hz, 20): filter steps per second during a guidance.
-        * ``lost_topic`` (``/pearl/laser``), ``lost_symbol`` (``userLost``; ``''``: not
-          published). With ``domain`` set, a symbol that is not an observation of the domain
+        * ``lost_topic`` (``/pearl/laser``), ``lost_symbol`` (``''``: not published; Pearl's
+          params file: ``userLost``). With ``domain`` set, a symbol that is not an observation of the domain
           is warned about (the tracker counts it as invalid until the domain has it).
         * ``action_topic`` (``/pearl/action``), ``state_topic`` (``/pearl/guide_pace``),
           ``diagnostics_period`` (0.01–3600 s).
@@ -85,7 +85,7 @@ class GuidePaceNode(PearlNode):
         Param("cmd_timeout", 0.5, "s: an older navigation command is not repeated", range=(0.05, 10.0)),
         Param("control_rate", 20.0, "Filter steps per second during a guidance (Hz)", range=(1.0, 100.0)),
         Param("lost_topic", "/pearl/laser", "Where 'resident lost' is reported (String)"),
-        Param("lost_symbol", "userLost", "Observation published when she is lost ('': none)"),
+        Param("lost_symbol", "", "Observation published when she is lost, a symbol of the domain ('': none)"),
         Param("domain", "", "Domain whose observations lost_symbol should be ('': no check)"),
         Param("action_topic", "/pearl/action", "Primitive actions (String)"),
         Param("state_topic", "/pearl/guide_pace", "Filter state for viewers (JSON String)"),

@@ -43,7 +43,8 @@ class LandmarkDetectorNode(PearlNode):
           deviation (from the covariance) is larger are ignored; 0 accepts every pose.
         * ``report_initial`` (bool, default false): report a place the first pose is in.
         * ``frame_id`` (str, ``map``): poses in another frame are ignored (no tf here).
-        * ``domain`` (str): when set, every symbol must be a Laser observation of the domain.
+        * ``domain`` (str): when set, every symbol must be a symbol of the domain's input on
+          ``laser_topic`` (Pearl: its Laser modality), or of the domain when no input is on it.
         * ``pose_topic`` (``/amcl_pose``), ``odom_topic`` (``''``: off), ``laser_topic``
           (``/pearl/laser``) (str).
         * ``diagnostics_period`` (double, 0.01–3600 s).
@@ -109,11 +110,15 @@ class LandmarkDetectorNode(PearlNode):
             raise NodeSetupError("no landmark configured: set landmarks.<place> to a Laser symbol for at least one "
                                  f"of location_names ({', '.join(p['location_names']) or 'none'})")
         if p["domain"]:
-            domain, _ = load_domain_and_model(resolve_path(p["domain"], "domain"))
-            laser = list(domain.modalities.get("Laser", [])) if domain is not None else []
+            domain, model = load_domain_and_model(resolve_path(p["domain"], "domain"))
+            # The symbols of the domain's input this node publishes on (its declared topic).
+            topic = self.resolve_topic_name(p["laser_topic"])
+            inputs = [c for c in (domain.inputs if domain is not None else ()) if self.resolve_topic_name(c.topic) == topic]
+            laser = list(inputs[0].symbols) if inputs else list(model.observations)
+            what = f"a symbol of the {inputs[0].modality} input ({topic})" if inputs else "an observation"
             for name, symbol in symbols.items():
                 if symbol not in laser:
-                    raise NodeSetupError(f"parameter landmarks.{name}: {symbol!r} is not a Laser observation of "
+                    raise NodeSetupError(f"parameter landmarks.{name}: {symbol!r} is not {what} of "
                                          f"{domain.name if domain else p['domain']} (valid: {', '.join(laser) or 'none'})")
         self.detector = LandmarkDetector(landmarks, report_initial=p["report_initial"])
         self.counts = {"poses": 0, "ignored_frame": 0, "ignored_uncertain": 0}
