@@ -55,10 +55,17 @@ class OperatorEvent:
     stamp: float
     autonomy: str
     detail: str = ""
+    #: ``autonomy`` events: the new settings (``autonomy``, ``confirm_categories``, ``confirm_timeout``),
+    #: so a replay can set them again.
+    settings: Optional[dict] = None
 
     def as_dict(self) -> dict:
-        return {"event": self.kind, "action": self.action, "step": self.step, "stamp": self.stamp,
-                "autonomy": self.autonomy, "detail": self.detail}
+        """JSON-ready form (``settings`` only when there are some)."""
+        out = {"event": self.kind, "action": self.action, "step": self.step, "stamp": self.stamp,
+               "autonomy": self.autonomy, "detail": self.detail}
+        if self.settings is not None:
+            out["settings"] = dict(self.settings)
+        return out
 
 
 @dataclass
@@ -152,7 +159,8 @@ class OperatorGate:
             return out
         detail = f"level {level}" + (f", confirm {', '.join(cats) or 'every action'} within {timeout:g} s"
                                      if level == "confirm" else "")
-        self._event(out, "autonomy", self.current or "", now, detail)
+        self._event(out, "autonomy", self.current or "", now, detail,
+                    settings={"autonomy": level, "confirm_categories": list(cats), "confirm_timeout": timeout})
         if self.current is not None and self.source == "policy" and self.status in ("proposed", "waiting", "declined",
                                                                                    "timeout"):
             self._offer(out, self.current, now)
@@ -268,9 +276,10 @@ class OperatorGate:
             self.waiting_since = None
         out.proposal_changed = True
 
-    def _event(self, out: GateOutput, kind: str, action: str, now: float, detail: str = "") -> None:
+    def _event(self, out: GateOutput, kind: str, action: str, now: float, detail: str = "",
+               settings: Optional[dict] = None) -> None:
         self.counts[kind] = self.counts.get(kind, 0) + 1
-        out.events.append(OperatorEvent(kind, action, self.step, float(now), self.autonomy, detail))
+        out.events.append(OperatorEvent(kind, action, self.step, float(now), self.autonomy, detail, settings))
 
     def _reject_unknown(self, out: GateOutput, what: str, action: str, now: float) -> bool:
         if action in self.actions:

@@ -18,6 +18,7 @@ from ros_helpers import Probe
 pytestmark = pytest.mark.ros
 
 import rclpy  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
 from rclpy.serialization import deserialize_message  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
@@ -83,17 +84,28 @@ def planned():
 
 
 def _graph(context, planned, **policy):
+    """The tracker and the policy, configured but not active: :func:`_probe` activates them once
+    the test's readers are matched, so nothing they publish (b0, the first events) is missed."""
     domain, model, decider = planned
-    return PearlGraph(context=context, domain=domain, model=model, decider=decider, executor=False, params_file=None,
-                      overrides={"belief_tracker": {"step_timeout": 0.0}, "hierarchical_policy": policy})
+    g = PearlGraph(context=context, domain=domain, model=model, decider=decider, executor=False, params_file=None,
+                   overrides={"belief_tracker": {"step_timeout": 0.0, "autostart": False},
+                              "hierarchical_policy": {**policy, "autostart": False}})
+    g.tracker.trigger_configure()
+    g.policy.trigger_configure()
+    return g
 
 
-def _probe(g, recorder_topics=None):
+def _probe(g, record=None):
+    """The operator's node (publishers, listeners, confirm client) and optionally a recorder
+    ``(writer, topics)`` on it; matched both ways, then the nodes are activated (policy first:
+    the tracker publishes b0 on activation) and b0's answer has arrived."""
     node = g.add_node(rclpy.create_node("operator_probe", context=g.context))
     probe = Probe(node)
+    # Latched like the writers, but a deep reader queue: two messages between spins are both kept.
+    latched = QoSProfile(depth=100, reliability=LATCHED_QOS.reliability, durability=LATCHED_QOS.durability)
     for topic in ("/pearl/action", "/pearl/proposal"):
-        probe.listen(topic, String, LATCHED_QOS)
-    probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
+        probe.listen(topic, String, latched)
+    probe.listen("/pearl/belief", cv.BeliefMsg, latched)
     probe.listen("/pearl/decision", String, EVENT_QOS)
     probe.listen("/pearl/operator/events", String, EVENT_QOS)
     probe.listen("/diagnostics", cv.DiagnosticsMsg, EVENT_QOS)
@@ -101,9 +113,27 @@ def _probe(g, recorder_topics=None):
     for topic in ("/test/answer", "/pearl/operator/veto", "/pearl/operator/command"):
         probe.publisher(topic, String, EVENT_QOS)
     client = node.create_client(SetBool, "/pearl/operator/confirm")
+    recorder = None
+    if record is not None:
+        from pearl_pomdp.nodes.bag_recorder import Recorder
+
+        writer, topics = record
+        recorder = Recorder(node, writer, topics)
+        assert g.spin_until(lambda: set(recorder.subscriptions) == set(topics), 15.0), recorder.subscriptions
     peers = [n for n in g.nodes if n is not node]
     assert g.spin_until(lambda: not probe.unmatched(peers) and client.service_is_ready(), 15.0), probe.unmatched(peers)
-    return probe, client
+    # Matching is asymmetric: the writers must see every reader too.
+    recorded = set() if recorder is None else set(recorder.subscriptions)
+    writers = [(w, n + (w.topic_name in recorded)) for w, n in
+               [(g.tracker.belief_pub, 2), (g.policy.action_pub, 2), (g.policy.operator_events_pub, 1),
+                (g.policy.decision_pub, 1), (g.policy.proposal_pub, 1)]]
+    assert g.spin_until(lambda: all(w.get_subscription_count() >= n for w, n in writers)
+                        and (recorder is None or all(s.get_publisher_count() >= 1
+                                                     for s in recorder.subscriptions.values())), 10.0)
+    g.policy.trigger_activate()
+    g.tracker.trigger_activate()
+    assert g.spin_until(lambda: probe.received["/pearl/belief"] and probe.received["/pearl/operator/events"], 10.0)
+    return probe, client, recorder
 
 
 def _send(g, probe, topic, text):
@@ -136,7 +166,7 @@ def _set_clock(g, probe, t):
 def test_confirm_publishes_a_confirmed_category_only_after_the_yes(ros_context, planned):
     context, _ = ros_context
     with _graph(context, planned, autonomy="confirm", confirm_categories=["Act"], confirm_timeout=5.0) as g:
-        probe, client = _probe(g)
+        probe, client, _ = _probe(g)
         _set_clock(g, probe, 100.0)
         # b0: the policy asks (Talk: not confirmed), published at once.
         assert g.spin_until(lambda: _actions(probe) == ["Ask"], 10.0), _actions(probe)
@@ -172,16 +202,12 @@ def test_confirm_publishes_a_confirmed_category_only_after_the_yes(ros_context, 
 def test_veto_re_decides_command_moves_the_belief_and_the_bag_records_it(ros_context, planned, tmp_path):
     from pearl_pomdp.bags.reader import BagReader
     from pearl_pomdp.bags.writer import BagWriter
-    from pearl_pomdp.nodes.bag_recorder import Recorder
 
     context, _ = ros_context
     domain, model, decider = planned
     writer = BagWriter(tmp_path / "operator")
     with _graph(context, planned) as g:
-        probe, _ = _probe(g)
-        recorder = Recorder(probe.node, writer, OPERATOR_TOPICS)
-        assert g.spin_until(lambda: set(recorder.subscriptions) == set(OPERATOR_TOPICS), 15.0), recorder.subscriptions
-        assert g.spin_until(lambda: all(s.get_publisher_count() >= 1 for s in recorder.subscriptions.values()), 10.0)
+        probe, _, recorder = _probe(g, (writer, OPERATOR_TOPICS))
         assert g.spin_until(lambda: _actions(probe) == ["Ask"], 10.0)
         _send(g, probe, "/test/answer", "sayA")
         assert g.spin_until(lambda: len(_actions(probe)) == 2, 10.0)
@@ -215,7 +241,8 @@ def test_veto_re_decides_command_moves_the_belief_and_the_bag_records_it(ros_con
         _send(g, probe, "/pearl/operator/command", "Ask")
         assert g.spin_until(lambda: g.tracker.core.open_action == "Ask", 10.0)
         _send(g, probe, "/test/answer", "sayB")
-        assert g.spin_until(lambda: len(probe.received["/pearl/belief"]) >= 3, 10.0)
+        assert g.spin_until(lambda: len(probe.received["/pearl/belief"]) >= 3, 10.0), \
+            (g.tracker.core.counters(), g.tracker.core.step, [list(cv.msg_to_belief(m)) for m in probe.received["/pearl/belief"]])
         expected_belief = BeliefFilter(model).update(belief, "Ask", "sayB")
         np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][-1]), expected_belief,
                                    rtol=0, atol=1e-12)
@@ -232,3 +259,78 @@ def test_veto_re_decides_command_moves_the_belief_and_the_bag_records_it(ros_con
     assert recorded["/pearl/operator/command"] == ["Jump", "Ask"]
     assert [json.loads(e)["event"] for e in recorded["/pearl/operator/events"]] == kinds
     assert recorded["/pearl/action"][-3:] == ["DoA", "Ask", _actions(probe)[-1]]
+
+
+def test_a_recorded_run_with_an_operator_replays_and_explains(ros_context, planned, tmp_path):
+    """Confirm, veto, no, command and a level change, recorded with /clock and the inputs; the
+    replay (a fresh graph loading the saved policy) feeds the operator's inputs and re-does
+    the level change and the answers: same actions, beliefs to 1e-12, same operator events."""
+    from rclpy.parameter import Parameter
+
+    from pearl_pomdp.bags.writer import BagWriter
+    from pearl_pomdp.cli.replay import format_explanation
+    from pearl_pomdp.nodes.bag_replay import replay_bag
+    from ros_helpers import allocate_domain_id
+
+    context, _ = ros_context
+    domain, model, decider = planned
+    (tmp_path / "two_jobs.domain.yaml").write_text(DOMAIN)
+    decider.save(tmp_path / "policy")
+    policy_params = {"autonomy": "confirm", "confirm_categories": ["Act"], "confirm_timeout": 5.0}
+    writer = BagWriter(tmp_path / "bag", custom_data={
+        "pearl.domain": "../two_jobs.domain.yaml", "pearl.policy": "../policy",
+        # The replay reads the shipped params file: its Pearl-only tracker settings are undone here.
+        "pearl.tracker_params": json.dumps({"step_timeout": 0.0, "stale_after": 0.0, "drive_speed": 0.0,
+                                            "drive_category": "", "nav_failed_observation": "", "place_feature": "",
+                                            "guide_actions": [""]}),
+        "pearl.policy_params": json.dumps(policy_params)})
+    topics = OPERATOR_TOPICS + ["/clock", "/test/answer", "/pearl/belief", "/pearl/decision"]
+    with _graph(context, planned, **policy_params) as g:
+        probe, client, recorder = _probe(g, (writer, topics))
+        _set_clock(g, probe, 100.0)
+
+        def n_events(n):
+            """n operator events seen, and every belief and action of the probe in the bag too:
+            the next input waits for them (a latched writer keeps only its latest message)."""
+            return g.spin_until(lambda: recorder.counts["/pearl/operator/events"] == n and len(_events(probe)) == n
+                                and recorder.counts["/pearl/belief"] == len(probe.received["/pearl/belief"])
+                                and recorder.counts["/pearl/action"] == len(_actions(probe)), 10.0)
+
+        assert n_events(1)                                   # b0: Ask acted
+        _send(g, probe, "/test/answer", "sayA")
+        assert n_events(2)                                   # Ask acted again
+        _send(g, probe, "/pearl/operator/veto", "Ask")
+        assert n_events(4)                                   # vetoed, DoA waiting
+        reply = _answer(g, client, False)                    # declined: answered, not acted
+        assert reply.success and reply.message == "declined (not acted) DoA"
+        assert n_events(5)
+        _send(g, probe, "/pearl/operator/command", "Ask")
+        assert n_events(6)
+        for n in (7, 8):
+            _send(g, probe, "/test/answer", "sayA")
+            assert n_events(n)                               # Ask acted, then DoA waiting
+        g.policy.set_parameters([Parameter("autonomy", value="full")])
+        assert n_events(10)                                  # autonomy, DoA acted
+        _send(g, probe, "/test/answer", "silent")
+        assert n_events(11)
+        assert g.spin_until(lambda: recorder.counts.get("/pearl/belief", 0) == len(probe.received["/pearl/belief"])
+                            and recorder.counts["/pearl/action"] == len(_actions(probe)), 10.0), \
+            (recorder.counts, len(probe.received["/pearl/belief"]), _actions(probe))
+        live_actions, live_events = _actions(probe), [e["event"] for e in _events(probe)]
+        recorder.stop()
+    writer.close()
+    assert live_actions == ["Ask", "Ask", "Ask", "Ask", "DoA", "DoA"], live_actions
+    assert live_events == ["acted", "acted", "vetoed", "waiting", "declined", "commanded", "acted", "waiting",
+                           "autonomy", "acted", "acted"], live_events
+
+    result = replay_bag(tmp_path / "bag", domain_id=allocate_domain_id(), explain=True)
+    assert result.actions == result.expected_actions == live_actions and result.match
+    assert result.beliefs_match and result.max_belief_difference <= 1e-12, \
+        (result.beliefs, result.expected_beliefs, result.max_belief_difference)
+    assert result.operator_events == result.expected_operator_events == live_events
+    step1 = result.explanation[1]
+    assert [e["event"] for e in step1["operator"]] == ["acted", "vetoed", "waiting", "declined", "commanded"]
+    assert result.explanation[2]["operator"] == []     # the policy acted, nobody intervened
+    assert step1["decision"]["action"] == "DoA"     # the re-decision after the veto is the one that stood
+    text = format_explanation(result.explanation, result.divergence)
+    assert "operator: vetoed Ask (re-decided without Ask: DoA)" in text and "operator: declined DoA" in text

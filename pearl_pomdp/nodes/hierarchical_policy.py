@@ -166,6 +166,9 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self.last_decision = None
         self.gate: Optional[OperatorGate] = None
         self.operator_rejected = 0      # operator inputs refused (unknown action, nothing to veto …)
+        self.operator_inputs = 0        # operator inputs taken (veto, command, yes/no; refused ones too)
+        self.beliefs_answered = 0       # beliefs the gate decided at (the veto's re-decisions not counted)
+        self.actions_published = 0      # actions put on action_topic (policy's, confirmed, commanded)
         self.inactive_operator = 0      # operator inputs while not active (not acted)
         self._confirm_srv: Optional[Any] = None
         self._confirm_timer: Optional[Any] = None
@@ -229,21 +232,24 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             self.publish_diagnostics()
             return
         assert self.gate is not None   # configured with the decider
+        self.beliefs_answered += 1
         self._apply(self.gate.on_belief(belief, self.now_s()), start)
 
     # ------------------------------------------------------------ operator
     def _apply(self, out: GateOutput, start: float) -> None:
         """Publish what the gate decided: actions first (the loop waits on them), then the record."""
+        assert self.gate is not None
         for action in out.publish:
             self.action_pub.publish(cv.action_to_msg(action))
+            self.actions_published += 1
         latency = time.perf_counter() - start
         for decision in out.decisions:
             self.latencies.append(latency)
             self.decision_pub.publish(cv.decision_to_msg(self.decisions, decision.action_name, decision.trace,
-                                                         latency, getattr(decision, "expansions", 0)))
+                                                         latency, getattr(decision, "expansions", 0),
+                                                         belief_step=self.gate.step))
             self.decisions += 1
             self.last_decision = decision
-        assert self.gate is not None
         if out.proposal_changed:
             self.proposal_pub.publish(cv.text_to_msg(json.dumps(self.gate.proposal(), separators=(",", ":"))))
         for event in out.events:
@@ -261,6 +267,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                 self.inactive_operator += 1   # a deactivated policy does not act
                 return
             start = time.perf_counter()
+            self.operator_inputs += 1
             action = cv.msg_to_action(msg)
             out = self.gate.veto(action, self.now_s()) if what == "veto" else self.gate.command(action, self.now_s())
             self._apply(out, start)
@@ -279,17 +286,22 @@ class HierarchicalPolicyNode(ManagedPearlNode):
 
     def _on_confirm(self, request, response):
         """``/pearl/operator/confirm`` (std_srvs/SetBool): yes publishes the waiting action, no drops it."""
+        response.success, response.message = self.answer(bool(request.data))
+        return response
+
+    def answer(self, yes: bool):
+        """The operator's yes/no to the waiting action (what the confirm service calls; a replay
+        calls it too) → ``(success, message)``."""
         if not self.active or self.gate is None:
-            response.success, response.message = False, "not active: nothing is waiting for a confirmation"
-            return response
+            return False, "not active: nothing is waiting for a confirmation"
+        self.operator_inputs += 1
         waiting = self.gate.current
-        out = self.gate.answer(bool(request.data), self.now_s())
+        out = self.gate.answer(yes, self.now_s())
         self._apply(out, time.perf_counter())
-        response.success = out.error is None
-        response.message = out.error or f"{'published' if request.data else 'declined (not acted)'} {waiting}"
         if out.error is not None:
             self.get_logger().warning(f"{self.params['confirm_service']}: {out.error}")
-        return response
+            return False, out.error
+        return True, f"{'published' if yes else 'declined (not acted)'} {waiting}"
 
     def _arm_confirm_deadline(self) -> None:
         timer, gate = self._confirm_timer, self.gate
