@@ -163,3 +163,47 @@ def below(hp, name):
     for k, c in enumerate(sub.actions):
         out |= below(hp, c) if sub.abstract[k] else {c}
     return out
+
+
+def test_a_deeper_root_search_masks_the_first_step_only():
+    """lookahead: 1 at a policy-contingent root: two steps of search over the offers. The veto
+    removes the offer at the first step; later steps may take the action again. The masked
+    value is recomputed here: first-step offers as contingent_offer gives them, successors
+    valued by the unmasked one-step choice (the vectors after it)."""
+    domain = parse_domain(PROBE_DOMAIN)
+    deep = plan(domain, parse_hierarchy(PROBE_HIERARCHY.replace(
+        "Top: {actions: [Ask, Do]}", "Top: {actions: [Ask, Do], lookahead: 1, expansions: 500}"), domain.actions))
+    top = deep.subtasks["Top"]
+    la = top.lookahead
+    assert top.search_depth == 2
+
+    def offer_value(bf, prim, depth):
+        bh = top.project(bf)[0]
+        a = top.model_actions.index(prim)
+        pred = np.asarray(la._Tt[a] @ bh)
+        total = float(bh @ la.R[:, a])
+        for o in la._live_obs[a]:
+            succ = pred * la.O[a, :, o]
+            m = succ.sum()
+            if m <= 1e-300:
+                continue
+            if depth == 1:
+                total += la.discount * float((top.alphas @ succ).max())
+            else:
+                nxt = top.lift(succ / m)
+                offers = {contingent_offer(deep, c, nxt, set())[0] if top.abstract[k] else c
+                          for k, c in enumerate(top.actions)}
+                total += la.discount * m * max(offer_value(nxt, p, depth - 1) for p in offers)
+        return total
+
+    for mass in (0.5, 0.9, 0.995):
+        b = np.array([mass, 1 - mass, 0.0])
+        chosen = deep.execute(b).action_name
+        masked = deep.execute_without(b, [chosen])
+        offers = {contingent_offer(deep, c, b, {chosen})[0] if top.abstract[k] else c
+                  for k, c in enumerate(top.actions) if top.abstract[k] or c != chosen}
+        values = {p: offer_value(b, p, 2) for p in offers}
+        best = max(values, key=values.get)
+        assert masked.action_name == best != chosen, (mass, chosen, values)
+        assert masked.trace[0].value == pytest.approx(values[best], abs=1e-9)
+        assert masked.expansions > 0
