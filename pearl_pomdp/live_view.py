@@ -74,7 +74,8 @@ _GUIDE_SCHEMA = {"type": "object", "properties": {k: {"type": t} for k, t in (
 
 _PROPOSAL_SCHEMA = {"type": "object", "properties": {
     "step": {"type": "integer"}, "action": {"type": "string"}, "source": {"type": "string"},
-    "status": {"type": "string"}, "autonomy": {"type": "string"}, "vetoed": {"type": "array", "items": {"type": "string"}},
+    "status": {"type": "string"}, "autonomy": {"type": "string"},
+    "vetoed": {"type": "array", "items": {"type": "string"}},
     "deadline": {"type": ["number", "null"]}}}
 _OPERATOR_EVENT_SCHEMA = {"type": "object", "properties": {
     "event": {"type": "string"}, "action": {"type": "string"}, "step": {"type": "integer"},

@@ -138,7 +138,8 @@ class OperatorGate:
         """Whether ``action`` waits for a yes under ``confirm`` (every action when no category is named)."""
         return not self.confirm_categories or self.categories.get(action) in self.confirm_categories
 
-    def set_level(self, now: float, autonomy: Optional[str] = None, confirm_categories: Optional[Collection[str]] = None,
+    def set_level(self, now: float, autonomy: Optional[str] = None,
+                  confirm_categories: Optional[Collection[str]] = None,
                   confirm_timeout: Optional[float] = None) -> GateOutput:
         """Change the autonomy level and its settings (``None``: unchanged), all checked first.
 

@@ -242,7 +242,7 @@ def test_veto_re_decides_command_moves_the_belief_and_the_bag_records_it(ros_con
         assert g.spin_until(lambda: g.tracker.core.open_action == "Ask", 10.0)
         _send(g, probe, "/test/answer", "sayB")
         assert g.spin_until(lambda: len(probe.received["/pearl/belief"]) >= 3, 10.0), \
-            (g.tracker.core.counters(), g.tracker.core.step, [list(cv.msg_to_belief(m)) for m in probe.received["/pearl/belief"]])
+            [list(cv.msg_to_belief(m)) for m in probe.received["/pearl/belief"]]
         expected_belief = BeliefFilter(model).update(belief, "Ask", "sayB")
         np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][-1]), expected_belief,
                                    rtol=0, atol=1e-12)

@@ -273,7 +273,8 @@ def explain_steps(history, decisions: List[Dict[str, Any]], marginals_of,
     if decisions:
         d0 = by_step.get(0, {})
         steps.append({"step": 0, "closed_by": None, "belief": None,
-                      "decision": {"action": d0.get("action"), "trace": d0.get("trace", [])}, "operator": events.get(0, [])})
+                      "decision": {"action": d0.get("action"), "trace": d0.get("trace", [])},
+                      "operator": events.get(0, [])})
     for k, r in enumerate(history, start=1):
         d = by_step.get(k, {})
         steps.append({
