@@ -286,7 +286,8 @@ class OperatorGate:
         if action in self.actions:
             return False
         shown = ", ".join(self.actions[:20]) + (" …" if len(self.actions) > 20 else "")
-        self._refuse(out, what, action, now, f"{action!r} is not an action of the model (actions: {shown})")
+        name = action if len(action) <= 60 else action[:57] + "…"   # a flood of text stays one line
+        self._refuse(out, what, name, now, f"{name!r} is not an action of the model (actions: {shown})")
         return True
 
     def _refuse(self, out: GateOutput, what: str, action: str, now: float, why: str) -> GateOutput:

@@ -109,6 +109,8 @@ def test_bad_operator_input_is_refused_and_nothing_is_acted(decider):
     for out in (g.veto("jump", 1.0), g.command("jump", 1.0)):
         assert out.publish == [] and "'jump' is not an action of the model" in out.error
         assert kinds(out) == ["rejected"]
+    long = g.command("x" * 10_000, 1.0)
+    assert long.publish == [] and len(long.error) < 200 and g.command("", 1.0).error.startswith("command refused: ''")
     with pytest.raises(ValueError, match="autonomy: 'half'"):
         g.set_level(2.0, autonomy="half")
     with pytest.raises(ValueError, match="confirm_categories: 'Drive' is not a category.*Door, Sense"):
