@@ -47,7 +47,8 @@ class ModelFormatError(SpecError):
 
 
 class PolicyError(PearlError):
-    """A policy file is unreadable or does not belong to the model it is used with."""
+    """A policy file is unreadable or does not belong to the model it is used with, or a policy
+    cannot decide (every action it could choose is forbidden)."""
 
 
 class BeliefError(PearlError):

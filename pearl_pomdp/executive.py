@@ -33,12 +33,12 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import List, Optional
+from typing import Collection, List, Optional
 
 import numpy as np
 
-from pearl_pomdp.errors import BeliefError
-from pearl_pomdp.interfaces import Decider, Decision, ObservingDecider, Policy, TraceStep
+from pearl_pomdp.errors import BeliefError, PolicyError
+from pearl_pomdp.interfaces import Decider, Decision, ObservingDecider, Policy, TraceStep, forbidden_indices
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.solvers.base import AlphaVectorPolicy
 from pearl_pomdp.tracking import BeliefTracker, StepResult, StepSettings
@@ -96,6 +96,51 @@ class FlatPolicyDecider:
             a, value = int(self.policy.action(b)), math.nan
         name = self.model.actions[a]
         return Decision(a, name, [TraceStep(self.name, name, value)])
+
+    def execute_without(self, belief, forbidden: Collection[str]) -> Decision:
+        """The best action at ``belief`` among those not in ``forbidden`` (names), by the policy's values.
+
+        * With the forward search: the largest of the search's Q-values over the allowed actions.
+        * With α-vectors: the label of the largest ``α_k·b`` among the vectors whose action is
+          allowed. When no vector carries an allowed action, the one-step search over the model
+          with the vectors at the leaves values every allowed action
+          (``Q(b, a) = b·R_a + γ Σ_o max_k α_k·(b T_a diag O_{a,o})``), so an action the policy
+          never chose still gets the policy's own value.
+        * A policy without values (:class:`~pearl_pomdp.solvers.mdp.MostLikelyStatePolicy`)
+          can only be masked when its choice is allowed.
+
+        Raises:
+            PolicyError: every action is forbidden, a name is not an action of the model, or the
+                policy has no values to choose another action by.
+        """
+        banned = forbidden_indices(self.model.actions, forbidden)
+        if not banned:
+            return self.execute(belief)
+        b = np.asarray(belief, dtype=float)
+        allowed = np.array([a not in banned for a in range(len(self.model.actions))])
+        q: Optional[np.ndarray] = None
+        if self._search is not None:
+            q = self._search.q_values(b)[0]
+        elif self._alphas is not None and self._labels is not None:
+            keep = allowed[self._labels]
+            if keep.any():
+                values = np.where(keep, self._alphas @ b, -np.inf)
+                k = int(np.argmax(values))
+                a, value = int(self._labels[k]), float(values[k])
+                return Decision(a, self.model.actions[a], [TraceStep(self.name, self.model.actions[a], value)])
+            from pearl_pomdp.hierarchy.execute import Lookahead
+
+            m = self.model
+            q = Lookahead(m.T, m.O, m.R, m.discount, self._alphas, 1).q_values(b)[0]
+        else:
+            decision = self.execute(b)
+            if decision.action in banned:
+                raise PolicyError(f"policy {type(self.policy).__name__} has no values to choose another action "
+                                  f"than {decision.action_name!r} by")
+            return decision
+        masked = np.where(allowed, q, -np.inf)
+        a = int(np.argmax(masked))
+        return Decision(a, self.model.actions[a], [TraceStep(self.name, self.model.actions[a], float(masked[a]))])
 
     def action(self, belief) -> int:
         return self.execute(belief).action

@@ -7,6 +7,8 @@
   :class:`Decision` with an EXECUTE trace
   (:class:`~pearl_pomdp.hierarchy.execute.HierarchicalPolicy`,
   :class:`~pearl_pomdp.executive.FlatPolicyDecider`).
+* :class:`MaskingDecider` — a decider that can also decide with some actions forbidden
+  (``execute_without(belief, forbidden)``): what an operator's veto needs.
 * :class:`ObservingDecider` — a decider that also keeps its own memory of what was heard
   (a behaviour tree, a state machine): the executive tells it every closed step.
 * :class:`Solver` — ``solve(model, *, options) -> SolveResult``; solvers are looked up by
@@ -18,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, List, Optional, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Collection, FrozenSet, List, Optional, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -26,7 +28,8 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
     from pearl_pomdp.model.pomdp import Pomdp
     from pearl_pomdp.solvers.base import SolveResult
 
-__all__ = ["TraceStep", "Decision", "Policy", "BatchPolicy", "Decider", "ObservingDecider", "Solver"]
+__all__ = ["TraceStep", "Decision", "Policy", "BatchPolicy", "Decider", "MaskingDecider", "ObservingDecider",
+           "Solver", "forbidden_indices"]
 
 
 @dataclass(frozen=True)
@@ -77,6 +80,37 @@ class Decider(Protocol):
     """Chooses the next primitive action at a belief, with the trace of why."""
 
     def execute(self, belief: np.ndarray) -> Decision: ...
+
+
+@runtime_checkable
+class MaskingDecider(Decider, Protocol):
+    """A decider that can decide with some primitive actions forbidden for this one decision.
+
+    ``execute_without(belief, forbidden)`` is the choice among the actions not in ``forbidden``
+    (action names) by the decider's own values; with ``forbidden`` empty it is ``execute(belief)``.
+    Nothing is remembered: the next decision may choose a forbidden action again (a veto masks
+    one step). Raises :class:`~pearl_pomdp.errors.PolicyError` when no action is left to choose.
+    """
+
+    def execute_without(self, belief: np.ndarray, forbidden: Collection[str]) -> Decision: ...
+
+
+def forbidden_indices(actions: List[str], forbidden: Collection[str]) -> FrozenSet[int]:
+    """The indices in ``actions`` of the ``forbidden`` names (for :meth:`MaskingDecider.execute_without`).
+
+    Raises:
+        PolicyError: a name is not in ``actions``, or every action is forbidden.
+    """
+    from pearl_pomdp.errors import PolicyError
+
+    index = {a: i for i, a in enumerate(actions)}
+    unknown = sorted(set(forbidden) - set(index))
+    if unknown:
+        raise PolicyError(f"cannot forbid {', '.join(map(repr, unknown))}: not an action of the model")
+    banned = frozenset(index[a] for a in forbidden)
+    if len(banned) == len(actions):
+        raise PolicyError("every action is forbidden: nothing is left to choose")
+    return banned
 
 
 @runtime_checkable

@@ -19,6 +19,10 @@ channel                    encoding / schema     what :meth:`LiveView.publish` t
 ``/pearl/guide_pace``      JSON                 the guide_pace node's state object
 ``/pearl/pose``            foxglove.PoseInFrame ``{"x", "y", "yaw"}`` (map frame)
 ``/pearl/places``          foxglove.SceneUpdate ``{name: [x, y, yaw]}`` (spheres and labels)
+``/pearl/proposal``        JSON                 the policy's proposal (step, action, status: acted,
+                                                 waiting for the operator's yes, proposed …)
+``/pearl/operator/events`` JSON                 one operator event (``{"event", "action", "step",
+                                                 "stamp", "autonomy", "detail"}``: veto, yes/no …)
 =========================  ===================  =====================================================
 
 Requires ``foxglove-sdk`` (installed with the ``ros`` extra of the README's install, or
@@ -68,6 +72,15 @@ _GUIDE_SCHEMA = {"type": "object", "properties": {k: {"type": t} for k, t in (
     ("active", ["string", "null"]), ("state", "string"), ("speed", "number"), ("nav_speed", "number"),
     ("pace", "number"), ("behind", ["number", "null"]), ("waited", "number"), ("times_lost", "integer"))}}
 
+_PROPOSAL_SCHEMA = {"type": "object", "properties": {
+    "step": {"type": "integer"}, "action": {"type": "string"}, "source": {"type": "string"},
+    "status": {"type": "string"}, "autonomy": {"type": "string"},
+    "vetoed": {"type": "array", "items": {"type": "string"}},
+    "deadline": {"type": ["number", "null"]}}}
+_OPERATOR_EVENT_SCHEMA = {"type": "object", "properties": {
+    "event": {"type": "string"}, "action": {"type": "string"}, "step": {"type": "integer"},
+    "stamp": {"type": "number"}, "autonomy": {"type": "string"}, "detail": {"type": "string"}}}
+
 #: topic → kind (``json`` with its JSON schema, or a Foxglove schema name).
 CHANNELS: Dict[str, Any] = {
     "/pearl/belief_marginals": ("json", _MARGINALS_SCHEMA),
@@ -77,6 +90,8 @@ CHANNELS: Dict[str, Any] = {
     "/pearl/transcript": ("foxglove.Log", None),
     "/pearl/pose": ("foxglove.PoseInFrame", None),
     "/pearl/places": ("foxglove.SceneUpdate", None),
+    "/pearl/proposal": ("json", _PROPOSAL_SCHEMA),
+    "/pearl/operator/events": ("json", _OPERATOR_EVENT_SCHEMA),
 }
 
 

@@ -302,6 +302,12 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
                 shown("/pearl/action", msg.data)
 
             listener.create_subscription(String, "/pearl/action", on_action_message, latched)
+            # What a person in the loop sees: the proposal and every operator event (JSON).
+            def on_operator(topic: str):
+                return lambda msg: shown(topic, json.loads(msg.data))   # std_msgs/String JSON
+
+            listener.create_subscription(String, "/pearl/proposal", on_operator("/pearl/proposal"), latched)
+            listener.create_subscription(String, "/pearl/operator/events", on_operator("/pearl/operator/events"), 100)
             live_view.publish_places({name: [x, y, 0.0] for name, (x, y) in scenario.map.items()}, 0.0)
         rec_node = graph.add_node(rclpy.create_node("demo_recorder", context=context,
                                                     parameter_overrides=[rclpy.parameter.Parameter(

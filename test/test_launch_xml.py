@@ -36,9 +36,9 @@ def test_pearl_launch_file_graph():
     assert d.nodes[1].parameters == [
         ("file", params), ("value", "defaults_file", params), ("value", "domain", str(REPO / "config" / "pearl.domain.yaml")),
         ("value", "hierarchy", str(REPO / "config" / "pearl.hierarchy.yaml")),
-        ("value", "policy", "/plans/pearl"), ("value", "use_sim_time", "false")]
+        ("value", "policy", "/plans/pearl"), ("value", "autonomy", "full"), ("value", "use_sim_time", "false")]
     assert set(d.arguments) == {"params_file", "domain", "hierarchy", "policy", "step_timeout", "use_sim_time",
-                                "navigation", "speech", "audio_source", "audio_output"}
+                                "autonomy", "navigation", "speech", "audio_source", "audio_output"}
 
 
 def test_params_are_written_like_launch_ros(tmp_path):
@@ -155,7 +155,7 @@ def test_pearl_launch_print_shows_the_commands():
     assert bad.returncode == 2
     assert bad.stderr.strip().splitlines() == [
         f"pearl launch: error: {LAUNCH}: unknown launch argument(s) polcy (declared: audio_output, audio_source, "
-        f"domain, hierarchy, navigation, params_file, policy, speech, step_timeout, use_sim_time)"]
+        f"autonomy, domain, hierarchy, navigation, params_file, policy, speech, step_timeout, use_sim_time)"]
 
 
 def test_speech_nodes_are_off_unless_asked():

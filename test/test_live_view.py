@@ -65,7 +65,10 @@ def test_a_client_gets_the_channels_and_the_belief_and_action_messages():
         view.publish("/pearl/pose", {"x": 21.0, "y": -4.0, "yaw": 3.1}, stamp_s=121.0)
         view.publish("/pearl/transcript", {"speaker": "robot", "text": "Please follow me."}, stamp_s=121.0)
         view.publish_places({"home": [0.0, 0.0, 0.0], "physio": [21.0, -4.0, 3.1416]}, stamp_s=121.0)
-        frames += [m for m in _receive(ws, lambda got: len([m for m in got if isinstance(m, bytes)]) >= 4)
+        vetoed = {"event": "vetoed", "action": "GuideToPhysio", "step": 3, "stamp": 121.0, "autonomy": "confirm",
+                  "detail": "re-decided without GuideToPhysio: ConfirmGuideToPhysio"}
+        view.publish("/pearl/operator/events", vetoed, stamp_s=121.0)
+        frames += [m for m in _receive(ws, lambda got: len([m for m in got if isinstance(m, bytes)]) >= 5)
                    if isinstance(m, bytes)]
     got = {}
     for frame in frames:
@@ -79,6 +82,7 @@ def test_a_client_gets_the_channels_and_the_belief_and_action_messages():
         assert len(got[topic]) == 1 and got[topic][0][0] == 121_000_000_000
     assert b"Please follow me." in got["/pearl/transcript"][0][1]
     assert b"place/physio" in got["/pearl/places"][0][1]
+    assert [json.loads(p) for _, p in got["/pearl/operator/events"]] == [vetoed]
 
 
 def test_publish_names_the_problem():

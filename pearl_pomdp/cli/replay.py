@@ -17,6 +17,11 @@ feature after the update, and the EXECUTE trace of the answer with the value of 
 choice; where replay and recording differ, the first divergence with both traces (when
 the bag recorded /pearl/decision). In --json these are "steps" and "divergence".
 
+A person in the loop is replayed too: the recorded vetoes and commands are fed to the
+policy, and the operator's level changes and yes/no answers (recorded as events on
+/pearl/operator/events) are done again at their place; --explain lists each step's operator
+events, --json adds "operator_events" and "expected_operator_events".
+
 Examples:
   pearl replay bags/table4_clarification
   pearl replay bags/figure4_guidance --json
@@ -78,6 +83,12 @@ def _trace_text(trace) -> str:
     return "  ".join(parts)
 
 
+def _operator_lines(step) -> list:
+    """The operator's events at this step's belief (veto, waiting, yes/no, command, level), one line each."""
+    return [f"        operator: {e['event']} {e['action']}" + (f" ({e['detail']})" if e.get("detail") else "")
+            for e in step.get("operator") or []]
+
+
 def format_explanation(steps, divergence) -> str:
     """The --explain text: one block per step, then the first divergence."""
     lines = ["", "why:"]
@@ -85,6 +96,7 @@ def format_explanation(steps, divergence) -> str:
         d = s["decision"]
         if s["closed_by"] is None:
             lines.append(f"  [b0] → {d['action']}   {_trace_text(d['trace'])}")
+            lines.extend(_operator_lines(s))
             continue
         c = s["closed_by"]
         heard = f"{c['input']} {c['text']!r} → {c['symbol']}"
@@ -96,6 +108,7 @@ def format_explanation(steps, divergence) -> str:
         lines.append(f"  [{s['step']:>3}] {s['time']:8.1f} s  after {s['action']}: {heard}")
         lines.append(f"        belief {belief}")
         lines.append(f"        → {d['action']}   {_trace_text(d['trace'])}")
+        lines.extend(_operator_lines(s))
     if divergence:
         lines.append(f"first divergence at action {divergence['action_index']}: replayed {divergence['replayed']}, "
                      f"recorded {divergence['recorded']}")

@@ -27,14 +27,14 @@ import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Union, cast
+from typing import Any, Collection, Dict, FrozenSet, List, Optional, Union, cast
 
 import numpy as np
 import scipy.sparse as sp
 
 from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import PolicyError
-from pearl_pomdp.interfaces import Decision, TraceStep
+from pearl_pomdp.interfaces import Decision, TraceStep, forbidden_indices
 from pearl_pomdp.jsonable import numpy_to_json
 from pearl_pomdp.model.factored import FactoredDomain
 
@@ -302,6 +302,22 @@ class SubtaskPolicy:
         k = int(np.argmax(values))
         return int(self.alpha_actions[k]), float(values[k])
 
+    def choose_allowed(self, belief: np.ndarray, allowed: np.ndarray):
+        """:meth:`choose` among the children with ``allowed[k]`` true (``[len(actions)]`` bools):
+        the largest Q-value, or the largest vector among those labelled with an allowed child.
+        ``None`` when no allowed child has a value here (no vector carries one)."""
+        if self.lookahead is not None:
+            q = np.where(allowed, self._q_values(np.asarray(belief, dtype=float)[None, :])[0], -np.inf)
+        else:
+            keep = allowed[self.alpha_actions]
+            if not keep.any():
+                return None
+            values = np.where(keep, self.alphas_full @ belief, -np.inf)
+            k = int(np.argmax(values))
+            return int(self.alpha_actions[k]), float(values[k])
+        k = int(np.argmax(q))
+        return (k, float(q[k])) if np.isfinite(q[k]) else None
+
     def choose_batch(self, beliefs: np.ndarray) -> np.ndarray:
         """``[N]`` action indices (into ``self.actions``) for full beliefs ``[N, S]``; ties as :meth:`choose`."""
         B = np.atleast_2d(np.asarray(beliefs, dtype=float))
@@ -356,6 +372,20 @@ class HierarchicalPolicy:
         #: Beliefs the last :meth:`execute` expanded in its forward search (0: one step, no search).
         self.last_expansions = 0
         self._pick_cache: Dict[tuple, tuple] = {}
+        #: Per subtask, the full-model indices of the primitives below it (what a veto can leave).
+        self._below: Dict[str, FrozenSet[int]] = {}
+        for name in subtasks:
+            self._primitives_below(name)
+
+    def _primitives_below(self, name: str) -> FrozenSet[int]:
+        got = self._below.get(name)
+        if got is None:
+            self._below[name] = frozenset()   # a cycle (rejected at load) ends here
+            sub = self.subtasks[name]
+            got = frozenset().union(*[self._primitives_below(c) if sub.abstract[k] else {self._index[c]}
+                                      for k, c in enumerate(sub.actions)])
+            self._below[name] = got
+        return got
 
     # ------------------------------------------------------------- EXECUTE
     def execute(self, belief) -> Decision:
@@ -384,11 +414,51 @@ class HierarchicalPolicy:
             node = choice
         raise PolicyError(f"the hierarchy below {self.root!r} has a cycle")  # pragma: no cover - validated at load
 
+    def execute_without(self, belief, forbidden: Collection[str]) -> Decision:
+        """EXECUTE with the primitives in ``forbidden`` (names) masked for this one decision.
+
+        Every subtask chooses among its children that are still possible: a primitive not
+        forbidden, a subtask with a primitive left below it. Policy-contingent: each child offers
+        the best primitive it has left, and the subtask takes the offer with the largest one-step
+        value over its own model (a deeper root search masks the first step only: later steps
+        may take the action again). Otherwise: the largest Q-value (lookahead) or vector among
+        the children left. With ``forbidden`` empty this is :meth:`execute`.
+
+        Raises:
+            PolicyError: a name is not a primitive action, every action is forbidden, or a
+                subtask has no value for any child left (no vector carries one).
+        """
+        banned = forbidden_indices(self.action_names, forbidden)
+        if not banned:
+            return self.execute(belief)
+        b = np.asarray(belief, dtype=float)
+        if b.shape != (self.num_states,):
+            raise ValueError(f"belief has shape {b.shape}, expected ({self.num_states},)")
+        if self.contingent:
+            return self._execute_contingent(b, banned)
+        trace = []
+        node = self.root
+        for _ in range(len(self.subtasks) + 1):
+            sub = self.subtasks[node]
+            allowed = np.array([bool(self._below[c] - banned) if sub.abstract[k] else self._index[c] not in banned
+                                for k, c in enumerate(sub.actions)])
+            got = sub.choose_allowed(b, allowed) if allowed.any() else None
+            if got is None:
+                raise PolicyError(f"subtask {node!r} has no value for any action left once "
+                                  f"{', '.join(sorted(forbidden))} is forbidden")
+            k, value = got
+            choice = sub.actions[k]
+            trace.append(TraceStep(node, choice, value))
+            if not sub.abstract[k]:
+                return Decision(self._index[choice], choice, trace)
+            node = choice
+        raise PolicyError(f"the hierarchy below {self.root!r} has a cycle")  # pragma: no cover - validated at load
+
     #: Picks remembered per (subtask, model marginal); the cache is emptied when it is full.
     PICK_CACHE = 4096
 
     # ------------------------------------------------- policy-contingent EXECUTE
-    def _pick(self, name: str, b: np.ndarray, memo: Dict[str, tuple]) -> tuple:
+    def _pick(self, name: str, b: np.ndarray, memo: Dict[str, Any], banned: FrozenSet[int] = frozenset()) -> Any:
         """``(primitive index, child index, value)`` subtask ``name`` chooses at the full belief ``b``.
 
         Each child offers the primitive it would execute at ``b`` (a primitive child offers
@@ -396,16 +466,16 @@ class HierarchicalPolicy:
         offer with the largest one-step value over its own model,
         ``Q(b, a) = b·R_a + γ Σ_o V(b T_a diag O_{a,o})`` with ``V`` its α-vectors — the value
         it was planned with, so the parent sees each child as the child acts (first child on
-        ties). ``memo`` holds the subtasks already asked at this belief."""
-        got = memo.get(name)
-        if got is not None:
-            return got
+        ties). ``memo`` holds the subtasks already asked at this belief. ``banned``: full-model
+        primitive indices no child may offer (a veto); ``None`` when nothing is left below ``name``."""
+        if name in memo:
+            return memo[name]
         sub = self.subtasks[name]
         # A subtask's pick depends on the belief only through its own model's marginal (its
         # children's features are among its own): the same marginal, the same pick.
         bh = sub.project(b)[0]
         key = (name, bh.tobytes())
-        got = self._pick_cache.get(key)
+        got = None if banned else self._pick_cache.get(key)
         if got is not None:
             memo[name] = got
             return got
@@ -413,32 +483,52 @@ class HierarchicalPolicy:
         table = self._to_model[name]
         best: Optional[tuple] = None
         for k, child in enumerate(sub.actions):
-            prim = self._pick(child, b, memo)[0] if sub.abstract[k] else self._index[child]
+            if sub.abstract[k]:
+                offer = self._pick(child, b, memo, banned)
+                if offer is None:
+                    continue
+                prim = offer[0]
+            else:
+                prim = self._index[child]
+                if prim in banned:
+                    continue
             value = float(q[table[prim]])
             if best is None or value > best[2]:
                 best = (prim, k, value)
-        memo[name] = cast(tuple, best)
+        memo[name] = best
+        if banned:
+            return best   # a masked pick is for this decision only: not cached
         if len(self._pick_cache) >= self.PICK_CACHE:
             self._pick_cache.clear()
         self._pick_cache[key] = memo[name]
         return memo[name]
 
-    def _search_value(self, name: str, b: np.ndarray, depth: int, budget: List[int]) -> tuple:
+    def _search_value(self, name: str, b: np.ndarray, depth: int, budget: List[int],
+                      banned: FrozenSet[int] = frozenset()) -> Any:
         """:meth:`_pick` with ``depth`` steps of forward search over subtask ``name``'s model:
         each offer's successors are valued by the same choice one step shallower (the
         children asked again at every successor), the α-vectors at depth 1. ``budget[0]``
         counts down the beliefs expanded; once it is spent, successors take their vector
-        value. Deterministic: offers in child order, observations in index order."""
-        memo: Dict[str, tuple] = {}
+        value. Deterministic: offers in child order, observations in index order. ``banned``
+        masks this step's offers only (the successors are later steps)."""
+        memo: Dict[str, Any] = {}
         if depth <= 1 or budget[0] <= 0:
-            return self._pick(name, b, memo)
+            return self._pick(name, b, memo, banned)
         sub = self.subtasks[name]
         la = cast(Lookahead, sub.lookahead)
         table = self._to_model[name]
         bh = sub.project(b)[0]
         best: Optional[tuple] = None
         for k, child in enumerate(sub.actions):
-            prim = self._pick(child, b, memo)[0] if sub.abstract[k] else self._index[child]
+            if sub.abstract[k]:
+                offer = self._pick(child, b, memo, banned)
+                if offer is None:
+                    continue
+                prim = offer[0]
+            else:
+                prim = self._index[child]
+                if prim in banned:
+                    continue
             a = int(table[prim])
             predicted = np.asarray(la._Tt[a] @ bh)
             value = float(bh @ la.R[:, a])
@@ -455,24 +545,27 @@ class HierarchicalPolicy:
                     value += la.discount * float((la.alphas @ successor).max())
             if best is None or value > best[2]:
                 best = (prim, k, value)
-        return cast(tuple, best)
+        return best
 
-    def _execute_contingent(self, b: np.ndarray) -> Decision:
+    def _execute_contingent(self, b: np.ndarray, banned: FrozenSet[int] = frozenset()) -> Decision:
         root = self.subtasks[self.root]
         budget = [root.expansions]
         if root.search_depth > 1:
-            prim, k, value = self._search_value(self.root, b, root.search_depth, budget)
+            got = self._search_value(self.root, b, root.search_depth, budget, banned)
         else:
-            prim, k, value = self._pick(self.root, b, {})
+            got = self._pick(self.root, b, {}, banned)
+        if got is None:
+            raise PolicyError(f"no action is left below {self.root!r} once {len(banned)} are forbidden")
+        prim, k, value = got
         self.last_expansions = root.expansions - budget[0] if root.search_depth > 1 else 0
         trace = [TraceStep(self.root, root.actions[k], value)]
-        memo: Dict[str, tuple] = {}
+        memo: Dict[str, Any] = {}
         node, child = self.root, root.actions[k]
         for _ in range(len(self.subtasks) + 1):
             if not self.subtasks[node].abstract[self.subtasks[node].actions.index(child)]:
                 return Decision(self._index[child], child, trace, expansions=self.last_expansions)
             node = child
-            _, k, value = self._pick(node, b, memo)
+            _, k, value = self._pick(node, b, memo, banned)
             child = self.subtasks[node].actions[k]
             trace.append(TraceStep(node, child, value))
         raise PolicyError(f"the hierarchy below {self.root!r} has a cycle")  # pragma: no cover - validated at load

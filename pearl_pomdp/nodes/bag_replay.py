@@ -34,8 +34,16 @@ The nodes' ``diagnostics_period`` is set to an hour during a replay: /diagnostic
 compared, and its timers would only add stops to the lock-step.
 
 The graph's configuration comes from the bag's ``custom_data`` (written by the recording
-script): ``pearl.domain``, ``pearl.policy`` (paths relative to the bag directory) and
-``pearl.tracker_params`` (JSON of belief-tracker parameter overrides).
+script): ``pearl.domain``, ``pearl.policy`` (paths relative to the bag directory),
+``pearl.tracker_params`` (JSON of belief-tracker parameter overrides) and, optionally,
+``pearl.policy_params`` (JSON of policy-node overrides: the autonomy level the run started with).
+
+A person in the loop (docs/ros-nodes.md, "Operator") is replayed too: the recorded vetoes and
+commands (``/pearl/operator/veto``, ``/pearl/operator/command``) are fed to the policy in
+bag order, and of the recorded operator events (``/pearl/operator/events``) the operator's
+own acts that are not topics are done again at their place: ``autonomy`` sets the recorded
+settings, ``confirmed``/``declined`` answer yes/no. A confirmation timeout happens by itself
+on the recorded /clock. With ``explain`` each step lists the operator events of the replay.
 """
 from __future__ import annotations
 
@@ -56,6 +64,10 @@ BELIEF_TOLERANCE = 1e-12
 DECISION_TOPIC = "/pearl/decision"
 #: custom_data keys of a replayable bag.
 KEY_DOMAIN, KEY_POLICY, KEY_TRACKER = "pearl.domain", "pearl.policy", "pearl.tracker_params"
+KEY_POLICY_PARAMS = "pearl.policy_params"
+OPERATOR_EVENTS_TOPIC = "/pearl/operator/events"
+#: Recorded operator events a replay does again (the others follow from them and the inputs).
+REENACTED = ("autonomy", "confirmed", "declined")
 
 
 @dataclass
@@ -78,6 +90,8 @@ class ReplayResult:
         max_belief_difference: the largest ``|b_replayed − b_recorded|`` over the beliefs both have
             (``None`` when the bag recorded none).
         beliefs_match: as many beliefs as recorded, each within :data:`BELIEF_TOLERANCE`.
+        operator_events: the kinds of the operator events the replay produced, in order.
+        expected_operator_events: the kinds recorded on ``/pearl/operator/events``.
     """
 
     bag: str
@@ -97,6 +111,8 @@ class ReplayResult:
     expected_beliefs: int = 0
     max_belief_difference: Optional[float] = None
     beliefs_match: bool = False
+    operator_events: List[str] = field(default_factory=list)
+    expected_operator_events: List[str] = field(default_factory=list)
 
     def to_dict(self) -> Dict[str, Any]:
         out = {"bag": self.bag, "match": self.match, "actions": self.actions,
@@ -105,6 +121,9 @@ class ReplayResult:
                "messages_per_second": round(self.messages_per_second, 1), "clock_skipped": self.clock_skipped,
                "counters": self.counters, "beliefs": self.beliefs, "expected_beliefs": self.expected_beliefs,
                "max_belief_difference": self.max_belief_difference, "beliefs_match": self.beliefs_match}
+        if self.operator_events or self.expected_operator_events:
+            out["operator_events"] = self.operator_events
+            out["expected_operator_events"] = self.expected_operator_events
         if self.explanation is not None:
             out["steps"] = self.explanation
             out["divergence"] = self.divergence
@@ -182,15 +201,17 @@ def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optio
             raise PearlError(f"{reader.path}: custom_data {key}: {p} does not exist")
         return str(p)
 
-    tracker = custom.get(KEY_TRACKER) or "{}"
-    try:
-        tracker_params = json.loads(tracker)
-        if not isinstance(tracker_params, dict):
-            raise ValueError("not a JSON object")
-    except ValueError as err:
-        raise PearlError(f"{reader.path}: custom_data {KEY_TRACKER}: {err}") from None
+    def params_of(key: str) -> Dict[str, Any]:
+        try:
+            value = json.loads(custom.get(key) or "{}")
+            if not isinstance(value, dict):
+                raise ValueError("not a JSON object")
+        except ValueError as err:
+            raise PearlError(f"{reader.path}: custom_data {key}: {err}") from None
+        return value
+
     return {"domain": path_of(KEY_DOMAIN, domain), "policy": path_of(KEY_POLICY, policy),
-            "tracker_params": tracker_params}
+            "tracker_params": params_of(KEY_TRACKER), "policy_params": params_of(KEY_POLICY_PARAMS)}
 
 
 def _graph_options() -> Dict[str, Any]:
@@ -225,29 +246,79 @@ def _top_marginals(marginals: Dict[str, Dict[str, float]]) -> Dict[str, List[Any
     return out
 
 
-def explain_steps(history, decisions: List[Dict[str, Any]], marginals_of) -> List[Dict[str, Any]]:
+def explain_steps(history, decisions: List[Dict[str, Any]], marginals_of,
+                  operator_events: Optional[List[Dict[str, Any]]] = None) -> List[Dict[str, Any]]:
     """Why each action was taken: per closed step, what closed it, the belief after, and the
     EXECUTE trace (with values) of the decision that answered that belief.
 
     Args:
         history: the tracker's closed :class:`~pearl_pomdp.tracking.StepResult` s, in order.
-        decisions: the policy's ``/pearl/decision`` objects (decision 0 answers ``b0``).
+        decisions: the policy's ``/pearl/decision`` objects (decision 0 answers ``b0``). A
+            decision with ``belief_step`` answers that belief; of several (a veto's re-decision)
+            the last is the one that stood.
         marginals_of: belief → ``{feature: {value: p}}``.
+        operator_events: the policy's ``/pearl/operator/events`` objects; each step lists those
+            of its belief (``step``) when the operator did anything there.
     """
+    by_step: Dict[int, Dict[str, Any]] = {}
+    for i, d in enumerate(decisions):
+        by_step[int(d.get("belief_step", i))] = d
+    events: Dict[int, List[Dict[str, Any]]] = {}
+    for e in operator_events or []:
+        events.setdefault(int(e.get("step", -1)), []).append(
+            {k: e.get(k) for k in ("event", "action", "stamp", "autonomy", "detail")})
+    for k in [k for k, listed in events.items() if all(e["event"] == "acted" for e in listed)]:
+        del events[k]   # the policy acted, nobody intervened: nothing to say
     steps = []
     if decisions:
+        d0 = by_step.get(0, {})
         steps.append({"step": 0, "closed_by": None, "belief": None,
-                      "decision": {"action": decisions[0].get("action"), "trace": decisions[0].get("trace", [])}})
+                      "decision": {"action": d0.get("action"), "trace": d0.get("trace", [])},
+                      "operator": events.get(0, [])})
     for k, r in enumerate(history, start=1):
-        d = decisions[k] if k < len(decisions) else {}
+        d = by_step.get(k, {})
         steps.append({
             "step": k, "time": round(r.time, 6), "action": r.action,
             "closed_by": {"input": r.source, "text": r.text, "symbol": r.observation,
                           "confidence": r.confidence, "zero_likelihood": r.zero_likelihood},
             "belief": _top_marginals(marginals_of(r.belief)),
             "decision": {"action": d.get("action"), "trace": d.get("trace", [])},
+            "operator": events.get(k, []),
         })
     return steps
+
+
+def _recorded_operator_events(reader: BagReader) -> List[Any]:
+    """``(bag message index, event object)`` of the recorded operator events."""
+    if OPERATOR_EVENTS_TOPIC not in reader.topics:
+        return []
+    out = []
+    for m in reader.read_messages([OPERATOR_EVENTS_TOPIC]):
+        try:
+            out.append(json.loads(_string_data(m.data)))
+        except (ValueError, UnicodeDecodeError) as err:
+            raise BagError(f"{reader.path}: topic {OPERATOR_EVENTS_TOPIC}: message at log time {m.log_time} "
+                           f"is not an operator event: {err}") from None
+    return out
+
+
+def _reenact(driver, event: Dict[str, Any]) -> None:
+    """Do again an operator act the bag holds only as an event (see the module doc)."""
+    kind = event.get("event")
+    if kind == "autonomy":
+        from rclpy.parameter import Parameter
+
+        settings = event.get("settings") or {"autonomy": event.get("autonomy")}
+        params = [Parameter("autonomy", Parameter.Type.STRING, str(settings["autonomy"]))]
+        if "confirm_categories" in settings:
+            params.append(Parameter("confirm_categories", Parameter.Type.STRING_ARRAY,
+                                    [str(c) for c in settings["confirm_categories"]]))
+        if "confirm_timeout" in settings:
+            params.append(Parameter("confirm_timeout", Parameter.Type.DOUBLE, float(settings["confirm_timeout"])))
+        driver.graph.policy.set_parameters_atomically(params)
+        driver.settle()
+    elif kind in ("confirmed", "declined"):
+        driver.answer(kind == "confirmed")
 
 
 def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: Optional[str] = None,
@@ -284,7 +355,8 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
     # Diagnostics are not compared; slowing their timers keeps them out of the lock-step
     # (fewer timer deadlines to stop at). Nothing else about the nodes changes.
     quiet = {"diagnostics_period": 3600.0}
-    overrides = {"belief_tracker": {**quiet, **dict(cfg["tracker_params"])}, "hierarchical_policy": quiet}
+    overrides = {"belief_tracker": {**quiet, **dict(cfg["tracker_params"])},
+                 "hierarchical_policy": {**quiet, **dict(cfg["policy_params"])}}
     graph = PearlGraph(domain_id=domain_id, use_sim_time=True, executor=False,
                        args=["--ros-args", "--disable-external-lib-logs", "--disable-rosout-logs", "--log-level", "warn"],
                        shared={"domain": cfg["domain"], "policy": cfg["policy"]}, overrides=overrides,
@@ -318,9 +390,22 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
         if explain:
             core.keep_history()
             node.create_subscription(String, DECISION_TOPIC, lambda m: decisions.append(json.loads(m.data)), 1000)
+        replayed_events: List[Dict[str, Any]] = []
+        node.create_subscription(String, OPERATOR_EVENTS_TOPIC, lambda m: replayed_events.append(json.loads(m.data)),
+                                 QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
+                                            durability=DurabilityPolicy.VOLATILE))
         pubs = {t: node.create_publisher(msg_type, t, EVENT_QOS) for t, (_, msg_type) in input_types.items()
                 if t in reader.topics}
-        driver.wait_until_matched(list(pubs.values()))
+        # The operator's topics (the policy's parameters name them): fed to the policy.
+        policy_node = graph.policy
+        operator_pubs = {}
+        for param in ("veto_topic", "command_topic"):
+            if policy_node.has_parameter(param):
+                topic = policy_node.resolve_topic_name(policy_node.get_parameter(param).value)
+                if topic in reader.topics:
+                    operator_pubs[topic] = node.create_publisher(String, topic, EVENT_QOS)
+        recorded_events = iter(_recorded_operator_events(reader))
+        driver.wait_until_matched(list(pubs.values()) + list(operator_pubs.values()))
         # b0 before any input: the latched writer keeps only the latest belief.
         driver.wait(lambda: belief_sub.get_publisher_count() > 0 and bool(beliefs), "the tracker's b0")
 
@@ -355,12 +440,22 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
                 driver.set_time(t, raw=m.data)
                 fed += 1
                 deadline = driver.next_timer_deadline()
-            elif m.topic in pubs:
+            elif m.topic in pubs or m.topic in operator_pubs or m.topic == OPERATOR_EVENTS_TOPIC:
+                event: Optional[Dict[str, Any]] = None
+                if m.topic == OPERATOR_EVENTS_TOPIC:
+                    event = next(recorded_events, {})
+                if event is not None and event.get("event") not in REENACTED:
+                    continue   # an outcome: the replay makes its own
                 if pending is not None:
                     driver.set_time(pending[1], raw=pending[0])
                     fed += 1
                     pending = None
-                driver.feed(pubs[m.topic], m.data)
+                if event is not None:
+                    _reenact(driver, event)
+                elif m.topic in operator_pubs:
+                    driver.feed_operator(operator_pubs[m.topic], m.data)
+                else:
+                    driver.feed(pubs[m.topic], m.data)
                 fed += 1
                 deadline = driver.next_timer_deadline()
         if pending is not None:
@@ -368,14 +463,18 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
             fed += 1
         tracker = graph.tracker
         driver.wait(lambda: len(beliefs) >= 1 + core.step, "the beliefs")
+        gate = getattr(graph.policy, "gate", None)
+        if gate is not None:
+            driver.wait(lambda: len(replayed_events) >= sum(gate.counts.values()), "the operator events")
         explanation = None
         if explain:
             driver.wait(lambda: len(decisions) >= graph.policy.decisions, "the decision traces")
-            explanation = explain_steps(list(core.history or []), decisions, core.marginals)
+            explanation = explain_steps(list(core.history or []), decisions, core.marginals, replayed_events)
         seconds = time.perf_counter() - start
         if bar is not None:
             bar.close()
         counters = dict(tracker.counters())
+        operator_events = [str(e.get("event")) for e in replayed_events]
     finally:
         graph.shutdown()
     recorded = recorded_beliefs(reader)
@@ -405,4 +504,5 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
                         first_mismatch=mismatch, counters=counters, clock_skipped=skipped,
                         explanation=explanation, divergence=divergence, beliefs=len(beliefs),
                         expected_beliefs=len(recorded), max_belief_difference=max_difference,
-                        beliefs_match=beliefs_match)
+                        beliefs_match=beliefs_match, operator_events=operator_events,
+                        expected_operator_events=[str(e.get("event")) for e in _recorded_operator_events(reader)])

@@ -163,12 +163,15 @@ def msg_to_action(msg: String) -> str:
     return msg.data.strip()
 
 
-def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: float, expansions: int = 0) -> String:
+def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: float, expansions: int = 0,
+                    belief_step: Optional[int] = None) -> String:
     """The EXECUTE trace as JSON on a String (root → … → primitive).
 
     Args:
         trace: items with ``subtask``, ``choice`` and ``value`` attributes (``TraceStep``) or dicts.
         expansions: beliefs the decision's forward search expanded (``Decision.expansions``).
+        belief_step: the belief this decision answers (0: ``b0``), when it may differ from
+            ``step`` (an operator's veto makes the policy decide again at the same belief).
     """
     steps = []
     for t in trace:
@@ -178,6 +181,8 @@ def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: flo
                       "value": value if math.isfinite(value) else None})
     body = {"step": int(step), "action": action_name, "trace": steps, "latency_s": float(latency_s),
             "expansions": int(expansions)}
+    if belief_step is not None:
+        body["belief_step"] = int(belief_step)
     return String(data=json.dumps(body, separators=(",", ":")))
 
 

@@ -3,15 +3,22 @@
 For every belief it runs EXECUTE top-down (root → … → primitive) and publishes the
 primitive action and the trace. All planning happens at start-up, before spinning: a
 callback only evaluates α-vectors (py_trees#420: a tick must be near-instant).
+
+A person in the loop (docs/ros-nodes.md, "Operator"): every decision goes through the core's
+:class:`~pearl_pomdp.operator.OperatorGate` — the autonomy level (``full`` / ``confirm`` /
+``off``), the operator's yes/no, veto and command — and every operator input and what became
+of it is published on the events topic, so a bag records it.
 """
 from __future__ import annotations
 
 import collections
+import json
 import sys
 import time
-from typing import Deque, List, Optional
+from typing import Any, Deque, List, Optional
 
 import numpy as np
+from rclpy.parameter import Parameter
 
 from pearl_pomdp.errors import BeliefError
 from pearl_pomdp.nodes import conversions as cv
@@ -19,6 +26,10 @@ from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Pa
                                       load_domain_and_model, resolve_path, run_node)
 from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
+from pearl_pomdp.operator import AUTONOMY_LEVELS, GateOutput, OperatorGate
+
+#: The parameters an operator may change while the node runs (``ros2 param set``).
+OPERATOR_LIVE = ("autonomy", "confirm_categories", "confirm_timeout")
 
 __all__ = ["HierarchicalPolicyNode", "load_decider", "main"]
 
@@ -75,6 +86,14 @@ class HierarchicalPolicyNode(ManagedPearlNode):
           (:mod:`pearl_pomdp.nodes.defaults`; ``''``: none).
         * ``use_sim_time`` (bool): follow /clock.
 
+    Parameters (changeable at run time, the operator's):
+        * ``autonomy`` (str): ``full`` (act), ``confirm`` (wait for a yes) or ``off`` (propose only).
+        * ``confirm_categories`` (str[]): under ``confirm``, the action categories that wait
+          (the domain's ``category:`` tags); empty: every action.
+        * ``confirm_timeout`` (double, s): how long an action waits for the answer; then it is not acted.
+        * ``veto_topic``, ``command_topic``, ``confirm_service``, ``proposal_topic``,
+          ``operator_events_topic`` (str, read-only): the operator interfaces' names.
+
     Subscribers:
         * ``/pearl/belief`` (std_msgs/Float64MultiArray, TRANSIENT_LOCAL): the tracker's belief.
 
@@ -85,7 +104,17 @@ class HierarchicalPolicyNode(ManagedPearlNode):
           latency (belief message received → action published, wall clock) and the beliefs its
           forward search expanded (0: the one-step choice only).
         * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): decisions, rejected beliefs and
-          latency p50/p99/max over the last 1000 decisions.
+          latency p50/p99/max over the last 1000 decisions; one ERROR status per refused operator input.
+        * ``/pearl/proposal`` (std_msgs/String JSON, TRANSIENT_LOCAL depth 1): the step's current
+          action and its status (:meth:`~pearl_pomdp.operator.OperatorGate.proposal`).
+        * ``/pearl/operator/events`` (std_msgs/String JSON): every operator event
+          (:class:`~pearl_pomdp.operator.OperatorEvent`).
+
+    Operator inputs:
+        * ``/pearl/operator/veto`` (std_msgs/String): an action name; masked for this step, the
+          policy re-decides at once when it was the choice.
+        * ``/pearl/operator/command`` (std_msgs/String): an action name, published as the robot's action.
+        * ``/pearl/operator/confirm`` (std_srvs/SetBool service): yes/no to the waiting action.
 
     In-process use: ``HierarchicalPolicyNode(context=ctx, parameter_overrides={...}, domain=dom,
     model=model, decider=d)`` — ``decider`` (anything with ``.execute(belief) -> Decision``)
@@ -106,6 +135,20 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         Param("belief_topic", "/pearl/belief", "Belief input (std_msgs/Float64MultiArray)"),
         Param("action_topic", "/pearl/action", "Primitive action output (std_msgs/String)"),
         Param("decision_topic", "/pearl/decision", "EXECUTE trace output (JSON std_msgs/String)"),
+        Param("autonomy", "full", f"Autonomy level: {' / '.join(AUTONOMY_LEVELS)} (full acts, confirm waits for "
+                                  "the operator's yes, off only proposes); changeable at run time", read_only=False),
+        Param("confirm_categories", [], "Under confirm, the action categories that wait for a yes (the domain's "
+                                          "category: tags); empty: every action; changeable at run time",
+              read_only=False, type=Parameter.Type.STRING_ARRAY),
+        Param("confirm_timeout", 30.0, "Seconds an action waits for the operator's answer before it is not acted; "
+                                       "changeable at run time", read_only=False, range=(0.001, 86400.0)),
+        Param("veto_topic", "/pearl/operator/veto", "Operator's veto: an action name (std_msgs/String)"),
+        Param("command_topic", "/pearl/operator/command", "Operator's command: an action name, acted as the "
+                                                          "robot's (std_msgs/String)"),
+        Param("confirm_service", "/pearl/operator/confirm", "Operator's yes/no to the waiting action "
+                                                            "(std_srvs/SetBool)"),
+        Param("proposal_topic", "/pearl/proposal", "The step's action and its status (JSON std_msgs/String)"),
+        Param("operator_events_topic", "/pearl/operator/events", "Every operator event (JSON std_msgs/String)"),
         AUTOSTART,
     )
 
@@ -121,7 +164,16 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self.inactive_beliefs = 0  # beliefs that arrived while not active (not answered)
         self.latencies: Deque[float] = collections.deque(maxlen=1000)
         self.last_decision = None
+        self.gate: Optional[OperatorGate] = None
+        self.operator_rejected = 0      # operator inputs refused (unknown action, nothing to veto …)
+        self.operator_inputs = 0        # operator inputs taken (veto, command, yes/no; refused ones too)
+        self.beliefs_answered = 0       # beliefs the gate decided at (the veto's re-decisions not counted)
+        self.actions_published = 0      # actions put on action_topic (policy's, confirmed, commanded)
+        self.inactive_operator = 0      # operator inputs while not active (not acted)
+        self._confirm_srv: Optional[Any] = None
+        self._confirm_timer: Optional[Any] = None
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self.start(p["autostart"])
 
     def configure_node(self) -> None:
@@ -133,14 +185,39 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self.domain, self.model = domain, model
         self.decider = decider if decider is not None else load_decider(model, domain, p["policy"],
                                                                         p["hierarchy"], self.get_logger())
+        categories = getattr(domain, "categories", {}) if domain is not None else {}
+        try:
+            self.gate = OperatorGate(self.decider, model.actions, categories, autonomy=p["autonomy"],
+                                     confirm_categories=_categories(p["confirm_categories"]),
+                                     confirm_timeout=p["confirm_timeout"])
+        except ValueError as err:
+            raise NodeSetupError(f"parameter {err}") from None
         self.action_pub = self.lifecycle_publisher(cv.TextMsg, p["action_topic"], LATCHED_QOS)
         self.decision_pub = self.lifecycle_publisher(cv.TextMsg, p["decision_topic"], EVENT_QOS)
+        self.proposal_pub = self.lifecycle_publisher(cv.TextMsg, p["proposal_topic"], LATCHED_QOS)
+        # Depth 100: a burst of events (a veto re-deciding, a command withdrawing) reaches the recorder.
+        self.operator_events_pub = self.lifecycle_publisher(cv.TextMsg, p["operator_events_topic"],
+                                                            _deep(EVENT_QOS, 100))
         self.managed_subscription(cv.BeliefMsg, p["belief_topic"], self._on_belief, LATCHED_QOS)
+        self.managed_subscription(cv.TextMsg, p["veto_topic"], self._operator_input("veto"), EVENT_QOS)
+        self.managed_subscription(cv.TextMsg, p["command_topic"], self._operator_input("command"), EVENT_QOS)
+        from std_srvs.srv import SetBool
+
+        self._confirm_srv = self.create_service(SetBool, p["confirm_service"], self._on_confirm)
+        # One-shot timer for the waiting action's deadline (node clock: sim time under /clock).
+        self._confirm_timer = self.managed_timer(p["confirm_timeout"], self._on_confirm_deadline)
+        self._confirm_timer.cancel()
         self.managed_timer(p["diagnostics_period"], self.publish_diagnostics)
-        self.get_logger().info(f"policy ready for {model.name} ({type(self.decider).__name__})")
+        self.get_logger().info(f"policy ready for {model.name} ({type(self.decider).__name__}); autonomy "
+                               f"{self.gate.autonomy}")
 
     def cleanup_node(self) -> None:
         self.decider = None
+        self.gate = None
+        if self._confirm_srv is not None:
+            self.destroy_service(self._confirm_srv)
+            self._confirm_srv = None
+        self._confirm_timer = None
 
     def _on_belief(self, msg) -> None:
         if not self.active or self.decider is None:
@@ -154,14 +231,112 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             self.get_logger().error(f"rejected belief on {self.params['belief_topic']}: {err}")
             self.publish_diagnostics()
             return
-        decision = self.decider.execute(belief)
-        self.action_pub.publish(cv.action_to_msg(decision.action_name))
+        assert self.gate is not None   # configured with the decider
+        self.beliefs_answered += 1
+        self._apply(self.gate.on_belief(belief, self.now_s()), start)
+
+    # ------------------------------------------------------------ operator
+    def _apply(self, out: GateOutput, start: float) -> None:
+        """Publish what the gate decided: actions first (the loop waits on them), then the record."""
+        assert self.gate is not None
+        for action in out.publish:
+            self.action_pub.publish(cv.action_to_msg(action))
+            self.actions_published += 1
         latency = time.perf_counter() - start
-        self.latencies.append(latency)
-        self.decision_pub.publish(cv.decision_to_msg(self.decisions, decision.action_name,
-                                                     decision.trace, latency, getattr(decision, "expansions", 0)))
-        self.decisions += 1
-        self.last_decision = decision
+        for decision in out.decisions:
+            self.latencies.append(latency)
+            self.decision_pub.publish(cv.decision_to_msg(self.decisions, decision.action_name, decision.trace,
+                                                         latency, getattr(decision, "expansions", 0),
+                                                         belief_step=self.gate.step))
+            self.decisions += 1
+            self.last_decision = decision
+        if out.proposal_changed:
+            self.proposal_pub.publish(cv.text_to_msg(json.dumps(self.gate.proposal(), separators=(",", ":"))))
+        for event in out.events:
+            self.operator_events_pub.publish(cv.text_to_msg(json.dumps(event.as_dict(), separators=(",", ":"))))
+            if event.kind not in ("acted", "rejected"):
+                self.get_logger().info(f"operator: {event.kind} {event.action}"
+                                       + (f" ({event.detail})" if event.detail else ""))
+        self._arm_confirm_deadline()
+
+    def _operator_input(self, what: str):
+        topic = self.params[f"{what}_topic"]
+
+        def callback(msg) -> None:
+            if not self.active or self.gate is None:
+                self.inactive_operator += 1   # a deactivated policy does not act
+                return
+            start = time.perf_counter()
+            self.operator_inputs += 1
+            action = cv.msg_to_action(msg)
+            out = self.gate.veto(action, self.now_s()) if what == "veto" else self.gate.command(action, self.now_s())
+            self._apply(out, start)
+            if out.error is not None:
+                self._refused(f"{topic}: {out.error}")
+
+        return callback
+
+    def _refused(self, text: str) -> None:
+        """One operator input was refused: one ERROR status on /diagnostics, naming the topic."""
+        self.operator_rejected += 1
+        self.get_logger().error(text)
+        values = {"operator_rejected": self.operator_rejected}
+        self.diag_pub.publish(cv.diagnostics_to_msg(f"pearl: {self.get_name()}: operator", self.model.name,
+                                                    cv.DIAG_ERROR, text, values, self.now_s()))
+
+    def _on_confirm(self, request, response):
+        """``/pearl/operator/confirm`` (std_srvs/SetBool): yes publishes the waiting action, no drops it."""
+        response.success, response.message = self.answer(bool(request.data))
+        return response
+
+    def answer(self, yes: bool):
+        """The operator's yes/no to the waiting action (what the confirm service calls; a replay
+        calls it too) → ``(success, message)``."""
+        if not self.active or self.gate is None:
+            return False, "not active: nothing is waiting for a confirmation"
+        self.operator_inputs += 1
+        waiting = self.gate.current
+        out = self.gate.answer(yes, self.now_s())
+        self._apply(out, time.perf_counter())
+        if out.error is not None:
+            self.get_logger().warning(f"{self.params['confirm_service']}: {out.error}")
+            return False, out.error
+        return True, f"{'published' if yes else 'declined (not acted)'} {waiting}"
+
+    def _arm_confirm_deadline(self) -> None:
+        timer, gate = self._confirm_timer, self.gate
+        if timer is None or gate is None:
+            return
+        deadline = gate.deadline()
+        if deadline is None:
+            timer.cancel()
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        timer.timer_period_ns = max(1, int(round(deadline * 1e9)) - now_ns)
+        timer.reset()
+
+    def _on_confirm_deadline(self) -> None:
+        if self._confirm_timer is not None:
+            self._confirm_timer.cancel()   # one-shot; re-armed by _apply
+        if self.gate is not None:
+            self._apply(self.gate.on_tick(self.now_s()), time.perf_counter())
+
+    def _on_set_parameters(self, params):
+        """Run-time changes of the autonomy level and its settings, checked by the core first."""
+        from rcl_interfaces.msg import SetParametersResult
+
+        live = {param.name: param.value for param in params if param.name in OPERATOR_LIVE}
+        if not live or self.gate is None:
+            return SetParametersResult(successful=True)   # not configured: the value is read at configure
+        if "confirm_categories" in live:
+            live["confirm_categories"] = _categories(live["confirm_categories"])
+        try:
+            out = self.gate.set_level(self.now_s(), **live)
+        except ValueError as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        if self.active:
+            self._apply(out, time.perf_counter())
+        return SetParametersResult(successful=True)
 
     def publish_diagnostics(self) -> None:
         """Publish decision count, rejected beliefs and latency percentiles on /diagnostics."""
@@ -171,9 +346,24 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                   "latency_p99_ms": f"{np.percentile(lat, 99) * 1e3:.3f}",
                   "latency_max_ms": f"{lat.max() * 1e3:.3f}"}
         values["inactive_beliefs"] = self.inactive_beliefs
-        level = cv.DIAG_WARN if self.rejected else cv.DIAG_OK
+        if self.gate is not None:
+            values.update(autonomy=self.gate.autonomy, operator_rejected=self.operator_rejected,
+                          inactive_operator=self.inactive_operator,
+                          **{f"operator_{k}": v for k, v in sorted(self.gate.counts.items())})
+        level = cv.DIAG_WARN if self.rejected or self.operator_rejected else cv.DIAG_OK
         self.diag_pub.publish(cv.diagnostics_to_msg(f"pearl: {self.get_name()}", self.model.name, level,
                                                     f"{self.decisions} decisions", values, self.now_s()))
+
+
+def _categories(values) -> List[str]:
+    """A string-array parameter's categories (blank entries dropped: ``[""]`` is none, as in a YAML file)."""
+    return [v for v in (values or []) if v]
+
+
+def _deep(qos, depth: int):
+    from rclpy.qos import QoSProfile
+
+    return QoSProfile(depth=depth, history=qos.history, reliability=qos.reliability, durability=qos.durability)
 
 
 def main(args: Optional[List[str]] = None) -> int:

@@ -9,9 +9,12 @@ by wall-clock pacing, so a run does not depend on the machine's speed:
   shows it; run every timer that fell due (a step timeout); :meth:`settle`.
 * :meth:`SimClockDriver.feed` — publish one input; wait until the tracker has taken it
   (one of its counters moved); :meth:`settle`.
+* :meth:`SimClockDriver.feed_operator` — publish one operator input (veto, command) to the
+  policy; wait until the policy has taken it; :meth:`settle`.
 * :meth:`SimClockDriver.settle` — wait until the policy has answered every belief the
-  tracker published and the tracker has opened a step with each answer
-  (``decisions == 1 + updates``, every action received back).
+  tracker published and the tracker has received every action the policy published
+  (without an operator: ``decisions == 1 + updates``, every action received back; an action
+  waiting for the operator's yes, or only proposed, is an answer that publishes nothing).
 
 A missing answer ends a wait after ``wait_s`` wall seconds with a warning and ``False``
 (shown as a mismatch by replay, an error by the demo), never a hang.
@@ -78,19 +81,23 @@ class SimClockDriver:
     def settled(self) -> bool:
         """Every belief answered, every answer back at the tracker (see the module doc)."""
         tracker, policy = self.graph.tracker, self.graph.policy
-        decisions = policy.decisions
-        return (tracker.core is not None and decisions == 1 + tracker.core.step and len(self.actions) >= decisions
-                and tracker.actions_received >= decisions)
+        answered = getattr(policy, "beliefs_answered", policy.decisions)
+        published = getattr(policy, "actions_published", policy.decisions)
+        return (tracker.core is not None and answered == 1 + tracker.core.step and len(self.actions) >= published
+                and tracker.actions_received >= published)
 
     def settle(self) -> bool:
         """Wait until the graph is :meth:`settled`."""
         return self.wait(self.settled, "the policy's answer")
 
     def wait_until_matched(self, publishers) -> bool:
-        """Wait until ``publishers`` and the /clock publisher reach a subscriber and the first action arrived."""
+        """Wait until ``publishers`` and the /clock publisher reach a subscriber and b0 was answered
+        (the first action arrived, unless the operator's level holds it)."""
         ok = self.wait(lambda: all(p.get_subscription_count() > 0 for p in publishers)
                        and self.clock_pub.get_subscription_count() > 0, "subscriptions to match")
-        return self.wait(lambda: bool(self.actions) and self.settled(), "the first action") and ok
+        policy = self.graph.policy
+        return self.wait(lambda: getattr(policy, "beliefs_answered", len(self.actions)) > 0 and self.settled(),
+                         "the first action") and ok
 
     # ----------------------------------------------------------------- phases
     def set_time(self, t_ns: int, raw: Optional[bytes] = None) -> bool:
@@ -113,6 +120,19 @@ class SimClockDriver:
         publisher.publish(msg)
         ok = self.wait(lambda: tracker.counters() != before, f"the tracker to take {publisher.topic_name}")
         return self.settle() and ok
+
+    def feed_operator(self, publisher, msg) -> bool:
+        """Publish one operator input (veto, command) to the policy; wait until it took it; settle."""
+        policy = self.graph.policy
+        before = policy.operator_inputs
+        publisher.publish(msg)
+        ok = self.wait(lambda: policy.operator_inputs > before, f"the policy to take {publisher.topic_name}")
+        return self.settle() and ok
+
+    def answer(self, yes: bool) -> bool:
+        """The operator's yes/no to the waiting action (the policy's confirm path, called in-process); settle."""
+        self.graph.policy.answer(yes)
+        return self.settle()
 
     def next_timer_deadline(self) -> Optional[int]:
         """Sim time (ns) at which the next node timer on sim time falls due, or ``None``."""
