@@ -51,13 +51,16 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--seed", type=int, default=7, help="resident generator seed (the study uses 0)")
     ap.add_argument("--prior-strength", type=float, default=10.0)
+    ap.add_argument("--untied", action="store_true", help="fit each action's copy of a shared table on its own data")
     ap.add_argument("--top", type=int, default=12, help="largest row changes to list")
     ap.add_argument("--out", default=str(REPO / "out/fit-pearl"))
     args = ap.parse_args()
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    domain = load_domain(args.domain)
+    # The designer's rows are the prior and the recording policy's model: a file that already
+    # carries a fitted: section (the shipped one) is read without it, and write_fitted replaces it.
+    domain = load_domain(args.domain, fitted=False)
     model = domain.compile()
     template = study_template(REPO / "config/scenarios/study.yaml")
     cases = resident_scenarios(template, generate_residents(args.residents, seed=args.seed), TASKS + [NO_WALK_TASK, AWAY_TASK])
@@ -73,13 +76,13 @@ def main() -> int:
         files.append(path)
     record_s = time.perf_counter() - t0
     episodes = load_episodes(files)
-    result = fit_domain(domain, episodes, prior_strength=args.prior_strength)
+    result = fit_domain(domain, episodes, prior_strength=args.prior_strength, tied=not args.untied)
     fitted = out / "pearl.fitted.domain.yaml"
     write_fitted(args.domain, result, fitted, prior_strength=args.prior_strength)
     rows = sorted(result.rows, key=lambda r: -r.change)
     print(json.dumps({
         "episodes": len(episodes), "steps": sum(len(e.actions) for e in episodes),
-        "record_seconds": round(record_s, 1), "prior_strength": args.prior_strength,
+        "record_seconds": round(record_s, 1), "prior_strength": args.prior_strength, "tied": not args.untied,
         "rows_fitted": len(result.rows), "rows_kept": len(result.kept), "out": str(fitted),
         "largest_changes": [{"table": r.table, "row": r.row, "n": round(r.n, 1), "change": round(r.change, 3),
                              "before": {k: round(v, 3) for k, v in r.before.items() if v > 0.005},

@@ -58,7 +58,9 @@ def test_counting_with_truth_recovers_the_true_tables():
     # Mostly waiting (as a robot does), with the actions that change who is present.
     episodes = simulate_episodes(truth, episodes=60, steps=60, seed=3,
                                  actions=["DoNothing"] * 6 + ["RingDoorBell", "GotoPatientRoom"])
-    result = fit_domain(designer, episodes, prior_strength=10)
+    # This world gives DoNothing rows unlike the other actions that share the designer's default
+    # table, which a tied fit would average with theirs: fit each action on its own data.
+    result = fit_domain(designer, episodes, prior_strength=10, tied=False)
     assert result.with_truth
     fitted = result.domain
     motion = row(fitted, "DoNothing", "UserMotionGoal", "none,yes,room")
@@ -180,3 +182,92 @@ def test_fitted_rows_with_many_small_entries_still_sum_to_one(tmp_path):
     result = FitResult(designer, [row], [], True, [], 1, 1)
     text = PEARL.read_text() + "\n" + fitted_section(result, 5.0)
     parse_domain(text, source="seven")  # loads: the row sums to 1 within the tolerance
+
+
+#: Two actions; the designer declares that neither acts on the resident's wish (defaults.effects):
+#: Drive only moves the robot.
+TIED_DOMAIN = """
+name: tied
+discount: 0.9
+features:
+  Wish: [none, want]
+  Robot: [home, room]
+start: {Wish: none, Robot: home}
+modalities:
+  Heard: {symbols: [nothing, asked]}
+defaults:
+  effects:
+    Wish:
+      parents: [Wish]
+      table:
+        none: {none: 0.9, want: 0.1}
+        want: want
+actions:
+  Wait: {}
+  Drive:
+    effects:
+      Robot: {set: room}
+observations:
+  default:
+    parents: [Wish]
+    table:
+      none: {nothing: 0.9, asked: 0.1}
+      want: {nothing: 0.5, asked: 0.5}
+rewards:
+  - {action: Wait, reward: 0, why: "the fit reads no reward"}
+"""
+
+
+def _confounded_episodes(count: int):
+    """Her wish always arises during the drive (as questions scheduled on the clock fell in
+    the long drives of issue 21's training episodes): Wait, Wait, Drive (wish arises), Wait."""
+    none_home = {"Wish": "none", "Robot": "home"}
+    episodes = []
+    for i in range(count):
+        states = [none_home, none_home, none_home, {"Wish": "want", "Robot": "room"}, {"Wish": "want", "Robot": "room"}]
+        episodes.append(Episode(["Wait", "Wait", "Drive", "Wait"], ["nothing", "nothing", "asked", "asked"],
+                                states, f"hand:{i}"))
+    return episodes
+
+
+def test_a_table_written_once_is_fitted_once_from_the_pooled_data(tmp_path):
+    domain = parse_domain(TIED_DOMAIN, source="tied.domain.yaml")
+    from pearl_pomdp.fit import tied_groups
+
+    wish = domain.feature_names.index("Wish")
+    assert (wish, [domain.actions.index("Wait"), domain.actions.index("Drive")]) in tied_groups(domain)
+    episodes = _confounded_episodes(10)
+    # Untied, the drive is credited with every wish: from 'none' it always led to 'want' (10 of 10),
+    # waiting never did (0 of 20).
+    untied = fit_domain(domain, episodes, prior_strength=0, min_count=1, tied=False).domain
+    assert row(untied, "Drive", "Wish", "none")["want"] == pytest.approx(1.0)
+    assert row(untied, "Wait", "Wish", "none")["want"] == pytest.approx(0.0)
+    # Tied (the default), one row for both: 10 wishes in 30 steps from 'none' = 1/3, by hand.
+    result = fit_domain(domain, episodes, prior_strength=0, min_count=1)
+    for action in ("Drive", "Wait"):
+        assert row(result.domain, action, "Wish", "none")["want"] == pytest.approx(1 / 3)
+    # With the designer's row as 10 pseudo-counts: (10 * 0.1 + 10) / (10 + 30) = 0.275.
+    prior = fit_domain(domain, episodes, prior_strength=10, min_count=1).domain
+    assert row(prior, "Drive", "Wish", "none")["want"] == pytest.approx(0.275)
+    # The robot's place is Drive's own table: not tied, fitted from Drive's data alone.
+    assert row(result.domain, "Drive", "Robot", "home")["room"] == pytest.approx(1.0)
+    # The written file says which rows were pooled and loads back to the same numbers.
+    source = tmp_path / "tied.domain.yaml"
+    source.write_text(TIED_DOMAIN)
+    out = write_fitted(source, result, tmp_path / "fitted.yaml", 0)
+    assert "pooled over the 2 actions of defaults.effects.Wish" in out.read_text()
+    reloaded = load_domain(out)
+    assert row(reloaded, "Wait", "Wish", "none")["want"] == pytest.approx(1 / 3, abs=1e-9)
+
+
+def test_em_pools_tied_tables_too():
+    """Without the true state the M-step pools the expected counts the same way: after EM the
+    tied rows are equal, where the untied fit gives the drive its own row."""
+    domain = parse_domain(TIED_DOMAIN, source="tied.domain.yaml")
+    hidden = _confounded_episodes(10)
+    for ep in hidden:
+        ep.states = None
+    tied = fit_domain(domain, hidden, prior_strength=1, min_count=0.5, em_iterations=5).domain
+    untied = fit_domain(domain, hidden, prior_strength=1, min_count=0.5, em_iterations=5, tied=False).domain
+    assert row(tied, "Drive", "Wish", "none") == pytest.approx(row(tied, "Wait", "Wish", "none"))
+    assert row(untied, "Drive", "Wish", "none")["want"] > row(untied, "Wait", "Wish", "none")["want"] + 0.1

@@ -1,6 +1,6 @@
 """Fit a domain's transition and observation tables to recorded episodes.
 
-    pearl fit DOMAIN EPISODES… --out FITTED.yaml [--prior-strength K] [--min-count N] [--json]
+    pearl fit DOMAIN EPISODES… --out FITTED.yaml [--prior-strength K] [--min-count N] [--untied] [--json]
 
 EPISODES are bag directories (``pearl demo`` / ``pearl record`` output: each closed step's
 action and observation from /pearl/belief_marginals, the true state from /pearl/sim/truth
@@ -10,7 +10,9 @@ when a simulator recorded it) or ``.jsonl`` files with one episode per line
 Each table row (one configuration of the row's parents) becomes
 ``(K · designer row + counts) / (K + n)``: counted from the true states when every episode
 has them, else expected counts by EM over the DBN (the log-likelihood of each iteration is
-printed). Rows with fewer than N observations keep the designer's row. FITTED.yaml is the
+printed). Rows with fewer than N observations keep the designer's row. A table written once
+for many actions (under ``defaults.effects``, or a feature nothing mentions) is estimated once
+from all their data, as the domain declares (``--untied``: per action). FITTED.yaml is the
 domain file unchanged — the designer's comments included — plus a ``fitted:`` section whose
 rows are marked with their data count and the designer's row they replace.
 
@@ -40,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="rows with less data keep the designer's row (default 5)")
     parser.add_argument("--em-iterations", type=int, default=30, metavar="I",
                         help="EM iterations at most, without true states (default 30)")
+    parser.add_argument("--untied", action="store_true",
+                        help="fit each action's copy of a table written once under defaults.effects (or a persisting "
+                             "feature) on that action's data alone; by default they are estimated together")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -58,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     domain = load_domain(args.domain)
     episodes = load_episodes(args.episodes)
     result = fit_domain(domain, episodes, prior_strength=args.prior_strength, min_count=args.min_count,
-                        em_iterations=args.em_iterations)
+                        em_iterations=args.em_iterations, tied=not args.untied)
     out = write_fitted(args.domain, result, args.out, args.prior_strength)
     load_domain(out)  # what was written must load: a fitted file that does not is a bug, not a user error
     tables = result.tables()

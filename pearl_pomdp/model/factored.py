@@ -103,6 +103,11 @@ class _Cpt:
     parents: Tuple[int, ...]  # feature indices
     table: np.ndarray
     why: str = ""
+    #: Where the table was written: the field path of its spec (``defaults.effects.F`` for every
+    #: action that keeps the default, ``actions.A.effects.F`` for an action's own), or
+    #: ``persists F`` when nothing mentions the feature. Tables of one origin are one table in
+    #: the designer's model: ``pearl fit`` estimates them together (tied parameters).
+    origin: str = ""
 
 
 # ====================================================================== the domain
@@ -577,7 +582,7 @@ class _Builder:
                     raise self.fail(rwhere, f"unknown value {v!r} of parent {self.fnames[p]}", rows, key)
                 combo.append(self.features[p].values.index(v))
             table[tuple(combo)] = self.dist_row(dist, values, rwhere, rows, key, allow_keep=False, noun=noun)
-        return _Cpt(cpt.parents, table, cpt.why)
+        return _Cpt(cpt.parents, table, cpt.why, cpt.origin)
 
     def build_features(self, node: Any) -> List[StateFeature]:
         node = self.need_map(node, "features", self.data, "features")
@@ -721,9 +726,13 @@ class _Builder:
         for f in range(len(self.features)):
             if f in given:
                 fspec, fwhere, cont, key = given[f]
-                cpts.append(self.build_effect(f, fspec, fwhere, cont, key))
+                cpt = self.build_effect(f, fspec, fwhere, cont, key)
+                cpt.origin = fwhere
+                cpts.append(cpt)
             else:
-                cpts.append(_persist(f, len(self.features[f])))
+                cpt = _persist(f, len(self.features[f]))
+                cpt.origin = f"persists {self.fnames[f]}"
+                cpts.append(cpt)
         return cpts
 
     def feature_ref(self, name: Any, where: str, container: Any, key: Any) -> int:
