@@ -275,3 +275,73 @@ def test_plan_report_has_the_bounds_of_every_subtask(probe):
         assert info["stop_reason"] in ("converged", "trials")
         assert info["starts"] >= 1
     json.dumps(hp.report)  # JSON-ready
+
+
+#: A group: Act has a subtask (Do) among its children, so Top is offered Ask and Do's pick —
+#: Act's children's offers — and chooses between them by its own value.
+GROUP_HIERARCHY = """
+root: Top
+defaults: {trials: 200}
+subtasks:
+  Top: {actions: [Act]}
+  Act: {actions: [Ask, Do]}
+  Do: {actions: [DoA, DoB]}
+"""
+
+
+def test_a_group_passes_its_childrens_offers_up_and_the_parent_chooses_by_its_own_value():
+    domain = parse_domain(PROBE_DOMAIN)
+    model = domain.compile()
+    hp = plan(domain, parse_hierarchy(GROUP_HIERARCHY, domain.actions))
+    top, act = hp.subtasks["Top"], hp.subtasks["Act"]
+
+    def q(sub, b, action):
+        """sub's one-step value of a primitive at the full belief b, by hand from its arrays."""
+        la, bh = sub.lookahead, sub.project(b)[0]
+        a = sub.model_actions.index(action)
+        pred = np.asarray(la._Tt[a] @ bh)
+        total = float(bh @ la.R[:, a])
+        for o in range(la.O.shape[2]):
+            succ = pred * la.O[a, :, o]
+            if succ.sum() > 0:
+                total += la.discount * float((sub.alphas @ succ).max())
+        return total
+
+    rng = np.random.default_rng(5)
+    for p in np.concatenate([[0.5, 0.85, 0.98, 0.02], rng.uniform(size=20)]):
+        b = belief(model, a=float(p), b=float(1 - p))
+        do_pick = hp.action_names[hp._pick("Do", b, {})[0]]
+        offers = [(hp.action_names[prim], path) for prim, path in hp.offers(top.actions, b, {})]
+        assert offers == [("Ask", (0, 0)), (do_pick, (0, 1))]       # Act's children, not Act's pick
+        d = hp.execute(b)
+        want = max(["Ask", do_pick], key=lambda a: q(top, b, a))   # first on ties, as EXECUTE
+        assert d.action_name == want
+        assert d.trace[0].value == pytest.approx(max(q(top, b, "Ask"), q(top, b, do_pick)), abs=1e-9)
+        # The trace goes through the group with the group's own value of what the root chose.
+        assert [t.subtask for t in d.trace][:2] == ["Top", "Act"]
+        assert d.trace[1].value == pytest.approx(q(act, b, want), abs=1e-9)
+        # Batched EXECUTE (simulation) decides the same.
+        assert hp.actions_batch(b[None, :])[0] == d.action
+
+
+def test_pearl_answers_a_question_it_is_sure_of_while_the_walk_is_still_uncertain(pearl_policy):
+    """Issue 21's second protocol found the converged plan waiting for a dozen steps while she
+    asked for the time over and over: after the reminder the walk was wanted with 0.64, and
+    Assist, ranking its children by its own option value, offered ConfirmGuideToPhysio (44.0)
+    over TellTime (37.1); the root, shown only the confirmation, valued it below waiting. With
+    the group's offers passed up the root sees TellTime too and answers first."""
+    from pathlib import Path
+
+    from pearl_pomdp.model.factored import load_domain
+
+    domain = load_domain(Path(__file__).resolve().parents[1] / "config/pearl.domain.yaml")
+    hp = load_hierarchical_policy(pearl_policy, domain)
+    marginals = {"RobotLocation": {"room": 1.0}, "UserLocation": {"room": 1.0}, "UserPresent": {"yes": 1.0},
+                 "ReminderGoal": {"none": 1.0}, "UserMotionGoal": {"toPhysioWithRobot": 0.64, "none": 0.36},
+                 "UserInfoGoal": {"wantTime": 1.0}, "Battery": {"ok": 1.0}}
+    b = np.ones(domain.compile().num_states)
+    for f, feature in enumerate(domain.features):
+        b *= np.array([marginals[feature.name].get(v, 0.0) for v in feature.values])[domain.state_values[:, f]]
+    d = hp.execute(b / b.sum())
+    assert d.action_name == "TellTime"
+    assert [t.subtask for t in d.trace] == ["Act", "Assist", "Inform"]

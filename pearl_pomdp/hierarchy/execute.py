@@ -27,7 +27,7 @@ import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Collection, Dict, FrozenSet, List, Optional, Union, cast
+from typing import Any, Collection, Dict, FrozenSet, List, Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
 import scipy.sparse as sp
@@ -372,6 +372,9 @@ class HierarchicalPolicy:
         #: Beliefs the last :meth:`execute` expanded in its forward search (0: one step, no search).
         self.last_expansions = 0
         self._pick_cache: Dict[tuple, tuple] = {}
+        #: Subtasks with a subtask among their children: their children's offers go up to their
+        #: parent (:meth:`_offers`), so a level of organisation hides no alternative.
+        self._groups = {name for name, sub in subtasks.items() if any(sub.abstract)}
         #: Per subtask, the full-model indices of the primitives below it (what a veto can leave).
         self._below: Dict[str, FrozenSet[int]] = {}
         for name in subtasks:
@@ -458,16 +461,45 @@ class HierarchicalPolicy:
     PICK_CACHE = 4096
 
     # ------------------------------------------------- policy-contingent EXECUTE
-    def _pick(self, name: str, b: np.ndarray, memo: Dict[str, Any], banned: FrozenSet[int] = frozenset()) -> Any:
-        """``(primitive index, child index, value)`` subtask ``name`` chooses at the full belief ``b``.
+    def offers(self, children: Sequence[str], b: np.ndarray, memo: Dict[str, Any],
+               banned: FrozenSet[int] = frozenset()) -> List[Tuple[int, Tuple[int, ...]]]:
+        """What a subtask with these ``children`` chooses among at the full belief ``b``:
+        ``(primitive index, path)`` pairs, ``path`` the child indices from that subtask down.
 
-        Each child offers the primitive it would execute at ``b`` (a primitive child offers
-        itself, an abstract one what its own :meth:`_pick` gives); the subtask takes the
-        offer with the largest one-step value over its own model,
-        ``Q(b, a) = b·R_a + γ Σ_o V(b T_a diag O_{a,o})`` with ``V`` its α-vectors — the value
-        it was planned with, so the parent sees each child as the child acts (first child on
-        ties). ``memo`` holds the subtasks already asked at this belief. ``banned``: full-model
-        primitive indices no child may offer (a veto); ``None`` when nothing is left below ``name``."""
+        A primitive child offers itself. A child subtask whose children are all primitives
+        offers the primitive its own policy picks (:meth:`_pick`). A child subtask that has
+        subtasks among its children (a *group*, such as Pearl's ``Assist``) passes its
+        children's offers up instead of choosing among them by its own value: measured on
+        Pearl (docs/hierarchy.md, "Groups pass their offers up"), a group ranked by its own
+        option value offered ``ConfirmGuideToPhysio`` where the root, which also values what
+        follows the group's job, would have answered her question first — and the root, shown
+        only the confirmation, waited instead for a dozen steps. ``banned``: primitives no
+        child may offer (a veto)."""
+        out: List[Tuple[int, Tuple[int, ...]]] = []
+        for k, child in enumerate(children):
+            if child not in self.subtasks:
+                prim = self._index[child]
+                if prim not in banned:
+                    out.append((prim, (k,)))
+            elif child in self._groups:
+                grand = self.subtasks[child].actions
+                out.extend((prim, (k,) + path) for prim, path in self.offers(grand, b, memo, banned))
+            else:
+                offer = self._pick(child, b, memo, banned)
+                if offer is not None:
+                    out.append((offer[0], (k,)))
+        return out
+
+    def _pick(self, name: str, b: np.ndarray, memo: Dict[str, Any], banned: FrozenSet[int] = frozenset()) -> Any:
+        """``(primitive index, child index, value, path)`` subtask ``name`` chooses at the full belief ``b``.
+
+        Its children's offers (:meth:`offers`) are valued by one Bellman step over its own
+        model, ``Q(b, a) = b·R_a + γ Σ_o V(b T_a diag O_{a,o})`` with ``V`` its α-vectors — the
+        value it was planned with, so the parent sees each child as the child acts — and the
+        largest is taken (the first offer on ties). ``path``: the child indices from ``name``
+        down to the subtask that made the offer. ``memo`` holds the subtasks already asked at
+        this belief. ``banned``: full-model primitive indices no child may offer (a veto);
+        ``None`` when nothing is left below ``name``."""
         if name in memo:
             return memo[name]
         sub = self.subtasks[name]
@@ -482,19 +514,10 @@ class HierarchicalPolicy:
         q = sub.one_step.q(bh)
         table = self._to_model[name]
         best: Optional[tuple] = None
-        for k, child in enumerate(sub.actions):
-            if sub.abstract[k]:
-                offer = self._pick(child, b, memo, banned)
-                if offer is None:
-                    continue
-                prim = offer[0]
-            else:
-                prim = self._index[child]
-                if prim in banned:
-                    continue
+        for prim, path in self.offers(sub.actions, b, memo, banned):
             value = float(q[table[prim]])
             if best is None or value > best[2]:
-                best = (prim, k, value)
+                best = (prim, path[0], value, path)
         memo[name] = best
         if banned:
             return best   # a masked pick is for this decision only: not cached
@@ -519,16 +542,7 @@ class HierarchicalPolicy:
         table = self._to_model[name]
         bh = sub.project(b)[0]
         best: Optional[tuple] = None
-        for k, child in enumerate(sub.actions):
-            if sub.abstract[k]:
-                offer = self._pick(child, b, memo, banned)
-                if offer is None:
-                    continue
-                prim = offer[0]
-            else:
-                prim = self._index[child]
-                if prim in banned:
-                    continue
+        for prim, path in self.offers(sub.actions, b, memo, banned):
             a = int(table[prim])
             predicted = np.asarray(la._Tt[a] @ bh)
             value = float(bh @ la.R[:, a])
@@ -544,7 +558,7 @@ class HierarchicalPolicy:
                 else:
                     value += la.discount * float((la.alphas @ successor).max())
             if best is None or value > best[2]:
-                best = (prim, k, value)
+                best = (prim, path[0], value, path)
         return best
 
     def _execute_contingent(self, b: np.ndarray, banned: FrozenSet[int] = frozenset()) -> Decision:
@@ -556,16 +570,23 @@ class HierarchicalPolicy:
             got = self._pick(self.root, b, {}, banned)
         if got is None:
             raise PolicyError(f"no action is left below {self.root!r} once {len(banned)} are forbidden")
-        prim, k, value = got
+        prim, k, value, path = got
         self.last_expansions = root.expansions - budget[0] if root.search_depth > 1 else 0
         trace = [TraceStep(self.root, root.actions[k], value)]
         memo: Dict[str, Any] = {}
+        # Down the path to the subtask that offered the primitive: each group on the way with its
+        # own value of that primitive (it passed the offer up; it did not choose it).
         node, child = self.root, root.actions[k]
+        for idx in path[1:]:
+            node = child
+            sub = self.subtasks[node]
+            child = sub.actions[idx]
+            trace.append(TraceStep(node, child, float(sub.one_step.q(sub.project(b)[0])[self._to_model[node][prim]])))
         for _ in range(len(self.subtasks) + 1):
-            if not self.subtasks[node].abstract[self.subtasks[node].actions.index(child)]:
+            if child not in self.subtasks:
                 return Decision(self._index[child], child, trace, expansions=self.last_expansions)
             node = child
-            _, k, value = self._pick(node, b, memo, banned)
+            _, k, value, _path = self._pick(node, b, memo, banned)
             child = self.subtasks[node].actions[k]
             trace.append(TraceStep(node, child, value))
         raise PolicyError(f"the hierarchy below {self.root!r} has a cycle")  # pragma: no cover - validated at load
@@ -578,12 +599,22 @@ class HierarchicalPolicy:
         sub = self.subtasks[name]
         Q = sub.one_step.q_rows(sub.project(B))
         table = self._to_model[name]
-        offers = np.stack([self._pick_batch(child, B, memo) if sub.abstract[k]
-                           else np.full(B.shape[0], self._index[child], dtype=np.int64)
-                           for k, child in enumerate(sub.actions)], axis=1)          # [N, J]
+        offers = np.stack(self._offer_columns(sub.actions, B, memo), axis=1)          # [N, J]
         values = np.take_along_axis(Q, table[offers], axis=1)
         memo[name] = offers[np.arange(B.shape[0]), np.argmax(values, axis=1)]
         return memo[name]
+
+    def _offer_columns(self, children: Sequence[str], B: np.ndarray, memo: Dict[str, np.ndarray]) -> List[np.ndarray]:
+        """:meth:`offers` for every row of ``B`` at once: one ``[N]`` column of primitives per offer, in its order."""
+        cols: List[np.ndarray] = []
+        for child in children:
+            if child not in self.subtasks:
+                cols.append(np.full(B.shape[0], self._index[child], dtype=np.int64))
+            elif child in self._groups:
+                cols.extend(self._offer_columns(self.subtasks[child].actions, B, memo))
+            else:
+                cols.append(self._pick_batch(child, B, memo))
+        return cols
 
     def action(self, belief) -> int:
         """The primitive action index EXECUTE picks at ``belief`` (the flat-policy protocol)."""

@@ -293,7 +293,8 @@ def _starts(abst: AbstractSubtask, n_model: int, entries: np.ndarray) -> np.ndar
 
 class _ChildOffers:
     """The action filter of a policy-contingent parent: at a belief over the parent's model,
-    the primitives its children would execute there (and ``Exit`` for an option)."""
+    the primitives its children offer there (:meth:`HierarchicalPolicy.offers`: what each child
+    subtask would execute, a group's children's offers) and ``Exit`` for an option."""
 
     def __init__(self, solved: HierarchicalPolicy, spec: SubtaskSpec, model_actions, state_to_model: np.ndarray,
                  n_states: int, has_exit: bool):
@@ -323,10 +324,8 @@ class _ChildOffers:
         b[self.representative[idx[real]]] = val[real]
         b /= b.sum()
         memo: Dict[str, tuple] = {}
-        for child in self.children:
-            name = self.solved.action_names[self.solved._pick(child, b, memo)[0]] if child in self.solved.subtasks \
-                else child
-            mask[self.index[name]] = True
+        for prim, _path in self.solved.offers(self.children, b, memo):
+            mask[self.index[self.solved.action_names[prim]]] = True
         return mask
 
 
