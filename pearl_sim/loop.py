@@ -51,8 +51,11 @@ def clock_s(ns: int) -> float:
 class EpisodeSpec(Protocol):
     """What the loop reads of a world's scenario: its name (for errors) and its step budget."""
 
-    name: str
-    max_steps: int
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def max_steps(self) -> int: ...
 
 
 class World(Protocol):
@@ -60,9 +63,15 @@ class World(Protocol):
     :class:`pearl_sim.reception.world.ReceptionWorld`, the reception hall). The loop knows
     nothing else of a world: no domain names, no places."""
 
-    scenario: EpisodeSpec
-    #: The world's clock (seconds).
-    time: float
+    @property
+    def scenario(self) -> EpisodeSpec:
+        """The episode: its name and step budget."""
+        ...
+
+    @property
+    def time(self) -> float:
+        """The world's clock (seconds)."""
+        ...
 
     def act(self, action: str) -> StepResult:
         """Carry out ``action``; every message it produced, timestamped."""

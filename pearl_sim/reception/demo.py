@@ -17,7 +17,7 @@ import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 from pearl_pomdp.errors import PearlError
 from pearl_sim.messages import StepResult
@@ -145,10 +145,12 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
         decisions: List[dict] = []
         marginals: List[dict] = []
         listener = graph.add_node(rclpy.create_node("demo_listener", context=context))
-        listener.create_subscription(String, "/pearl/decision", lambda m: decisions.append(json.loads(m.data)), 50)
+        def keep(into: List[dict]) -> Callable[[Any], None]:
+            return lambda msg: into.append(json.loads(msg.data))   # std_msgs/String holding JSON
+
+        listener.create_subscription(String, "/pearl/decision", keep(decisions), 50)
         latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        listener.create_subscription(String, "/pearl/belief_marginals", lambda m: marginals.append(json.loads(m.data)),
-                                     latched)
+        listener.create_subscription(String, "/pearl/belief_marginals", keep(marginals), latched)
         rec_node = graph.add_node(rclpy.create_node("demo_recorder", context=context, parameter_overrides=[
             rclpy.parameter.Parameter("use_sim_time", rclpy.parameter.Parameter.Type.BOOL, True)]))
         topics = ["/clock", "/pearl/action", "/pearl/belief", "/pearl/belief_marginals", "/pearl/decision",

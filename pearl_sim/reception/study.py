@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Union
+from typing import Any, Dict, List, Optional, Sequence, Union
 
 from pearl_sim.messages import StepResult
 from pearl_sim.reception.scenario import ReceptionScenario
@@ -104,9 +104,11 @@ def run_reception_episode(scenario: ReceptionScenario, agent, domain, params_fil
 
 def reception_agents(domain, hierarchy_path, policies: Sequence[str] = DEFAULT_POLICIES, seed: int = 0,
                      flat_trials: Optional[int] = None, log=None):
-    """Plan the POMDP controllers (as the nursing-home study plans them: :func:`pearl_sim.experiment.build_agents`)
+    """Plan the POMDP controllers (as the nursing-home study plans them: :func:`pearl_sim.planning.plan_controller`)
     and build the reception behaviour tree; name → controller, with ``.timings``."""
-    from pearl_sim.experiment import PlannedAgents, build_agents
+    import time
+
+    from pearl_sim.planning import PlannedAgents, plan_controller
     from pearl_sim.policies import DEFAULT_FLAT_TRIALS
     from pearl_sim.reception.behaviour_tree import ReceptionBehaviourTree
 
@@ -114,17 +116,18 @@ def reception_agents(domain, hierarchy_path, policies: Sequence[str] = DEFAULT_P
     unknown = [p for p in policies if p not in known]
     if unknown:
         raise ValueError(f"unknown policy {unknown[0]!r} for the reception world; known: {', '.join(sorted(known))}")
-    pomdp = [p for p in policies if p != BASELINE]
-    planned = build_agents(domain, hierarchy_path, policies=pomdp, seed=seed, log=log,
-                           flat_trials=flat_trials or DEFAULT_FLAT_TRIALS) if pomdp else PlannedAgents()
+    model = domain.compile()
     agents = PlannedAgents()
     for name in policies:
+        t0 = time.perf_counter()
         if name == BASELINE:
-            agents[name] = ReceptionBehaviourTree(name, list(domain.compile().actions))
-            agents.timings[name] = 0.0
+            agents[name] = ReceptionBehaviourTree(name, list(model.actions))
         else:
-            agents[name] = planned[name]
-            agents.timings[name] = planned.timings[name]
+            agents[name] = plan_controller(name, domain, model, hierarchy_path, seed=seed,
+                                           flat_trials=flat_trials or DEFAULT_FLAT_TRIALS)
+        agents.timings[name] = time.perf_counter() - t0
+        if log:
+            log(f"planned {name} in {agents.timings[name]:.1f} s")
     return agents
 
 
@@ -144,7 +147,7 @@ def run_study(domain, agents, scenarios: Sequence[ReceptionScenario], noise_leve
 
 
 def _t_ci(values: Sequence[float]) -> dict:
-    from pearl_sim.study import t_ci
+    from pearl_sim.stats import t_ci
 
     return t_ci(values)
 
@@ -157,7 +160,7 @@ def summarise(episodes: Sequence[ReceptionEpisode], baseline: str = BASELINE) ->
     """``per_policy`` (policy → noise → score → mean, 95 % t CI, n; task success with a Wilson CI;
     mean seconds to hand-over) and ``paired`` (policy → noise → score → mean and 95 % CI of
     policy − baseline over the same cells)."""
-    from pearl_sim.experiment import proportion_ci
+    from pearl_sim.stats import proportion_ci
 
     groups: Dict[str, Dict[float, List[ReceptionEpisode]]] = {}
     for e in episodes:
@@ -166,7 +169,7 @@ def summarise(episodes: Sequence[ReceptionEpisode], baseline: str = BASELINE) ->
     for policy, by_noise in groups.items():
         per_policy[policy] = {}
         for noise, es in sorted(by_noise.items()):
-            row = {s: _t_ci([_value(e, s) for e in es]) for s in SCORES}
+            row: Dict[str, Any] = {s: _t_ci([_value(e, s) for e in es]) for s in SCORES}
             row["success_rate"] = proportion_ci(sum(e.success for e in es), len(es))
             row["time_to_handover_s"] = _t_ci([t for e in es for t in e.time_to_handover])
             row["stranded"] = int(sum(e.stranded for e in es))
@@ -185,13 +188,13 @@ def summarise(episodes: Sequence[ReceptionEpisode], baseline: str = BASELINE) ->
                 for s in SCORES:
                     diffs[s].append(_value(e, s) - _value(base, s))
             paired[policy][f"{noise:g}"] = {s: _t_ci(v) for s, v in diffs.items()}
-    per_scenario: Dict[str, Dict[str, dict]] = {}
+    per_scenario: Dict[str, Dict[str, List[ReceptionEpisode]]] = {}
     for e in episodes:
-        per_scenario.setdefault(e.scenario, {}).setdefault(e.policy, []).append(e)  # type: ignore[arg-type]
+        per_scenario.setdefault(e.scenario, {}).setdefault(e.policy, []).append(e)
     scen = {name: {p: {"episodes": len(es), "success": sum(x.success for x in es) / len(es),
                        "wrong_actions": sum(x.wrong_actions for x in es) / len(es),
                        "discounted_return": sum(x.discounted_return for x in es) / len(es)}
-                   for p, es in by.items()}  # type: ignore[union-attr]
+                   for p, es in by.items()}
             for name, by in sorted(per_scenario.items())}
     return {"per_policy": per_policy, "paired_vs_baseline": paired, "per_scenario": scen}
 
