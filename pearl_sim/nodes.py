@@ -27,14 +27,17 @@ from __future__ import annotations
 
 import json
 import math
-from typing import List, Optional
+from typing import TYPE_CHECKING, List, Optional
 
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from pearl_sim.world import StepResult, World
+from pearl_sim.messages import StepResult
+
+if TYPE_CHECKING:   # the nursing home's world; GraphBackend serves any world's hardware
+    from pearl_sim.world import World
 
 RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 

@@ -87,20 +87,17 @@ def _saved_policy(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pearl_pomdp.cli import print_json
-    from pearl_sim.demo import run_demo, summary_dict
-
     from pearl_pomdp.cli._inputs import require_dir, require_file
     from pearl_pomdp.errors import PearlError
-    from pearl_sim.scenario import load_scenarios
+    from pearl_sim.worlds import runner, world_for
 
     # Check every input before planning or starting the graph (a typo fails at once).
     require_file(args.domain, "domain file (--domain)")
-    from pearl_sim.worlds import runner, world_for
-
     world = world_for(args.domain)
     if world.demo is not None:
         return int(runner(world.demo)(args))
+    from pearl_sim.scenario import load_scenarios
+
     args.scenario = args.scenario or _share(world.demo_scenario)
     args.hierarchy = args.hierarchy or _share("config/pearl.hierarchy.yaml")
     require_file(args.scenario, "scenario file (--scenario)")
