@@ -55,6 +55,8 @@ class ReceptionEpisode:
     time_to_handover: List[float] = field(default_factory=list)
     actions: List[str] = field(default_factory=list)
     wrong: List[str] = field(default_factory=list)
+    #: The episode as ``pearl fit`` reads it (one ``.jsonl`` line).
+    record: Dict[str, Any] = field(default_factory=dict)
 
 
 def episode_settings(scenario: ReceptionScenario, params_file: Union[str, Path]):
@@ -91,7 +93,15 @@ def run_reception_episode(scenario: ReceptionScenario, agent, domain, params_fil
         if on_step is not None:
             on_step(world, result, waits, executive)
 
-    trace = run_episode(world, ExecutiveBackend(executive), before_action=before, on_action=after)
+    states: List[Dict[str, str]] = []
+
+    def start(action: str) -> None:
+        states.append(world.truth())
+        before(action)
+
+    trace = run_episode(world, ExecutiveBackend(executive), before_action=start, on_action=after)
+    states.append(world.truth())
+    steps = executive.steps
     m = world.metrics
     return ReceptionEpisode(
         policy=agent.name, scenario=scenario.name, noise=float(world.word_error_rate), seed=world.seed,
@@ -99,7 +109,11 @@ def run_reception_episode(scenario: ReceptionScenario, agent, domain, params_fil
         visitors_served=m.visitors_served, visitors_left=m.visitors_left, wrong_actions=m.wrong_actions,
         clarifications=m.clarifications, unprompted_questions=m.unprompted_questions, stranded=m.stranded,
         docks=m.docks, steps=m.steps, seconds=float(world.time), time_to_handover=list(m.time_to_handover),
-        actions=list(trace.actions), wrong=list(m.wrong))
+        actions=list(trace.actions), wrong=list(m.wrong),
+        # What `pearl fit` reads: the closed steps (the last may still be open) and the true state
+        # at the start of every action, and after the last closed one.
+        record={"scenario": scenario.name, "seed": world.seed, "actions": [st.action for st in steps],
+                "observations": [st.observation for st in steps], "states": states[:len(steps) + 1]})
 
 
 def reception_agents(domain, hierarchy_path, policies: Sequence[str] = DEFAULT_POLICIES, seed: int = 0,
@@ -200,8 +214,8 @@ def summarise(episodes: Sequence[ReceptionEpisode], baseline: str = BASELINE) ->
 
 
 def episodes_json(episodes: Sequence[ReceptionEpisode]) -> List[dict]:
-    """JSON-ready rows, one per episode (with its actions and wrong actions)."""
-    return [asdict(e) for e in episodes]
+    """JSON-ready rows, one per episode (with its actions and wrong actions; not the fit record)."""
+    return [{k: v for k, v in asdict(e).items() if k != "record"} for e in episodes]
 
 
 def format_table(summary: dict, baseline: str = BASELINE) -> str:
