@@ -21,7 +21,6 @@ from typing import Any, Callable, Dict, List, Optional
 
 from pearl_pomdp.errors import PearlError
 from pearl_sim.messages import StepResult
-from pearl_sim.reception.hardware import SAID_TOPIC, TRUTH_TOPIC
 from pearl_sim.reception.scenario import load_reception_scenarios
 from pearl_sim.reception.world import ReceptionWorld
 
@@ -105,7 +104,7 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
     from pearl_pomdp.params import node_parameters
     from pearl_sim.loop import run_episode
     from pearl_sim.nodes import GraphBackend
-    from pearl_sim.reception.hardware import ReceptionHardware
+    from pearl_sim.reception.hardware import SAID_TOPIC, TRUTH_TOPIC, ReceptionHardware
 
     started = time.monotonic()
     scenario = load_reception_scenarios(scenario_path)[0]
