@@ -162,3 +162,16 @@ def test_a_domain_without_a_world_is_one_clear_error(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.startswith(f"pearl experiment: error: {other}: name: no simulated world for domain 'kiosk' "
                                   "(worlds: pearl: ")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--snr", "20"], "--snr: the reception world has the word-error recogniser only; use --noise"),
+    (["--residents", "paper"], "--residents: the reception world's visitors are in its study file (--study)"),
+    (["--noise", "0.2,1.5"], "--noise: '0.2,1.5': word error rates in [0, 1] are needed"),
+    (["--policies", "qmdp,scripted"], "--policies: 'scripted': the reception world compares behaviour_tree, "
+                                      "flat_pointbased, hierarchical, most_likely_state, qmdp"),
+])
+def test_the_nursing_home_only_options_are_refused_by_name(args, message):
+    proc = subprocess.run([str(Path(sys.executable).parent / "pearl"), "experiment", "--domain", str(DOMAIN), *args],
+                          capture_output=True, text=True, timeout=60)
+    assert (proc.returncode, proc.stderr.strip()) == (2, f"pearl experiment: error: <command line>: {message}")

@@ -49,6 +49,10 @@ def run_cli(args: argparse.Namespace) -> int:
     world = WORLDS["reception"]
     if args.snr is not None:
         raise SpecError("<command line>", "--snr", "the reception world has the word-error recogniser only; use --noise")
+    if args.residents != "paper,generated:6":
+        raise SpecError("<command line>", "--residents", "the reception world's visitors are in its study file (--study)")
+    if args.flat_trials is not None and args.flat_time_limit is not None:
+        raise SpecError("<command line>", "--flat-trials", "give --flat-trials or --flat-time-limit, not both")
     seeds = DEFAULT_SEEDS if args.episodes is None else args.episodes
     if seeds < 1:
         raise SpecError("<command line>", "--episodes", f"{seeds}: at least 1 seed per cell is needed")
@@ -81,7 +85,7 @@ def run_cli(args: argparse.Namespace) -> int:
     domain = load_domain(args.domain)
     flat_trials = args.flat_trials
     agents = study.reception_agents(domain, hierarchy, policies=policies, seed=args.seed, flat_trials=flat_trials,
-                                    log=log)
+                                    flat_time_limit=args.flat_time_limit, log=log)
     t0 = time.perf_counter()
     items = [(sc, x, k, name) for x in noise for sc in scenarios for k in range(seeds) for name in agents]
     _jobs.update(agents=agents, domain=domain, params=params, model=domain.compile())

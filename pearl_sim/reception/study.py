@@ -101,7 +101,9 @@ def run_reception_episode(scenario: ReceptionScenario, agent, domain, params_fil
 
     trace = run_episode(world, ExecutiveBackend(executive), before_action=start, on_action=after)
     states.append(world.truth())
-    steps = executive.steps
+    # Closed steps of actions the world carried out: queued observations can close the steps of
+    # actions decided but not yet carried out when the step budget ends.
+    steps = executive.steps[:len(trace.actions)]
     m = world.metrics
     return ReceptionEpisode(
         policy=agent.name, scenario=scenario.name, noise=float(world.word_error_rate), seed=world.seed,
@@ -117,7 +119,7 @@ def run_reception_episode(scenario: ReceptionScenario, agent, domain, params_fil
 
 
 def reception_agents(domain, hierarchy_path, policies: Sequence[str] = DEFAULT_POLICIES, seed: int = 0,
-                     flat_trials: Optional[int] = None, log=None):
+                     flat_trials: Optional[int] = None, flat_time_limit: Optional[float] = None, log=None):
     """Plan the POMDP controllers (as the nursing-home study plans them: :func:`pearl_sim.planning.plan_controller`)
     and build the reception behaviour tree; name → controller, with ``.timings``."""
     import time
@@ -138,7 +140,7 @@ def reception_agents(domain, hierarchy_path, policies: Sequence[str] = DEFAULT_P
             agents[name] = ReceptionBehaviourTree(name, list(model.actions))
         else:
             agents[name] = plan_controller(name, domain, model, hierarchy_path, seed=seed,
-                                           flat_trials=flat_trials or DEFAULT_FLAT_TRIALS)
+                                           flat_trials=flat_trials or DEFAULT_FLAT_TRIALS, flat_time_limit=flat_time_limit)
         agents.timings[name] = time.perf_counter() - t0
         if log:
             log(f"planned {name} in {agents.timings[name]:.1f} s")
