@@ -175,3 +175,16 @@ def test_the_nursing_home_only_options_are_refused_by_name(args, message):
     proc = subprocess.run([str(Path(sys.executable).parent / "pearl"), "experiment", "--domain", str(DOMAIN), *args],
                           capture_output=True, text=True, timeout=60)
     assert (proc.returncode, proc.stderr.strip()) == (2, f"pearl experiment: error: <command line>: {message}")
+
+
+def test_the_demos_bag_replays_by_the_reception_robots_rules(run):
+    """The bag keeps the domain, the policy and the node params beside it: `pearl replay` runs the
+    tracker by config/reception_nodes.yaml's rules and takes the recorded actions again."""
+    proc = subprocess.run([str(Path(sys.executable).parent / "pearl"), "replay", str(run["out"] / "demo" / "bag"),
+                           "--json"], env=ros_env(allocate_domain_id(), run["out"]), capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    report = json.loads(proc.stdout)
+    # The recorded actions include the policy's answer to the last belief (one more than the world carried out).
+    assert report["match"] is True and report["beliefs_match"] is True and report["actions"] == report["expected_actions"]
+    assert report["actions"][:len(run["demo"]["actions"])] == run["demo"]["actions"]

@@ -114,6 +114,9 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
     if bag_dir.exists() and any(bag_dir.iterdir()):
         raise PearlError(f"{bag_dir}: already holds a bag; choose another --out folder")
     shutil.copyfile(domain_path, out_dir / "domain.yaml")
+    # The robot's node params beside the bag too: `pearl replay` runs the tracker by its rules.
+    shutil.copyfile(params_file, out_dir / "nodes.yaml")
+    params_file = out_dir / "nodes.yaml"
     domain = load_domain(out_dir / "domain.yaml")
     world = ReceptionWorld(scenario, seed=seed)
     policy_dir = out_dir / "policy"
@@ -160,7 +163,7 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
             "pearl.domain": os.path.relpath(out_dir / "domain.yaml", bag_dir),
             "pearl.policy": os.path.relpath(policy_dir, bag_dir.resolve()),
             "pearl.tracker_params": json.dumps(tracker_params),
-            "pearl.params_file": str(Path(params_file).resolve())})
+            "pearl.params_file": os.path.relpath(params_file, bag_dir)})
         recorder = Recorder(rec_node, writer, topics=topics)
         graph.spin_until(lambda: len(recorder.subscriptions) >= 6, timeout_sec=5.0)
         driver = SimClockDriver(graph, wait_s=wall_timeout)
