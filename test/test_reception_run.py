@@ -154,14 +154,15 @@ def test_no_pearl_name_in_the_reception_sources_config_or_output(run):
     assert found == {}
 
 
-def test_a_domain_without_a_world_is_one_clear_error(tmp_path):
+def test_a_domain_without_a_world_is_one_clear_error(tmp_path, capsys):
+    from pearl_pomdp.cli import main
+
     other = tmp_path / "kiosk.domain.yaml"
     other.write_text(DOMAIN.read_text().replace("name: reception", "name: kiosk"))
-    proc = subprocess.run([str(Path(sys.executable).parent / "pearl"), "experiment", "--domain", str(other)],
-                          capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 2
-    assert proc.stderr.startswith(f"pearl experiment: error: {other}: name: no simulated world for domain 'kiosk' "
-                                  "(worlds: pearl: ")
+    for command in ("experiment", "demo"):
+        assert main([command, "--domain", str(other)]) == 2
+        assert capsys.readouterr().err.startswith(
+            f"pearl {command}: error: {other}: name: no simulated world for domain 'kiosk' (worlds: pearl: ")
 
 
 @pytest.mark.parametrize("args, message", [
@@ -171,10 +172,11 @@ def test_a_domain_without_a_world_is_one_clear_error(tmp_path):
     (["--policies", "qmdp,scripted"], "--policies: 'scripted': the reception world compares behaviour_tree, "
                                       "flat_pointbased, hierarchical, most_likely_state, qmdp"),
 ])
-def test_the_nursing_home_only_options_are_refused_by_name(args, message):
-    proc = subprocess.run([str(Path(sys.executable).parent / "pearl"), "experiment", "--domain", str(DOMAIN), *args],
-                          capture_output=True, text=True, timeout=60)
-    assert (proc.returncode, proc.stderr.strip()) == (2, f"pearl experiment: error: <command line>: {message}")
+def test_the_nursing_home_only_options_are_refused_by_name(args, message, capsys):
+    from pearl_pomdp.cli import main
+
+    assert main(["experiment", "--domain", str(DOMAIN), *args]) == 2
+    assert capsys.readouterr().err.strip() == f"pearl experiment: error: <command line>: {message}"
 
 
 def test_the_demos_bag_replays_by_the_reception_robots_rules(run):
