@@ -17,7 +17,6 @@ for it per episode (the scenario sets the step timeout).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Optional
 
 from pearl_pomdp.interfaces import Decision, TraceStep

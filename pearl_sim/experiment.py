@@ -15,9 +15,8 @@ paper's fixed-pace guidance against walking-pace adaptation.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, Dict, List, Optional, Sequence
+from typing import Callable, List, Optional, Sequence
 
-from pearl_pomdp.interfaces import Decider
 from pearl_sim.scenario import Scenario
 from pearl_sim.world import World
 
@@ -116,7 +115,7 @@ def with_word_error_rate(scenario: Scenario, wer: float) -> Scenario:
 
 
 # --------------------------------------------------------------------- the study
-from pearl_sim.policies import DEFAULT_FLAT_TRIALS, FLAT_LOOKAHEAD, POLICY_NAMES  # noqa: E402  (one list, cheap to import: pearl --help)
+from pearl_sim.policies import DEFAULT_FLAT_TRIALS, POLICY_NAMES  # noqa: E402  (one list, cheap to import: pearl --help)
 
 
 

@@ -101,7 +101,6 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
     from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.nodes.graph import PearlGraph
     from pearl_pomdp.nodes.sim_clock import SimClockDriver
-    from pearl_pomdp.params import node_parameters
     from pearl_sim.loop import run_episode
     from pearl_sim.nodes import GraphBackend
     from pearl_sim.reception.hardware import SAID_TOPIC, TRUTH_TOPIC, ReceptionHardware
