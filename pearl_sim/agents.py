@@ -17,21 +17,13 @@ for it per episode (the scenario sets the step timeout).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Optional
 
-from pearl_pomdp.interfaces import Decider, Decision, TraceStep
+from pearl_pomdp.interfaces import Decision, TraceStep
+from pearl_sim.planning import Controller  # noqa: F401  (re-exported: where callers find it)
 
 #: Symbol that closes a step in which nothing was heard (the tracker's timeout rule).
 TIMEOUT_SYMBOL = "unknown"
-
-
-@dataclass
-class Controller:
-    """A named decider: what ``pearl experiment`` compares."""
-
-    name: str
-    decider: Decider
 
 
 class ScriptedAgent:

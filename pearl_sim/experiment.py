@@ -14,13 +14,9 @@ paper's fixed-pace guidance against walking-pace adaptation.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, Dict, List, Optional, Sequence
+from typing import Callable, List, Optional, Sequence
 
-import numpy as np
-
-from pearl_pomdp.interfaces import Decider
 from pearl_sim.scenario import Scenario
 from pearl_sim.world import World
 
@@ -110,24 +106,7 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
 
 
 # ----------------------------------------------------------------- statistics
-def mean_ci(values: Sequence[float]) -> Dict[str, Optional[float]]:
-    """Mean and 95% half-width (normal approximation; 0 for fewer than two values)."""
-    x = np.asarray(list(values), dtype=float)
-    if x.size == 0:
-        return {"mean": None, "ci95": None, "n": 0}
-    half = 1.96 * x.std(ddof=1) / math.sqrt(x.size) if x.size > 1 else 0.0
-    return {"mean": float(x.mean()), "ci95": float(half), "n": int(x.size)}
-
-
-def proportion_ci(successes: int, n: int) -> Dict[str, Optional[float]]:
-    """Success rate with a 95% Wilson score interval."""
-    if n == 0:
-        return {"rate": None, "low": None, "high": None, "successes": 0, "n": 0}
-    z = 1.96
-    p = successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return {"rate": p, "low": max(0.0, centre - half), "high": min(1.0, centre + half), "successes": successes, "n": n}
+from pearl_sim.stats import mean_ci, proportion_ci  # noqa: E402,F401  (re-exported: one source)
 
 
 def with_word_error_rate(scenario: Scenario, wer: float) -> Scenario:
@@ -136,18 +115,12 @@ def with_word_error_rate(scenario: Scenario, wer: float) -> Scenario:
 
 
 # --------------------------------------------------------------------- the study
-from pearl_sim.policies import DEFAULT_FLAT_TRIALS, FLAT_LOOKAHEAD, POLICY_NAMES  # noqa: E402  (one list, cheap to import: pearl --help)
+from pearl_sim.policies import DEFAULT_FLAT_TRIALS, POLICY_NAMES  # noqa: E402  (one list, cheap to import: pearl --help)
 
 
 
 
-class PlannedAgents(Dict[str, Any]):
-    """name → agent (a :class:`~pearl_sim.agents.Controller`, the behaviour tree, a scripted
-    agent), with :attr:`timings`: name → seconds it took to plan."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.timings: Dict[str, float] = {}
+from pearl_sim.planning import PlannedAgents, plan_controller  # noqa: E402,F401  (re-exported)
 
 
 def build_agents(domain, hierarchy_path, flat_time_limit: Optional[float] = None, policies: Sequence[str] = POLICY_NAMES,
@@ -166,9 +139,7 @@ def build_agents(domain, hierarchy_path, flat_time_limit: Optional[float] = None
     """
     import time as _time
 
-    from pearl_pomdp.executive import FlatPolicyDecider
-    from pearl_pomdp.solvers.registry import solve
-    from pearl_sim.agents import Controller, ScriptedAgent
+    from pearl_sim.agents import ScriptedAgent
 
     unknown = sorted(set(policies) - set(POLICY_NAMES))
     if unknown:
@@ -177,33 +148,19 @@ def build_agents(domain, hierarchy_path, flat_time_limit: Optional[float] = None
     agents = PlannedAgents()
     timings = agents.timings
     for name in policies:
-        t0 = _time.perf_counter()
-        decider: Decider
-        if name == "hierarchical":
-            from pearl_pomdp.hierarchy import load_hierarchy, plan
-
-            decider = plan(domain, load_hierarchy(hierarchy_path, domain), seed=seed)
-        elif name == "flat_pointbased":
-            budget = {"trials": flat_trials} if flat_time_limit is None else {"time_limit": flat_time_limit}
-            decider = FlatPolicyDecider(solve(model, "pointbased", seed=seed, **budget).policy, model,
-                                        lookahead=FLAT_LOOKAHEAD)
-        elif name == "qmdp":
-            decider = FlatPolicyDecider(solve(model, "qmdp").policy, model)
-        elif name == "most_likely_state":
-            from pearl_pomdp.solvers.mdp import most_likely_state_policy
-
-            decider = FlatPolicyDecider(most_likely_state_policy(model), model)
-        elif name == "behaviour_tree":
+        if name == "behaviour_tree":
             from pearl_sim.behaviour_tree import PearlBehaviourTree
 
             agents[name] = PearlBehaviourTree(name, list(model.actions))
             timings[name] = 0.0
             continue
-        else:
+        if name == "scripted":
             agents[name] = ScriptedAgent(name, list(model.actions))
             timings[name] = 0.0
             continue
-        agents[name] = Controller(name, decider)
+        t0 = _time.perf_counter()
+        agents[name] = plan_controller(name, domain, model, hierarchy_path, seed=seed, flat_trials=flat_trials,
+                                       flat_time_limit=flat_time_limit)
         timings[name] = _time.perf_counter() - t0
         if log:
             log(f"planned {name} in {timings[name]:.1f} s")

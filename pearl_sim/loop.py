@@ -29,9 +29,9 @@ from typing import Callable, Deque, List, Optional, Protocol
 import numpy as np
 
 from pearl_pomdp.errors import PearlError
-from pearl_sim.world import Message, StepResult, World
+from pearl_sim.messages import Message, StepResult
 
-__all__ = ["Backend", "ExecutiveBackend", "EpisodeTrace", "run_episode", "clock_ns", "IDLE_LIMIT"]
+__all__ = ["Backend", "World", "ExecutiveBackend", "EpisodeTrace", "run_episode", "clock_ns", "IDLE_LIMIT"]
 
 #: Longest the world idles for a step with no deadline (a drive is closed by its landmark;
 #: a step with no timeout and nothing to hear is a configuration fault, reported).
@@ -46,6 +46,40 @@ def clock_ns(t: float) -> int:
 def clock_s(ns: int) -> float:
     """A ``/clock`` time back in seconds, computed as the nodes compute it."""
     return ns * 1e-9
+
+
+class EpisodeSpec(Protocol):
+    """What the loop reads of a world's scenario: its name (for errors) and its step budget."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def max_steps(self) -> int: ...
+
+
+class World(Protocol):
+    """The simulated world's side of the loop (:class:`pearl_sim.world.World`, the nursing home;
+    :class:`pearl_sim.reception.world.ReceptionWorld`, the reception hall). The loop knows
+    nothing else of a world: no domain names, no places."""
+
+    @property
+    def scenario(self) -> EpisodeSpec:
+        """The episode: its name and step budget."""
+        ...
+
+    @property
+    def time(self) -> float:
+        """The world's clock (seconds)."""
+        ...
+
+    def act(self, action: str) -> StepResult:
+        """Carry out ``action``; every message it produced, timestamped."""
+        ...
+
+    def wait(self, until: float) -> StepResult:
+        """Let time pass with the robot idle until a message is produced or ``until``."""
+        ...
 
 
 class Backend(Protocol):

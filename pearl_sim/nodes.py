@@ -27,14 +27,17 @@ from __future__ import annotations
 
 import json
 import math
-from typing import List, Optional
+from typing import TYPE_CHECKING, List, Optional
 
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from pearl_sim.world import StepResult, World
+from pearl_sim.messages import StepResult
+
+if TYPE_CHECKING:   # the nursing home's world; GraphBackend serves any world's hardware
+    from pearl_sim.world import World
 
 RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
@@ -125,6 +128,14 @@ class SimulatedHardware:
         self.publishers = {"Speech": self.speech.pub, "Touchscreen": self.user.touch,
                            "Laser": self.navigation.laser, "Reminder": self.reminder.pub}
 
+    def outgoing(self, message) -> tuple:
+        """``(publisher, message)`` that carries a world message: its modality's node, as text."""
+        return self.publishers[message.modality], String(data=message.text)
+
+    def publish_said(self, said: str) -> None:
+        """What the resident actually said, for transcripts (``/pearl/sim/said``)."""
+        self.user.said.publish(String(data=said))
+
     def publish_truth(self, t: float, phase: str, action: str = "", result: Optional[StepResult] = None) -> None:
         """The true state on ``/pearl/sim/truth`` (JSON), and the robot's pose.
 
@@ -143,6 +154,9 @@ class SimulatedHardware:
 class GraphBackend:
     """The real Pearl nodes as the robot of :func:`pearl_sim.loop.run_episode` (over DDS, under /clock).
 
+    ``hardware`` is any simulated hardware with ``publishers`` (to wait for), ``outgoing(message)``
+    → ``(publisher, ROS message)`` and ``publish_said(text)``: :class:`SimulatedHardware` (the
+    nursing home), :class:`pearl_sim.reception.hardware.ReceptionHardware` (the reception hall).
     Each world message is published by the simulated node of its modality at its time
     (the :class:`~pearl_pomdp.nodes.sim_clock.SimClockDriver` moves ``/clock`` there first
     and waits for the graph's answer); a deadline is reached by moving ``/clock`` to it, so
@@ -152,7 +166,7 @@ class GraphBackend:
         PearlError: the graph did not answer within the driver's wait (names the phase).
     """
 
-    def __init__(self, graph, hardware: SimulatedHardware, driver):
+    def __init__(self, graph, hardware, driver):
         self.graph, self.hardware, self.driver = graph, hardware, driver
         self.now_ns = 0
 
@@ -178,8 +192,9 @@ class GraphBackend:
         self._advance(clock_ns(message.time))
         before = len(self.driver.actions)
         if message.said:
-            self.hardware.user.said.publish(String(data=message.said))
-        if not self.driver.feed(self.hardware.publishers[message.modality], String(data=message.text)):
+            self.hardware.publish_said(message.said)
+        publisher, msg = self.hardware.outgoing(message)
+        if not self.driver.feed(publisher, msg):
             raise PearlError(f"the Pearl graph did not take {message.modality} {message.text!r} "
                              f"at {message.time:.3f} s")
         return self.driver.actions[before:]

@@ -15,12 +15,9 @@ numbers do not depend on ``jobs`` (``test/test_study.py`` checks ``jobs=2`` agai
 from __future__ import annotations
 
 import csv
-import math
 import multiprocessing
 from dataclasses import dataclass, replace
 from typing import Dict, List, Optional, Sequence
-
-import numpy as np
 
 from pearl_sim.experiment import EpisodeResult, mean_ci, proportion_ci, run_episode
 from pearl_sim.residents import StudyCase, effective_word_error_rate
@@ -136,16 +133,7 @@ def _value(e: StudyEpisode, metric: str) -> Optional[float]:
     return float(getattr(r, metric))
 
 
-def t_ci(values: Sequence[float]) -> dict:
-    """Mean and 95 % half-width from Student's t (0 for fewer than two values)."""
-    from scipy import stats
-
-    x = np.asarray([v for v in values if v is not None], dtype=float)
-    if x.size == 0:
-        return {"mean": None, "ci95": None, "low": None, "high": None, "n": 0}
-    half = float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
-    m = float(x.mean())
-    return {"mean": m, "ci95": half, "low": m - half, "high": m + half, "n": int(x.size)}
+from pearl_sim.stats import t_ci  # noqa: E402,F401  (re-exported: one source)
 
 
 def per_policy(episodes: Sequence[StudyEpisode]) -> Dict[str, Dict[str, dict]]:

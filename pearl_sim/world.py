@@ -40,6 +40,7 @@ from typing import Dict, List, Optional
 import numpy as np
 
 from pearl_sim.asr import SpeechRecogniser
+from pearl_sim.messages import Message, StepResult  # noqa: F401  (re-exported: the world's message types)
 from pearl_sim.scenario import Scenario
 
 #: Seconds between the simulated people tracker's reports and GuidePace's control steps
@@ -95,37 +96,6 @@ UTTERANCES: Dict[str, List[str]] = {
     "chatter": ["hello pearl", "thank you", "that is nice", "hmm", "what did you say"],
 }
 TOUCH = {"yes": "t_yes", "no": "t_no", "time": "t_time", "weather": "t_weather", "go": "t_go"}
-
-
-@dataclass
-class Message:
-    """One input message: ``modality`` (Speech/Touchscreen/Laser/Reminder) and its text.
-
-    For Speech, ``text`` is the recogniser's output and ``said`` what the resident said.
-    """
-
-    time: float
-    modality: str
-    text: str
-    said: str = ""
-    meant: str = ""   # the resident's intent (yes, time, go, chatter …), for transcripts
-
-
-@dataclass
-class StepResult:
-    """What one action (or a wait) did: its time span, the messages it produced and notable events."""
-
-    action: str
-    start: float
-    end: float
-    messages: List[Message] = field(default_factory=list)
-    events: List[str] = field(default_factory=list)
-    wrong: Optional[str] = None
-
-    @property
-    def message(self) -> Optional[Message]:
-        """The first message, or ``None`` when nothing was heard."""
-        return self.messages[0] if self.messages else None
 
 
 @dataclass

@@ -36,7 +36,9 @@ compared, and its timers would only add stops to the lock-step.
 The graph's configuration comes from the bag's ``custom_data`` (written by the recording
 script): ``pearl.domain``, ``pearl.policy`` (paths relative to the bag directory),
 ``pearl.tracker_params`` (JSON of belief-tracker parameter overrides) and, optionally,
-``pearl.policy_params`` (JSON of policy-node overrides: the autonomy level the run started with).
+``pearl.policy_params`` (JSON of policy-node overrides: the autonomy level the run started with)
+and ``pearl.params_file`` (the robot's node params file, relative to the bag directory; absent:
+the shipped one, as for the nursing-home robot).
 
 A person in the loop (docs/ros-nodes.md, "Operator") is replayed too: the recorded vetoes and
 commands (``/pearl/operator/veto``, ``/pearl/operator/command``) are fed to the policy in
@@ -65,6 +67,7 @@ DECISION_TOPIC = "/pearl/decision"
 #: custom_data keys of a replayable bag.
 KEY_DOMAIN, KEY_POLICY, KEY_TRACKER = "pearl.domain", "pearl.policy", "pearl.tracker_params"
 KEY_POLICY_PARAMS = "pearl.policy_params"
+KEY_PARAMS_FILE = "pearl.params_file"
 OPERATOR_EVENTS_TOPIC = "/pearl/operator/events"
 #: Recorded operator events a replay does again (the others follow from them and the inputs).
 REENACTED = ("autonomy", "confirmed", "declined")
@@ -211,7 +214,9 @@ def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optio
         return value
 
     return {"domain": path_of(KEY_DOMAIN, domain), "policy": path_of(KEY_POLICY, policy),
-            "tracker_params": params_of(KEY_TRACKER), "policy_params": params_of(KEY_POLICY_PARAMS)}
+            "tracker_params": params_of(KEY_TRACKER), "policy_params": params_of(KEY_POLICY_PARAMS),
+            # Another robot's node params (its tracker rules); absent: the shipped file.
+            "params_file": path_of(KEY_PARAMS_FILE, None) if custom.get(KEY_PARAMS_FILE) else "default"}
 
 
 def _graph_options() -> Dict[str, Any]:
@@ -360,7 +365,7 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
     graph = PearlGraph(domain_id=domain_id, use_sim_time=True, executor=False,
                        args=["--ros-args", "--disable-external-lib-logs", "--disable-rosout-logs", "--log-level", "warn"],
                        shared={"domain": cfg["domain"], "policy": cfg["policy"]}, overrides=overrides,
-                       **_graph_options())
+                       params_file=cfg.get("params_file", "default"), **_graph_options())
     try:
         # Phases of the shared sim-clock driver (pearl_pomdp.nodes.sim_clock): match, then per
         # bag message set_time (/clock, coalesced) or feed (an input), each settling the graph.

@@ -13,6 +13,7 @@ Examples:
   pearl demo --scenario config/scenarios/table4_dialog.yaml --seed 3
   pearl plan config/pearl.domain.yaml && pearl demo --json      # uses out/policies/pearl
   pearl demo --scenario config/scenarios/figure4_recogniser.yaml # real speech: espeak-ng, noise, pocketsphinx
+  pearl demo --domain config/reception.domain.yaml               # the reception robot (docs/reception.md)
 """
 from __future__ import annotations
 
@@ -34,9 +35,12 @@ def _share(relative: str) -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", default=_share("config/scenarios/figure4.yaml"), help="scenario file")
-    parser.add_argument("--domain", default=_share("config/pearl.domain.yaml"), help="factored domain")
-    parser.add_argument("--hierarchy", default=_share("config/pearl.hierarchy.yaml"), help="action hierarchy")
+    parser.add_argument("--scenario", default=None,
+                        help="scenario file (default: the domain's world's, config/scenarios/figure4.yaml for Pearl)")
+    parser.add_argument("--domain", default=_share("config/pearl.domain.yaml"),
+                        help="factored domain; its name chooses the simulated world (pearl_sim/worlds.py: pearl, "
+                             "reception)")
+    parser.add_argument("--hierarchy", default=None, help="action hierarchy (default: NAME.hierarchy.yaml beside the domain)")
     parser.add_argument("--policy", default="",
                         help="planned policy folder (default: the one `pearl plan` saved in out/policies/NAME "
                              "if it fits the domain, else plan now)")
@@ -83,16 +87,20 @@ def _saved_policy(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pearl_pomdp.cli import print_json
-    from pearl_sim.demo import run_demo, summary_dict
-
     from pearl_pomdp.cli._inputs import require_dir, require_file
     from pearl_pomdp.errors import PearlError
-    from pearl_sim.scenario import load_scenarios
+    from pearl_sim.worlds import runner, world_for
 
     # Check every input before planning or starting the graph (a typo fails at once).
-    require_file(args.scenario, "scenario file (--scenario)")
     require_file(args.domain, "domain file (--domain)")
+    world = world_for(args.domain)
+    if world.demo is not None:
+        return int(runner(world.demo)(args))
+    from pearl_sim.scenario import load_scenarios
+
+    args.scenario = args.scenario or _share(world.demo_scenario)
+    args.hierarchy = args.hierarchy or _share("config/pearl.hierarchy.yaml")
+    require_file(args.scenario, "scenario file (--scenario)")
     if args.policy:
         require_dir(args.policy, "policy directory (--policy, from `pearl plan`)")
     else:

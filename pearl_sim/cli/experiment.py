@@ -35,25 +35,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pearl_sim.cli.demo import _share
     from pearl_sim.policies import DEFAULT_FLAT_TRIALS, DEFAULT_POLICIES, POLICY_NAMES
 
-    parser.add_argument("--study", default=_share("config/scenarios/study.yaml"),
-                        help="study file: the paper's residents and the shared scenario fields")
+    parser.add_argument("--study", default=None,
+                        help="study file (default: the domain's world's, config/scenarios/study.yaml for the Pearl "
+                             "domain: the paper's residents and the shared scenario fields)")
     parser.add_argument("--domain", default=_share("config/pearl.domain.yaml"),
-                        help="factored domain the policies are planned for (default: the Pearl domain)")
-    parser.add_argument("--hierarchy", default=_share("config/pearl.hierarchy.yaml"),
-                        help="action hierarchy of the hierarchical policy (default: the Pearl hierarchy)")
+                        help="factored domain the policies are planned for (default: the Pearl domain); its name "
+                             "chooses the simulated world (pearl_sim/worlds.py: pearl, reception)")
+    parser.add_argument("--hierarchy", default=None,
+                        help="action hierarchy of the hierarchical policy (default: NAME.hierarchy.yaml beside the "
+                             "domain)")
     parser.add_argument("--residents", default="paper,generated:6",
                         help="'paper' (the six of the study file), 'generated:N' (seeded profiles), or both, comma-separated")
     parser.add_argument("--seed", type=int, default=0, help="seed of the resident generator (default 0)")
-    parser.add_argument("--episodes", type=int, default=2, help="seeds per resident, task and noise level (default 2)")
-    parser.add_argument("--noise", "--wer", dest="noise", default="0,0.2,0.4,0.6",
-                        help="recogniser word error rates (noise levels), comma-separated")
+    parser.add_argument("--episodes", type=int, default=None,
+                        help="seeds per resident, task and noise level (default 2; reception: 20 per episode)")
+    parser.add_argument("--noise", "--wer", dest="noise", default=None,
+                        help="recogniser word error rates (noise levels), comma-separated (default 0,0.2,0.4,0.6; "
+                             "reception: 0,0.2,0.4)")
     parser.add_argument("--snr", default=None, metavar="DB,…",
                         help="noise axis in SNR (dB) through the measured recogniser channel (--channel) instead "
                              "of word error rates, e.g. 30,20,10,5")
     parser.add_argument("--channel", default=_share("config/speech/pearl_channel.json"),
                         help="calibrated speech channel for --snr (`pearl calibrate-speech --out`)")
-    parser.add_argument("--policies", default=",".join(DEFAULT_POLICIES),
-                        help=f"comma-separated subset of {', '.join(POLICY_NAMES)}")
+    parser.add_argument("--policies", default=None,
+                        help=f"comma-separated subset of {', '.join(POLICY_NAMES)} (default {','.join(DEFAULT_POLICIES)}; "
+                             "reception: hierarchical,flat_pointbased,qmdp,behaviour_tree)")
     parser.add_argument("--flat-trials", type=int, default=None, metavar="N",
                         help="trials of the flat point-based solve (default %d): the same policy on any machine"
                              % DEFAULT_FLAT_TRIALS)
@@ -114,7 +120,30 @@ def _validate(args):
     return policies, sorted(set(noise)), profiles, cases
 
 
+def _pearl_defaults(args: argparse.Namespace) -> None:
+    """The nursing-home study's defaults for what the command line left out."""
+    from pearl_sim.cli.demo import _share
+    from pearl_sim.policies import DEFAULT_POLICIES
+
+    args.study = args.study or _share("config/scenarios/study.yaml")
+    args.hierarchy = args.hierarchy or _share("config/pearl.hierarchy.yaml")
+    args.episodes = 2 if args.episodes is None else args.episodes
+    args.noise = "0,0.2,0.4,0.6" if args.noise is None else args.noise
+    args.policies = ",".join(DEFAULT_POLICIES) if args.policies is None else args.policies
+
+
 def run(args: argparse.Namespace) -> int:
+    from pearl_sim.worlds import runner, world_for
+
+    require_file(args.domain, "domain file (--domain)")
+    world = world_for(args.domain)
+    if world.experiment is not None:
+        return int(runner(world.experiment)(args))
+    _pearl_defaults(args)
+    return _run_pearl(args)
+
+
+def _run_pearl(args: argparse.Namespace) -> int:
     import json
     import logging
 
