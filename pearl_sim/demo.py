@@ -323,11 +323,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
         backend = GraphBackend(graph, sim, driver)
         # Every /clock must reach the bag, or a replay would see inputs at the wrong time:
         # wait until each sim-time node and the recorder subscribe to the driver's /clock.
-        clock_readers = 1 + sum(1 for n in graph.nodes if n.get_parameter("use_sim_time").value)
-        if not graph.spin_until(lambda: driver.clock_pub.get_subscription_count() >= clock_readers,
-                                timeout_sec=wall_timeout):
-            raise PearlError(f"/clock reached {driver.clock_pub.get_subscription_count()} of {clock_readers} "
-                             f"subscribers within {wall_timeout} s")
+        driver.wait_for_clock_readers(extra=1)   # the recorder
 
         def on_action(step_result: StepResult, waits: List[StepResult]) -> None:
             sim_now["s"] = backend.now_ns * 1e-9

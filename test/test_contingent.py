@@ -69,6 +69,20 @@ def probe():
     return domain, domain.compile(), plan(domain, parse_hierarchy(HIERARCHY, domain.actions))
 
 
+def one_step_value(sub, b, action):
+    """Subtask ``sub``'s one-step value of a primitive at the full belief ``b``, by hand from its
+    saved arrays: b·R_a + γ Σ_o max_k α_k·(b T_a diag O_ao)."""
+    la, bh = sub.lookahead, sub.project(b)[0]
+    a = sub.model_actions.index(action)
+    pred = np.asarray(la._Tt[a] @ bh)
+    total = float(bh @ la.R[:, a])
+    for o in range(la.O.shape[2]):
+        succ = pred * la.O[a, :, o]
+        if succ.sum() > 0:
+            total += la.discount * float((sub.alphas @ succ).max())
+    return total
+
+
 def belief(model, **p):
     b = np.zeros(model.num_states)
     for name, mass in p.items():
@@ -132,18 +146,9 @@ def test_trace_values_are_one_step_values_of_the_offers(probe):
     _, model, hp = probe
     top = hp.subtasks["Top"]
     b = belief(model, a=0.7, b=0.3)
-    bh = top.project(b)[0]
-    la = top.lookahead
 
     def q(action):
-        a = top.model_actions.index(action)
-        pred = np.asarray(la._Tt[a] @ bh)
-        total = float(bh @ la.R[:, a])
-        for o in range(la.O.shape[2]):
-            succ = pred * la.O[a, :, o]
-            if succ.sum() > 0:
-                total += la.discount * float((top.alphas @ succ).max())
-        return total
+        return one_step_value(top, b, action)
 
     offer = hp.execute(np.where(np.arange(model.num_states) >= 0, b, 0)).trace
     values = hp.values(b)
@@ -295,18 +300,6 @@ def test_a_group_passes_its_childrens_offers_up_and_the_parent_chooses_by_its_ow
     hp = plan(domain, parse_hierarchy(GROUP_HIERARCHY, domain.actions))
     top, act = hp.subtasks["Top"], hp.subtasks["Act"]
 
-    def q(sub, b, action):
-        """sub's one-step value of a primitive at the full belief b, by hand from its arrays."""
-        la, bh = sub.lookahead, sub.project(b)[0]
-        a = sub.model_actions.index(action)
-        pred = np.asarray(la._Tt[a] @ bh)
-        total = float(bh @ la.R[:, a])
-        for o in range(la.O.shape[2]):
-            succ = pred * la.O[a, :, o]
-            if succ.sum() > 0:
-                total += la.discount * float((sub.alphas @ succ).max())
-        return total
-
     rng = np.random.default_rng(5)
     for p in np.concatenate([[0.5, 0.85, 0.98, 0.02], rng.uniform(size=20)]):
         b = belief(model, a=float(p), b=float(1 - p))
@@ -314,12 +307,13 @@ def test_a_group_passes_its_childrens_offers_up_and_the_parent_chooses_by_its_ow
         offers = [(hp.action_names[prim], path) for prim, path in hp.offers(top.actions, b, {})]
         assert offers == [("Ask", (0, 0)), (do_pick, (0, 1))]       # Act's children, not Act's pick
         d = hp.execute(b)
-        want = max(["Ask", do_pick], key=lambda a: q(top, b, a))   # first on ties, as EXECUTE
+        want = max(["Ask", do_pick], key=lambda a: one_step_value(top, b, a))   # first on ties, as EXECUTE
         assert d.action_name == want
-        assert d.trace[0].value == pytest.approx(max(q(top, b, "Ask"), q(top, b, do_pick)), abs=1e-9)
+        assert d.trace[0].value == pytest.approx(max(one_step_value(top, b, "Ask"), one_step_value(top, b, do_pick)),
+                                                 abs=1e-9)
         # The trace goes through the group with the group's own value of what the root chose.
         assert [t.subtask for t in d.trace][:2] == ["Top", "Act"]
-        assert d.trace[1].value == pytest.approx(q(act, b, want), abs=1e-9)
+        assert d.trace[1].value == pytest.approx(one_step_value(act, b, want), abs=1e-9)
         # Batched EXECUTE (simulation) decides the same.
         assert hp.actions_batch(b[None, :])[0] == d.action
 

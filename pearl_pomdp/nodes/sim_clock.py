@@ -64,6 +64,22 @@ class SimClockDriver:
         self.node.get_logger().warning(f"sim clock: gave up waiting for {what} after {self.wait_s} s")
         return False
 
+    def wait_for_clock_readers(self, extra: int = 1) -> None:
+        """Block until every sim-time node of the graph, plus ``extra`` other readers (a bag
+        recorder), subscribes to this driver's ``/clock``: a ``/clock`` sent before a reader
+        matched is lost to it, and a bag missing one would replay its inputs at the wrong time.
+
+        Raises:
+            PearlError: fewer readers than that within ``wait_s`` wall seconds (how many came).
+        """
+        from pearl_pomdp.errors import PearlError
+
+        readers = extra + sum(1 for n in self.graph.nodes if n.get_parameter("use_sim_time").value)
+        if not self.graph.spin_until(lambda: self.clock_pub.get_subscription_count() >= readers,
+                                     timeout_sec=self.wait_s):
+            raise PearlError(f"/clock reached {self.clock_pub.get_subscription_count()} of {readers} "
+                             f"subscribers within {self.wait_s} s")
+
     def drain(self) -> None:
         """Run every callback that is ready now (timers that fell due after a clock jump)."""
         from rclpy.executors import TimeoutException

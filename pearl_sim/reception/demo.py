@@ -167,11 +167,7 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
         graph.spin_until(lambda: len(recorder.subscriptions) >= 6, timeout_sec=5.0)
         driver = SimClockDriver(graph, wait_s=wall_timeout)
         backend = GraphBackend(graph, hardware, driver)
-        clock_readers = 1 + sum(1 for n in graph.nodes if n.get_parameter("use_sim_time").value)
-        if not graph.spin_until(lambda: driver.clock_pub.get_subscription_count() >= clock_readers,
-                                timeout_sec=wall_timeout):
-            raise PearlError(f"/clock reached {driver.clock_pub.get_subscription_count()} of {clock_readers} "
-                             f"subscribers within {wall_timeout} s")
+        driver.wait_for_clock_readers(extra=1)   # the recorder
 
         def on_action(step: StepResult, waits: List[StepResult]) -> None:
             index = len(result.actions) + 1
