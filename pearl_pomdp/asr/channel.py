@@ -25,13 +25,13 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from pearl_pomdp.asr.audio import mix_at_snr
+from pearl_pomdp.asr.babble import TRACK_ID, babble_track
 from pearl_pomdp.errors import PearlError, SpecError
 
 __all__ = ["ChannelTable", "MeasuredChannel", "ChannelError", "calibrate", "default_utterances", "babble_track",
@@ -40,15 +40,6 @@ __all__ = ["ChannelTable", "MeasuredChannel", "ChannelError", "calibrate", "defa
 FORMAT = "pearl-speech-channel/1"
 #: Recognised texts kept per (SNR, meant symbol) cell for the sampler.
 MAX_SAMPLES = 64
-#: Sentences of the babble track (four espeak talkers, summed with offsets).
-_BABBLE_TEXT = (
-    "i went to the shop this morning and the bus was late again",
-    "she told me that her grandson is coming to visit on sunday",
-    "could you pass me the newspaper and my glasses from the table",
-    "the garden looks lovely now that the roses are out",
-)
-_BABBLE_VOICES = ("en-us+m1", "en-us+f2", "en-gb-x-rp", "en-us+m4")
-
 
 class ChannelError(PearlError):
     """A channel file is unreadable or does not cover what is asked of it."""
@@ -58,19 +49,6 @@ def trial_seed(*parts: object) -> int:
     """A 63-bit seed from the content of a trial (order-independent of other trials)."""
     h = hashlib.sha256("\x1f".join(map(str, parts)).encode()).digest()
     return int.from_bytes(h[:8], "little") >> 1
-
-
-@lru_cache(maxsize=1)
-def babble_track() -> np.ndarray:
-    """About 4 s of four talkers at once (deterministic; built once per process)."""
-    from pearl_pomdp.asr.synthesizer import synthesize
-
-    parts = [synthesize(t, {"name": v, "rate": 170}).astype(np.float64) for t, v in zip(_BABBLE_TEXT, _BABBLE_VOICES)]
-    n = min(len(p) for p in parts)
-    track = np.zeros(n)
-    for i, p in enumerate(parts):
-        track += np.roll(p[:n], i * n // len(parts))
-    return track
 
 
 def default_utterances(keywords: Mapping[str, Sequence[str]], unknown_symbol: str = "unknown") -> Dict[str, List[str]]:
@@ -275,6 +253,8 @@ def calibrate(recognizer, keyword_filter, utterances: Mapping[str, Sequence[str]
         raise ValueError("no utterance to speak")
     voice_objs = {v: get_voice(v) for v in voices}
     babble = babble_track() if noise == "babble" else None
+    # White noise is generated from the trial's seed alone; babble also depends on the track.
+    noise_id = TRACK_ID if noise == "babble" else noise
     store = _ResultCache(recognizer.identity, cache_dir() / "speech-channel" if cache else None)
     symbols = list(keyword_filter.symbols)
     cells: Dict[str, Dict[str, dict]] = {}
@@ -290,7 +270,7 @@ def calibrate(recognizer, keyword_filter, utterances: Mapping[str, Sequence[str]
                     for vname, voice in voice_objs.items():
                         for rep in range(repeats):
                             level = float(snr) + voice.snr_offset_db
-                            key = trial_seed(seed, text, sorted(voice.to_dict().items()), level, noise, rep)
+                            key = trial_seed(seed, text, sorted(voice.to_dict().items()), level, noise_id, rep)
                             hit = store.get(str(key))
                             if hit is None:
                                 if (text, vname) not in clean:
@@ -309,7 +289,7 @@ def calibrate(recognizer, keyword_filter, utterances: Mapping[str, Sequence[str]
                                 progress(done, total)
     finally:
         store.flush()
-    info = {"recogniser": recognizer.identity, "noise": noise, "repeats": repeats, "seed": seed,
+    info = {"recogniser": recognizer.identity, "noise": noise, "noise_id": noise_id, "repeats": repeats, "seed": seed,
             "voices": {v: voice_objs[v].to_dict() for v in voices}, "utterances": {k: list(v) for k, v in utterances.items()}}
     info.update(meta or {})
     return ChannelTable([float(s) for s in snrs], symbols, list(utterances), cells, info)
