@@ -35,11 +35,22 @@ from pearl_pomdp.asr.babble import TRACK_ID, babble_track
 from pearl_pomdp.errors import PearlError, SpecError
 
 __all__ = ["ChannelTable", "MeasuredChannel", "ChannelError", "calibrate", "default_utterances", "babble_track",
+           "wilson_interval",
            "trial_seed", "FORMAT", "MAX_SAMPLES"]
 
 FORMAT = "pearl-speech-channel/1"
 #: Recognised texts kept per (SNR, meant symbol) cell for the sampler.
 MAX_SAMPLES = 64
+
+def wilson_interval(hits: int, n: int, z: float = 1.96) -> Tuple[float, float]:
+    """Wilson score interval of a proportion ``hits / n`` (``(0, 1)`` for no trials)."""
+    if n <= 0:
+        return 0.0, 1.0
+    p = hits / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * float(np.sqrt(p * (1 - p) / n + z * z / (4 * n * n))) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
 
 class ChannelError(PearlError):
     """A channel file is unreadable or does not cover what is asked of it."""
@@ -92,6 +103,41 @@ class ChannelTable:
             hit += cell["counts"].get(meant, 0)
             total += cell["n"]
         return hit / total if total else float("nan")
+
+    def confusion(self, snr: float) -> Dict[str, Dict[str, int]]:
+        """Counts ``{meant: {recognised: trials}}`` at ``snr`` over every symbol (zeros included)."""
+        return {m: {s: int(self._cell(m, snr)["counts"].get(s, 0)) for s in self.symbols} for m in self.meant}
+
+    def error_rates(self, snr: float, unknown_symbol: str = "unknown") -> Dict[str, dict]:
+        """Insertion and deletion rates at ``snr``, each ``{"count", "n", "rate", "ci95": [lo, hi]}`` (Wilson).
+
+        * ``insertion``: a keyword recognised that was not said — a keyword other than the
+          meant one (``unknown`` meant, or another keyword meant), over every trial;
+        * ``insertion_from_chatter``: the same over trials meant as ``unknown_symbol`` only
+          (chatter, nothing for the robot), ``substitution``: over trials meant as a keyword;
+        * ``deletion``: a meant keyword heard as ``unknown_symbol``, over keyword trials.
+
+        What a clarification question guards against is an insertion: a controller that
+        acts on a heard keyword does the wrong thing; a deletion only delays.
+        """
+        counts = self.confusion(snr)
+        keywords = [s for s in self.symbols if s != unknown_symbol]
+
+        def rate(hits: int, n: int) -> dict:
+            lo, hi = wilson_interval(hits, n)
+            return {"count": hits, "n": n, "rate": hits / n if n else None, "ci95": [lo, hi]}
+
+        chatter = counts.get(unknown_symbol, {})
+        said_keyword = [m for m in counts if m != unknown_symbol]
+        from_chatter = sum(chatter.get(k, 0) for k in keywords)
+        substituted = sum(counts[m][k] for m in said_keyword for k in keywords if k != m)
+        n_chatter = sum(chatter.values())
+        n_keyword = sum(sum(counts[m].values()) for m in said_keyword)
+        deleted = sum(counts[m].get(unknown_symbol, 0) for m in said_keyword)
+        return {"insertion": rate(from_chatter + substituted, n_chatter + n_keyword),
+                "insertion_from_chatter": rate(from_chatter, n_chatter),
+                "substitution": rate(substituted, n_keyword),
+                "deletion": rate(deleted, n_keyword)}
 
     def _cell(self, meant: str, snr: float) -> dict:
         row = self.cells.get(self.key(snr))
