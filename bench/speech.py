@@ -112,7 +112,8 @@ def measure_kind(recognizer, kf, utterances, snrs, voices, repeats, kind, keywor
             "confusion": conf,
             "error_rates": {k: {"count": r["count"], "n": r["n"], "rate": round(r["rate"], 4),
                                 "ci95": [round(x, 4) for x in r["ci95"]]} for k, r in rates.items()},
-            "keyword_accuracy": round(hits / n, 4), "keyword_accuracy_ci95": [round(x, 4) for x in wilson_interval(hits, n)],
+            "keyword_accuracy": round(hits / n, 4),
+            "keyword_accuracy_ci95": [round(x, 4) for x in wilson_interval(hits, n)],
             "all_accuracy": round(pooled.accuracy(snr), 4)}
     return {"snr_db": snrs, "voices": voices, "repeats": repeats, "cache": cache,
             "trials": sum(c["n"] for row in pooled.cells.values() for c in row.values()),

@@ -99,6 +99,7 @@ def run_on_cluster(address: str, payload: dict, work: Sequence[Any], progress: b
         bar.close()
         return [episode for chunk in results for episode in chunk]
     except TimeoutError:
-        raise ClusterError(f"--cluster {address}: the scheduler has no worker (start `dask worker {address}`)") from None
+        raise ClusterError(f"--cluster {address}: the scheduler has no worker "
+                           f"(start `dask worker {address}`)") from None
     finally:
         client.close()

@@ -22,7 +22,8 @@ Output: per table the rows fitted, the data behind them and the largest change; 
 Examples:
   pearl demo --out out/fit-demo --json > /dev/null
   pearl fit config/pearl.domain.yaml out/fit-demo/bag --out out/pearl.fitted.domain.yaml
-  pearl fit config/pearl.domain.yaml --speech config/speech/pearl_channel_babble.json --snr 10 --out out/pearl.babble10.yaml
+  pearl fit config/pearl.domain.yaml --speech config/speech/pearl_channel_babble.json --snr 10 \
+      --out out/pearl.babble10.yaml
 """
 from __future__ import annotations
 

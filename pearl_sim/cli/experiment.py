@@ -58,6 +58,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "its own measured channel (--channel, --babble-channel)")
     parser.add_argument("--babble-channel", default=_share("config/speech/pearl_channel_babble.json"),
                         help="calibrated speech channel of babble noise (`pearl calibrate-speech --noise babble`)")
+    parser.add_argument("--speech-rows", default=None, metavar="FITTED.yaml",
+                        help="also run each POMDP policy planned with this domain's observation rows (e.g. from "
+                             "`pearl fit DOMAIN --speech CHANNEL.json --snr DB`), named POLICY@measured; the world "
+                             "and the scores stay the --domain's")
+    parser.add_argument("--measured-policies", default=None, metavar="P,…",
+                        help="with --speech-rows: which policies get a @measured twin (default: every POMDP one)")
     parser.add_argument("--policies", default=",".join(DEFAULT_POLICIES),
                         help=f"comma-separated subset of {', '.join(POLICY_NAMES)}")
     parser.add_argument("--flat-trials", type=int, default=None, metavar="N",
@@ -140,6 +146,19 @@ def _validate(args):
     profiles = parse_population(args.residents, args.study, seed=args.seed)
     cases = resident_scenarios(study_template(args.study), profiles, source=args.study)
     args.kinds = kinds
+    args.measured = []
+    if args.speech_rows is not None:
+        require_file(args.speech_rows, "domain with measured speech rows (--speech-rows)")
+        pomdps = [p for p in policies if p not in ("behaviour_tree", "scripted")]
+        wanted = pomdps if args.measured_policies is None else [p.strip() for p in args.measured_policies.split(",")
+                                                                 if p.strip()]
+        bad = [p for p in wanted if p not in pomdps]
+        if bad or not wanted:
+            raise SpecError("<command line>", "--measured-policies",
+                            f"{bad[0] if bad else 'none'!r} is not a POMDP policy of --policies ({', '.join(pomdps)})")
+        args.measured = wanted
+    elif args.measured_policies is not None:
+        raise SpecError("<command line>", "--measured-policies", "needs --speech-rows")
     return policies, sorted(set(noise)), profiles, cases
 
 
@@ -168,6 +187,15 @@ def run(args: argparse.Namespace) -> int:
     agents = build_agents(domain, args.hierarchy, flat_time_limit=args.flat_time_limit, flat_trials=flat_trials,
                           policies=policies,
                           log=log if terminal else None)
+    if args.measured:
+        from pearl_sim.agents import Controller
+
+        measured_domain = load_domain(args.speech_rows)
+        twins = build_agents(measured_domain, args.hierarchy, flat_time_limit=args.flat_time_limit,
+                             flat_trials=flat_trials, policies=args.measured, log=log if terminal else None)
+        for name, agent in twins.items():
+            agents[f"{name}@measured"] = Controller(f"{name}@measured", agent.decider, domain=measured_domain)
+            agents.timings[f"{name}@measured"] = twins.timings[name]
     plan_seconds = dict(agents.timings)
     kinds = args.kinds
     grid = study.cells(len(cases), noise, args.episodes, kinds=kinds or ("",))
@@ -202,7 +230,8 @@ def run(args: argparse.Namespace) -> int:
                      "noise_axis": ("noise_kind,snr_db" if kinds else "snr_db") if snr else "word_error_rate",
                      "channel": channel, "noise_kinds": kinds, "channels": channels, "cluster": args.cluster,
                      "seeds_per_cell": args.episodes,
-                     "policies": policies, "baseline": study.BASELINE, "episodes": len(episodes),
+                     "policies": list(agents), "baseline": study.BASELINE, "speech_rows": args.speech_rows,
+                     "episodes": len(episodes),
                      "jobs": args.jobs},
         "plan_seconds": plan_seconds,
         "per_policy": table,
