@@ -248,6 +248,54 @@ def paired(episodes: Sequence[StudyEpisode], baseline: str = BASELINE) -> Dict[s
     return out
 
 
+def growth(episodes: Sequence[StudyEpisode], policy: str, worse: str, better: str, metric: str = "discounted_return",
+           baseline: str = BASELINE) -> dict:
+    """Does ``policy``'s advantage over ``baseline`` grow from level ``better`` to level ``worse``?
+
+    Per matched cell (resident, task, seed) present at both levels for both policies:
+    ``g = (policy − baseline)[worse] − (policy − baseline)[better]``; returns its mean and
+    Student-t 95 % CI (:func:`t_ci`). Levels are labels (``"babble:10"``). For the return,
+    ``g > 0`` means the advantage grows as recognition gets worse; for wrong actions, ``g < 0``.
+    """
+    index = {(e.policy, e.level, e.resident, e.task, e.seed): e for e in episodes}
+    gs: List[float] = []
+    for (p, level, resident, task, seed), e in index.items():
+        if p != policy or level != worse:
+            continue
+        found = [index.get((q, lv, resident, task, seed)) for q, lv in
+                 ((baseline, worse), (policy, better), (baseline, better))]
+        others = [o for o in found if o is not None]
+        if len(others) < 3:
+            continue
+        values = [_value(x, metric) for x in [e, *others]]
+        if any(v is None for v in values):
+            continue
+        a, b, c, d = (float(v) for v in values)  # type: ignore[arg-type]
+        gs.append((a - b) - (c - d))
+    return t_ci(gs)
+
+
+def growth_contrasts(episodes: Sequence[StudyEpisode], baseline: str = BASELINE) -> Dict[str, Dict[str, dict]]:
+    """Every policy's :func:`growth` of the return and wrong-action advantage over ``baseline``
+    for each kind's noisiest vs quietest SNR, and for babble vs white at each SNR both have.
+
+    Keys ``"babble:10 vs babble:30"``; each value ``{"discounted_return": …, "wrong_actions": …}``.
+    """
+    levels = sorted({(e.noise_kind, e.noise) for e in episodes})
+    pairs = []
+    for kind in sorted({k for k, _ in levels}):
+        snrs = sorted(n for k, n in levels if k == kind)
+        if len(snrs) >= 2:
+            pairs.append((level_label(kind, snrs[0]), level_label(kind, snrs[-1])))
+    for k, n in levels:
+        if k == "babble" and ("white", n) in levels:
+            pairs.append((level_label("babble", n), level_label("white", n)))
+    policies = sorted({e.policy for e in episodes} - {baseline})
+    return {f"{worse} vs {better}": {p: {m: growth(episodes, p, worse, better, m, baseline)
+                                         for m in ("discounted_return", "wrong_actions")} for p in policies}
+            for worse, better in pairs}
+
+
 def of_kind(table: Dict[str, Dict[str, dict]], kind: str) -> Dict[str, Dict[str, dict]]:
     """The levels of one noise kind, keyed by their SNR alone (``"babble:10"`` → ``"10"``)."""
     return {policy: {f"{label_value(k):g}": v for k, v in by_level.items() if label_kind(k) == kind}

@@ -145,3 +145,23 @@ def test_a_policy_planned_with_measured_speech_rows_tracks_its_belief_in_them(tm
     report = json.loads((out / "study.json").read_text())
     assert set(report["per_policy"]) == {"qmdp", "qmdp@measured", "behaviour_tree"}
     assert set(report["paired_vs_baseline"]) == {"qmdp", "qmdp@measured"}
+
+
+def test_growth_of_the_advantage_is_a_paired_difference_of_differences():
+    """g = (P − tree)[worse] − (P − tree)[better] per matched cell: by hand on three seeds."""
+    eps = []
+    # returns (tree, policy): at babble:30 the policy is +1, +2, +3 ahead; at babble:10 +5, +5, +9.
+    for seed, (q_tree, q_pol, n_tree, n_pol) in enumerate([(50, 51, 40, 45), (50, 52, 40, 45), (50, 53, 30, 39)]):
+        for level, tree, pol in ((30.0, q_tree, q_pol), (10.0, n_tree, n_pol)):
+            eps.append(study.StudyEpisode("behaviour_tree", "A", "walk", level, float("nan"), seed,
+                                          _result("behaviour_tree", True, 0, tree), "babble"))
+            eps.append(study.StudyEpisode("hierarchical", "A", "walk", level, float("nan"), seed,
+                                          _result("hierarchical", True, 0, pol), "babble"))
+    g = study.growth(eps, "hierarchical", "babble:10", "babble:30")
+    # g = 4, 3, 6: mean 4.333, sd 1.528, t(0.975, 2) = 4.303 → half-width 3.795
+    assert g["n"] == 3 and g["mean"] == pytest.approx(13 / 3)
+    assert g["ci95"] == pytest.approx(4.3027 * 1.5275 / 3 ** 0.5, rel=1e-3)
+    contrasts = study.growth_contrasts(eps)
+    assert set(contrasts) == {"babble:10 vs babble:30"}
+    assert contrasts["babble:10 vs babble:30"]["hierarchical"]["discounted_return"]["mean"] == pytest.approx(13 / 3)
+    assert contrasts["babble:10 vs babble:30"]["hierarchical"]["wrong_actions"]["mean"] == 0.0

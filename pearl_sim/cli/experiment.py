@@ -237,6 +237,8 @@ def run(args: argparse.Namespace) -> int:
         "per_policy": table,
         "per_scenario": study.per_scenario(episodes),
         "paired_vs_baseline": diffs,
+        # The paper's effect: does each policy's advantage grow as recognition gets worse?
+        "growth_vs_baseline": study.growth_contrasts(episodes) if kinds and study.BASELINE in agents else None,
         "acceptance": goal,
         "files": {"png": str(png), "csv": str(csv_path), "json": str(out / "study.json")},
         "episode_seconds": round(episode_seconds, 1),
