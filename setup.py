@@ -35,6 +35,10 @@ NODES = {
 #: speaker additionally needs PortAudio (sounddevice, which pocketsphinx pulls in).
 SPEECH = ["pocketsphinx>=5,<6", "espeakng-loader>=0.2"]
 
+#: `pearl experiment --cluster ADDRESS` runs the study's cells on a Dask cluster (pure Python;
+#: the test starts a local cluster). Nothing else needs it: --jobs stays the default.
+CLUSTER = ["distributed>=2024.1"]
+
 #: The solvers' compiled kernels (one C file each, Python's C API and the buffer protocol
 #: only: no numpy headers needed to build). Each is the only implementation of its loops, for
 #: every model size: the exact solver's prune (with its own warm-started simplex) and the
@@ -80,10 +84,11 @@ setup(
         ]
         + SPEECH,
         "speech": SPEECH,
+        "cluster": CLUSTER,
         "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6", "py_trees>=2.2",
                  "websockets>=12",  # a real WebSocket client for test/test_live_view.py
                  "mypy>=1.8"]  # .ci/run type-checks the core (mypy.ini)
-        + SPEECH,
+        + SPEECH + CLUSTER,
     },
     zip_safe=False,  # (a compiled extension)
     maintainer="Pearl POMDP developers",

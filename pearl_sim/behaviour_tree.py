@@ -373,6 +373,12 @@ class PearlBehaviourTree:
             self.blackboard.register_key(key=key, access=Access.WRITE)
         self.reset()
 
+    def __reduce__(self):
+        # py_trees nodes hold generators (a tick in progress) and cannot be pickled: a copy sent
+        # to another process (pearl experiment --cluster) is a fresh tree, as every episode
+        # starts from one (reset()).
+        return (type(self), (self.name, sorted(self._index, key=self._index.__getitem__)))
+
     # ---------------------------------------------------------------- ObservingDecider
     def reset(self) -> None:
         """A fresh episode: every node INVALID, the blackboard at the start of the day."""

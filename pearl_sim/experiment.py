@@ -77,7 +77,10 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
 
     model = domain.compile()
     world = World(scenario, seed=seed, pace_adaptation=pace_adaptation, domain=domain)
-    executive = episode_executive(agent, domain, scenario, model)
+    # The robot's model: the agent's own (planned with other observation rows) or the world's.
+    own = getattr(agent, "domain", None)
+    executive = episode_executive(agent, own, scenario, own.compile()) if own is not None else \
+        episode_executive(agent, domain, scenario, model)
     backend = ExecutiveBackend(executive)
     returns = {"total": 0.0, "discount": 1.0}
     action_index = {a: i for i, a in enumerate(model.actions)}

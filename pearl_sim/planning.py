@@ -20,10 +20,16 @@ POMDP_POLICIES = ("hierarchical", "flat_pointbased", "qmdp", "most_likely_state"
 
 @dataclass
 class Controller:
-    """A named decider: what ``pearl experiment`` compares."""
+    """A named decider: what ``pearl experiment`` compares.
+
+    ``domain``: the model the decider was planned with and tracks its belief in, when it is
+    not the world's (``pearl experiment --speech-rows``: planned with measured speech rows);
+    ``None``: the world's domain.
+    """
 
     name: str
     decider: Decider
+    domain: Optional[object] = None
 
 
 class PlannedAgents(Dict[str, Any]):

@@ -34,11 +34,29 @@ PAIRED_METRICS = ("success", "wrong_actions", "discounted_return", "clarificatio
 
 @dataclass(frozen=True)
 class Cell:
-    """One world: case index (resident × task), noise level, seed index."""
+    """One world: case index (resident × task), noise level, seed index, and noise kind
+    (``""`` on the word-error axis and the single-channel SNR axis; ``white``/``babble`` on
+    the (kind, SNR) axis, each kind heard through its own measured channel)."""
 
     case: int
     noise: float
     k: int
+    kind: str = ""
+
+
+def level_label(kind: str, noise: float) -> str:
+    """The key of a noise level in the tables: ``"10"``, or ``"babble:10"`` on the (kind, SNR) axis."""
+    return f"{kind}:{noise:g}" if kind else f"{noise:g}"
+
+
+def label_value(label: str) -> float:
+    """The number of a level label (``"babble:10"`` → 10.0)."""
+    return float(label.rsplit(":", 1)[-1])
+
+
+def label_kind(label: str) -> str:
+    """The noise kind of a level label (``""`` when it has none)."""
+    return label.rsplit(":", 1)[0] if ":" in label else ""
 
 
 @dataclass
@@ -52,10 +70,17 @@ class StudyEpisode:
     word_error_rate: float
     seed: int
     result: EpisodeResult
+    noise_kind: str = ""
+
+    @property
+    def level(self) -> str:
+        """The noise level's label (:func:`level_label`)."""
+        return level_label(self.noise_kind, self.noise)
 
     def row(self) -> dict:
         r = self.result
-        return {"policy": self.policy, "resident": self.resident, "task": self.task, "noise": self.noise,
+        return {"policy": self.policy, "resident": self.resident, "task": self.task, "noise_kind": self.noise_kind,
+                "noise": self.noise,
                 "word_error_rate": round(self.word_error_rate, 6), "seed": self.seed,
                 "guidance_completed": int(r.guidance_completed), "guidance_wanted": int(r.guidance_wanted),
                 "time_to_goal_s": r.time_to_goal,
@@ -64,9 +89,10 @@ class StudyEpisode:
                 "residents_lost": r.residents_lost, "discounted_return": r.discounted_return, "steps": r.steps}
 
 
-def cells(n_cases: int, noise_levels: Sequence[float], seeds: int) -> List[Cell]:
-    """Every case × noise level × seed, in a fixed order."""
-    return [Cell(c, float(n), k) for n in noise_levels for c in range(n_cases) for k in range(seeds)]
+def cells(n_cases: int, noise_levels: Sequence[float], seeds: int, kinds: Sequence[str] = ("",)) -> List[Cell]:
+    """Every noise kind × case × noise level × seed, in a fixed order."""
+    return [Cell(c, float(n), k, kind) for kind in kinds for n in noise_levels for c in range(n_cases)
+            for k in range(seeds)]
 
 
 # The work a forked worker inherits (set by run_cells before the pool starts).
@@ -74,11 +100,17 @@ _WORK: dict = {}
 
 
 def _run_one(job) -> StudyEpisode:
+    return run_job(_WORK, job)
+
+
+def run_job(work: dict, job) -> StudyEpisode:
+    """One episode: ``job`` = (policy, :class:`Cell`) with ``work`` = the study's domain, agents,
+    cases and speech channels (what :func:`run_cells` hands every worker)."""
     policy, cell = job
-    domain, agents, cases = _WORK["domain"], _WORK["agents"], _WORK["cases"]
+    domain, agents, cases = work["domain"], work["agents"], work["cases"]
     case: StudyCase = cases[cell.case]
     sc = case.scenario
-    channel = _WORK.get("channel")
+    channel = work["channels"][cell.kind] if cell.kind else work.get("channel")
     if channel:
         # SNR axis: the room's SNR through the measured recogniser channel (pooled over the
         # calibration's voices); her articulation is not applied on this axis.
@@ -90,20 +122,32 @@ def _run_one(job) -> StudyEpisode:
         sc = replace(sc, word_error_rate=wer, resident=replace(sc.resident, word_error_rate=None))
     seed = sc.seed + 1000 * cell.k
     result = run_episode(sc, agents[policy], domain, seed=seed)
-    return StudyEpisode(policy, case.resident, case.task, cell.noise, wer, seed, result)
+    return StudyEpisode(policy, case.resident, case.task, cell.noise, wer, seed, result, cell.kind)
 
 
 def run_cells(domain, agents: Dict[str, object], cases: Sequence[StudyCase], grid: Sequence[Cell],
-              jobs: int = 1, progress: bool = False, channel: Optional[str] = None) -> List[StudyEpisode]:
-    """Every policy in every cell; ``jobs`` worker processes (1: this process).
+              jobs: int = 1, progress: bool = False, channel: Optional[str] = None,
+              channels: Optional[Dict[str, str]] = None, cluster: Optional[str] = None,
+              cluster_timeout: Optional[float] = None) -> List[StudyEpisode]:
+    """Every policy in every cell; ``jobs`` worker processes (1: this process), or the
+    workers of the Dask cluster at ``cluster`` (:mod:`pearl_sim.cluster`: the same episodes).
 
     ``channel``: a calibrated speech channel (``pearl calibrate-speech --out``); the cells'
-    noise levels are then SNRs in dB through it, else word error rates.
+    noise levels are then SNRs in dB through it, else word error rates. ``channels``: noise
+    kind → channel file, for cells with a ``kind`` (the (kind, SNR) axis).
     """
     from tqdm import tqdm
 
     work = [(policy, cell) for cell in grid for policy in agents]
-    _WORK.update(domain=domain, agents=agents, cases=list(cases), channel=channel)
+    payload = dict(domain=domain, agents=agents, cases=list(cases), channel=channel, channels=dict(channels or {}))
+    missing = sorted({c.kind for c in grid if c.kind} - set(payload["channels"]))
+    if missing:
+        raise ValueError(f"no speech channel for noise kind {missing[0]!r}")
+    if cluster is not None:
+        from pearl_sim.cluster import run_on_cluster
+
+        return run_on_cluster(cluster, payload, work, progress=progress, timeout=cluster_timeout)
+    _WORK.update(payload)
     try:
         bar = tqdm(total=len(work), desc="study", disable=not progress, leave=False)
         out: List[StudyEpisode] = []
@@ -138,16 +182,16 @@ from pearl_sim.stats import t_ci  # noqa: E402,F401  (re-exported: one source)
 
 def per_policy(episodes: Sequence[StudyEpisode]) -> Dict[str, Dict[str, dict]]:
     """policy → noise level → scores with 95 % CIs."""
-    groups: Dict[str, Dict[float, List[StudyEpisode]]] = {}
+    groups: Dict[str, Dict[tuple, List[StudyEpisode]]] = {}
     for e in episodes:
-        groups.setdefault(e.policy, {}).setdefault(e.noise, []).append(e)
+        groups.setdefault(e.policy, {}).setdefault((e.noise_kind, e.noise), []).append(e)
     out: Dict[str, Dict[str, dict]] = {}
     for policy, by_noise in groups.items():
         out[policy] = {}
-        for noise, es in sorted(by_noise.items()):
+        for (kind, noise), es in sorted(by_noise.items()):
             rs = [e.result for e in es]
             goals = sum(r.goals_achieved for r in rs)
-            out[policy][f"{noise:g}"] = {
+            out[policy][level_label(kind, noise)] = {
                 "episodes": len(rs),
                 "guidance_success": proportion_ci(sum(r.guidance_completed for r in rs), len(rs)),
                 # Of the episodes where she wanted the walk (she may decline the reminder's offer).
@@ -167,12 +211,12 @@ def per_policy(episodes: Sequence[StudyEpisode]) -> Dict[str, Dict[str, dict]]:
 def paired(episodes: Sequence[StudyEpisode], baseline: str = BASELINE) -> Dict[str, Dict[str, dict]]:
     """policy → noise → metric → mean and 95 % CI of (policy − baseline) over matched cells.
 
-    Cells are matched on (resident, task, noise, seed). ``time_to_goal`` pairs only cells
-    where both completed the guidance.
+    Cells are matched on (resident, task, noise kind, noise, seed). ``time_to_goal`` pairs
+    only cells where both completed the guidance.
     """
-    index = {(e.policy, e.resident, e.task, e.noise, e.seed): e for e in episodes}
+    index = {(e.policy, e.resident, e.task, (e.noise_kind, e.noise), e.seed): e for e in episodes}
     policies = sorted({e.policy for e in episodes} - {baseline})
-    noises = sorted({e.noise for e in episodes})
+    noises = sorted({(e.noise_kind, e.noise) for e in episodes})
     out: Dict[str, Dict[str, dict]] = {}
     for policy in policies:
         out[policy] = {}
@@ -188,8 +232,62 @@ def paired(episodes: Sequence[StudyEpisode], baseline: str = BASELINE) -> Dict[s
                     a, b = _value(e, m), _value(base, m)
                     if a is not None and b is not None:
                         diffs[m].append(a - b)
-            out[policy][f"{noise:g}"] = {m: t_ci(v) for m, v in diffs.items()}
+            out[policy][level_label(*noise)] = {m: t_ci(v) for m, v in diffs.items()}
     return out
+
+
+def growth(episodes: Sequence[StudyEpisode], policy: str, worse: str, better: str, metric: str = "discounted_return",
+           baseline: str = BASELINE) -> dict:
+    """Does ``policy``'s advantage over ``baseline`` grow from level ``better`` to level ``worse``?
+
+    Per matched cell (resident, task, seed) present at both levels for both policies:
+    ``g = (policy − baseline)[worse] − (policy − baseline)[better]``; returns its mean and
+    Student-t 95 % CI (:func:`t_ci`). Levels are labels (``"babble:10"``). For the return,
+    ``g > 0`` means the advantage grows as recognition gets worse; for wrong actions, ``g < 0``.
+    """
+    index = {(e.policy, e.level, e.resident, e.task, e.seed): e for e in episodes}
+    gs: List[float] = []
+    for (p, level, resident, task, seed), e in index.items():
+        if p != policy or level != worse:
+            continue
+        found = [index.get((q, lv, resident, task, seed)) for q, lv in
+                 ((baseline, worse), (policy, better), (baseline, better))]
+        others = [o for o in found if o is not None]
+        if len(others) < 3:
+            continue
+        values = [_value(x, metric) for x in [e, *others]]
+        if any(v is None for v in values):
+            continue
+        a, b, c, d = (float(v) for v in values)  # type: ignore[arg-type]
+        gs.append((a - b) - (c - d))
+    return t_ci(gs)
+
+
+def growth_contrasts(episodes: Sequence[StudyEpisode], baseline: str = BASELINE) -> Dict[str, Dict[str, dict]]:
+    """Every policy's :func:`growth` of the return and wrong-action advantage over ``baseline``
+    for each kind's noisiest vs quietest SNR, and for babble vs white at each SNR both have.
+
+    Keys ``"babble:10 vs babble:30"``; each value ``{"discounted_return": …, "wrong_actions": …}``.
+    """
+    levels = sorted({(e.noise_kind, e.noise) for e in episodes})
+    pairs = []
+    for kind in sorted({k for k, _ in levels}):
+        snrs = sorted(n for k, n in levels if k == kind)
+        if len(snrs) >= 2:
+            pairs.append((level_label(kind, snrs[0]), level_label(kind, snrs[-1])))
+    for k, n in levels:
+        if k == "babble" and ("white", n) in levels:
+            pairs.append((level_label("babble", n), level_label("white", n)))
+    policies = sorted({e.policy for e in episodes} - {baseline})
+    return {f"{worse} vs {better}": {p: {m: growth(episodes, p, worse, better, m, baseline)
+                                         for m in ("discounted_return", "wrong_actions")} for p in policies}
+            for worse, better in pairs}
+
+
+def of_kind(table: Dict[str, Dict[str, dict]], kind: str) -> Dict[str, Dict[str, dict]]:
+    """The levels of one noise kind, keyed by their SNR alone (``"babble:10"`` → ``"10"``)."""
+    return {policy: {f"{label_value(k):g}": v for k, v in by_level.items() if label_kind(k) == kind}
+            for policy, by_level in table.items()}
 
 
 def acceptance(table: Dict[str, Dict[str, dict]], diffs: Dict[str, Dict[str, dict]], policy: str = "hierarchical",
@@ -204,7 +302,7 @@ def acceptance(table: Dict[str, Dict[str, dict]], diffs: Dict[str, Dict[str, dic
     if policy not in table or baseline not in table or policy not in diffs:
         return None
     # Quietest first: the lowest word error rate, or the highest SNR.
-    levels = sorted(table[baseline], key=float, reverse=snr)
+    levels = sorted(table[baseline], key=label_value, reverse=snr)
     quiet = levels[0]
     b, p = table[baseline][quiet], table[policy][quiet]
     bs, br = b["guidance_success"], b["discounted_return"]

@@ -138,3 +138,27 @@ def test_fitted_domain_loads_and_moves_speech_rows_only(measured, tmp_path):
     same, _ = fit_observation_rows(DOMAIN, table, -10.0, prior_strength=1e12)
     np.testing.assert_allclose(parse_domain(yaml.safe_dump(same, sort_keys=False), "same").compile().O,
                                designer.O, atol=1e-8)
+
+
+def test_insertion_and_deletion_rates_count_the_confusion_by_hand():
+    """Insertion: a keyword heard that was not said (chatter heard as a keyword, or another
+    keyword); deletion: a said keyword heard as unknown. Counts and Wilson bounds by hand."""
+    symbols = ["yes", "no", "go", "unknown"]
+    cells = {"10": {
+        "yes": {"n": 10, "counts": {"yes": 7, "no": 1, "unknown": 2}},      # 1 substitution, 2 deletions
+        "go": {"n": 10, "counts": {"go": 8, "no": 2}},                      # 2 substitutions
+        "unknown": {"n": 20, "counts": {"unknown": 17, "go": 2, "yes": 1}},  # 3 insertions from chatter
+    }}
+    table = ChannelTable([10.0], symbols, ["yes", "go", "unknown"], cells)
+    assert table.confusion(10) == {"yes": {"yes": 7, "no": 1, "go": 0, "unknown": 2},
+                                   "go": {"yes": 0, "no": 2, "go": 8, "unknown": 0},
+                                   "unknown": {"yes": 1, "no": 0, "go": 2, "unknown": 17}}
+    rates = table.error_rates(10)
+    assert (rates["insertion"]["count"], rates["insertion"]["n"]) == (6, 40)
+    assert (rates["insertion_from_chatter"]["count"], rates["insertion_from_chatter"]["n"]) == (3, 20)
+    assert (rates["substitution"]["count"], rates["substitution"]["n"]) == (3, 20)
+    assert (rates["deletion"]["count"], rates["deletion"]["n"]) == (2, 20)
+    assert rates["insertion"]["rate"] == pytest.approx(0.15)
+    # Wilson 95 % of 6/40: centre (0.15 + 1.96²/80)/(1 + 1.96²/40) = 0.1807, half-width 0.1101.
+    lo, hi = rates["insertion"]["ci95"]
+    assert lo == pytest.approx(0.0706, abs=5e-4) and hi == pytest.approx(0.2907, abs=5e-4)

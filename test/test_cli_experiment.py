@@ -82,6 +82,14 @@ def test_flat_policy_budget_gives_the_same_study_beside_a_cpu_burner(tmp_path, c
     (["--jobs", "0"], "--jobs: 0"),
     (["--flat-trials", "0"], "--flat-trials: must be at least 1"),
     (["--flat-trials", "5", "--flat-time-limit", "3"], "--flat-trials: give --flat-trials or --flat-time-limit"),
+    (["--noise-kind", "babble"], "--noise-kind: needs --snr"),
+    (["--snr", "10", "--noise-kind", "white,pink"], "--noise-kind: 'pink' is not one of white, babble"),
+    (["--snr", "10", "--noise-kind", "babble", "--babble-channel", "none.json"], "none.json"),
+    (["--measured-policies", "qmdp"], "--measured-policies: needs --speech-rows"),
+    (["--speech-rows", "config/pearl.domain.yaml", "--measured-policies", "behaviour_tree"],
+     "--measured-policies: 'behaviour_tree' is not a POMDP policy"),
+    (["--snr", "10", "--cluster", "tcp://127.0.0.1:9", "--cluster-timeout", "1"],
+     "--cluster tcp://127.0.0.1:9: no Dask scheduler answered within 1 s"),
 ])
 def test_bad_input_is_one_clear_error_before_any_work(tmp_path, capsys, argv, message):
     out = tmp_path / "out"

@@ -116,3 +116,52 @@ def test_snr_axis_runs_through_the_measured_recogniser_channel(tmp_path, capsys)
     assert report["acceptance"] is None   # no hierarchical policy in this run (its SNR ordering: above)
     assert main(["experiment", "--snr", "99", "--out", str(tmp_path / "x")]) == 2
     assert "--snr: 99.0 dB is outside [-20, 60]" in capsys.readouterr().err
+
+
+def test_a_policy_planned_with_measured_speech_rows_tracks_its_belief_in_them(tmp_path):
+    """`--speech-rows`: the @measured twin's executive runs on the fitted domain (its O), the
+    world and the score on the designer's; the study's CLI adds the twin beside its policy."""
+    import json
+
+    from pearl_pomdp.asr.channel import ChannelTable
+    from pearl_pomdp.cli import main
+    from pearl_pomdp.fit_speech import write_speech_fitted
+    from pearl_pomdp.model.factored import load_domain
+    from pearl_sim.agents import Controller
+    from pearl_sim.experiment import run_episode
+
+    table = ChannelTable.load("config/speech/pearl_channel_babble.json")
+    path, _ = write_speech_fitted("config/pearl.domain.yaml", table, 10, tmp_path / "b10.yaml")
+    fitted, designer = load_domain(path), default_domain()
+    assert not (fitted.compile().O == designer.compile().O).all()
+    twin = Controller("qmdp@measured", build_agents(fitted, None, policies=["qmdp"])["qmdp"].decider, domain=fitted)
+    case = resident_scenarios(study_template(STUDY), paper_residents(STUDY)[:1])[0]
+    seen = []
+    run_episode(case.scenario, twin, designer, seed=3, on_step=lambda world, result, waits, ex: seen.append(ex))
+    assert seen and seen[0].domain is fitted and seen[0].tracker.model.O is fitted.compile().O
+    out = tmp_path / "study"
+    assert main(["experiment", "--policies", "qmdp,behaviour_tree", "--residents", "generated:1", "--episodes", "1",
+                 "--snr", "10", "--noise-kind", "babble", "--speech-rows", str(path), "--out", str(out), "--json"]) == 0
+    report = json.loads((out / "study.json").read_text())
+    assert set(report["per_policy"]) == {"qmdp", "qmdp@measured", "behaviour_tree"}
+    assert set(report["paired_vs_baseline"]) == {"qmdp", "qmdp@measured"}
+
+
+def test_growth_of_the_advantage_is_a_paired_difference_of_differences():
+    """g = (P − tree)[worse] − (P − tree)[better] per matched cell: by hand on three seeds."""
+    eps = []
+    # returns (tree, policy): at babble:30 the policy is +1, +2, +3 ahead; at babble:10 +5, +5, +9.
+    for seed, (q_tree, q_pol, n_tree, n_pol) in enumerate([(50, 51, 40, 45), (50, 52, 40, 45), (50, 53, 30, 39)]):
+        for level, tree, pol in ((30.0, q_tree, q_pol), (10.0, n_tree, n_pol)):
+            eps.append(study.StudyEpisode("behaviour_tree", "A", "walk", level, float("nan"), seed,
+                                          _result("behaviour_tree", True, 0, tree), "babble"))
+            eps.append(study.StudyEpisode("hierarchical", "A", "walk", level, float("nan"), seed,
+                                          _result("hierarchical", True, 0, pol), "babble"))
+    g = study.growth(eps, "hierarchical", "babble:10", "babble:30")
+    # g = 4, 3, 6: mean 4.333, sd 1.528, t(0.975, 2) = 4.303 → half-width 3.795
+    assert g["n"] == 3 and g["mean"] == pytest.approx(13 / 3)
+    assert g["ci95"] == pytest.approx(4.3027 * 1.5275 / 3 ** 0.5, rel=1e-3)
+    contrasts = study.growth_contrasts(eps)
+    assert set(contrasts) == {"babble:10 vs babble:30"}
+    assert contrasts["babble:10 vs babble:30"]["hierarchical"]["discounted_return"]["mean"] == pytest.approx(13 / 3)
+    assert contrasts["babble:10 vs babble:30"]["hierarchical"]["wrong_actions"]["mean"] == 0.0

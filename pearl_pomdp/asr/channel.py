@@ -25,29 +25,31 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from pearl_pomdp.asr.audio import mix_at_snr
+from pearl_pomdp.asr.babble import TRACK_ID, babble_track
 from pearl_pomdp.errors import PearlError, SpecError
 
 __all__ = ["ChannelTable", "MeasuredChannel", "ChannelError", "calibrate", "default_utterances", "babble_track",
+           "wilson_interval",
            "trial_seed", "FORMAT", "MAX_SAMPLES"]
 
 FORMAT = "pearl-speech-channel/1"
 #: Recognised texts kept per (SNR, meant symbol) cell for the sampler.
 MAX_SAMPLES = 64
-#: Sentences of the babble track (four espeak talkers, summed with offsets).
-_BABBLE_TEXT = (
-    "i went to the shop this morning and the bus was late again",
-    "she told me that her grandson is coming to visit on sunday",
-    "could you pass me the newspaper and my glasses from the table",
-    "the garden looks lovely now that the roses are out",
-)
-_BABBLE_VOICES = ("en-us+m1", "en-us+f2", "en-gb-x-rp", "en-us+m4")
+
+def wilson_interval(hits: int, n: int, z: float = 1.96) -> Tuple[float, float]:
+    """Wilson score interval of a proportion ``hits / n`` (``(0, 1)`` for no trials)."""
+    if n <= 0:
+        return 0.0, 1.0
+    p = hits / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * float(np.sqrt(p * (1 - p) / n + z * z / (4 * n * n))) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 class ChannelError(PearlError):
@@ -58,19 +60,6 @@ def trial_seed(*parts: object) -> int:
     """A 63-bit seed from the content of a trial (order-independent of other trials)."""
     h = hashlib.sha256("\x1f".join(map(str, parts)).encode()).digest()
     return int.from_bytes(h[:8], "little") >> 1
-
-
-@lru_cache(maxsize=1)
-def babble_track() -> np.ndarray:
-    """About 4 s of four talkers at once (deterministic; built once per process)."""
-    from pearl_pomdp.asr.synthesizer import synthesize
-
-    parts = [synthesize(t, {"name": v, "rate": 170}).astype(np.float64) for t, v in zip(_BABBLE_TEXT, _BABBLE_VOICES)]
-    n = min(len(p) for p in parts)
-    track = np.zeros(n)
-    for i, p in enumerate(parts):
-        track += np.roll(p[:n], i * n // len(parts))
-    return track
 
 
 def default_utterances(keywords: Mapping[str, Sequence[str]], unknown_symbol: str = "unknown") -> Dict[str, List[str]]:
@@ -114,6 +103,41 @@ class ChannelTable:
             hit += cell["counts"].get(meant, 0)
             total += cell["n"]
         return hit / total if total else float("nan")
+
+    def confusion(self, snr: float) -> Dict[str, Dict[str, int]]:
+        """Counts ``{meant: {recognised: trials}}`` at ``snr`` over every symbol (zeros included)."""
+        return {m: {s: int(self._cell(m, snr)["counts"].get(s, 0)) for s in self.symbols} for m in self.meant}
+
+    def error_rates(self, snr: float, unknown_symbol: str = "unknown") -> Dict[str, dict]:
+        """Insertion and deletion rates at ``snr``, each ``{"count", "n", "rate", "ci95": [lo, hi]}`` (Wilson).
+
+        * ``insertion``: a keyword recognised that was not said — a keyword other than the
+          meant one (``unknown`` meant, or another keyword meant), over every trial;
+        * ``insertion_from_chatter``: the same over trials meant as ``unknown_symbol`` only
+          (chatter, nothing for the robot), ``substitution``: over trials meant as a keyword;
+        * ``deletion``: a meant keyword heard as ``unknown_symbol``, over keyword trials.
+
+        What a clarification question guards against is an insertion: a controller that
+        acts on a heard keyword does the wrong thing; a deletion only delays.
+        """
+        counts = self.confusion(snr)
+        keywords = [s for s in self.symbols if s != unknown_symbol]
+
+        def rate(hits: int, n: int) -> dict:
+            lo, hi = wilson_interval(hits, n)
+            return {"count": hits, "n": n, "rate": hits / n if n else None, "ci95": [lo, hi]}
+
+        chatter = counts.get(unknown_symbol, {})
+        said_keyword = [m for m in counts if m != unknown_symbol]
+        from_chatter = sum(chatter.get(k, 0) for k in keywords)
+        substituted = sum(counts[m][k] for m in said_keyword for k in keywords if k != m)
+        n_chatter = sum(chatter.values())
+        n_keyword = sum(sum(counts[m].values()) for m in said_keyword)
+        deleted = sum(counts[m].get(unknown_symbol, 0) for m in said_keyword)
+        return {"insertion": rate(from_chatter + substituted, n_chatter + n_keyword),
+                "insertion_from_chatter": rate(from_chatter, n_chatter),
+                "substitution": rate(substituted, n_keyword),
+                "deletion": rate(deleted, n_keyword)}
 
     def _cell(self, meant: str, snr: float) -> dict:
         row = self.cells.get(self.key(snr))
@@ -275,6 +299,8 @@ def calibrate(recognizer, keyword_filter, utterances: Mapping[str, Sequence[str]
         raise ValueError("no utterance to speak")
     voice_objs = {v: get_voice(v) for v in voices}
     babble = babble_track() if noise == "babble" else None
+    # White noise is generated from the trial's seed alone; babble also depends on the track.
+    noise_id = TRACK_ID if noise == "babble" else noise
     store = _ResultCache(recognizer.identity, cache_dir() / "speech-channel" if cache else None)
     symbols = list(keyword_filter.symbols)
     cells: Dict[str, Dict[str, dict]] = {}
@@ -290,7 +316,7 @@ def calibrate(recognizer, keyword_filter, utterances: Mapping[str, Sequence[str]
                     for vname, voice in voice_objs.items():
                         for rep in range(repeats):
                             level = float(snr) + voice.snr_offset_db
-                            key = trial_seed(seed, text, sorted(voice.to_dict().items()), level, noise, rep)
+                            key = trial_seed(seed, text, sorted(voice.to_dict().items()), level, noise_id, rep)
                             hit = store.get(str(key))
                             if hit is None:
                                 if (text, vname) not in clean:
@@ -309,7 +335,7 @@ def calibrate(recognizer, keyword_filter, utterances: Mapping[str, Sequence[str]
                                 progress(done, total)
     finally:
         store.flush()
-    info = {"recogniser": recognizer.identity, "noise": noise, "repeats": repeats, "seed": seed,
+    info = {"recogniser": recognizer.identity, "noise": noise, "noise_id": noise_id, "repeats": repeats, "seed": seed,
             "voices": {v: voice_objs[v].to_dict() for v in voices}, "utterances": {k: list(v) for k, v in utterances.items()}}
     info.update(meta or {})
     return ChannelTable([float(s) for s in snrs], symbols, list(utterances), cells, info)

@@ -20,7 +20,8 @@ Each trial is one espeak-ng synthesis and one pocketsphinx decode (~0.1-0.3 s), 
 defaults (5 SNRs x 4 voices x the residents' and carrier sentences) take several minutes;
 the shipped config/speech/pearl_channel.json is
 `pearl calibrate-speech config/pearl.domain.yaml --snr 30,20,10,5 --no-carriers` (352 trials,
-docs/speech.md). The examples below are small (seconds).
+docs/speech.md), config/speech/pearl_channel_babble.json the same with --noise babble (six talkers
+reading the IEEE Harvard sentences: pearl_pomdp/asr/babble.py). The examples below are small (seconds).
 
 Examples:
   pearl calibrate-speech config/pearl.domain.yaml --snr 20 --voices clear --no-carriers --out channel.json

@@ -56,7 +56,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="noise axis in SNR (dB) through the measured recogniser channel (--channel) instead "
                              "of word error rates, e.g. 30,20,10,5")
     parser.add_argument("--channel", default=_share("config/speech/pearl_channel.json"),
-                        help="calibrated speech channel for --snr (`pearl calibrate-speech --out`)")
+                        help="calibrated speech channel for --snr (`pearl calibrate-speech --out`); white noise "
+                             "with --noise-kind")
+    parser.add_argument("--noise-kind", default=None, metavar="KIND,…",
+                        help="with --snr: the noise axis is (kind, SNR), kinds of white,babble, each heard through "
+                             "its own measured channel (--channel, --babble-channel)")
+    parser.add_argument("--babble-channel", default=_share("config/speech/pearl_channel_babble.json"),
+                        help="calibrated speech channel of babble noise (`pearl calibrate-speech --noise babble`)")
+    parser.add_argument("--speech-rows", default=None, metavar="FITTED.yaml",
+                        help="also run each POMDP policy planned with this domain's observation rows (e.g. from "
+                             "`pearl fit DOMAIN --speech CHANNEL.json --snr DB`), named POLICY@measured; the world "
+                             "and the scores stay the --domain's")
+    parser.add_argument("--measured-policies", default=None, metavar="P,…",
+                        help="with --speech-rows: which policies get a @measured twin (default: every POMDP one)")
     parser.add_argument("--policies", default=None,
                         help=f"comma-separated subset of {', '.join(POLICY_NAMES)} (default {','.join(DEFAULT_POLICIES)}; "
                              "reception: hierarchical,flat_pointbased,qmdp,behaviour_tree)")
@@ -67,6 +79,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="instead of --flat-trials, S seconds of wall clock (the policy then depends on the "
                              "machine's speed and load)")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes for the episodes (default 1)")
+    parser.add_argument("--cluster", default=None, metavar="ADDRESS",
+                        help="run the episodes on the Dask scheduler at ADDRESS (e.g. tcp://host:8786) instead of "
+                             "--jobs processes: the same results (pearl_sim/cluster.py)")
+    parser.add_argument("--cluster-timeout", type=float, default=None, metavar="S",
+                        help="seconds to wait for the --cluster scheduler (default 10)")
     parser.add_argument("--out", default=None, help="folder for study.json, episodes.csv, study.png (default out/study-<time>)")
     parser.add_argument("--json", action="store_true",
                         help="print one JSON object (with per_scenario and every episode's actions, as study.json)")
@@ -102,11 +119,28 @@ def _validate(args):
         raise SpecError("<command line>", option, f"{text!r}: expected comma-separated numbers") from None
     if not noise:
         raise SpecError("<command line>", option, "no noise level given")
+    kinds: list = []
+    if args.noise_kind is not None:
+        from pearl_pomdp.asr.audio import NOISE_KINDS
+
+        if args.snr is None:
+            raise SpecError("<command line>", "--noise-kind", "needs --snr (the kinds are heard at SNRs)")
+        kinds = list(dict.fromkeys(k.strip() for k in args.noise_kind.split(",") if k.strip()))
+        bad_kind = [k for k in kinds if k not in NOISE_KINDS]
+        if bad_kind or not kinds:
+            raise SpecError("<command line>", "--noise-kind",
+                            f"{bad_kind[0] if bad_kind else args.noise_kind!r} is not one of {', '.join(NOISE_KINDS)}")
+    if args.cluster is not None and not args.cluster.strip():
+        raise SpecError("<command line>", "--cluster", "empty scheduler address")
     if args.snr is not None:
         bad = [x for x in noise if not -20.0 <= x <= 60.0]
         if bad:
             raise SpecError("<command line>", "--snr", f"{bad[0]} dB is outside [-20, 60]")
-        require_file(args.channel, "speech channel file (--channel, from `pearl calibrate-speech --out`)")
+        if not kinds or "white" in kinds:
+            require_file(args.channel, "speech channel file (--channel, from `pearl calibrate-speech --out`)")
+        if "babble" in kinds:
+            require_file(args.babble_channel,
+                         "babble speech channel file (--babble-channel, from `pearl calibrate-speech --noise babble`)")
     else:
         bad = [x for x in noise if not 0.0 <= x <= 1.0]
         if bad:
@@ -117,6 +151,20 @@ def _validate(args):
         require_file(args.hierarchy, "hierarchy file (--hierarchy)")
     profiles = parse_population(args.residents, args.study, seed=args.seed)
     cases = resident_scenarios(study_template(args.study), profiles, source=args.study)
+    args.kinds = kinds
+    args.measured = []
+    if args.speech_rows is not None:
+        require_file(args.speech_rows, "domain with measured speech rows (--speech-rows)")
+        pomdps = [p for p in policies if p not in ("behaviour_tree", "scripted")]
+        wanted = pomdps if args.measured_policies is None else [p.strip() for p in args.measured_policies.split(",")
+                                                                 if p.strip()]
+        bad = [p for p in wanted if p not in pomdps]
+        if bad or not wanted:
+            raise SpecError("<command line>", "--measured-policies",
+                            f"{bad[0] if bad else 'none'!r} is not a POMDP policy of --policies ({', '.join(pomdps)})")
+        args.measured = wanted
+    elif args.measured_policies is not None:
+        raise SpecError("<command line>", "--measured-policies", "needs --speech-rows")
     return policies, sorted(set(noise)), profiles, cases
 
 
@@ -154,6 +202,10 @@ def _run_pearl(args: argparse.Namespace) -> int:
     from pearl_sim.experiment import build_agents
 
     policies, noise, profiles, cases = _validate(args)
+    if args.cluster is not None:
+        from pearl_sim.cluster import connect
+
+        connect(args.cluster, args.cluster_timeout or 10.0).close()   # an address that does not answer: before planning
     started = time.perf_counter()
     out = Path(args.out) if args.out else Path("out") / f"study-{time.strftime('%Y%m%d-%H%M%S')}"
     out.mkdir(parents=True, exist_ok=True)
@@ -164,34 +216,58 @@ def _run_pearl(args: argparse.Namespace) -> int:
     agents = build_agents(domain, args.hierarchy, flat_time_limit=args.flat_time_limit, flat_trials=flat_trials,
                           policies=policies,
                           log=log if terminal else None)
+    if args.measured:
+        from pearl_sim.agents import Controller
+
+        measured_domain = load_domain(args.speech_rows)
+        twins = build_agents(measured_domain, args.hierarchy, flat_time_limit=args.flat_time_limit,
+                             flat_trials=flat_trials, policies=args.measured, log=log if terminal else None)
+        for name, agent in twins.items():
+            agents[f"{name}@measured"] = Controller(f"{name}@measured", agent.decider, domain=measured_domain)
+            agents.timings[f"{name}@measured"] = twins.timings[name]
     plan_seconds = dict(agents.timings)
-    grid = study.cells(len(cases), noise, args.episodes)
+    kinds = args.kinds
+    grid = study.cells(len(cases), noise, args.episodes, kinds=kinds or ("",))
     # The tracker's recoveries from impossible observations are logged per step; in a study of
     # thousands of episodes they drown the progress bar (the counters stay in each tracker).
     logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
     t0 = time.perf_counter()
     snr = args.snr is not None
     channel = str(Path(args.channel).resolve()) if snr else None
-    episodes = study.run_cells(domain, agents, cases, grid, jobs=args.jobs, progress=terminal, channel=channel)
+    channels = {k: str(Path(args.channel if k == "white" else args.babble_channel).resolve()) for k in kinds}
+    episodes = study.run_cells(domain, agents, cases, grid, jobs=args.jobs, progress=terminal, channel=channel,
+                               channels=channels, cluster=args.cluster, cluster_timeout=args.cluster_timeout)
     episode_seconds = time.perf_counter() - t0
     table = study.per_policy(episodes)
     diffs = study.paired(episodes) if study.BASELINE in agents else {}
-    goal = study.acceptance(table, diffs, snr=snr)
     png = out / "study.png"
-    study.plot_study(table, diffs, png, snr=snr)
+    goal: Any
+    if kinds:
+        # One acceptance evaluation and one figure per noise kind (its SNRs, quietest first).
+        goal = {k: study.acceptance(study.of_kind(table, k), study.of_kind(diffs, k), snr=True) for k in kinds}
+        for k in kinds:
+            study.plot_study(study.of_kind(table, k), study.of_kind(diffs, k), out / f"study-{k}.png", snr=True)
+        png = out / f"study-{kinds[0]}.png"
+    else:
+        goal = study.acceptance(table, diffs, snr=snr)
+        study.plot_study(table, diffs, png, snr=snr)
     csv_path = out / "episodes.csv"
     study.write_csv(episodes, csv_path)
     report: Dict[str, Any] = {
         "protocol": {"residents": [p.name for p in profiles], "resident_spec": args.residents, "resident_seed": args.seed,
                      "tasks": sorted({c.task for c in cases}), "noise_levels": noise,
-                     "noise_axis": "snr_db" if snr else "word_error_rate", "channel": channel,
+                     "noise_axis": ("noise_kind,snr_db" if kinds else "snr_db") if snr else "word_error_rate",
+                     "channel": channel, "noise_kinds": kinds, "channels": channels, "cluster": args.cluster,
                      "seeds_per_cell": args.episodes,
-                     "policies": policies, "baseline": study.BASELINE, "episodes": len(episodes),
+                     "policies": list(agents), "baseline": study.BASELINE, "speech_rows": args.speech_rows,
+                     "episodes": len(episodes),
                      "jobs": args.jobs},
         "plan_seconds": plan_seconds,
         "per_policy": table,
         "per_scenario": study.per_scenario(episodes),
         "paired_vs_baseline": diffs,
+        # The paper's effect: does each policy's advantage grow as recognition gets worse?
+        "growth_vs_baseline": study.growth_contrasts(episodes) if kinds and study.BASELINE in agents else None,
         "acceptance": goal,
         "files": {"png": str(png), "csv": str(csv_path), "json": str(out / "study.json")},
         "episode_seconds": round(episode_seconds, 1),
@@ -202,8 +278,14 @@ def _run_pearl(args: argparse.Namespace) -> int:
     if args.json:
         print_json(report)
         return 0
-    _print_table(table, diffs, goal)
-    print(f"{len(episodes)} episodes in {episode_seconds:.1f} s ({args.jobs} job(s)); wrote {png}, {csv_path}, "
+    if kinds:
+        for k in kinds:
+            print(f"noise kind {k}:")
+            _print_table(study.of_kind(table, k), study.of_kind(diffs, k), goal[k])
+    else:
+        _print_table(table, diffs, goal)
+    where = f"on {args.cluster}" if args.cluster else f"{args.jobs} job(s)"
+    print(f"{len(episodes)} episodes in {episode_seconds:.1f} s ({where}); wrote {png}, {csv_path}, "
           f"{out / 'study.json'}")
     return 0
 

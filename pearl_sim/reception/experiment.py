@@ -49,6 +49,13 @@ def run_cli(args: argparse.Namespace) -> int:
     world = WORLDS["reception"]
     if args.snr is not None:
         raise SpecError("<command line>", "--snr", "the reception world has the word-error recogniser only; use --noise")
+    for option, value in (("--noise-kind", getattr(args, "noise_kind", None)),
+                          ("--speech-rows", getattr(args, "speech_rows", None)),
+                          ("--measured-policies", getattr(args, "measured_policies", None)),
+                          ("--cluster", getattr(args, "cluster", None))):
+        if value is not None:
+            raise SpecError("<command line>", option, "is for the nursing-home study; the reception study runs "
+                                                      "on this machine's processes (--jobs) with word error rates")
     if args.residents != "paper,generated:6":
         raise SpecError("<command line>", "--residents", "the reception world's visitors are in its study file (--study)")
     if args.flat_trials is not None and args.flat_time_limit is not None:
