@@ -190,3 +190,10 @@ def test_the_demos_bag_replays_by_the_reception_robots_rules(run):
     # The recorded actions include the policy's answer to the last belief (one more than the world carried out).
     assert report["match"] is True and report["beliefs_match"] is True and report["actions"] == report["expected_actions"]
     assert report["actions"][:len(run["demo"]["actions"])] == run["demo"]["actions"]
+    # The bag holds b0 itself (latched with depth 1: the demo waits until the recorder has it).
+    from pearl_pomdp.bags.reader import BagReader
+    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.nodes.bag_replay import recorded_beliefs
+
+    first = recorded_beliefs(BagReader(run["out"] / "demo" / "bag"))[0]
+    assert max(abs(x - y) for x, y in zip(first, load_domain(DOMAIN).compile().b0)) < 1e-12

@@ -144,6 +144,18 @@ class Recorder:
                 self.on_subscribe(topic, type_name)
         return new
 
+    def recording(self, topics: Iterable[str], received: bool = False) -> bool:
+        """Whether every topic in ``topics`` has a subscription matched with at least one
+        publisher (and, with ``received``, has delivered at least one message).
+
+        A run must not start before that: a latched topic of depth 1 (``/pearl/belief``) keeps
+        only its newest message for a reader that joins late, and even a matched reader gets
+        the latched one only some time after the match — if the first step's belief is
+        published in between, b0 never reaches the bag (seen: a demo bag one belief short, one
+        run in three under load). ``received=True`` waits for the latched message itself."""
+        return all((sub := self.subscriptions.get(self._fq(t))) is not None and sub.get_publisher_count() > 0
+                   and (not received or self.counts.get(self._fq(t), 0) > 0) for t in topics)
+
     def _callback(self, topic: str):
         writer, clock, counts = self.writer, self.node.get_clock(), self.counts
 
