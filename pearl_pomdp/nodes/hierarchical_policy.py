@@ -247,7 +247,8 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             self.latencies.append(latency)
             self.decision_pub.publish(cv.decision_to_msg(self.decisions, decision.action_name, decision.trace,
                                                          latency, getattr(decision, "expansions", 0),
-                                                         belief_step=self.gate.step))
+                                                         belief_step=self.gate.step,
+                                                         search=getattr(decision, "search", None)))
             self.decisions += 1
             self.last_decision = decision
         if out.proposal_changed:
