@@ -18,16 +18,40 @@ from typing import Collection, Optional
 
 import numpy as np
 
+from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.interfaces import Decision, TraceStep, forbidden_indices
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.online.beliefs import sample_belief
 from pearl_pomdp.online.despot import Despot, DespotSettings, SearchResult
 from pearl_pomdp.online.generative import Bounds, ExplicitModel, alpha_bounds
 
-__all__ = ["OnlineDecider", "DEFAULT_TRIALS"]
+__all__ = ["OnlineDecider", "DEFAULT_TRIALS", "ONLINE_POLICY", "online_trials"]
+
+#: The policy name that asks for online planning instead of a saved policy (node parameter
+#: ``policy:=online`` or ``online:TRIALS``; ``pearl simulate MODEL online:TRIALS``).
+ONLINE_POLICY = "online"
 
 #: Trials per decision when nothing else is asked (one source for the CLI and the node).
 DEFAULT_TRIALS = 200
+
+
+def online_trials(policy: str, where: str = "policy") -> Optional[int]:
+    """The trial budget ``policy`` asks for when it names online planning, else ``None``.
+
+    ``"online"`` → :data:`DEFAULT_TRIALS`; ``"online:N"`` → ``N``; anything else → ``None`` (a path).
+
+    Raises:
+        PolicyError: ``online:`` followed by something that is not a positive integer (names ``where``).
+    """
+    text = str(policy).strip()
+    if text == ONLINE_POLICY:
+        return DEFAULT_TRIALS
+    if not text.startswith(ONLINE_POLICY + ":"):
+        return None
+    tail = text[len(ONLINE_POLICY) + 1:]
+    if not tail.isdigit() or int(tail) < 1:
+        raise PolicyError(f"{where}: {text!r}: expected online or online:TRIALS with TRIALS a positive integer")
+    return int(tail)
 
 
 class OnlineDecider:

@@ -230,11 +230,15 @@ class RockSampleBounds:
 
     def lower(self, states, rng):
         m = self.model
-        cell, share = self._share(states)
+        return self._tour_value(*self._share(states))
+
+    def _tour_value(self, cell: int, share: np.ndarray) -> float:
+        """The lower bound's value: the open-loop tour's, or driving East at once when that is better."""
+        m = self.model
         mask = int(((share > 0.5).astype(np.int64) << np.arange(m.k)).sum())
         weights, exit_discount = self._tour(cell, mask)
-        east_now = 10.0 * m.discount ** (m.n - 1 - cell % m.n)
-        return float(max(weights @ (20.0 * share - 10.0) + 10.0 * exit_discount, east_now))
+        tour = float(weights @ (20.0 * share - 10.0)) + 10.0 * exit_discount
+        return max(tour, 10.0 * m.discount ** (m.n - 1 - cell % m.n))
 
     def both(self, states, rng) -> Tuple[float, float]:
         """``(lower, upper)`` from one pass over the particles."""
@@ -244,10 +248,7 @@ class RockSampleBounds:
             upper = float(self.mdp_values[states].mean())
         else:
             upper = float(10.0 * share @ self._upper_discounts[cell] + 10.0 * m.discount ** (m.n - 1 - cell % m.n))
-        mask = int(((share > 0.5).astype(np.int64) << np.arange(m.k)).sum())
-        weights, exit_discount = self._tour(cell, mask)
-        east_now = 10.0 * m.discount ** (m.n - 1 - cell % m.n)
-        return float(max(weights @ (20.0 * share - 10.0) + 10.0 * exit_discount, east_now)), upper
+        return self._tour_value(cell, share), upper
 
     def _tour(self, cell: int, mask: int) -> Tuple[np.ndarray, float]:
         """The open-loop tour from ``cell`` over the rocks in ``mask``: per rock the discount of its
