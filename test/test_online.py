@@ -256,3 +256,27 @@ def test_settings_reject_what_cannot_stop():
         DespotSettings(trials=None, time_limit=None)
     with pytest.raises(ValueError, match="xi"):
         DespotSettings(xi=0.0)
+
+
+def test_policy_online_wires_the_decider_and_decision_messages_carry_the_search(tiger):
+    """``policy:=online:TRIALS`` loads the online decider; /pearl/decision carries its search record,
+    and ``pearl replay --explain`` prints the search's size and the top of its tree."""
+    import json
+
+    from pearl_pomdp.cli.replay import search_lines
+    from pearl_pomdp.nodes.common import NodeSetupError
+    from pearl_pomdp.nodes.conversions import decision_to_msg
+    from pearl_pomdp.nodes.hierarchical_policy import load_decider
+
+    decider = load_decider(tiger, None, "online:7", "")
+    assert isinstance(decider, OnlineDecider) and decider.settings.trials == 7
+    with pytest.raises(NodeSetupError, match="parameter policy: 'online:0'"):
+        load_decider(tiger, None, "online:0", "")
+    d = decider.execute(tiger.b0)
+    body = json.loads(decision_to_msg(0, d.action_name, d.trace, 0.01, d.expansions, search=d.search).data)
+    search = body["search"]
+    assert search["trials"] == 7 and search["nodes"] >= 7 and search["gap"] == pytest.approx(
+        search["upper"] - search["lower"])
+    assert search["seconds"] > 0 and search["top"]["actions"][0]["action"] == d.action_name
+    text = "\n".join(search_lines(search))
+    assert "7 trials" in text and f"{d.action_name}: [" in text and "o0 " in text
