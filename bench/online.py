@@ -8,7 +8,9 @@ Problems (the models and where each comes from: docs/online.md "Benchmark"):
   exact factored belief and its bounds (MDP upper, open-loop tour lower).
 * ``tag`` — Tag (Pineau, Gordon & Thrun, IJCAI 2003), the explicit file
   ``test/data/pomdp/TagAvoid.pomdp`` (870 states) through :class:`~pearl_pomdp.online.decider.OnlineDecider`:
-  exact belief at the root, FIB upper and blind-policy lower bounds.
+  exact belief at the root, FIB upper and blind-policy lower bounds (``--tag-lower blind``), or
+  the α-vectors of the project's point-based solver run offline for some seconds
+  (``--tag-lower pointbased:30``).
 
 For each problem and each per-step budget (``--budgets``, seconds; the search's wall-clock
 guard at 95 % of it, K = 500 scenarios, D = 90), ``--episodes`` episodes of at most ``--steps`` steps from
@@ -173,12 +175,26 @@ def absorbing_states(model) -> np.ndarray:
         done = closed
 
 
-def run_tag(budget, episodes, steps, seed, max_minutes) -> dict:
+def run_tag(budget, episodes, steps, seed, max_minutes, lower: str = "blind") -> dict:
+    """Tag through OnlineDecider. ``lower``: ``"blind"`` (blind-policy vectors) or
+    ``"pointbased:SECONDS"`` (the α-vectors of the project's point-based solver run that long offline:
+    the issue's "point-based lower" — online search on top of an offline policy)."""
     from pearl_pomdp.online.decider import OnlineDecider
+    from pearl_pomdp.online.generative import alpha_bounds
 
     model = _tag_model()
     t_bounds = time.perf_counter()
-    decider = OnlineDecider(model, settings=DespotSettings(trials=None, time_limit=GUARD_SHARE * budget), seed=seed)
+    if lower == "blind":
+        bounds = alpha_bounds(model)
+    elif lower.startswith("pointbased:"):
+        from pearl_pomdp.solvers.registry import solve
+
+        offline = solve(model, "pointbased", time_limit=float(lower.split(":", 1)[1]), seed=seed)
+        bounds = alpha_bounds(model, lower_alphas=offline.policy.alphas)
+    else:
+        raise SystemExit(f"bench/online.py: error: --tag-lower: {lower!r}: expected blind or pointbased:SECONDS")
+    decider = OnlineDecider(model, bounds=bounds, settings=DespotSettings(trials=None, time_limit=GUARD_SHARE * budget),
+                            seed=seed)
     bound_seconds = time.perf_counter() - t_bounds
     trials, gaps, nodes = [], [], []
 
@@ -193,6 +209,7 @@ def run_tag(budget, episodes, steps, seed, max_minutes) -> dict:
     returns, times, minutes = _simulate_explicit(model, decide, episodes, steps, seed, max_minutes)
     mean, half = _ci(returns)
     return {"states": model.num_states, "actions": model.num_actions, "bounds": decider.bounds.description,
+            "lower_bound_source": lower,
             "bound_setup_seconds": round(bound_seconds, 2), "budget_s": budget, "episodes": len(returns),
             "mean": mean, "ci95": half, **_timing(times, budget), "mean_trials": float(np.mean(trials)),
             "mean_nodes": float(np.mean(nodes)), "mean_root_gap": float(np.mean(gaps)),
@@ -234,6 +251,8 @@ def main(argv=None) -> int:
     ap.add_argument("--max-minutes", type=float, default=15.0, help="per configuration: no new episode after this")
     ap.add_argument("--offline-time", type=float, default=0.0,
                     help="seconds for the offline point-based policy (0: skip)")
+    ap.add_argument("--tag-lower", default="blind",
+                    help="Tag's lower bound: blind, or pointbased:SECONDS (offline α-vectors)")
     ap.add_argument("--json", action="store_true", help="(the output is always one JSON object)")
     args = ap.parse_args(argv)
     problems = [p for p in args.problems.split(",") if p]
@@ -253,7 +272,7 @@ def main(argv=None) -> int:
         out["results"][p] = {}
         for budget in budgets:
             if p == "tag":
-                r = run_tag(budget, args.episodes, args.steps, args.seed, args.max_minutes)
+                r = run_tag(budget, args.episodes, args.steps, args.seed, args.max_minutes, args.tag_lower)
             else:
                 r = run_rocksample(p[2:], budget, args.episodes, args.steps, args.seed, args.max_minutes)
             out["results"][p][f"{budget:g}s"] = r
