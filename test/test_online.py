@@ -280,3 +280,30 @@ def test_policy_online_wires_the_decider_and_decision_messages_carry_the_search(
     assert search["seconds"] > 0 and search["top"]["actions"][0]["action"] == d.action_name
     text = "\n".join(search_lines(search))
     assert "7 trials" in text and f"{d.action_name}: [" in text and "o0 " in text
+
+
+def test_particle_belief_follows_bayes_and_reinvigorates_when_deprived(tiger):
+    """Weighted resampling tracks the exact posterior; when no particle explains the observation
+    (a perfect sensor contradicting every particle) the filter reinvigorates instead of starving."""
+    from pearl_pomdp.belief import BeliefFilter
+    from pearl_pomdp.model.pomdp import Pomdp
+    from pearl_pomdp.online.beliefs import ParticleBelief
+
+    rng = np.random.default_rng(0)
+    g = ExplicitModel(tiger)
+    pf = ParticleBelief(g, np.repeat([0, 1], 2000), reinvigorate=lambda a, o, n, r: np.full(n, o))
+    exact = BeliefFilter(tiger)
+    b = exact.initial()
+    for o in (0, 0, 1):                                      # listen: left, left, right
+        pf.update(0, o, rng)
+        b = exact.update(b, 0, o)
+    assert np.mean(pf.particles == 0) == pytest.approx(b[0], abs=0.03)   # 0.85 after left, left, right
+    assert pf.reinvigorations == 0
+
+    eye = np.eye(2)
+    sensor = Pomdp.create(["a", "b"], ["stay"], ["see-a", "see-b"], [eye], [eye], np.zeros((2, 1)), discount=0.9)
+    deprived = ParticleBelief(ExplicitModel(sensor), np.zeros(100, dtype=np.int64),
+                              reinvigorate=lambda a, o, n, r: np.full(n, o))
+    deprived.update(0, 1, rng)                               # every particle says "a", the sensor sees "b"
+    assert deprived.reinvigorations == 1
+    assert (deprived.particles == 1).all() and deprived.particles.shape == (100,)

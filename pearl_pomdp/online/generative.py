@@ -137,6 +137,10 @@ class ExplicitModel:
     def is_terminal(self, states):
         return np.zeros(np.shape(states), dtype=bool)
 
+    def observation_likelihood(self, next_states, action: int, observation: int) -> np.ndarray:
+        """``O[a, s', o]`` for each of ``next_states`` (what a particle filter weights by)."""
+        return self.model.O[action, np.asarray(next_states, dtype=np.int64), observation]
+
 
 class AlphaBounds:
     """Bounds from α-vectors over the explicit states.
