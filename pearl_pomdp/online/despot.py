@@ -14,7 +14,8 @@ Node values are *totals over the root's K scenarios divided by K*, discounted fr
 (not from the root): a node holding half the scenarios with per-particle value 10 has value 5.
 
 The budget is deterministic: ``trials`` per decision, every random number drawn from a
-generator seeded per decision; ``time_limit`` is only a guard (stop after the trial under way).
+generator seeded per decision; ``time_limit`` is only a guard: no expansion starts that would
+end past it at the pace of the slowest expansion so far (the trial under way stops and backs up).
 """
 from __future__ import annotations
 
@@ -39,7 +40,8 @@ class DespotSettings:
         xi: ``ξ`` in (0, 1]: a trial stops where the gap is below this share of the root's.
         regularization: ``λ`` ≥ 0, the price of a policy node (0: plain anytime DESPOT).
         trials: trials per decision (the deterministic budget); ``None``: until ``time_limit``.
-        time_limit: seconds per decision, a guard checked between trials; ``None``: none.
+        time_limit: seconds per decision, a guard checked before each expansion against the slowest
+            expansion so far; ``None``: none.
         gap_tolerance: stop early once ``U(b0) − L(b0)`` is at most this.
     """
 
@@ -158,6 +160,7 @@ class Despot:
         self._nodes = 1
         self._expansions = 0
         self._deadline = None if st.time_limit is None else t0 + st.time_limit
+        self._slowest = 0.0      # the longest expansion of this search (the guard's look-ahead)
         root = self._leaf(np.asarray(root_states, dtype=np.int64), np.arange(K), 0)
         trials, stop = 0, "trials"
         while True:
@@ -169,7 +172,7 @@ class Despot:
             if st.trials is not None and trials >= st.trials:
                 stop = "trials"
                 break
-            if st.time_limit is not None and time.perf_counter() - t0 >= st.time_limit:
+            if self._deadline is not None and time.perf_counter() + self._slowest >= self._deadline:
                 stop = "time_limit"
                 break
         assert root.actions is not None   # the first trial expands the root
@@ -238,10 +241,13 @@ class Despot:
         node = root
         root_gap = root.upper - root.lower
         while node.depth < self.settings.depth and not node.terminal:
-            if node is not root and self._deadline is not None and time.perf_counter() >= self._deadline:
-                break   # the wall-clock guard: back up what this trial found, then stop
             if node.actions is None:
+                if (node is not root and self._deadline is not None
+                        and time.perf_counter() + self._slowest >= self._deadline):
+                    break   # the wall-clock guard: back up what this trial found, then stop
+                started = time.perf_counter()
                 self._expand(node)
+                self._slowest = max(self._slowest, time.perf_counter() - started)
             elif node is not root and self._excess(node, root_gap) <= 0:
                 break
             assert node.actions is not None
