@@ -183,7 +183,7 @@ def test_despot_tiger_return_is_near_the_optimum(tiger):
     from pearl_pomdp.solvers.registry import solve
 
     exact = solve(tiger, "pointbased", epsilon=1e-4, time_limit=30)
-    decider = OnlineDecider(tiger, settings=DespotSettings(trials=10, scenarios=100, depth=10))
+    decider = OnlineDecider(tiger, settings=DespotSettings(trials=5, scenarios=100, depth=8))
     world, filt = ExplicitModel(tiger), BeliefFilter(tiger)
 
     def run(choose, episodes=20, steps=20):
