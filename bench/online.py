@@ -56,6 +56,7 @@ PUBLISHED = {
     "note": "the table's numbers could not be read from the sources reachable here (the search tools return "
             "only the first page of the paper's stored copies); they are left null rather than quoted from "
             "memory: fill them in from the paper before judging the acceptance criterion",
+    # (mean, 95 % CI half width) per planner, once read from the paper; None: not available here.
     "figures": {p: {"DESPOT": None, "POMCP": None} for p in ("rs7_8", "rs11_11", "rs15_15", "tag")},
 }
 
@@ -241,6 +242,25 @@ def run_offline(problem, time_limit, episodes, steps, seed) -> dict:
             "solve_seconds": round(res.seconds, 1), "episodes": len(returns), "mean": mean, "ci95": half}
 
 
+def acceptance(results: dict) -> dict:
+    """Issue 24's criterion where this run has the numbers: RockSample(11,11) and (15,15) at 1 s
+    within the published DESPOT figure's 95 % CI or above it, and every p99 within budget + 10 %.
+    A published figure that is ``null`` gives the verdict ``None`` (not judged), never a pass."""
+    out: dict = {"p99_within_budget_plus_10pct": {f"{p} {b}": r["p99_within_budget_plus_10pct"]
+                                                  for p, rs in results.items() for b, r in rs.items()}}
+    for p in ("rs11_11", "rs15_15"):
+        r = results.get(p, {}).get("1s")
+        if r is None:
+            continue
+        published = PUBLISHED["figures"][p]["DESPOT"]
+        verdict = None
+        if published is not None:
+            verdict = bool(r["mean"] >= published[0] - published[1])   # our mean in their CI or above
+        out[f"{p} 1s vs DESPOT"] = {"ours": [r["mean"], r["ci95"]], "published": published,
+                                    "within_or_above": verdict}
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--problems", default=",".join(PROBLEMS), help=f"comma-separated: {', '.join(PROBLEMS)}")
@@ -280,6 +300,7 @@ def main(argv=None) -> int:
                   f"p99 {r['decision_s_p99']:.3f} s", file=sys.stderr, flush=True)
         if args.offline_time > 0 and p in ("rs7_8", "tag"):
             out["offline"][p] = run_offline(p, args.offline_time, args.episodes, args.steps, args.seed)
+    out["acceptance"] = acceptance(out["results"])
     out["wall_minutes"] = round((time.perf_counter() - t_all) / 60.0, 2)
     out["machine"]["load_avg_1min_at_end"] = os.getloadavg()[0]
     print(json.dumps(out, indent=1))
