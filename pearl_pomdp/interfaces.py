@@ -52,13 +52,17 @@ class Decision:
     trace: List[TraceStep] = field(default_factory=list)
     #: Beliefs a forward search expanded for this decision (0: none beyond the one step).
     expansions: int = 0
+    #: An online search's record (:class:`~pearl_pomdp.online.decider.OnlineDecider`): its size
+    #: (trials, nodes), the bounds and gap at the root, its seconds and the top of its tree; ``None``
+    #: for offline policies.
+    search: Optional[dict] = None
 
     def as_dict(self) -> dict:
         """JSON-ready form (``value`` NaN becomes ``None``)."""
         return {"action": self.action, "action_name": self.action_name,
                 "trace": [{"subtask": t.subtask, "choice": t.choice,
                            "value": None if math.isnan(t.value) else t.value} for t in self.trace],
-                "expansions": self.expansions}
+                "expansions": self.expansions, **({"search": self.search} if self.search is not None else {})}
 
 
 @runtime_checkable

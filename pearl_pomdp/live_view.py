@@ -64,6 +64,7 @@ _DECISION_SCHEMA = {
     "properties": {
         "step": {"type": "integer"}, "action": {"type": "string"}, "latency_s": {"type": "number"},
         "expansions": {"type": "integer"},
+        "search": {"type": "object"},   # an online policy's search record (docs/online.md)
         "trace": {"type": "array", "items": {"type": "object", "properties": {
             "subtask": {"type": "string"}, "choice": {"type": "string"}, "value": {"type": "number"}}}},
     },

@@ -83,6 +83,21 @@ def _trace_text(trace) -> str:
     return "  ".join(parts)
 
 
+def search_lines(search) -> list:
+    """An online decision's search, for --explain: its size, the root's bounds, and the top of the
+    tree (the best actions by lower bound with their observation branches)."""
+    if not search:
+        return []
+    lines = [f"        search: {search.get('trials')} trials, {search.get('nodes')} nodes, root "
+             f"[{search.get('lower', 0.0):.2f}, {search.get('upper', 0.0):.2f}] gap {search.get('gap', 0.0):.2f}, "
+             f"{search.get('seconds', 0.0) * 1e3:.0f} ms, stopped by {search.get('stop')}"]
+    for a in (search.get("top") or {}).get("actions", []):
+        branches = ", ".join(f"o{c['observation']} {c['share']:.0%} [{c['lower']:.2f}, {c['upper']:.2f}]"
+                             for c in a.get("children", []))
+        lines.append(f"          {a['action']}: [{a['lower']:.2f}, {a['upper']:.2f}]  {branches}")
+    return lines
+
+
 def _operator_lines(step) -> list:
     """The operator's events at this step's belief (veto, waiting, yes/no, command, level), one line each."""
     return [f"        operator: {e['event']} {e['action']}" + (f" ({e['detail']})" if e.get("detail") else "")
@@ -96,6 +111,7 @@ def format_explanation(steps, divergence) -> str:
         d = s["decision"]
         if s["closed_by"] is None:
             lines.append(f"  [b0] → {d['action']}   {_trace_text(d['trace'])}")
+            lines.extend(search_lines(d.get("search")))
             lines.extend(_operator_lines(s))
             continue
         c = s["closed_by"]
@@ -108,6 +124,7 @@ def format_explanation(steps, divergence) -> str:
         lines.append(f"  [{s['step']:>3}] {s['time']:8.1f} s  after {s['action']}: {heard}")
         lines.append(f"        belief {belief}")
         lines.append(f"        → {d['action']}   {_trace_text(d['trace'])}")
+        lines.extend(search_lines(d.get("search")))
         lines.extend(_operator_lines(s))
     if divergence:
         lines.append(f"first divergence at action {divergence['action_index']}: replayed {divergence['replayed']}, "

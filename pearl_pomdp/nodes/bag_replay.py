@@ -251,6 +251,15 @@ def _top_marginals(marginals: Dict[str, Dict[str, float]]) -> Dict[str, List[Any
     return out
 
 
+def _decision_record(d: Dict[str, Any]) -> Dict[str, Any]:
+    """What --explain keeps of one /pearl/decision: the action, the trace and, for an online
+    search, its record (size, root bounds and gap, seconds, the top of the tree)."""
+    out = {"action": d.get("action"), "trace": d.get("trace", [])}
+    if d.get("search") is not None:
+        out["search"] = d["search"]
+    return out
+
+
 def explain_steps(history, decisions: List[Dict[str, Any]], marginals_of,
                   operator_events: Optional[List[Dict[str, Any]]] = None) -> List[Dict[str, Any]]:
     """Why each action was taken: per closed step, what closed it, the belief after, and the
@@ -278,7 +287,7 @@ def explain_steps(history, decisions: List[Dict[str, Any]], marginals_of,
     if decisions:
         d0 = by_step.get(0, {})
         steps.append({"step": 0, "closed_by": None, "belief": None,
-                      "decision": {"action": d0.get("action"), "trace": d0.get("trace", [])},
+                      "decision": _decision_record(d0),
                       "operator": events.get(0, [])})
     for k, r in enumerate(history, start=1):
         d = by_step.get(k, {})
@@ -287,7 +296,7 @@ def explain_steps(history, decisions: List[Dict[str, Any]], marginals_of,
             "closed_by": {"input": r.source, "text": r.text, "symbol": r.observation,
                           "confidence": r.confidence, "zero_likelihood": r.zero_likelihood},
             "belief": _top_marginals(marginals_of(r.belief)),
-            "decision": {"action": d.get("action"), "trace": d.get("trace", [])},
+            "decision": _decision_record(d),
             "operator": events.get(k, []),
         })
     return steps

@@ -164,7 +164,7 @@ def msg_to_action(msg: String) -> str:
 
 
 def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: float, expansions: int = 0,
-                    belief_step: Optional[int] = None) -> String:
+                    belief_step: Optional[int] = None, search: Optional[dict] = None) -> String:
     """The EXECUTE trace as JSON on a String (root → … → primitive).
 
     Args:
@@ -183,6 +183,8 @@ def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: flo
             "expansions": int(expansions)}
     if belief_step is not None:
         body["belief_step"] = int(belief_step)
+    if search is not None:
+        body["search"] = search
     return String(data=json.dumps(body, separators=(",", ":")))
 
 

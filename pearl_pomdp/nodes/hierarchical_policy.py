@@ -20,7 +20,7 @@ from typing import Any, Deque, List, Optional
 import numpy as np
 from rclpy.parameter import Parameter
 
-from pearl_pomdp.errors import BeliefError
+from pearl_pomdp.errors import BeliefError, PolicyError
 from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Param,
                                       load_domain_and_model, resolve_path, run_node)
@@ -40,12 +40,26 @@ def load_decider(model, domain, policy: str, hierarchy: str, logger=None):
     * ``policy`` a directory: a saved hierarchical policy (``pearl plan --out DIR``).
     * ``policy`` a file: a flat α-vector policy (``.npz`` + ``.json``), wrapped in
       :class:`pearl_pomdp.executive.FlatPolicyDecider`.
+    * ``policy`` ``online`` or ``online:TRIALS``: plan online at every belief
+      (:class:`pearl_pomdp.online.decider.OnlineDecider`: DESPOT from the exact belief, FIB and
+      blind-policy bounds, ``TRIALS`` trials per decision).
     * ``policy`` empty: PLAN now from ``domain`` and the ``hierarchy`` file.
 
     Raises:
         NodeSetupError: nothing to load, or a file is missing.
     """
     if policy:
+        from pearl_pomdp.online.decider import online_trials
+
+        try:
+            trials = online_trials(policy, "parameter policy")
+        except PolicyError as err:
+            raise NodeSetupError(str(err)) from None
+        if trials is not None:
+            from pearl_pomdp.online.decider import OnlineDecider
+            from pearl_pomdp.online.despot import DespotSettings
+
+            return OnlineDecider(model, settings=DespotSettings(trials=trials))
         path = resolve_path(policy, "policy", kind="policy file or directory")
         if path.is_dir():
             from pearl_pomdp.hierarchy import load_hierarchical_policy
@@ -130,7 +144,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         Param("hierarchy", "config/pearl.hierarchy.yaml", "Action hierarchy (.yaml); planned at start-up "
                                                          "when policy is empty"),
         Param("policy", "", "Planned policy: directory from `pearl plan --out DIR`, or flat .npz; "
-                            "empty: plan at start-up"),
+                            "online or online:TRIALS: plan online (DESPOT) at every belief; empty: plan at start-up"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
         Param("belief_topic", "/pearl/belief", "Belief input (std_msgs/Float64MultiArray)"),
         Param("action_topic", "/pearl/action", "Primitive action output (std_msgs/String)"),
@@ -247,7 +261,8 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             self.latencies.append(latency)
             self.decision_pub.publish(cv.decision_to_msg(self.decisions, decision.action_name, decision.trace,
                                                          latency, getattr(decision, "expansions", 0),
-                                                         belief_step=self.gate.step))
+                                                         belief_step=self.gate.step,
+                                                         search=getattr(decision, "search", None)))
             self.decisions += 1
             self.last_decision = decision
         if out.proposal_changed:

@@ -1,0 +1,282 @@
+"""Anytime DESPOT (Ye, Somani, Hsu & Lee, *DESPOT: Online POMDP Planning with Regularization*,
+JAIR 58, 2017; Somani et al., NIPS 2013), over a :class:`~pearl_pomdp.online.generative.GenerativeModel`.
+
+A decision samples ``K`` scenarios — a start state from the root belief and a stream of uniforms
+per depth — and grows a sparse belief tree in which every node holds the scenarios consistent
+with its action-observation history. A *trial* walks from the root down the action with the
+highest upper bound and the observation child with the largest *excess uncertainty*
+``E(b) = γ^d (U(b) - L(b)) - ξ |Φ_b|/K (U(b0) - L(b0))`` (Alg. 3 of the JAIR paper), expands
+leaves (every action, every observation the scenarios produce), and backs the bounds up:
+``L(b,a) = Σ_φ r_φ/K − λ γ^{-d} + γ Σ_o L(b')``, ``L(b) = max(L₀(b), max_a L(b,a))``,
+``U(b) = min(U₀(b), max_a U(b,a))``. The decision is the root action with the best lower bound.
+
+Node values are *totals over the root's K scenarios divided by K*, discounted from the node
+(not from the root): a node holding half the scenarios with per-particle value 10 has value 5.
+
+The budget is deterministic: ``trials`` per decision, every random number drawn from a
+generator seeded per decision; ``time_limit`` is only a guard: no expansion starts that would
+end past it at the pace of the slowest expansion so far (the trial under way stops and backs up).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from pearl_pomdp.online.generative import Bounds, GenerativeModel
+
+__all__ = ["DespotSettings", "Despot", "SearchResult"]
+
+
+@dataclass(frozen=True)
+class DespotSettings:
+    """The search's parameters (defaults: the JAIR paper's K = 500, D = 90, ξ = 0.95, λ = 0).
+
+    Attributes:
+        scenarios: ``K``, scenarios sampled at the root.
+        depth: ``D``, the deepest node a trial expands.
+        xi: ``ξ`` in (0, 1]: a trial stops where the gap is below this share of the root's.
+        regularization: ``λ`` ≥ 0, the price of a policy node (0: plain anytime DESPOT).
+        trials: trials per decision (the deterministic budget); ``None``: until ``time_limit``.
+        time_limit: seconds per decision, a guard checked before each expansion against the slowest
+            expansion so far; ``None``: none.
+        gap_tolerance: stop early once ``U(b0) − L(b0)`` is at most this.
+    """
+
+    scenarios: int = 500
+    depth: int = 90
+    xi: float = 0.95
+    regularization: float = 0.0
+    trials: Optional[int] = 1000
+    time_limit: Optional[float] = None
+    gap_tolerance: float = 1e-6
+
+    def __post_init__(self):
+        if self.scenarios < 1:
+            raise ValueError(f"scenarios: {self.scenarios} is not a positive count")
+        if self.depth < 1:
+            raise ValueError(f"depth: {self.depth} is not a positive count")
+        if not 0.0 < self.xi <= 1.0:
+            raise ValueError(f"xi: {self.xi} is not in (0, 1]")
+        if self.regularization < 0:
+            raise ValueError(f"regularization: {self.regularization} is negative")
+        if self.trials is None and self.time_limit is None:
+            raise ValueError("trials and time_limit are both unset: the search would never stop")
+        if self.trials is not None and self.trials < 1:
+            raise ValueError(f"trials: {self.trials} is not a positive count")
+        if self.time_limit is not None and not self.time_limit > 0:
+            raise ValueError(f"time_limit: {self.time_limit} is not a positive number of seconds")
+
+
+class _Belief:
+    """A DESPOT belief node: the scenarios that reach it and their states."""
+
+    __slots__ = ("states", "scenarios", "depth", "lower", "upper", "lower0", "upper0", "actions", "terminal")
+
+    def __init__(self, states, scenarios, depth):
+        self.states = states
+        self.scenarios = scenarios
+        self.depth = depth
+        self.actions: Optional[List["_Action"]] = None
+        self.lower = self.upper = self.lower0 = self.upper0 = 0.0
+        self.terminal = False
+
+
+class _Action:
+    __slots__ = ("reward", "children", "lower", "upper")
+
+    def __init__(self, reward: float, children: Dict[int, _Belief]):
+        self.reward = reward
+        self.children = children
+        self.lower = self.upper = 0.0
+
+
+@dataclass
+class SearchResult:
+    """One decision's outcome and the size of the search behind it.
+
+    Attributes:
+        action: the chosen action index (best lower bound at the root).
+        lower, upper: the root's bounds after the search (``gap = upper − lower``).
+        trials: trials run; ``nodes``: belief nodes in the tree; ``expansions``: nodes expanded.
+        seconds: wall-clock time of the search.
+        stop: why it stopped: ``"trials"``, ``"time_limit"`` or ``"gap"``.
+        action_bounds: per root action ``(lower, upper)``.
+        top: the top of the tree (see :meth:`Despot.tree_top`).
+    """
+
+    action: int
+    lower: float
+    upper: float
+    trials: int
+    nodes: int
+    expansions: int
+    seconds: float
+    stop: str
+    action_bounds: List[tuple]
+    top: dict
+
+    @property
+    def gap(self) -> float:
+        return self.upper - self.lower
+
+    def as_dict(self) -> dict:
+        return {"action": self.action, "lower": self.lower, "upper": self.upper, "gap": self.gap,
+                "trials": self.trials, "nodes": self.nodes, "expansions": self.expansions,
+                "seconds": self.seconds, "stop": self.stop}
+
+
+class Despot:
+    """The anytime DESPOT search (see the module doc).
+
+    Args:
+        model: the generative model.
+        bounds: the heuristics (:class:`~pearl_pomdp.online.generative.Bounds`).
+        settings: :class:`DespotSettings`.
+    """
+
+    def __init__(self, model: GenerativeModel, bounds: Bounds, settings: DespotSettings = DespotSettings()):
+        self.model = model
+        self.bounds = bounds
+        self.settings = settings
+        self._powers = model.discount ** np.arange(settings.depth + 2)
+
+    # ------------------------------------------------------------------ search
+    def search(self, root_states: np.ndarray, seed: int) -> SearchResult:
+        """Plan from the particles ``root_states`` (``[K]`` states: the sampled scenarios' starts).
+
+        Everything random comes from ``numpy.random.default_rng(seed)``: the same seed and
+        particles give the same tree and the same action (with ``trials`` as the budget).
+        """
+        st = self.settings
+        t0 = time.perf_counter()
+        rng = np.random.default_rng(seed)
+        K = int(root_states.shape[0])
+        self._K = K
+        self._rng = rng
+        self._uniforms = rng.random((K, st.depth + 1, self.model.uniforms_per_step))
+        self._nodes = 1
+        self._expansions = 0
+        self._deadline = None if st.time_limit is None else t0 + st.time_limit
+        self._slowest = 0.0      # the longest expansion of this search (the guard's look-ahead)
+        root = self._leaf(np.asarray(root_states, dtype=np.int64), np.arange(K), 0)
+        trials, stop = 0, "trials"
+        while True:
+            self._trial(root)
+            trials += 1
+            if root.upper - root.lower <= st.gap_tolerance:
+                stop = "gap"
+                break
+            if st.trials is not None and trials >= st.trials:
+                stop = "trials"
+                break
+            if self._deadline is not None and time.perf_counter() + self._slowest >= self._deadline:
+                stop = "time_limit"
+                break
+        assert root.actions is not None   # the first trial expands the root
+        lows = [an.lower for an in root.actions]
+        action = int(np.argmax(lows))
+        return SearchResult(action, root.lower, root.upper, trials, self._nodes, self._expansions,
+                            time.perf_counter() - t0, stop, [(an.lower, an.upper) for an in root.actions],
+                            self.tree_top(root))
+
+    def _leaf(self, states, scenarios, depth) -> _Belief:
+        node = _Belief(states, scenarios, depth)
+        live = ~self.model.is_terminal(states)
+        n_live = int(live.sum())
+        if n_live == 0:
+            node.terminal = True
+            return node   # all bounds 0
+        share = n_live / self._K
+        s_live = states if n_live == states.shape[0] else states[live]
+        both = getattr(self.bounds, "both", None)   # one pass for both bounds, when the bounds offer it
+        lower, upper = (both(s_live, self._rng) if both is not None
+                        else (self.bounds.lower(s_live, self._rng), self.bounds.upper(s_live)))
+        node.lower0 = node.lower = share * lower
+        node.upper0 = node.upper = max(share * upper, node.lower)
+        return node
+
+    def _expand(self, node: _Belief) -> None:
+        self._expansions += 1
+        K = self._K
+        u = self._uniforms[node.scenarios, node.depth]
+        actions = []
+        for a in range(len(self.model.actions)):
+            nxt, obs, rew = self.model.step(node.states, a, u)
+            children: Dict[int, _Belief] = {}
+            if obs.shape[0] and (obs == obs[0]).all():
+                children[int(obs[0])] = self._leaf(nxt, node.scenarios, node.depth + 1)
+            else:
+                order = np.argsort(obs, kind="stable")
+                sorted_obs = obs[order]
+                cuts = np.flatnonzero(np.diff(sorted_obs)) + 1
+                for idx in np.split(order, cuts):
+                    children[int(obs[idx[0]])] = self._leaf(nxt[idx], node.scenarios[idx], node.depth + 1)
+            self._nodes += len(children)
+            an = _Action(float(rew.sum()) / K, children)
+            self._backup_action(an, node.depth)
+            actions.append(an)
+        node.actions = actions
+        self._backup_belief(node)
+
+    def _backup_action(self, an: _Action, depth: int) -> None:
+        g = self.model.discount
+        penalty = self.settings.regularization / self._powers[min(depth, len(self._powers) - 1)]
+        an.lower = an.reward - penalty + g * sum(c.lower for c in an.children.values())
+        an.upper = an.reward - penalty + g * sum(c.upper for c in an.children.values())
+
+    def _backup_belief(self, node: _Belief) -> None:
+        assert node.actions is not None
+        node.lower = max(node.lower0, max(an.lower for an in node.actions))
+        node.upper = max(min(node.upper0, max(an.upper for an in node.actions)), node.lower)
+
+    def _excess(self, node: _Belief, root_gap: float) -> float:
+        return (self._powers[node.depth] * (node.upper - node.lower)
+                - self.settings.xi * node.scenarios.shape[0] / self._K * root_gap)
+
+    def _trial(self, root: _Belief) -> None:
+        path = [root]
+        node = root
+        root_gap = root.upper - root.lower
+        while node.depth < self.settings.depth and not node.terminal:
+            if node.actions is None:
+                if (node is not root and self._deadline is not None
+                        and time.perf_counter() + self._slowest >= self._deadline):
+                    break   # the wall-clock guard: back up what this trial found, then stop
+                started = time.perf_counter()
+                self._expand(node)
+                self._slowest = max(self._slowest, time.perf_counter() - started)
+            elif node is not root and self._excess(node, root_gap) <= 0:
+                break
+            assert node.actions is not None
+            best = max(node.actions, key=lambda an: an.upper)
+            child = max(best.children.values(), key=lambda c: self._excess(c, root_gap))
+            if self._excess(child, root_gap) <= 0:
+                break
+            node = child
+            path.append(node)
+        for n in reversed(path):
+            if n.actions is not None:
+                for an in n.actions:
+                    self._backup_action(an, n.depth)
+                self._backup_belief(n)
+
+    # ------------------------------------------------------------------ report
+    def tree_top(self, root: _Belief, width: int = 3) -> dict:
+        """The root and, for its best few actions, their observation children (bounds, scenarios)."""
+        K = self._K
+        out: dict = {"lower": root.lower, "upper": root.upper, "scenarios": int(root.scenarios.shape[0]),
+                     "actions": []}
+        if root.actions is None:
+            return out
+        ranked = sorted(range(len(root.actions)), key=lambda a: -root.actions[a].lower)  # type: ignore[index]
+        for a in ranked[:width]:
+            an = root.actions[a]
+            out["actions"].append({
+                "action": self.model.actions[a], "lower": an.lower, "upper": an.upper, "reward": an.reward,
+                "children": [{"observation": int(o), "share": c.scenarios.shape[0] / K, "lower": c.lower,
+                              "upper": c.upper, "expanded": c.actions is not None}
+                             for o, c in sorted(an.children.items())]})
+        return out

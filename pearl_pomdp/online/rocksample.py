@@ -1,0 +1,329 @@
+"""RockSample (Smith & Simmons, *Heuristic Search Value Iteration for POMDPs*, UAI 2004) as a
+generative model, with its exact factored belief and its bounds.
+
+The terms are those of the project's generated ``test/data/pomdp/RockSample_*.pomdp`` files
+(test/data/pomdp/README.md), so the generative model and the explicit file agree state by state:
+
+* an ``n × n`` grid (x grows East, y North), ``k`` rocks at fixed cells; a state is the rover's
+  cell and the good/bad bit of each rock, ``state = (y·n + x)·2^k + bits`` (rock ``i`` is bit ``i``),
+  plus one absorbing exit state ``n²·2^k``: 247,808 states for (11,11), 7,372,800 for (15,15);
+* actions ``N S E W Sample Check_1 … Check_k``; observations ``good bad`` (actions other than a
+  check observe ``good``); γ = 0.95;
+* moving East off the grid: +10 and exit; sampling a good rock: +10 and it turns bad; a bad
+  rock: −10; an illegal move (off the N, S or W edge) or ``Sample`` off a rock: −100 and exit;
+* ``Check_i`` reports rock ``i`` correctly with probability ``(1 + η)/2``, ``η = 2^(−d/d₀)``,
+  ``d`` the Euclidean distance from the rover to the rock;
+* start: the rover at the start cell, each rock good with probability ½ independently.
+
+Layouts (:data:`LAYOUTS`): (7,8) and (11,11) are the standard ones (HSVI/ZMDP, SARSOP and the
+DESPOT code's ``Init_7_8``/``Init_11_11`` agree); (4,4) is HSVI's with ``η = e^(−d)``. DESPOT
+places the rocks of (15,15) at random (its ``InitGeneral``), so there is no standard layout:
+:data:`LAYOUTS` holds one drawn with ``numpy.random.default_rng(15)`` (written out so
+it never changes) with the rover starting at ``(0, n//2)`` as DESPOT's does.
+"""
+from __future__ import annotations
+
+import math
+from typing import Dict, List, Sequence, Tuple
+
+import numpy as np
+
+__all__ = ["RockSample", "RockBelief", "RockSampleBounds", "LAYOUTS", "rocksample"]
+
+#: name → (n, start (x, y), rocks [(x, y), …], d₀).
+LAYOUTS: Dict[str, Tuple[int, Tuple[int, int], List[Tuple[int, int]], float]] = {
+    "4_4": (4, (0, 2), [(3, 1), (2, 1), (1, 3), (1, 0)], math.log(2.0)),
+    "7_8": (7, (0, 3), [(2, 0), (0, 1), (3, 1), (6, 3), (2, 4), (3, 4), (5, 5), (1, 6)], 20.0),
+    "11_11": (11, (0, 5), [(0, 3), (0, 7), (1, 8), (2, 4), (3, 3), (3, 8), (4, 3), (5, 8), (6, 1), (9, 3), (9, 9)],
+              20.0),
+    # Drawn once: cells = numpy.random.default_rng(15).choice(225, size=15, replace=False), cell c at
+    # (c % 15, c // 15); written out so the instance never changes with numpy.
+    "15_15": (15, (0, 7), [(13, 2), (11, 9), (2, 2), (6, 3), (11, 10), (7, 6), (8, 14), (1, 13), (9, 0), (0, 10),
+                           (3, 14), (9, 11), (14, 6), (5, 8), (14, 4)], 20.0),
+}
+
+N, S, E, W, SAMPLE = 0, 1, 2, 3, 4
+GOOD, BAD = 0, 1
+
+
+class RockSample:
+    """RockSample(n, k) as a :class:`~pearl_pomdp.online.generative.GenerativeModel` (module doc)."""
+
+    uniforms_per_step = 1
+
+    def __init__(self, n: int, start: Tuple[int, int], rocks: Sequence[Tuple[int, int]],
+                 half_efficiency_distance: float = 20.0, discount: float = 0.95, name: str = ""):
+        self.n = int(n)
+        self.k = len(rocks)
+        self.start = (int(start[0]), int(start[1]))
+        self.rocks = [(int(x), int(y)) for x, y in rocks]
+        if len(set(self.rocks)) != self.k:
+            raise ValueError("rocks: two rocks share a cell")
+        self.d0 = float(half_efficiency_distance)
+        self.discount = float(discount)
+        self.name = name or f"RockSample({self.n},{self.k})"
+        self.actions = ["N", "S", "E", "W", "Sample"] + [f"Check_{i + 1}" for i in range(self.k)]
+        self.observations = ["good", "bad"]
+        self.num_states = self.n * self.n * (1 << self.k) + 1
+        self.exit_state = self.num_states - 1
+        cells = self.n * self.n
+        self.rock_at = np.full(cells, -1, dtype=np.int64)
+        for i, (x, y) in enumerate(self.rocks):
+            self.rock_at[y * self.n + x] = i
+        xs, ys = np.arange(cells) % self.n, np.arange(cells) // self.n
+        rx = np.array([x for x, _ in self.rocks], dtype=float)
+        ry = np.array([y for _, y in self.rocks], dtype=float)
+        dist = np.hypot(xs[:, None] - rx[None, :], ys[:, None] - ry[None, :])      # [cells, k]
+        #: P(check reports the truth) per cell and rock.
+        self.accuracy = 0.5 * (1.0 + np.power(2.0, -dist / self.d0))
+        #: Manhattan distance per cell and rock (the bounds').
+        self.manhattan = (np.abs(xs[:, None] - rx[None, :]) + np.abs(ys[:, None] - ry[None, :])).astype(np.int64)
+
+    # --------------------------------------------------------------- encoding
+    def encode(self, x: int, y: int, bits: int) -> int:
+        return (y * self.n + x) * (1 << self.k) + bits
+
+    def decode(self, state: int) -> Tuple[int, int, int]:
+        """``(x, y, bits)``; raises ValueError for the exit state."""
+        if state == self.exit_state:
+            raise ValueError("the exit state has no cell")
+        cell, bits = divmod(int(state), 1 << self.k)
+        return cell % self.n, cell // self.n, bits
+
+    def is_terminal(self, states):
+        return np.asarray(states) == self.exit_state
+
+    # ------------------------------------------------------------------- step
+    def step(self, states, action, uniforms):
+        s = np.asarray(states, dtype=np.int64)
+        k, n = self.k, self.n
+        done = s == self.exit_state
+        cell = np.where(done, 0, s >> k)
+        bits = s & ((1 << k) - 1)
+        x, y = cell % n, cell // n
+        reward = np.zeros(s.shape[0])
+        obs = np.full(s.shape[0], GOOD, dtype=np.int64)
+        nxt = s.copy()
+        exit_now = np.zeros(s.shape[0], dtype=bool)
+        if action in (N, S, E, W):
+            dx, dy = {N: (0, 1), S: (0, -1), E: (1, 0), W: (-1, 0)}[action]
+            x2, y2 = x + dx, y + dy
+            east_exit = x2 >= n
+            illegal = (x2 < 0) | (y2 < 0) | (y2 >= n)
+            reward = np.where(east_exit, 10.0, np.where(illegal, -100.0, 0.0))
+            exit_now = east_exit | illegal
+            nxt = np.where(exit_now, self.exit_state, ((y2 * n + x2) << k) + bits)
+        elif action == SAMPLE:
+            rock = self.rock_at[cell]
+            on_rock = rock >= 0
+            r_idx = np.maximum(rock, 0)
+            good = ((bits >> r_idx) & 1).astype(bool) & on_rock
+            reward = np.where(on_rock, np.where(good, 10.0, -10.0), -100.0)
+            exit_now = ~on_rock
+            cleared = bits & ~(np.int64(1) << r_idx)
+            nxt = np.where(exit_now, self.exit_state, (cell << k) + np.where(on_rock, cleared, bits))
+        else:
+            i = action - 5
+            if not 0 <= i < k:
+                raise ValueError(f"action {action} is not an action of {self.name}")
+            truth_good = ((bits >> i) & 1).astype(bool)
+            correct = uniforms[:, 0] < self.accuracy[cell, i]
+            obs = np.where(truth_good == correct, GOOD, BAD).astype(np.int64)
+        nxt = np.where(done, self.exit_state, nxt)
+        reward = np.where(done, 0.0, reward)
+        obs = np.where(done, GOOD, obs)
+        return nxt.astype(np.int64), obs, reward
+
+    def initial_belief(self) -> "RockBelief":
+        return RockBelief(self)
+
+
+class RockBelief:
+    """RockSample's exact belief: the rover's cell (known), whether it has exited, and
+    ``P(rock i good)`` per rock. Exact because the rocks are independent at the start and every
+    observation informs one rock only; it cannot run out of particles.
+    """
+
+    def __init__(self, model: RockSample):
+        self.model = model
+        self.x, self.y = model.start
+        self.exited = False
+        self.p_good = np.full(model.k, 0.5)
+
+    def sample(self, count: int, rng: np.random.Generator) -> np.ndarray:
+        """``count`` states drawn from the belief."""
+        m = self.model
+        if self.exited:
+            return np.full(count, m.exit_state, dtype=np.int64)
+        good = rng.random((count, m.k)) < self.p_good[None, :]
+        bits = (good.astype(np.int64) << np.arange(m.k, dtype=np.int64)[None, :]).sum(axis=1)
+        return m.encode(self.x, self.y, 0) + bits
+
+    def update(self, action: int, observation: int) -> None:
+        """Bayes' rule after ``action`` and ``observation`` (moves are deterministic)."""
+        m = self.model
+        if self.exited:
+            return
+        if action in (N, S, E, W):
+            dx, dy = {N: (0, 1), S: (0, -1), E: (1, 0), W: (-1, 0)}[action]
+            x2, y2 = self.x + dx, self.y + dy
+            if not (0 <= x2 < m.n and 0 <= y2 < m.n):
+                self.exited = True
+                return
+            self.x, self.y = x2, y2
+        elif action == SAMPLE:
+            rock = int(m.rock_at[self.y * m.n + self.x])
+            if rock < 0:
+                self.exited = True
+                return
+            self.p_good[rock] = 0.0
+        else:
+            i = action - 5
+            acc = float(m.accuracy[self.y * m.n + self.x, i])
+            like_good = acc if observation == GOOD else 1.0 - acc
+            like_bad = 1.0 - acc if observation == GOOD else acc
+            p = self.p_good[i]
+            self.p_good[i] = p * like_good / (p * like_good + (1.0 - p) * like_bad)
+
+
+class RockSampleBounds:
+    """RockSample's bounds on a particle set (all at the rover's one cell).
+
+    * upper (``"mdp"``, the default): the value of the fully observed MDP (:func:`mdp_upper_values`)
+      at each particle, averaged — DESPOT's default for RockSample too. ``"distance"``: every good
+      rock collected at its own Manhattan distance and the exit at its own distance,
+      ``Σ_{good i} 10 γ^{d_i} + 10 γ^{n−1−x}`` — no policy reaches a rock sooner; averaged.
+    * lower: an open-loop plan the whole set follows (so it sees only the history): visit, nearest
+      first, the rocks that more than half the particles call good, sample each, then drive East
+      to the exit; its exact discounted value on every particle, averaged — or, when better,
+      driving East at once.
+    """
+
+    def __init__(self, model: RockSample, upper: str = "mdp"):
+        self.model = model
+        if upper not in ("mdp", "distance"):
+            raise ValueError(f"upper bound {upper!r}: expected 'mdp' or 'distance'")
+        #: The MDP value per state (``upper="mdp"``), else ``None``.
+        self.mdp_values = mdp_upper_values(model).reshape(-1) if upper == "mdp" else None
+        self._tours: Dict[Tuple[int, int], Tuple[np.ndarray, float]] = {}
+        #: γ^(Manhattan distance) per cell and rock.
+        self._upper_discounts = model.discount ** model.manhattan
+        self._shifts = np.arange(model.k, dtype=np.int64)[None, :]
+        self.description = ("upper: " + ("the fully observed MDP's value (value iteration)" if upper == "mdp" else
+                                         "good rocks and the exit each at its own Manhattan distance")
+                            + "; lower: open-loop nearest-first tour of the rocks most particles call good, then East")
+
+    def _share(self, states) -> Tuple[int, np.ndarray]:
+        """The rover's cell and, per rock, the share of particles that call it good."""
+        m = self.model
+        bits = states & ((1 << m.k) - 1)
+        counts = np.bitwise_and(bits[:, None] >> self._shifts, 1).sum(axis=0)
+        return int(states[0] >> m.k), counts / bits.shape[0]
+
+    # Both bounds are linear in the particles' rock bits, so their mean needs only the shares.
+    def upper(self, states):
+        m = self.model
+        if self.mdp_values is not None:
+            return float(self.mdp_values[states].mean())
+        cell, share = self._share(states)
+        return float(10.0 * share @ self._upper_discounts[cell] + 10.0 * m.discount ** (m.n - 1 - cell % m.n))
+
+    def lower(self, states, rng):
+        m = self.model
+        return self._tour_value(*self._share(states))
+
+    def _tour_value(self, cell: int, share: np.ndarray) -> float:
+        """The lower bound's value: the open-loop tour's, or driving East at once when that is better."""
+        m = self.model
+        mask = int(((share > 0.5).astype(np.int64) << np.arange(m.k)).sum())
+        weights, exit_discount = self._tour(cell, mask)
+        tour = float(weights @ (20.0 * share - 10.0)) + 10.0 * exit_discount
+        return max(tour, 10.0 * m.discount ** (m.n - 1 - cell % m.n))
+
+    def both(self, states, rng) -> Tuple[float, float]:
+        """``(lower, upper)`` from one pass over the particles."""
+        m = self.model
+        cell, share = self._share(states)
+        if self.mdp_values is not None:
+            upper = float(self.mdp_values[states].mean())
+        else:
+            upper = float(10.0 * share @ self._upper_discounts[cell] + 10.0 * m.discount ** (m.n - 1 - cell % m.n))
+        return self._tour_value(cell, share), upper
+
+    def _tour(self, cell: int, mask: int) -> Tuple[np.ndarray, float]:
+        """The open-loop tour from ``cell`` over the rocks in ``mask``: per rock the discount of its
+        sample (0 for rocks not visited) and the discount of the exit."""
+        key = (cell, mask)
+        hit = self._tours.get(key)
+        if hit is not None:
+            return hit
+        m = self.model
+        g = m.discount
+        x, y = cell % m.n, cell // m.n
+        todo = [i for i in range(m.k) if mask >> i & 1]
+        weights = np.zeros(m.k)
+        t = 0
+        while todo:
+            i = min(todo, key=lambda r: abs(m.rocks[r][0] - x) + abs(m.rocks[r][1] - y))
+            todo.remove(i)
+            t += abs(m.rocks[i][0] - x) + abs(m.rocks[i][1] - y)
+            x, y = m.rocks[i]
+            weights[i] = g ** t
+            t += 1
+        out = (weights, g ** (t + m.n - 1 - x))
+        self._tours[key] = out
+        return out
+
+
+def mdp_upper_values(model: RockSample, max_sweeps: int = 1000, tolerance: float = 1e-4,
+                     dtype=np.float32) -> np.ndarray:
+    """The fully observed MDP's value ``[n², 2^k]`` (rocks known): an upper bound of the POMDP value.
+
+    Value iteration from the distance bound of :class:`RockSampleBounds` (each good rock and the
+    exit at its own Manhattan distance), which satisfies ``H U ≤ U`` (a move shortens each distance
+    by at most one; sampling a good rock earns the 10 the bound counted for it), so the iterates
+    decrease monotonically and *every* iterate is an upper bound: a sweep cap never makes it
+    unsafe. Rounded up by ``tolerance`` at the end (float32 storage for the 7.4M states of (15,15)).
+    """
+    m = model
+    n, k, g = m.n, m.k, m.discount
+    cells, B = n * n, 1 << k
+    bits = np.arange(B, dtype=np.int64)
+    good = ((bits[:, None] >> np.arange(k)[None, :]) & 1).astype(dtype)          # [B, k]
+    xs = np.arange(cells) % n
+    V = (10.0 * (g ** m.manhattan).astype(dtype) @ good.T + (10.0 * g ** (n - 1 - xs)).astype(dtype)[:, None])
+    V = V.astype(dtype)
+    ys = np.arange(cells) // n
+    north = np.where(ys < n - 1, np.arange(cells) + n, -1)
+    south = np.where(ys > 0, np.arange(cells) - n, -1)
+    west = np.where(xs > 0, np.arange(cells) - 1, -1)
+    east = np.where(xs < n - 1, np.arange(cells) + 1, -1)
+    rock_cells = [(int(y * n + x), i) for i, (x, y) in enumerate(m.rocks)]
+    gd = dtype(g)
+    for _ in range(max_sweeps):
+        Vn = np.full_like(V, -100.0)
+        for nb in (north, south, west):
+            ok = nb >= 0
+            Vn[ok] = np.maximum(Vn[ok], gd * V[nb[ok]])
+        ok = east >= 0
+        Vn[ok] = np.maximum(Vn[ok], gd * V[east[ok]])
+        Vn[~ok] = np.maximum(Vn[~ok], dtype(10.0))
+        for cell, i in rock_cells:
+            has = (bits >> i) & 1
+            sampled = np.where(has == 1, 10.0 + gd * V[cell, bits & ~(1 << i)], -10.0 + gd * V[cell])
+            Vn[cell] = np.maximum(Vn[cell], sampled.astype(dtype))
+        Vn = np.minimum(Vn, V)
+        delta = float(np.max(V - Vn))
+        V = Vn
+        if delta <= tolerance:
+            break
+    return V + dtype(tolerance / (1.0 - g))
+
+
+def rocksample(name: str) -> RockSample:
+    """RockSample by layout name (``"7_8"``, ``"11_11"``, ``"15_15"``, ``"4_4"``)."""
+    try:
+        n, start, rocks, d0 = LAYOUTS[name]
+    except KeyError:
+        raise ValueError(f"RockSample layout {name!r}: choose one of {', '.join(LAYOUTS)}") from None
+    return RockSample(n, start, rocks, d0, name=f"RockSample({name.replace('_', ',')})")

@@ -1,0 +1,309 @@
+"""The online planner (pearl_pomdp/online): RockSample's dynamics against the explicit file and by
+hand, the bounds bracket the optimum, DESPOT on tiger, and budget determinism."""
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from pearl_pomdp.model import load_model
+from pearl_pomdp.online.decider import OnlineDecider
+from pearl_pomdp.online.despot import Despot, DespotSettings
+from pearl_pomdp.online.generative import ExplicitModel, alpha_bounds
+from pearl_pomdp.online.rocksample import RockSampleBounds, mdp_upper_values, rocksample
+
+
+@pytest.fixture(scope="module")
+def tiger(benchmarks_dir):
+    return load_model(str(benchmarks_dir / "tiger.95.POMDP"))
+
+
+@pytest.fixture(scope="module")
+def rs44_file(benchmarks_dir):
+    return load_model(str(benchmarks_dir / "RockSample_4_4.pomdp"))
+
+
+def _state_index(rs, name: str) -> int:
+    """The generative model's state for the file's name ``xXyY_B`` (B: rock 1 first)."""
+    if name == "exit":
+        return rs.exit_state
+    x, y, b = re.fullmatch(r"x(\d+)y(\d+)_([01]+)", name).groups()
+    return rs.encode(int(x), int(y), sum(1 << i for i, c in enumerate(b) if c == "1"))
+
+
+def test_rocksample_4_4_matches_the_explicit_file_state_by_state(rs44_file):
+    """Every state and action: the generative step's next state, reward and P(good) equal the
+    project's generated RockSample_4_4.pomdp (an independent writer of the same model)."""
+    rs = rocksample("4_4")
+    m = rs44_file
+    assert rs.num_states == m.num_states == 257
+    T = [Ta.toarray() if hasattr(Ta, "toarray") else np.asarray(Ta) for Ta in m.T]
+    ours = np.array([_state_index(rs, n) for n in m.states])
+    for a, name in enumerate(m.actions):
+        assert rs.actions[a] == name
+        for u in (0.1, 0.9):   # a check's outcome depends on the uniform; moves do not
+            nxt, obs, rew = rs.step(ours, a, np.full((ours.size, 1), u))
+            expected_next = ours[T[a].argmax(axis=1)]
+            assert np.array_equal(nxt, expected_next), name
+            np.testing.assert_allclose(rew, m.R[:, a], err_msg=name)
+        # P(good | s', a): the share of uniforms in [0, 1) that report good, on a fine grid.
+        grid = (np.arange(2000) + 0.5) / 2000
+        live = ours != rs.exit_state
+        for s_file, s in zip(np.flatnonzero(live)[:40], ours[live][:40]):
+            _, o, _ = rs.step(np.full(grid.size, s), a, grid[:, None])
+            s_next = int(T[a][s_file].argmax())
+            assert abs(float(np.mean(o == 0)) - m.O[a, s_next, 0]) < 1e-3, (name, m.states[s_file])
+
+
+def test_rocksample_dynamics_by_hand():
+    """A tiny instance worked by hand: RockSample(4,4) from the start cell (0, 2)."""
+    rs = rocksample("4_4")
+    s = rs.encode(0, 2, 0b0101)                # rocks 1 and 3 good
+    u = np.array([[0.5]])
+    # Check_1: rock 1 at (3, 1), distance sqrt(10); η = e^(-sqrt 10); P(correct) = (1 + η)/2.
+    p = 0.5 * (1 + math.exp(-math.sqrt(10)))
+    assert rs.accuracy[2 * 4 + 0, 0] == pytest.approx(p)
+    assert p == pytest.approx(0.5211646, abs=1e-7)   # e^-3.16228 = 0.0423292
+    nxt, o, r = rs.step(np.array([s]), 5, np.array([[p - 1e-9]]))
+    assert (nxt[0], o[0], r[0]) == (s, 0, 0.0)          # correct: rock 1 is good → "good"
+    nxt, o, r = rs.step(np.array([s]), 5, np.array([[p + 1e-9]]))
+    assert (nxt[0], o[0], r[0]) == (s, 1, 0.0)          # wrong → "bad"
+    # W off the grid: -100 and exit; E moves to (1, 2); N to (0, 3).
+    assert rs.step(np.array([s]), 3, u)[0][0] == rs.exit_state
+    assert rs.step(np.array([s]), 3, u)[2][0] == -100.0
+    assert rs.decode(int(rs.step(np.array([s]), 2, u)[0][0])) == (1, 2, 0b0101)
+    assert rs.decode(int(rs.step(np.array([s]), 0, u)[0][0])) == (0, 3, 0b0101)
+    # Rock 3 sits at (1, 3): go there and sample it: +10, then its bit is cleared; again: -10.
+    on3 = rs.encode(1, 3, 0b0101)
+    nxt, _, r = rs.step(np.array([on3]), 4, u)
+    assert r[0] == 10.0 and rs.decode(int(nxt[0])) == (1, 3, 0b0001)
+    assert rs.step(nxt, 4, u)[2][0] == -10.0
+    # Sample off a rock: -100 and exit; East off the grid at x = 3: +10 and exit.
+    assert rs.step(np.array([s]), 4, u)[2][0] == -100.0
+    east = rs.step(np.array([rs.encode(3, 0, 0)]), 2, u)
+    assert (east[0][0], east[2][0]) == (rs.exit_state, 10.0)
+    assert rs.step(np.array([rs.exit_state]), 2, u)[2][0] == 0.0   # the exit is absorbing, reward 0
+
+
+def test_rocksample_exact_belief_is_bayes():
+    rs = rocksample("4_4")
+    b = rs.initial_belief()
+    b.update(5, 0)                                  # Check_1 says good at accuracy p
+    p = 0.5 * (1 + math.exp(-math.sqrt(10)))
+    assert b.p_good[0] == pytest.approx(p)          # prior ½: posterior = p
+    b.update(2, 0)                                  # E: the rover moves to (1, 2)
+    assert (b.x, b.y) == (1, 2)
+    samples = b.sample(20000, np.random.default_rng(0))
+    assert {rs.decode(int(s))[:2] for s in samples} == {(1, 2)}
+    bits = samples & 0xF
+    assert np.mean(bits & 1) == pytest.approx(p, abs=0.01)
+
+
+def test_rocksample_mdp_bound_equals_value_iteration_on_the_explicit_file(rs44_file):
+    """The generative MDP upper bound is the fully observed MDP's value: the project's own value
+    iteration on the explicit file gives the same numbers (up to the bound's safety margin)."""
+    from pearl_pomdp.solvers.mdp import mdp_value_iteration
+
+    rs = rocksample("4_4")
+    V_file, _ = mdp_value_iteration(rs44_file, epsilon=1e-8)
+    ours = mdp_upper_values(rs, dtype=np.float64, tolerance=1e-9).reshape(-1)
+    idx = np.array([_state_index(rs, n) for n in rs44_file.states])
+    live = idx != rs.exit_state
+    np.testing.assert_allclose(ours[idx[live]], V_file[live], atol=1e-6)
+
+
+def test_rocksample_bounds_bracket_the_optimum(rs44_file):
+    """At b0 (all 16 rock configurations as particles) the tour lower bound ≤ V* ≤ the MDP upper
+    bound, with V* bracketed by the point-based solver run to a 1e-3 gap on the explicit file."""
+    from pearl_pomdp.solvers.registry import solve
+
+    result = solve(rs44_file, "pointbased", epsilon=1e-3, time_limit=30)
+    rs = rocksample("4_4")
+    b0 = np.array([rs.encode(0, 2, bits) for bits in range(16)])
+    bounds = RockSampleBounds(rs)
+    low, up = bounds.lower(b0, None), bounds.upper(b0)
+    assert low <= result.value_at_start + 1e-6
+    assert up >= result.upper_bound - 1e-6
+    assert low > 0.0                       # better than nothing: the tour earns something at b0
+    distance = RockSampleBounds(rs, upper="distance").upper(b0)
+    assert up <= distance + 1e-6           # the MDP bound is never looser than the distance bound
+
+
+def test_alpha_bounds_bracket_tiger_optimum(tiger):
+    """FIB above and the blind policies below bracket tiger's optimum at every belief we try."""
+    from pearl_pomdp.solvers.registry import solve
+
+    exact = solve(tiger, "pointbased", epsilon=1e-4, time_limit=30)
+    bounds = alpha_bounds(tiger)
+    rng = np.random.default_rng(0)
+    for p_left in (0.5, 0.15, 0.85, 0.97):
+        b = np.array([p_left, 1 - p_left])
+        states = (rng.random(4000) >= p_left).astype(np.int64)
+        v_star = exact.policy.value(b)
+        # The bounds of the particle belief; the particles' share is within 0.02 of p_left.
+        share = 1 - states.mean()
+        b_particles = np.array([share, 1 - share])
+        assert bounds.lower(states, rng) <= exact.policy.value(b_particles) + 1e-6
+        assert bounds.upper(states) >= exact.policy.value(b_particles) - 1e-6
+        assert bounds.lower(states, rng) < v_star < bounds.upper(states)
+
+
+def test_despot_on_tiger_acts_as_the_optimal_policy_and_brackets_its_value(tiger):
+    """At b0 DESPOT listens, after strong evidence it opens the other door — the converged
+    point-based policy's choices — and its root bounds bracket V*(b0) = 19.37 closely."""
+    from pearl_pomdp.solvers.registry import solve
+
+    exact = solve(tiger, "pointbased", epsilon=1e-4, time_limit=30)
+    v_star = exact.value_at_start
+    assert v_star == pytest.approx(19.37, abs=0.01)
+    decider = OnlineDecider(tiger, settings=DespotSettings(trials=100, scenarios=300, depth=40))
+    for p_left in (0.5, 0.85, 0.03, 0.97):
+        b = np.array([p_left, 1 - p_left])
+        assert decider.execute(b).action == exact.policy.action(b), p_left
+    d = decider.execute(tiger.b0)
+    assert d.action_name == "listen"
+    search = d.search
+    assert search is not None
+    # The root's bounds are over 300 sampled scenarios: they bracket V* within sampling noise.
+    assert search["lower"] <= v_star + 2.0
+    assert search["upper"] >= v_star - 2.0
+    # The search lifted the root's lower bound far above its heuristic start (always listen: -20).
+    blind_start = alpha_bounds(tiger).lower(np.array([0, 1] * 150), None)
+    assert blind_start == pytest.approx(-20.0, abs=1e-3)
+    assert search["lower"] > blind_start + 15.0
+    assert search["trials"] == 100 and search["nodes"] > 100 and search["seconds"] > 0
+
+
+def test_despot_tiger_return_is_near_the_optimum(tiger):
+    """Episodes on tiger (common random numbers for the world): the online planner's mean
+    discounted return over 20 steps is within the CI of the optimal policy's on the same seeds."""
+    from pearl_pomdp.belief import BeliefFilter
+    from pearl_pomdp.solvers.registry import solve
+
+    exact = solve(tiger, "pointbased", epsilon=1e-4, time_limit=30)
+    decider = OnlineDecider(tiger, settings=DespotSettings(trials=5, scenarios=100, depth=8))
+    world, filt = ExplicitModel(tiger), BeliefFilter(tiger)
+
+    def run(choose, episodes=20, steps=20):
+        out = []
+        for ep in range(episodes):
+            rng = np.random.default_rng(ep)
+            b, s, total = filt.initial(), int(rng.integers(2)), 0.0
+            for t in range(steps):
+                a = choose(b)
+                s2, o, r = world.step(np.array([s]), a, rng.random((1, 2)))
+                total += tiger.discount ** t * float(r[0])
+                b, s = filt.update(b, a, int(o[0])), int(s2[0])
+            out.append(total)
+        return np.array(out)
+
+    ours = run(lambda b: decider.execute(b).action)
+    best = run(exact.policy.action)
+    half = 1.96 * best.std(ddof=1) / math.sqrt(best.size)
+    assert ours.mean() >= best.mean() - half, (ours.mean(), best.mean(), half)
+
+
+def test_same_seed_same_actions_under_a_trial_budget():
+    """The trial budget is deterministic: the same particles and seed give the same tree and action;
+    another seed may differ but is reported with the same fields."""
+    rs = rocksample("7_8")
+    planner = Despot(rs, RockSampleBounds(rs), DespotSettings(trials=8, scenarios=200))
+    roots = rs.initial_belief().sample(200, np.random.default_rng(3))
+    first, second = planner.search(roots, seed=11), planner.search(roots, seed=11)
+    assert (first.action, first.trials, first.nodes, first.expansions) == \
+        (second.action, second.trials, second.nodes, second.expansions)
+    assert first.lower == second.lower and first.upper == second.upper
+    assert first.action_bounds == second.action_bounds
+    assert first.stop == "trials" and first.trials == 8
+    assert first.lower <= first.upper
+
+
+def test_online_decider_seed_depends_on_the_belief_only(tiger):
+    decider = OnlineDecider(tiger, settings=DespotSettings(trials=10, scenarios=50, depth=10), seed=4)
+    b = np.array([0.7, 0.3])
+    a = decider.execute(b)
+    decider.execute(np.array([0.2, 0.8]))          # whatever came between
+    again = decider.execute(b)
+    assert a.action == again.action
+    assert {k: v for k, v in a.search.items() if k != "seconds"} == \
+        {k: v for k, v in again.search.items() if k != "seconds"}
+    assert a.search["top"]["actions"][0]["action"] == a.action_name
+
+
+def test_time_guard_stops_the_search_near_its_limit():
+    rs = rocksample("11_11")
+    planner = Despot(rs, RockSampleBounds(rs, upper="distance"), DespotSettings(trials=None, time_limit=0.05))
+    result = planner.search(rs.initial_belief().sample(500, np.random.default_rng(0)), seed=0)
+    assert result.stop == "time_limit"
+    assert result.seconds < 0.05 + 0.04   # the guard trips between expansions
+
+
+def test_explicit_model_samples_the_rows(tiger):
+    """Inverse-CDF sampling: listening in tiger-left hears tiger-left 85 % of the time."""
+    g = ExplicitModel(tiger)
+    u = np.random.default_rng(0).random((20000, 2))
+    nxt, obs, rew = g.step(np.zeros(20000, dtype=np.int64), 0, u)
+    assert (nxt == 0).all() and (rew == -1.0).all()
+    assert np.mean(obs == 0) == pytest.approx(0.85, abs=0.01)
+    nxt, _, rew = g.step(np.zeros(20000, dtype=np.int64), 1, u)     # open-left with the tiger left
+    assert np.mean(nxt == 0) == pytest.approx(0.5, abs=0.02) and (rew == -100.0).all()
+
+
+def test_settings_reject_what_cannot_stop():
+    with pytest.raises(ValueError, match="never stop"):
+        DespotSettings(trials=None, time_limit=None)
+    with pytest.raises(ValueError, match="xi"):
+        DespotSettings(xi=0.0)
+
+
+def test_policy_online_wires_the_decider_and_decision_messages_carry_the_search(tiger):
+    """``policy:=online:TRIALS`` loads the online decider; /pearl/decision carries its search record,
+    and ``pearl replay --explain`` prints the search's size and the top of its tree."""
+    import json
+
+    from pearl_pomdp.cli.replay import search_lines
+    from pearl_pomdp.nodes.common import NodeSetupError
+    from pearl_pomdp.nodes.conversions import decision_to_msg
+    from pearl_pomdp.nodes.hierarchical_policy import load_decider
+
+    decider = load_decider(tiger, None, "online:7", "")
+    assert isinstance(decider, OnlineDecider) and decider.settings.trials == 7
+    with pytest.raises(NodeSetupError, match="parameter policy: 'online:0'"):
+        load_decider(tiger, None, "online:0", "")
+    d = decider.execute(tiger.b0)
+    body = json.loads(decision_to_msg(0, d.action_name, d.trace, 0.01, d.expansions, search=d.search).data)
+    search = body["search"]
+    assert search["trials"] == 7 and search["nodes"] >= 7 and search["gap"] == pytest.approx(
+        search["upper"] - search["lower"])
+    assert search["seconds"] > 0 and search["top"]["actions"][0]["action"] == d.action_name
+    text = "\n".join(search_lines(search))
+    assert "7 trials" in text and f"{d.action_name}: [" in text and "o0 " in text
+
+
+def test_particle_belief_follows_bayes_and_reinvigorates_when_deprived(tiger):
+    """Weighted resampling tracks the exact posterior; when no particle explains the observation
+    (a perfect sensor contradicting every particle) the filter reinvigorates instead of starving."""
+    from pearl_pomdp.belief import BeliefFilter
+    from pearl_pomdp.model.pomdp import Pomdp
+    from pearl_pomdp.online.beliefs import ParticleBelief
+
+    rng = np.random.default_rng(0)
+    g = ExplicitModel(tiger)
+    pf = ParticleBelief(g, np.repeat([0, 1], 2000), reinvigorate=lambda a, o, n, r: np.full(n, o))
+    exact = BeliefFilter(tiger)
+    b = exact.initial()
+    for o in (0, 0, 1):                                      # listen: left, left, right
+        pf.update(0, o, rng)
+        b = exact.update(b, 0, o)
+    assert np.mean(pf.particles == 0) == pytest.approx(b[0], abs=0.03)   # 0.85 after left, left, right
+    assert pf.reinvigorations == 0
+
+    eye = np.eye(2)
+    sensor = Pomdp.create(["a", "b"], ["stay"], ["see-a", "see-b"], [eye], [eye], np.zeros((2, 1)), discount=0.9)
+    deprived = ParticleBelief(ExplicitModel(sensor), np.zeros(100, dtype=np.int64),
+                              reinvigorate=lambda a, o, n, r: np.full(n, o))
+    deprived.update(0, 1, rng)                               # every particle says "a", the sensor sees "b"
+    assert deprived.reinvigorations == 1
+    assert (deprived.particles == 1).all() and deprived.particles.shape == (100,)
