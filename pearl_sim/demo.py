@@ -318,14 +318,8 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
             "pearl.policy": os.path.relpath(policy_dir, bag_dir.resolve()),
             "pearl.tracker_params": json.dumps(tracker_params)})
         recorder = Recorder(rec_node, writer, topics=RECORDED_TOPICS)
-        # The bag must hold the loop from its first message: b0 and the answer to it are latched
-        # (depth 1) and already out, so wait until the recorder has them (Recorder.recording).
-        loop_topics = ("/pearl/belief", "/pearl/belief_marginals", "/pearl/decision", "/pearl/action")
-        latched_topics = ("/pearl/belief", "/pearl/action")
-        if not graph.spin_until(lambda: recorder.recording(loop_topics)
-                                and recorder.recording(latched_topics, received=True), timeout_sec=wall_timeout):
-            missing = [t for t in loop_topics if not recorder.recording([t], received=t in latched_topics)]
-            raise PearlError(f"the bag recorder did not get {', '.join(missing)} within {wall_timeout} s")
+        # The bag must hold the loop from its first message (b0 and the answer to it are latched).
+        recorder.wait_until_recording(graph.spin_until, wall_timeout)
         driver = SimClockDriver(graph, wait_s=wall_timeout)
         backend = GraphBackend(graph, sim, driver)
         # Every /clock must reach the bag, or a replay would see inputs at the wrong time:

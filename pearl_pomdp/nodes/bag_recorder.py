@@ -29,6 +29,12 @@ from pearl_pomdp.errors import PearlError
 
 _NS = 1_000_000_000
 
+#: The decision loop's topics a bag must hold from their first message ...
+LOOP_TOPICS = ("/pearl/belief", "/pearl/belief_marginals", "/pearl/decision", "/pearl/action")
+#: ... and those of them that are latched (depth 1): b0 and the answer to it, already out
+#: when the recorder joins.
+LATCHED_LOOP_TOPICS = ("/pearl/belief", "/pearl/action")
+
 
 def message_class(type_name: str):
     """The Python class of a ROS 2 message type name (``std_msgs/msg/String`` → String)."""
@@ -155,6 +161,23 @@ class Recorder:
         run in three under load). ``received=True`` waits for the latched message itself."""
         return all((sub := self.subscriptions.get(self._fq(t))) is not None and sub.get_publisher_count() > 0
                    and (not received or self.counts.get(self._fq(t), 0) > 0) for t in topics)
+
+    def wait_until_recording(self, spin_until: Callable[..., bool], timeout_sec: float,
+                             topics: Iterable[str] = LOOP_TOPICS,
+                             latched: Iterable[str] = LATCHED_LOOP_TOPICS) -> None:
+        """Spin (``spin_until(condition, timeout_sec=…)``, the caller's executor) until every topic
+        in ``topics`` is matched and every one in ``latched`` has delivered its latched message
+        (:meth:`recording`); a run started before that loses b0 from its bag.
+
+        Raises:
+            PearlError: naming the topics still missing after ``timeout_sec``.
+        """
+        topics, latched = tuple(topics), tuple(latched)
+        if not spin_until(lambda: self.recording(topics) and self.recording(latched, received=True),
+                          timeout_sec=timeout_sec):
+            missing = [t for t in topics + tuple(t for t in latched if t not in topics)
+                       if not self.recording([t], received=t in latched)]
+            raise PearlError(f"the bag recorder did not get {', '.join(missing)} within {timeout_sec} s")
 
     def _callback(self, topic: str):
         writer, clock, counts = self.writer, self.node.get_clock(), self.counts
