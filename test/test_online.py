@@ -220,6 +220,50 @@ def test_same_seed_same_actions_under_a_trial_budget():
     assert first.lower <= first.upper
 
 
+class _OneAtATime:
+    """The model or bounds with their batched methods hidden: the search falls back to per-action
+    steps and per-node bounds."""
+
+    def __init__(self, inner):
+        self._inner = inner
+
+    def __getattr__(self, name):
+        if name in ("step_many", "many"):
+            raise AttributeError(name)
+        return getattr(self._inner, name)
+
+
+@pytest.mark.parametrize("layout", ["7_8", "11_11"])
+def test_rocksample_batched_step_and_bounds_equal_the_one_at_a_time_ones(layout):
+    """``step_many`` row a is ``step(states, a)`` exactly, the exit state included; ``many`` gives
+    each group's ``both``."""
+    rs = rocksample(layout)
+    rng = np.random.default_rng(5)
+    states = np.append(rng.integers(0, rs.exit_state, 300), rs.exit_state)
+    uniforms = rng.random((states.shape[0], 1))
+    nxt, obs, rew = rs.step_many(states, uniforms)
+    for a in range(len(rs.actions)):
+        one = rs.step(states, a, uniforms)
+        assert np.array_equal(nxt[a], one[0]) and np.array_equal(obs[a], one[1]) and np.array_equal(rew[a], one[2]), a
+    bounds = RockSampleBounds(rs)
+    cells = rng.integers(0, rs.n * rs.n, 6)
+    groups = [(c << rs.k) + rng.integers(0, 1 << rs.k, size) for c, size in zip(cells, (1, 7, 40, 3, 200, 2))]
+    lowers, uppers = bounds.many(groups, rng)
+    for g, lower, upper in zip(groups, lowers, uppers):
+        assert (lower, upper) == pytest.approx(bounds.both(g, rng), abs=1e-9)
+
+
+def test_the_batched_search_builds_the_tree_the_one_at_a_time_search_builds():
+    rs = rocksample("11_11")
+    roots = rs.initial_belief().sample(500, np.random.default_rng(2))
+    settings = DespotSettings(trials=25)
+    fast = Despot(rs, RockSampleBounds(rs), settings).search(roots, seed=9)
+    slow = Despot(_OneAtATime(rs), _OneAtATime(RockSampleBounds(rs)), settings).search(roots, seed=9)
+    assert (fast.action, fast.trials, fast.nodes, fast.expansions) == (slow.action, slow.trials, slow.nodes, slow.expansions)
+    assert fast.lower == pytest.approx(slow.lower, abs=1e-9) and fast.upper == pytest.approx(slow.upper, abs=1e-9)
+    assert fast.nodes > 1000
+
+
 def test_online_decider_seed_depends_on_the_belief_only(tiger):
     decider = OnlineDecider(tiger, settings=DespotSettings(trials=10, scenarios=50, depth=10), seed=4)
     b = np.array([0.7, 0.3])

@@ -183,39 +183,77 @@ class Despot:
                             self.tree_top(root))
 
     def _leaf(self, states, scenarios, depth) -> _Belief:
-        node = _Belief(states, scenarios, depth)
-        live = ~self.model.is_terminal(states)
-        n_live = int(live.sum())
-        if n_live == 0:
-            node.terminal = True
-            return node   # all bounds 0
-        share = n_live / self._K
-        s_live = states if n_live == states.shape[0] else states[live]
-        both = getattr(self.bounds, "both", None)   # one pass for both bounds, when the bounds offer it
-        lower, upper = (both(s_live, self._rng) if both is not None
-                        else (self.bounds.lower(s_live, self._rng), self.bounds.upper(s_live)))
-        node.lower0 = node.lower = share * lower
-        node.upper0 = node.upper = max(share * upper, node.lower)
-        return node
+        return self._leaves([(states, scenarios)], depth)[0]
+
+    def _leaves(self, groups, depth) -> List[_Belief]:
+        """New belief nodes for ``groups`` (``(states, scenarios)`` each) with their initial bounds.
+
+        Bounds that offer ``many`` (one vectorised pass over every group's particles) get all the
+        groups at once: the search spends most of its time here, and a call per new node costs more
+        than its arithmetic. Otherwise ``both`` or ``lower``/``upper`` per group, in order.
+        """
+        nodes = [_Belief(states, scenarios, depth) for states, scenarios in groups]
+        sizes = [node.states.shape[0] for node in nodes]
+        terminal = self.model.is_terminal(np.concatenate([node.states for node in nodes]))
+        ends = np.cumsum(sizes)
+        live_counts = np.add.reduceat(~terminal, ends - sizes)
+        live_states = []
+        live_nodes = []
+        for node, n_live, end, size in zip(nodes, live_counts, ends, sizes):
+            if n_live == 0:
+                node.terminal = True   # all bounds 0
+                continue
+            live_states.append(node.states if n_live == size else node.states[~terminal[end - size:end]])
+            live_nodes.append(node)
+        if not live_nodes:
+            return nodes
+        many = getattr(self.bounds, "many", None)
+        if many is not None:
+            lowers, uppers = many(live_states, self._rng)
+        else:
+            both = getattr(self.bounds, "both", None)   # one pass for both bounds, when the bounds offer it
+            pairs = [both(s, self._rng) if both is not None else (self.bounds.lower(s, self._rng), self.bounds.upper(s))
+                     for s in live_states]
+            lowers, uppers = [lo for lo, _ in pairs], [up for _, up in pairs]
+        for node, s_live, lower, upper in zip(live_nodes, live_states, lowers, uppers):
+            share = s_live.shape[0] / self._K
+            node.lower0 = node.lower = share * float(lower)
+            node.upper0 = node.upper = max(share * float(upper), node.lower)
+        return nodes
 
     def _expand(self, node: _Belief) -> None:
         self._expansions += 1
         K = self._K
         u = self._uniforms[node.scenarios, node.depth]
-        actions = []
+        rewards = []
+        groups = []          # every child of every action, in action order
+        keys = []            # per child: (action, observation)
+        step_many = getattr(self.model, "step_many", None)   # every action in one pass, when offered
+        stepped = step_many(node.states, u) if step_many is not None else None
         for a in range(len(self.model.actions)):
-            nxt, obs, rew = self.model.step(node.states, a, u)
-            children: Dict[int, _Belief] = {}
+            if stepped is not None:
+                nxt, obs, rew = stepped[0][a], stepped[1][a], stepped[2][a]
+            else:
+                nxt, obs, rew = self.model.step(node.states, a, u)
+            rewards.append(float(rew.sum()) / K)
             if obs.shape[0] and (obs == obs[0]).all():
-                children[int(obs[0])] = self._leaf(nxt, node.scenarios, node.depth + 1)
+                groups.append((nxt, node.scenarios))
+                keys.append((a, int(obs[0])))
             else:
                 order = np.argsort(obs, kind="stable")
                 sorted_obs = obs[order]
                 cuts = np.flatnonzero(np.diff(sorted_obs)) + 1
                 for idx in np.split(order, cuts):
-                    children[int(obs[idx[0]])] = self._leaf(nxt[idx], node.scenarios[idx], node.depth + 1)
-            self._nodes += len(children)
-            an = _Action(float(rew.sum()) / K, children)
+                    groups.append((nxt[idx], node.scenarios[idx]))
+                    keys.append((a, int(obs[idx[0]])))
+        children = self._leaves(groups, node.depth + 1)
+        self._nodes += len(children)
+        by_action: List[Dict[int, _Belief]] = [{} for _ in rewards]
+        for (a, o), child in zip(keys, children):
+            by_action[a][o] = child
+        actions = []
+        for reward, kids in zip(rewards, by_action):
+            an = _Action(reward, kids)
             self._backup_action(an, node.depth)
             actions.append(an)
         node.actions = actions

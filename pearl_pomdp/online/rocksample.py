@@ -134,6 +134,44 @@ class RockSample:
         obs = np.where(done, GOOD, obs)
         return nxt.astype(np.int64), obs, reward
 
+    def step_many(self, states, uniforms):
+        """Every action at once: ``(next states, observations, rewards)``, each ``[A, N]``, row ``a``
+        equal to :meth:`step` ``(states, a, uniforms)`` (one numpy pass instead of one per action:
+        the search expands a node under all of them)."""
+        s = np.asarray(states, dtype=np.int64)
+        k, n = self.k, self.n
+        count = s.shape[0]
+        done = s == self.exit_state
+        cell = np.where(done, 0, s >> k)
+        bits = s & ((1 << k) - 1)
+        x, y = cell % n, cell // n
+        A = len(self.actions)
+        nxt = np.empty((A, count), dtype=np.int64)
+        obs = np.full((A, count), GOOD, dtype=np.int64)
+        reward = np.zeros((A, count))
+        dx = np.array([0, 0, 1, -1])[:, None]           # N S E W
+        dy = np.array([1, -1, 0, 0])[:, None]
+        x2, y2 = x[None, :] + dx, y[None, :] + dy
+        east_exit = x2 >= n
+        illegal = (x2 < 0) | (y2 < 0) | (y2 >= n)
+        reward[:4] = np.where(east_exit, 10.0, np.where(illegal, -100.0, 0.0))
+        nxt[:4] = np.where(east_exit | illegal, self.exit_state, ((y2 * n + x2) << k) + bits[None, :])
+        rock = self.rock_at[cell]
+        on_rock = rock >= 0
+        r_idx = np.maximum(rock, 0)
+        good = ((bits >> r_idx) & 1).astype(bool) & on_rock
+        reward[SAMPLE] = np.where(on_rock, np.where(good, 10.0, -10.0), -100.0)
+        cleared = bits & ~(np.int64(1) << r_idx)
+        nxt[SAMPLE] = np.where(~on_rock, self.exit_state, (cell << k) + np.where(on_rock, cleared, bits))
+        truth_good = ((bits[None, :] >> np.arange(k)[:, None]) & 1).astype(bool)          # [k, N]
+        correct = uniforms[:, 0][None, :] < self.accuracy[cell].T                          # [k, N]
+        obs[5:] = np.where(truth_good == correct, GOOD, BAD)
+        nxt[5:] = s[None, :]
+        nxt[:, done] = self.exit_state
+        reward[:, done] = 0.0
+        obs[:, done] = GOOD
+        return nxt, obs, reward
+
     def initial_belief(self) -> "RockBelief":
         return RockBelief(self)
 
@@ -224,7 +262,7 @@ class RockSampleBounds:
     def upper(self, states):
         m = self.model
         if self.mdp_values is not None:
-            return float(self.mdp_values[states].mean())
+            return float(self.mdp_values[states].mean(dtype=np.float64))
         cell, share = self._share(states)
         return float(10.0 * share @ self._upper_discounts[cell] + 10.0 * m.discount ** (m.n - 1 - cell % m.n))
 
@@ -245,10 +283,35 @@ class RockSampleBounds:
         m = self.model
         cell, share = self._share(states)
         if self.mdp_values is not None:
-            upper = float(self.mdp_values[states].mean())
+            upper = float(self.mdp_values[states].mean(dtype=np.float64))
         else:
             upper = float(10.0 * share @ self._upper_discounts[cell] + 10.0 * m.discount ** (m.n - 1 - cell % m.n))
         return self._tour_value(cell, share), upper
+
+    def many(self, groups: Sequence[np.ndarray], rng) -> Tuple[np.ndarray, np.ndarray]:
+        """``(lowers, uppers)`` of several particle sets (each at its own single cell) in one pass:
+        the same numbers :meth:`both` gives set by set (what the search asks of a new node's
+        children), without a numpy call per set."""
+        m = self.model
+        sizes = np.fromiter((g.shape[0] for g in groups), dtype=np.int64, count=len(groups))
+        starts = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+        states = np.concatenate(groups)
+        bits = states & ((1 << m.k) - 1)
+        per_rock = np.bitwise_and(bits[:, None] >> self._shifts, 1)
+        shares = np.add.reduceat(per_rock, starts, axis=0) / sizes[:, None]          # [G, k]
+        cells = states[starts] >> m.k
+        if self.mdp_values is not None:
+            uppers = np.add.reduceat(self.mdp_values[states].astype(np.float64), starts) / sizes
+        else:
+            uppers = (10.0 * np.einsum("gk,gk->g", shares, self._upper_discounts[cells])
+                      + 10.0 * m.discount ** (m.n - 1 - cells % m.n))
+        masks = ((shares > 0.5).astype(np.int64) << np.arange(m.k)).sum(axis=1)
+        east = 10.0 * m.discount ** (m.n - 1 - cells % m.n)
+        lowers = np.empty(len(groups))
+        for g in range(len(groups)):
+            weights, exit_discount = self._tour(int(cells[g]), int(masks[g]))
+            lowers[g] = max(float(weights @ (20.0 * shares[g] - 10.0)) + 10.0 * exit_discount, float(east[g]))
+        return lowers, uppers
 
     def _tour(self, cell: int, mask: int) -> Tuple[np.ndarray, float]:
         """The open-loop tour from ``cell`` over the rocks in ``mask``: per rock the discount of its
