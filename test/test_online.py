@@ -253,6 +253,15 @@ def test_rocksample_batched_step_and_bounds_equal_the_one_at_a_time_ones(layout)
         assert (lower, upper) == pytest.approx(bounds.both(g, rng), abs=1e-9)
 
 
+def test_alpha_bounds_many_equals_each_sets_bounds(tiger):
+    bounds = alpha_bounds(tiger)
+    groups = [np.array([0]), np.array([0, 1, 1]), np.array([1] * 5 + [0] * 2)]
+    lowers, uppers = bounds.many(groups, None)
+    for g, lower, upper in zip(groups, lowers, uppers):
+        assert lower == pytest.approx(bounds.lower(g, None), abs=1e-12)
+        assert upper == pytest.approx(bounds.upper(g), abs=1e-12)
+
+
 def test_the_batched_search_builds_the_tree_the_one_at_a_time_search_builds():
     rs = rocksample("11_11")
     roots = rs.initial_belief().sample(500, np.random.default_rng(2))

@@ -164,6 +164,15 @@ class AlphaBounds:
     def lower(self, states, rng):
         return float(self.lower_alphas_t[states].mean(axis=0).max())
 
+    def many(self, groups: Sequence[np.ndarray], rng) -> Tuple[np.ndarray, np.ndarray]:
+        """``(lowers, uppers)`` of several particle sets in one pass (each set's ``lower``/``upper``)."""
+        sizes = np.fromiter((g.shape[0] for g in groups), dtype=np.int64, count=len(groups))
+        starts = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+        states = np.concatenate(groups)
+        uppers = (np.add.reduceat(self.upper_q[states], starts, axis=0) / sizes[:, None]).max(axis=1)
+        lowers = (np.add.reduceat(self.lower_alphas_t[states], starts, axis=0) / sizes[:, None]).max(axis=1)
+        return lowers, uppers
+
 
 def alpha_bounds(model: Pomdp, upper: str = "fib", lower: str = "blind",
                  lower_alphas: Optional[np.ndarray] = None) -> AlphaBounds:
