@@ -293,6 +293,33 @@ def test_time_guard_stops_the_search_near_its_limit():
     assert result.seconds < 0.05 + 0.04   # the guard trips between expansions
 
 
+def test_a_process_clock_budget_counts_this_process_cpu_seconds():
+    """``clock="process"`` (DESPOT's own code's measure): the guard and ``seconds`` read CPU time, so
+    a search whose process sleeps in a bound call still runs its CPU budget (a wall clock would stop
+    it after the sleep)."""
+    import time as _time
+
+    rs = rocksample("11_11")
+
+    class SleepyBounds(RockSampleBounds):
+        def many(self, groups, rng):
+            _time.sleep(0.02)                       # wall time passes, CPU time does not
+            return super().many(groups, rng)
+
+    roots = rs.initial_belief().sample(500, np.random.default_rng(0))
+    cpu = Despot(rs, SleepyBounds(rs), DespotSettings(trials=None, time_limit=0.1, clock="process"))
+    wall = Despot(rs, SleepyBounds(rs), DespotSettings(trials=None, time_limit=0.1))
+    t0 = _time.process_time()
+    by_cpu = cpu.search(roots, seed=0)
+    spent = _time.process_time() - t0
+    by_wall = wall.search(roots, seed=0)
+    assert by_cpu.stop == by_wall.stop == "time_limit"
+    assert by_cpu.seconds == pytest.approx(spent, abs=0.03)
+    assert by_cpu.expansions > by_wall.expansions
+    with pytest.raises(ValueError, match="clock: 'cpu' is not one of wall, process"):
+        DespotSettings(clock="cpu")
+
+
 def test_explicit_model_samples_the_rows(tiger):
     """Inverse-CDF sampling: listening in tiger-left hears tiger-left 85 % of the time."""
     g = ExplicitModel(tiger)
