@@ -46,7 +46,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from pearl_pomdp.online.despot import CLOCKS, Despot, DespotSettings  # noqa: E402
-from pearl_pomdp.online.rocksample import RockSampleBounds, rocksample  # noqa: E402
+from pearl_pomdp.online.rocksample import RockSampleBounds, random_rocksample, rocksample  # noqa: E402
 
 #: Published figures (average discounted return ± 95 % CI), with where each is from.
 PUBLISHED = {
@@ -74,19 +74,34 @@ def _ci(values):
 
 
 def run_rocksample(name: str, budget: float, episodes: int, steps: int, seed: int, max_minutes: float,
-                   clock: str = "wall") -> dict:
-    model = rocksample(name)
-    t_bounds = time.perf_counter()
-    bounds = RockSampleBounds(model)
-    bound_seconds = time.perf_counter() - t_bounds
+                   clock: str = "wall", layouts: str = "fixed") -> dict:
+    """``layouts="random"``: every episode on its own layout drawn as DESPOT's code draws one
+    (:func:`~pearl_pomdp.online.rocksample.random_rocksample`, seeded per episode), its bounds
+    rebuilt each time (their set-up is not in the decision times)."""
     settings = DespotSettings(trials=None, time_limit=GUARD_SHARE * budget, clock=clock)
-    planner = Despot(model, bounds, settings)
     now = CLOCKS[clock]
+
+    def instance(ep):
+        if layouts == "random":
+            n, k = (int(v) for v in name.split("_"))
+            model = random_rocksample(n, k, np.random.default_rng([seed, ep, 7919]))
+        else:
+            model = rocksample(name)
+        t_bounds = time.perf_counter()
+        bounds = RockSampleBounds(model)
+        return model, bounds, time.perf_counter() - t_bounds
+
+    model, bounds, bound_seconds = instance(0)
+    planner = Despot(model, bounds, settings)
     returns, times, walls, trials, gaps, nodes = [], [], [], [], [], []
     start = time.perf_counter()
     for ep in range(episodes):
         if (time.perf_counter() - start) / 60.0 > max_minutes:
             break
+        if layouts == "random" and ep > 0:
+            model, bounds, seconds = instance(ep)
+            bound_seconds += seconds
+            planner = Despot(model, bounds, settings)
         world = np.random.default_rng([seed, ep])       # the true state and the world's noise
         belief = model.initial_belief()
         state = int(belief.sample(1, world)[0])
@@ -110,7 +125,7 @@ def run_rocksample(name: str, budget: float, episodes: int, steps: int, seed: in
     mean, half = _ci(returns)
     return {"states": model.num_states, "actions": len(model.actions), "bounds": bounds.description,
             "bound_setup_seconds": round(bound_seconds, 2), "budget_s": budget, "episodes": len(returns),
-            "mean": mean, "ci95": half, "clock": clock, **_timing(times, budget),
+            "layouts": layouts, "mean": mean, "ci95": half, "clock": clock, **_timing(times, budget),
             "wall_decision_s_p99": float(np.percentile(walls, 99)), "mean_trials": float(np.mean(trials)),
             "mean_nodes": float(np.mean(nodes)), "mean_root_gap": float(np.mean(gaps)),
             "wall_minutes": round((time.perf_counter() - start) / 60.0, 2)}
@@ -316,6 +331,9 @@ def main(argv=None) -> int:
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="wall",
                     help="what a budget measures (RockSample): wall (a robot's wait) or process (CPU seconds, "
                          "as DESPOT's own code counts them: the same work per decision whatever the load)")
+    ap.add_argument("--layouts", choices=["fixed", "random"], default="fixed",
+                    help="RockSample rocks: the problem's fixed layout, or one drawn per episode as DESPOT's "
+                         "code draws sizes it has no layout for (compare with --despot on rs15_15)")
     ap.add_argument("--despot", metavar="PATH",
                     help="DESPOT's own rock_sample example (AdaCompNUS/despot, built outside this repository): "
                          "run on the same RockSample problems and budgets, --despot-runs episodes each")
@@ -344,7 +362,7 @@ def main(argv=None) -> int:
                     r = run_tag(budget, args.episodes, args.steps, args.seed, args.max_minutes, args.tag_lower)
                 else:
                     r = run_rocksample(p[2:], budget, args.episodes, args.steps, args.seed, args.max_minutes,
-                                       args.clock)
+                                       args.clock, args.layouts)
                 out["results"][p][f"{budget:g}s"] = r
                 print(f"{p} {budget:g}s: {r['mean']:.2f} ± {r['ci95']:.2f} over {r['episodes']} episodes, "
                       f"p99 {r['decision_s_p99']:.3f} s", file=sys.stderr, flush=True)

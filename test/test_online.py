@@ -12,7 +12,7 @@ from pearl_pomdp.model import load_model
 from pearl_pomdp.online.decider import OnlineDecider
 from pearl_pomdp.online.despot import Despot, DespotSettings
 from pearl_pomdp.online.generative import ExplicitModel, alpha_bounds
-from pearl_pomdp.online.rocksample import RockSampleBounds, mdp_upper_values, rocksample
+from pearl_pomdp.online.rocksample import RockSampleBounds, mdp_upper_values, random_rocksample, rocksample
 
 
 @pytest.fixture(scope="module")
@@ -387,3 +387,13 @@ def test_particle_belief_follows_bayes_and_reinvigorates_when_deprived(tiger):
     deprived.update(0, 1, rng)                               # every particle says "a", the sensor sees "b"
     assert deprived.reinvigorations == 1
     assert (deprived.particles == 1).all() and deprived.particles.shape == (100,)
+
+
+def test_random_rocksample_lays_out_as_despots_code_does():
+    """DESPOT's ``InitGeneral``: the rover at (0, n//2), k rocks at distinct cells of the grid."""
+    a = random_rocksample(15, 15, np.random.default_rng(4))
+    b = random_rocksample(15, 15, np.random.default_rng(4))
+    assert a.rocks == b.rocks and a.start == (0, 7) and len(set(a.rocks)) == 15
+    assert all(0 <= x < 15 and 0 <= y < 15 for x, y in a.rocks)
+    assert a.rocks != random_rocksample(15, 15, np.random.default_rng(5)).rocks
+    assert a.num_states == 15 * 15 * 2 ** 15 + 1

@@ -28,7 +28,7 @@ from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["RockSample", "RockBelief", "RockSampleBounds", "LAYOUTS", "rocksample"]
+__all__ = ["RockSample", "RockBelief", "RockSampleBounds", "LAYOUTS", "rocksample", "random_rocksample"]
 
 #: name → (n, start (x, y), rocks [(x, y), …], d₀).
 LAYOUTS: Dict[str, Tuple[int, Tuple[int, int], List[Tuple[int, int]], float]] = {
@@ -390,3 +390,16 @@ def rocksample(name: str) -> RockSample:
     except KeyError:
         raise ValueError(f"RockSample layout {name!r}: choose one of {', '.join(LAYOUTS)}") from None
     return RockSample(n, start, rocks, d0, name=f"RockSample({name.replace('_', ',')})")
+
+
+def random_rocksample(n: int, k: int, rng: np.random.Generator, half_efficiency_distance: float = 20.0) -> RockSample:
+    """RockSample(n, k) with its rocks at ``k`` distinct cells drawn uniformly (x then y per rock,
+    redrawn when the cell is taken) and the rover at ``(0, n//2)``: how DESPOT's code lays out a
+    size it has no standard layout for (``InitGeneral``), so an average over these instances is
+    comparable with its figures for such sizes."""
+    rocks: List[Tuple[int, int]] = []
+    while len(rocks) < k:
+        cell = (int(rng.integers(n)), int(rng.integers(n)))
+        if cell not in rocks:
+            rocks.append(cell)
+    return RockSample(n, (0, n // 2), rocks, half_efficiency_distance, name=f"RockSample({n},{k}), random layout")
