@@ -402,11 +402,15 @@ class FactoredDomain:
         if self._compiled is None:
             S = self.num_states
             T = [self.transition_matrix(a) for a in range(len(self.actions))]
-            O = np.stack([self.observation_matrix(a) for a in range(len(self.actions))])
+            # O filled in place and handed over without a copy: at the ward's size (233,280 states,
+            # 15 actions and symbols) each [A, S, Z] copy is 420 MB.
+            O = np.empty((len(self.actions), S, len(self.observations)))
+            for a in range(len(self.actions)):
+                O[a] = self.observation_matrix(a)
             model = Pomdp.create(
                 self.state_names(), list(self.actions), self.observations, T, O, self.reward_matrix(),
                 b0=self.start_belief(), discount=self.discount, name=self.name,
-                sparse=S * S > DENSE_LIMIT, tolerance=1e-6,
+                sparse=S * S > DENSE_LIMIT, tolerance=1e-6, copy=False,
             )
             model.metadata.update({
                 "domain": self.name,

@@ -77,6 +77,7 @@ class Pomdp:
         name: str = "pomdp",
         sparse: Optional[bool] = None,
         tolerance: float = 1e-6,
+        copy: bool = True,
     ) -> "Pomdp":
         """Validate the arrays and build a model.
 
@@ -87,6 +88,9 @@ class Pomdp:
             b0: ``[S]`` start belief; uniform when ``None``.
             sparse: force sparse (True) or dense (False) T; default by size.
             tolerance: how far a probability row may be from summing to 1.
+            copy: ``False`` takes ``T`` (CSR / float arrays) and ``O`` over without copying them when
+                their type already fits: for a caller that built them for this model alone
+                (:meth:`FactoredDomain.compile`; a 233,280-state ``O`` is 420 MB, a copy doubles it).
 
         Raises:
             ValueError: a shape is wrong or a row is not a distribution (the
@@ -101,12 +105,16 @@ class Pomdp:
         if len(T) != A:
             raise ValueError(f"T has {len(T)} action matrices, expected {A}")
         for a, Ta in enumerate(T):
-            m = _csr(Ta).copy() if sparse else (Ta.toarray() if issparse(Ta) else np.array(Ta, dtype=float))
+            if sparse:
+                m = _csr(Ta).copy() if copy else _csr(Ta)
+            else:
+                m = Ta.toarray() if issparse(Ta) else np.array(Ta, dtype=float, copy=copy or None)
             if m.shape != (S, S):
                 raise ValueError(f"T[{actions[a]}] has shape {m.shape}, expected ({S}, {S})")
             mats.append(m)
-        # Copies: a model never aliases its caller's arrays (editing one must not edit the other).
-        O = np.array(O, dtype=float)
+        # Copies: a model never aliases its caller's arrays (editing one must not edit the other),
+        # unless the caller says it hands them over (copy=False).
+        O = np.array(O, dtype=float) if copy else np.asarray(O, dtype=float)
         if O.shape != (A, S, Z):
             raise ValueError(f"O has shape {O.shape}, expected ({A}, {S}, {Z})")
         R = np.array(R, dtype=float)

@@ -90,7 +90,10 @@ class ExplicitModel:
 
     ``step`` draws ``s' ~ T[a][s, :]`` with the first uniform and ``o ~ O[a, s', :]`` with the
     second (inverse CDF: the same uniforms give the same outcome). The reward is ``R[s, a]``.
-    Sparse ``T`` stays sparse: each action keeps its rows' cumulative sums in CSR order.
+    Sparse ``T`` stays sparse and is not copied: each step sums the particles' own rows (a few
+    entries each) and the observation rows of their next states, so the adapter adds no
+    ``nnz``-sized or ``[A, S, Z]``-sized array to the model's (the ward's 233,280 states: a
+    cumulative copy of T and O would be another ~580 MB).
     """
 
     uniforms_per_step = 2
@@ -103,34 +106,39 @@ class ExplicitModel:
         self.states = list(model.states)
         self.discount = float(model.discount)
         self.R = np.asarray(model.R, dtype=float)
-        self._rows: List[Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._O = np.asarray(model.O, dtype=float)
+        self._rows: List[Tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         for Ta in model.T:
             if issparse(Ta):
-                c = Ta.tocsr()
-                indptr, indices, data = (np.asarray(c.indptr, dtype=np.int64), np.asarray(c.indices, dtype=np.int64),
-                                         np.asarray(c.data, dtype=float))
+                c = Ta if Ta.format == "csr" else Ta.tocsr()
+                indptr, indices, data = c.indptr, c.indices, np.asarray(c.data, dtype=float)
             else:
                 dense = np.asarray(Ta, dtype=float)
                 rows, indices = np.nonzero(dense)
                 data = dense[rows, indices]
-                indptr = np.concatenate(([0], np.cumsum(np.bincount(rows, minlength=dense.shape[0])))).astype(np.int64)
-                indices = indices.astype(np.int64)
-            cum = np.cumsum(data)
-            start = np.concatenate(([0.0], cum))[indptr[:-1]]     # the cumulative mass before each row
-            self._rows.append((indptr, indices, cum, start))
-        O = np.asarray(model.O, dtype=float)
-        self._obs_cdf = np.cumsum(O, axis=2)
-        self._obs_cdf[:, :, -1] = np.inf     # rounding never runs past the last symbol
+                indptr = np.concatenate(([0], np.cumsum(np.bincount(rows, minlength=dense.shape[0]))))
+                indices = indices.astype(np.int32 if dense.shape[0] < 2 ** 31 else np.int64)
+            self._rows.append((indptr, indices, data))
 
     def step(self, states, action, uniforms):
         s = np.asarray(states, dtype=np.int64)
-        indptr, indices, cum, start = self._rows[action]
-        row_mass = np.where(indptr[s + 1] > indptr[s], cum[np.maximum(indptr[s + 1] - 1, 0)] - start[s], 0.0)
-        target = start[s] + uniforms[:, 0] * row_mass
+        indptr, indices, data = self._rows[action]
+        lo = np.asarray(indptr[s], dtype=np.int64)
+        lengths = np.asarray(indptr[s + 1], dtype=np.int64) - lo
+        # The particles' rows laid end to end: within-row cumulative sums, then per particle the
+        # first entry whose cumulative mass exceeds u * (row mass) — the inverse CDF of its row.
+        owner = np.repeat(np.arange(s.shape[0]), lengths)
+        first = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+        flat = lo[owner] + (np.arange(owner.shape[0]) - first[owner])
+        cum = np.cumsum(data[flat])
+        before = np.concatenate(([0.0], cum))[first]              # mass of the rows before each particle's
+        row_mass = np.where(lengths > 0, np.concatenate(([0.0], cum))[first + lengths] - before, 0.0)
+        target = before + uniforms[:, 0] * row_mass
         k = np.searchsorted(cum, target, side="right")
-        k = np.clip(k, indptr[s], indptr[s + 1] - 1)
-        nxt = indices[k]
-        cdf = self._obs_cdf[action][nxt]                      # [N, Z]
+        k = np.clip(k, first, first + np.maximum(lengths, 1) - 1)
+        nxt = np.asarray(indices[flat[k]], dtype=np.int64)
+        cdf = np.cumsum(self._O[action][nxt], axis=1)             # [N, Z], only the particles' rows
+        cdf[:, -1] = np.inf                                        # rounding never runs past the last symbol
         obs = (cdf <= uniforms[:, 1:2]).sum(axis=1).astype(np.int64)
         return nxt, obs, self.R[s, action].copy()
 

@@ -1,0 +1,77 @@
+"""The core's memory fixes the ward (config/ward.domain.yaml, 233,280 states) needs, checked on small models.
+
+* ``ExplicitModel`` samples straight from the model's sparse rows and ``O`` (no cumulative copy of
+  T, no ``[A, S, Z]`` observation CDF): outcomes equal an explicit inverse CDF per particle.
+* ``Pomdp.create(copy=False)`` takes the arrays over; ``FactoredDomain.compile`` uses it.
+* The hierarchy's abstraction refuses a subtask whose state pairs do not fit, naming it.
+"""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from pearl_pomdp.model.pomdp import Pomdp
+from pearl_pomdp.online.generative import ExplicitModel
+
+
+def _random_sparse_model(seed=3, S=40, A=3, Z=4):
+    rng = np.random.default_rng(seed)
+    T = []
+    for _ in range(A):
+        rows = []
+        for s in range(S):
+            k = int(rng.integers(1, 7))                      # rows of 1..6 entries, like the ward's
+            cols = rng.choice(S, size=k, replace=False)
+            p = rng.random(k)
+            rows.append((np.full(k, s), cols, p / p.sum()))
+        r, c, p = (np.concatenate(x) for x in zip(*rows))
+        T.append(sp.csr_matrix((p, (r, c)), shape=(S, S)))
+    O = rng.random((A, S, Z))
+    O /= O.sum(axis=2, keepdims=True)
+    return Pomdp.create([f"s{i}" for i in range(S)], [f"a{i}" for i in range(A)], [f"o{i}" for i in range(Z)],
+                        T, O, rng.normal(size=(S, A)), sparse=True)
+
+
+def test_explicit_model_is_the_inverse_cdf_of_each_row_without_copies():
+    model = _random_sparse_model()
+    g = ExplicitModel(model)
+    rng = np.random.default_rng(1)
+    states = rng.integers(0, model.num_states, 3000)
+    u = rng.random((3000, 2))
+    for a in range(len(model.actions)):
+        nxt, obs, rew = g.step(states, a, u)
+        Ta = model.T[a].tocsr()
+        for i in range(0, 3000, 37):
+            s = states[i]
+            cols = Ta.indices[Ta.indptr[s]:Ta.indptr[s + 1]]
+            cdf = np.cumsum(Ta.data[Ta.indptr[s]:Ta.indptr[s + 1]])
+            expect = cols[min(int(np.searchsorted(cdf, u[i, 0] * cdf[-1], side="right")), len(cols) - 1)]
+            assert nxt[i] == expect
+            ocdf = np.cumsum(model.O[a, expect])
+            assert obs[i] == min(int(np.searchsorted(ocdf, u[i, 1], side="right")), model.num_observations - 1)
+            assert rew[i] == model.R[s, a]
+    # The adapter holds the model's own arrays: no nnz-sized or [A, S, Z]-sized copy.
+    assert g._O is model.O
+    assert all(rows[1] is model.T[a].indices for a, rows in enumerate(g._rows))
+    assert not any(isinstance(v, np.ndarray) and v.size >= model.O.size and v is not model.O
+                   for v in vars(g).values())
+
+
+def test_create_without_copy_takes_the_arrays_over_and_compile_uses_it():
+    from pearl_pomdp.model.factored import parse_domain
+
+    model = _random_sparse_model()
+    again = Pomdp.create(model.states, model.actions, model.observations, model.T, model.O, model.R, sparse=True, copy=False)
+    assert again.O is model.O and np.shares_memory(again.T[0].data, model.T[0].data)
+    copied = Pomdp.create(model.states, model.actions, model.observations, model.T, model.O, model.R, sparse=True)
+    assert copied.O is not model.O and not np.shares_memory(copied.T[0].data, model.T[0].data)
+    tiny = parse_domain("""
+discount: 0.9
+features: {Door: [closed, open]}
+modalities: {Eye: [dark, bright]}
+actions: {Push: {effects: {Door: {set: open}}}, Wait: {}}
+observations:
+  default: {parents: [Door], table: {closed: dark, open: {bright: 0.8, dark: 0.2}}}
+rewards: [{action: Push, reward: -1, why: effort}]
+""")
+    m = tiny.compile()
+    assert m.O.shape == (2, 2, 2) and m.O[0, 1, 1] == pytest.approx(0.8) and m.O.flags.owndata
