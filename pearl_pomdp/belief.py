@@ -51,6 +51,9 @@ SUM_TOLERANCE = 1e-6
 NEGATIVE_TOLERANCE = 1e-12
 #: Most matrix entries the fused per-(action, observation) operators may hold in total.
 FUSED_LIMIT = 20_000_000
+#: Most entries of ``O`` for which the filter keeps its own contiguous copies of ``Tᵀ`` and ``O``
+#: (beyond it: views of the model's arrays; see :class:`BeliefFilter`).
+VIEW_LIMIT = 16_000_000
 #: The first this many zero-likelihood recoveries are logged one by one, then every 1000th.
 LOG_FIRST = 10
 
@@ -67,7 +70,7 @@ _min = np.minimum.reduce
 
 def _matvec(M, x: np.ndarray) -> np.ndarray:
     """``M @ x`` for a dense array or a CSR matrix with float64 data (``x`` float64, contiguous)."""
-    if isinstance(M, np.ndarray):
+    if isinstance(M, np.ndarray) or M.format != "csr":
         return M @ x
     ok = _DIRECT_MATVEC["ok"]
     if ok:
@@ -128,9 +131,16 @@ class BeliefFilter:
         self.num_observations = Z = model.num_observations
         self._TT = []
         stored = 0
+        # Past VIEW_LIMIT entries of O (the ward: 52M) the filter keeps views of the model's
+        # arrays instead of copies: T[a]ᵀ as the CSC view of T[a]'s CSR, O[a, :, o] a strided
+        # column. Slower per update (milliseconds there), but no second T and O in memory.
+        self.views = model.O.size > VIEW_LIMIT
         for Ta in model.T:
             nnz = Ta.nnz if sp.issparse(Ta) else int(np.count_nonzero(Ta))
-            if S >= 64 and nnz <= 0.3 * S * S:
+            if self.views and sp.issparse(Ta) and Ta.format == "csr":
+                TTa = Ta.T                       # CSC, sharing T[a]'s arrays
+                stored += TTa.nnz
+            elif S >= 64 and nnz <= 0.3 * S * S:
                 TTa = sp.csr_matrix(Ta, dtype=float).T.tocsr()
                 TTa.sum_duplicates()
                 TTa.eliminate_zeros()
@@ -142,12 +152,14 @@ class BeliefFilter:
                 stored += S * S
             self._TT.append(TTa)
         # [A, Z, S]: O[a, :, o] as a contiguous row.
-        self._OT = np.ascontiguousarray(np.transpose(model.O, (0, 2, 1)))
+        self._OT = np.transpose(model.O, (0, 2, 1))
+        if not self.views:
+            self._OT = np.ascontiguousarray(self._OT)
         # Fused operators M[a][o] = diag(O[a, :, o]) · T[a]ᵀ: one mat-vec gives the
         # unnormalised posterior, and rows where O[a, s', o] = 0 drop out of the sparse
         # product. Built here (steady per-update latency), unless they would hold more than
         # FUSED_LIMIT entries; then the update multiplies by the column after the mat-vec.
-        self._fused_ok = stored * Z <= FUSED_LIMIT
+        self._fused_ok = stored * Z <= FUSED_LIMIT and not self.views
         self._M = [[self._fused(a, o) for o in range(Z)] for a in range(A)] if self._fused_ok else None
         self.zero_likelihood_count = 0
         self.updates = 0

@@ -75,3 +75,22 @@ rewards: [{action: Push, reward: -1, why: effort}]
 """)
     m = tiny.compile()
     assert m.O.shape == (2, 2, 2) and m.O[0, 1, 1] == pytest.approx(0.8) and m.O.flags.owndata
+
+
+def test_belief_filter_past_the_view_limit_shares_the_models_arrays_and_agrees(monkeypatch):
+    import pearl_pomdp.belief as belief
+
+    model = _random_sparse_model(seed=5, S=80)
+    exact = belief.BeliefFilter(model)
+    monkeypatch.setattr(belief, "VIEW_LIMIT", 10)
+    viewing = belief.BeliefFilter(model)
+    assert viewing.views and not exact.views
+    assert np.shares_memory(viewing._OT, model.O)
+    assert all(np.shares_memory(viewing._TT[a].data, model.T[a].data) for a in range(len(model.actions)))
+    b = model.b0
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        a, o = int(rng.integers(len(model.actions))), int(rng.integers(model.num_observations))
+        nb = viewing.update(b, a, o)
+        np.testing.assert_allclose(nb, exact.update(b, a, o), atol=1e-12)
+        b = nb
