@@ -94,3 +94,13 @@ def test_belief_filter_past_the_view_limit_shares_the_models_arrays_and_agrees(m
         nb = viewing.update(b, a, o)
         np.testing.assert_allclose(nb, exact.update(b, a, o), atol=1e-12)
         b = nb
+
+
+def test_the_online_deciders_default_upper_bound_is_qmdp_past_the_fib_limit(monkeypatch):
+    import pearl_pomdp.online.decider as decider
+
+    model = _random_sparse_model(seed=7)
+    assert decider.default_bounds(model).description.startswith("upper: FIB")
+    monkeypatch.setattr(decider, "FIB_LIMIT", model.num_states * 3 * 4 - 1)
+    assert decider.default_bounds(model).description.startswith("upper: QMDP")
+    assert decider.OnlineDecider(model).bounds.description.startswith("upper: QMDP")

@@ -25,7 +25,7 @@ from pearl_pomdp.online.beliefs import sample_belief
 from pearl_pomdp.online.despot import Despot, DespotSettings, SearchResult
 from pearl_pomdp.online.generative import Bounds, ExplicitModel, alpha_bounds
 
-__all__ = ["OnlineDecider", "DEFAULT_TRIALS", "ONLINE_POLICY", "online_trials"]
+__all__ = ["OnlineDecider", "DEFAULT_TRIALS", "ONLINE_POLICY", "online_trials", "default_bounds", "FIB_LIMIT"]
 
 #: The policy name that asks for online planning instead of a saved policy (node parameter
 #: ``policy:=online`` or ``online:TRIALS``; ``pearl simulate MODEL online:TRIALS``).
@@ -33,6 +33,17 @@ ONLINE_POLICY = "online"
 
 #: Trials per decision when nothing else is asked (one source for the CLI and the node).
 DEFAULT_TRIALS = 200
+
+#: Largest ``S·A·Z`` for which the default upper bound is the fast informed bound; past it QMDP
+#: (FIB's backups cost a pass over ``T`` per action and observation: minutes and gigabytes on the
+#: ward's 233,280 states × 15 × 15 = 52M, where QMDP takes seconds).
+FIB_LIMIT = 5_000_000
+
+
+def default_bounds(model: Pomdp) -> Bounds:
+    """:func:`~pearl_pomdp.online.generative.alpha_bounds` with FIB above, or QMDP past :data:`FIB_LIMIT`."""
+    size = model.num_states * model.num_actions * model.num_observations
+    return alpha_bounds(model, upper="fib" if size <= FIB_LIMIT else "qmdp")
 
 
 def online_trials(policy: str, where: str = "policy") -> Optional[int]:
@@ -59,8 +70,8 @@ class OnlineDecider:
 
     Args:
         model: the flat model (beliefs are ``[S]`` over its states).
-        bounds: the heuristics; default :func:`~pearl_pomdp.online.generative.alpha_bounds`
-            (FIB upper, blind-policy lower), computed once here.
+        bounds: the heuristics; default :func:`default_bounds` (FIB upper, or QMDP past
+            :data:`FIB_LIMIT`; blind-policy lower), computed once here.
         settings: the search's :class:`~pearl_pomdp.online.despot.DespotSettings`
             (default: ``DEFAULT_TRIALS`` trials, K = 500, D = 90).
         seed: combined with each belief's bytes into the decision's seed.
@@ -71,7 +82,7 @@ class OnlineDecider:
                  seed: int = 0, name: str = "online"):
         self.model = model
         self.generative = ExplicitModel(model)
-        self.bounds = bounds if bounds is not None else alpha_bounds(model)
+        self.bounds = bounds if bounds is not None else default_bounds(model)
         self.settings = settings if settings is not None else DespotSettings(trials=DEFAULT_TRIALS)
         self.search_engine = Despot(self.generative, self.bounds, self.settings)
         self.seed = int(seed)
