@@ -66,6 +66,7 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml")),
         (f"share/{PACKAGE}/config/scenarios", glob("config/scenarios/*.yaml")),
         (f"share/{PACKAGE}/config/scenarios/reception", glob("config/scenarios/reception/*.yaml")),
+        (f"share/{PACKAGE}/config/scenarios/ward", glob("config/scenarios/ward/*.yaml")),
         (f"share/{PACKAGE}/config/speech", glob("config/speech/*.json")),
         (f"share/{PACKAGE}/config/foxglove", glob("config/foxglove/*.json")),
     ],

@@ -42,6 +42,9 @@ WORLDS: Dict[str, SimWorld] = {
                           "config/scenarios/reception/one_visitor.yaml", "config/scenarios/reception/study.yaml",
                           "config/reception_nodes.yaml", demo="pearl_sim.reception.demo:run_cli",
                           experiment="pearl_sim.reception.experiment:run_cli"),
+    "ward": SimWorld("ward", "the ward: one robot, three residents with medication reminders and requests",
+                     "config/scenarios/ward/study.yaml", "config/scenarios/ward/study.yaml", "config/ward_nodes.yaml",
+                     demo="pearl_sim.ward.experiment:run_demo_cli", experiment="pearl_sim.ward.experiment:run_cli"),
 }
 
 

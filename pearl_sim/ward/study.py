@@ -1,0 +1,232 @@
+"""The ward study: controllers × episodes × speech noise × seeds, with paired statistics (docs/ward.md).
+
+Every controller meets every *cell* — an episode of the study file at a noise level (the
+recogniser's word error rate) with a seed — and a cell gives the same world to every controller,
+so the differences against the behaviour tree are **paired**. Each episode runs through
+:func:`pearl_sim.loop.run_episode` with the core executive and the tracker's rules from
+``config/ward_nodes.yaml``. Every decision's wall time is recorded (p50/p99 per controller).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Union
+
+from pearl_sim.messages import StepResult
+from pearl_sim.ward.scenario import WardScenario
+from pearl_sim.ward.world import WardWorld
+
+__all__ = ["WardEpisode", "run_ward_episode", "ward_agents", "summarise", "BASELINE", "DEFAULT_POLICIES", "SCORES",
+           "ONLINE_TRIALS"]
+
+BASELINE = "behaviour_tree"
+#: Trials per decision of the study's online controller (``online`` = ``online:20``).
+ONLINE_TRIALS = 20
+#: The compared controllers: the hierarchy, DESPOT online, the tree.
+DEFAULT_POLICIES = ("hierarchical", "online", "behaviour_tree")
+#: Per-episode scores reported with CIs and paired against the baseline.
+SCORES = ("discounted_return", "success", "requests_met", "pills_taken", "wrong_actions", "questions",
+          "unprompted_questions")
+
+
+@dataclass
+class WardEpisode:
+    """One episode's scores and the cell it ran in."""
+
+    policy: str
+    scenario: str
+    noise: float
+    seed: int
+    discounted_return: float
+    success: bool
+    requests: int
+    requests_met: int
+    pills: int
+    pills_taken: int
+    pills_on_time: int
+    wrong_actions: int
+    questions: int
+    unprompted_questions: int
+    steps: int
+    seconds: float
+    decision_seconds: List[float] = field(default_factory=list)
+    request_wait: List[float] = field(default_factory=list)
+    actions: List[str] = field(default_factory=list)
+    wrong: List[str] = field(default_factory=list)
+
+
+class _Timed:
+    """A decider whose every decision's wall time is recorded (the executive calls ``execute``)."""
+
+    def __init__(self, decider, seconds: List[float]):
+        self._decider, self._seconds = decider, seconds
+
+    def execute(self, belief):
+        t0 = time.perf_counter()
+        d = self._decider.execute(belief)
+        self._seconds.append(time.perf_counter() - t0)
+        return d
+
+    def __getattr__(self, name):
+        return getattr(self._decider, name)
+
+
+def episode_settings(scenario: WardScenario, params_file: Union[str, Path]):
+    """The belief tracker's step rules for ``scenario``: the params file's, then the scenario's step timeout."""
+    from pearl_pomdp.params import step_settings
+
+    return step_settings(params_file, **scenario.tracker_parameters())
+
+
+def run_ward_episode(scenario: WardScenario, agent, domain, params_file: Union[str, Path], seed: Optional[int] = None,
+                     word_error_rate: Optional[float] = None, model=None, on_step=None) -> WardEpisode:
+    """Run ``agent`` (``name`` and ``decider``) in a fresh :class:`WardWorld` through the one step loop, and score it.
+
+    The return is Σ_t γ^t R[s_t, a_t] with R and γ of ``domain`` and s_t the world's true state
+    (:meth:`WardWorld.truth`) when a_t starts.
+    """
+    from pearl_pomdp.executive import Executive
+    from pearl_sim.loop import ExecutiveBackend, run_episode
+
+    model = model if model is not None else domain.compile()
+    world = WardWorld(scenario, seed=seed, word_error_rate=word_error_rate)
+    if hasattr(agent.decider, "reset"):
+        agent.decider.reset()
+    seconds: List[float] = []
+    decider = agent.decider if hasattr(agent.decider, "observe") else _Timed(agent.decider, seconds)
+    executive = Executive(model, decider, domain=domain, settings=episode_settings(scenario, params_file))
+    index = {a: i for i, a in enumerate(model.actions)}
+    score = {"total": 0.0, "discount": 1.0}
+
+    def start(action: str) -> None:
+        state = domain.state_index(world.truth())
+        score["total"] += score["discount"] * float(model.R[state, index[action]])
+        score["discount"] *= model.discount
+
+    def after(result: StepResult, waits: List[StepResult]) -> None:
+        if on_step is not None:
+            on_step(world, result, waits, executive)
+
+    trace = run_episode(world, ExecutiveBackend(executive), before_action=start, on_action=after)
+    m = world.metrics
+    return WardEpisode(
+        policy=agent.name, scenario=scenario.name, noise=float(world.word_error_rate), seed=world.seed,
+        discounted_return=score["total"], success=world.all_met, requests=m.requests, requests_met=m.requests_met,
+        pills=m.pills, pills_taken=m.pills_on_time + m.pills_overdue, pills_on_time=m.pills_on_time,
+        wrong_actions=m.wrong_actions, questions=m.questions, unprompted_questions=m.unprompted_questions,
+        steps=m.steps, seconds=float(world.time), decision_seconds=seconds, request_wait=list(m.request_wait),
+        actions=list(trace.actions), wrong=list(m.wrong))
+
+
+def ward_agents(domain, hierarchy_path, policies: Sequence[str] = DEFAULT_POLICIES, seed: int = 0, log=None):
+    """Plan the POMDP controllers and build the ward tree; name → controller, with ``.timings``.
+
+    ``online`` / ``online:N``: :class:`~pearl_pomdp.online.decider.OnlineDecider` (DESPOT at every
+    step, :data:`ONLINE_TRIALS` trials unless ``N``); ``hierarchical``: the hierarchy beside the domain.
+    """
+    from pearl_pomdp.online.decider import OnlineDecider, online_trials
+    from pearl_pomdp.online.despot import DespotSettings
+    from pearl_sim.planning import Controller, PlannedAgents, plan_controller
+    from pearl_sim.ward.behaviour_tree import WardBehaviourTree
+
+    model = domain.compile()
+    agents = PlannedAgents()
+    for name in policies:
+        t0 = time.perf_counter()
+        if name == BASELINE:
+            agents[name] = WardBehaviourTree(name, list(model.actions))
+        elif name == "online" or name.startswith("online:"):
+            trials = ONLINE_TRIALS if name == "online" else online_trials(name, "--policies")
+            agents[name] = Controller(name, OnlineDecider(model, settings=DespotSettings(trials=trials), seed=seed))
+        else:
+            agents[name] = plan_controller(name, domain, model, hierarchy_path, seed=seed)
+        agents.timings[name] = time.perf_counter() - t0
+        if log:
+            log(f"planned {name} in {agents.timings[name]:.1f} s")
+    return agents
+
+
+def _t_ci(values: Sequence[float]) -> dict:
+    from pearl_sim.stats import t_ci
+
+    return t_ci(values)
+
+
+def _percentile(values: Sequence[float], q: float) -> Optional[float]:
+    import numpy as np
+
+    return float(np.percentile(values, q)) if len(values) else None
+
+
+def summarise(episodes: Sequence[WardEpisode], baseline: str = BASELINE) -> dict:
+    """``per_policy`` (policy → noise → score → mean, 95 % t CI; success with a Wilson CI; decision
+    seconds p50/p99/max) and ``paired_vs_baseline`` (policy → noise → score → mean and 95 % CI of
+    policy − baseline over the same cells), and ``paired`` between every two POMDP controllers."""
+    from pearl_sim.stats import proportion_ci
+
+    groups: Dict[str, Dict[float, List[WardEpisode]]] = {}
+    for e in episodes:
+        groups.setdefault(e.policy, {}).setdefault(e.noise, []).append(e)
+    per_policy: Dict[str, Dict[str, dict]] = {}
+    for policy, by_noise in groups.items():
+        per_policy[policy] = {}
+        for noise, es in sorted(by_noise.items()):
+            row: Dict[str, Any] = {s: _t_ci([float(getattr(e, s)) for e in es]) for s in SCORES}
+            row["success_rate"] = proportion_ci(sum(e.success for e in es), len(es))
+            row["request_wait_s"] = _t_ci([t for e in es for t in e.request_wait])
+            secs = [t for e in es for t in e.decision_seconds]
+            row["decision_ms"] = {"p50": None if not secs else 1000 * _percentile(secs, 50),
+                                  "p99": None if not secs else 1000 * _percentile(secs, 99),
+                                  "max": None if not secs else 1000 * max(secs), "n": len(secs)}
+            row["episodes"] = len(es)
+            per_policy[policy][f"{noise:g}"] = row
+    index = {(e.policy, e.scenario, e.noise, e.seed): e for e in episodes}
+
+    def paired(a: str, b: str) -> Dict[str, dict]:
+        out = {}
+        for noise in sorted({e.noise for e in episodes}):
+            diffs: Dict[str, List[float]] = {s: [] for s in SCORES}
+            for (p, sc, n, seed), e in index.items():
+                other = index.get((b, sc, n, seed))
+                if p != a or n != noise or other is None:
+                    continue
+                for s in SCORES:
+                    diffs[s].append(float(getattr(e, s)) - float(getattr(other, s)))
+            out[f"{noise:g}"] = {s: _t_ci(v) for s, v in diffs.items()}
+        return out
+
+    names = sorted(groups)
+    vs_base = {p: paired(p, baseline) for p in names if p != baseline and baseline in groups}
+    between = {f"{a} - {b}": paired(a, b) for a in names for b in names if a < b and baseline not in (a, b)}
+    return {"per_policy": per_policy, "paired_vs_baseline": vs_base, "paired": between}
+
+
+def episodes_json(episodes: Sequence[WardEpisode]) -> List[dict]:
+    """JSON-ready rows, one per episode (decision times summarised, not listed)."""
+    rows = []
+    for e in episodes:
+        row = {k: v for k, v in asdict(e).items() if k != "decision_seconds"}
+        row["decisions"] = len(e.decision_seconds)
+        rows.append(row)
+    return rows
+
+
+def format_table(summary: dict, baseline: str = BASELINE) -> str:
+    """The study's table as text: return ± CI, the paired return difference to ``baseline`` with its
+    95 % CI, task success, requests met, pills taken, wrong actions, decision p99."""
+    lines = [f"{'policy':<16} {'noise':>5} {'return':>14} {'Δreturn vs tree [95% CI]':>28} {'success':>18} "
+             f"{'met/ep':>7} {'pills/ep':>8} {'wrong/ep':>9} {'p99 ms':>8}"]
+    for policy, by_noise in summary["per_policy"].items():
+        for level, row in by_noise.items():
+            r, s = row["discounted_return"], row["success_rate"]
+            d = "-"
+            if policy in summary["paired_vs_baseline"]:
+                p = summary["paired_vs_baseline"][policy][level]["discounted_return"]
+                d = f"{p['mean']:+.2f} [{p['low']:+.2f}, {p['high']:+.2f}]"
+            p99 = row["decision_ms"]["p99"]
+            lines.append(f"{policy:<16} {level:>5} {r['mean']:>7.2f} ± {r['ci95']:<5.2f} {d:>28} "
+                         f"{s['successes']:>3}/{s['n']:<3} [{s['low']:.2f},{s['high']:.2f}] "
+                         f"{row['requests_met']['mean']:>7.2f} {row['pills_taken']['mean']:>8.2f} "
+                         f"{row['wrong_actions']['mean']:>9.2f} {'-' if p99 is None else f'{p99:.0f}':>8}")
+    return "\n".join(lines)
