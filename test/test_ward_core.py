@@ -104,3 +104,23 @@ def test_the_online_deciders_default_upper_bound_is_qmdp_past_the_fib_limit(monk
     monkeypatch.setattr(decider, "FIB_LIMIT", model.num_states * 3 * 4 - 1)
     assert decider.default_bounds(model).description.startswith("upper: QMDP")
     assert decider.OnlineDecider(model).bounds.description.startswith("upper: QMDP")
+
+
+def test_planning_refuses_a_subtask_whose_state_pairs_do_not_fit_in_one_line_naming_it(monkeypatch):
+    """The ward's CareAnn keeps all 233,280 states (5.4e10 pairs): planning stops with one line naming
+    the hierarchy file, the subtask and the features kept. Checked on the reception robot with the
+    limit lowered below its Welcome subtask's 36² pairs (the ward itself takes a minute to get there)."""
+    import pearl_pomdp.hierarchy.abstraction as abstraction
+    from pearl_pomdp.errors import PearlError
+    from pearl_pomdp.hierarchy import load_hierarchy, plan
+    from pearl_pomdp.model.factored import load_domain
+
+    domain = load_domain("config/reception.domain.yaml")
+    hierarchy = load_hierarchy("config/reception.hierarchy.yaml", domain)
+    monkeypatch.setattr(abstraction, "MAX_PAIRS", 35 ** 2)
+    with pytest.raises(PearlError) as err:
+        plan(domain, hierarchy, seed=0)
+    text = str(err.value)
+    assert "\n" not in text
+    assert text.startswith("config/reception.hierarchy.yaml: subtasks.Welcome: subtask Welcome: its abstraction keeps 36 states")
+    assert "Visitor, Wish, RobotAt, Battery" in text and "1.3e+03 state pairs > 2^31" in text

@@ -52,13 +52,30 @@ import numpy as np
 import scipy.sparse as sp
 
 from pearl_pomdp.hierarchy.parameterize import StateFactors, SubtaskModel
+from pearl_pomdp.errors import PearlError
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.model.factored import FactoredDomain
 
-__all__ = ["AbstractSubtask", "abstract_subtask", "KernelBuilder"]
+__all__ = ["AbstractSubtask", "abstract_subtask", "KernelBuilder", "AbstractionTooLarge", "MAX_PAIRS"]
 
 #: Two probabilities (or rewards) closer than this are equal for the condition checks.
 TOL = 1e-10
+#: Most abstract state pairs ``X·X'`` a subtask's kernels may index (scipy's int32 row indices, and
+#: the dense ``[X, X']`` per action of the standard form, stop well before).
+MAX_PAIRS = 2 ** 31 - 1
+
+
+class AbstractionTooLarge(PearlError):
+    """A subtask's abstraction keeps too many states to build (the message names the subtask and why)."""
+
+
+def _check_size(sub, factors: "StateFactors", keep, X: int) -> None:
+    if X * X > MAX_PAIRS:
+        names = [factors.names[f] for f in sorted(keep)]
+        raise AbstractionTooLarge(
+            f"subtask {sub.name}: its abstraction keeps {X:,} states ({len(names)} features: {', '.join(names)}), "
+            f"{float(X) * X:.3g} state pairs > 2^31: a feature its actions' rewards, effects or observations read "
+            f"(rules for every action '*' read every feature) cannot be dropped; the subtask cannot be planned")
 
 
 @dataclass
@@ -240,6 +257,10 @@ def abstract_subtask(sub: SubtaskModel, factors: StateFactors, domain=None, chil
 
     Returns:
         The :class:`AbstractSubtask`.
+
+    Raises:
+        AbstractionTooLarge: X+ keeps more than ``MAX_PAIRS`` state pairs (checked before any
+            kernel is built: one line naming the subtask, its size and the features kept).
     """
     model = sub.model
     builder = builder or KernelBuilder(model)
@@ -258,6 +279,7 @@ def abstract_subtask(sub: SubtaskModel, factors: StateFactors, domain=None, chil
     while True:
         order = sorted(keep)
         xmap, X = _lumping(factors, order)
+        _check_size(sub, factors, keep, X)
         K = builder.kernels(sub.source, xmap, X)
         found = _violations(sub, K, X, Z, partners, keep, tol)
         added = set().union(*found.values())

@@ -34,7 +34,7 @@ from typing import Dict, Optional
 import numpy as np
 
 from pearl_pomdp.errors import PearlError
-from pearl_pomdp.hierarchy.abstraction import AbstractSubtask, KernelBuilder, abstract_subtask
+from pearl_pomdp.hierarchy.abstraction import AbstractionTooLarge, AbstractSubtask, KernelBuilder, abstract_subtask
 from pearl_pomdp.hierarchy.execute import HierarchicalPolicy, Lookahead, SubtaskPolicy
 from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
 from pearl_pomdp.hierarchy.spec import Hierarchy, SubtaskSpec
@@ -149,7 +149,10 @@ def _plan_corner(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
                 raise PearlError(f"{hierarchy.source}: subtasks.{name}: {problem}")
             log.warning("%s", problem)
         child_relevant = sorted({f for c in spec.children if c in abstracts for f in abstracts[c].relevant})
-        abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder)
+        try:
+            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder)
+        except AbstractionTooLarge as e:
+            raise PearlError(f"{hierarchy.source}: subtasks.{name}: {e}") from None
         t1 = time.perf_counter()
         limited = spec if deadline is None else dataclasses.replace(spec, time_limit=_left(deadline, spec.time_limit))
         result = solve_subtask(abst.model, limited, seed=seed, solver=solver)
@@ -366,7 +369,10 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
                 raise PearlError(f"{hierarchy.source}: subtasks.{name}: {problem}")
             log.warning("%s", problem)
         child_relevant = sorted({f for c in spec.children if c in abstracts for f in abstracts[c].relevant})
-        abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder)
+        try:
+            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder)
+        except AbstractionTooLarge as e:
+            raise PearlError(f"{hierarchy.source}: subtasks.{name}: {e}") from None
         solve_model = abst.model if is_root else with_exit(abst.model)
         starts = _starts(abst, solve_model.num_states, entries)
         abstract_children = [c for c in spec.children if c in policies]
