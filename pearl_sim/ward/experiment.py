@@ -79,6 +79,10 @@ def run_cli(args: argparse.Namespace) -> int:
     if bad or not policies:
         raise SpecError("<command line>", "--policies", f"{bad[0] if bad else ''!r}: the ward world compares "
                         f"{', '.join(sorted(known))} and online:TRIALS")
+    from pearl_pomdp.online.decider import online_trials
+
+    for p in policies:
+        online_trials(p, "--policies")          # a bad online:TRIALS fails before the model is compiled
     study_path = args.study or _share(world.study)
     require_file(study_path, "study file (--study)")
     params = _share(world.params_file)
