@@ -37,7 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from pearl_pomdp.errors import BeliefError
-from pearl_pomdp.model.pomdp import Pomdp
+from pearl_pomdp.model.pomdp import LARGE_O_ENTRIES, Pomdp
 
 __all__ = ["BeliefFilter", "update_belief", "MIN_LIKELIHOOD", "SUM_TOLERANCE"]
 
@@ -53,7 +53,7 @@ NEGATIVE_TOLERANCE = 1e-12
 FUSED_LIMIT = 20_000_000
 #: Most entries of ``O`` for which the filter keeps its own contiguous copies of ``Tᵀ`` and ``O``
 #: (beyond it: views of the model's arrays; see :class:`BeliefFilter`).
-VIEW_LIMIT = 16_000_000
+VIEW_LIMIT = LARGE_O_ENTRIES
 #: The first this many zero-likelihood recoveries are logged one by one, then every 1000th.
 LOG_FIRST = 10
 

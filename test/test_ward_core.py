@@ -124,3 +124,32 @@ def test_planning_refuses_a_subtask_whose_state_pairs_do_not_fit_in_one_line_nam
     assert "\n" not in text
     assert text.startswith("config/reception.hierarchy.yaml: subtasks.Welcome: subtask Welcome: its abstraction keeps 36 states")
     assert "Visitor, Wish, RobotAt, Battery" in text and "1.3e+03 state pairs > 2^31" in text
+
+
+def test_a_large_compiled_model_keeps_O_as_float32_and_the_filter_and_sampler_use_it_uncopied(monkeypatch):
+    """Past LARGE_O_ENTRIES (the ward: 52M) compile stores O as float32; beliefs and samples agree
+    with the float64 model's to float32 precision. Checked on the reception domain with the limit lowered."""
+    import pearl_pomdp.belief as belief
+    import pearl_pomdp.model.factored as factored
+    from pearl_pomdp.model.factored import load_domain
+
+    exact = load_domain("config/reception.domain.yaml").compile()
+    monkeypatch.setattr(factored, "LARGE_O_ENTRIES", 100)
+    monkeypatch.setattr(belief, "VIEW_LIMIT", 100)
+    small = load_domain("config/reception.domain.yaml").compile()
+    assert exact.O.dtype == np.float64 and small.O.dtype == np.float32
+    np.testing.assert_allclose(small.O, exact.O, atol=1e-7)
+    f32, f64 = belief.BeliefFilter(small), belief.BeliefFilter(exact)
+    assert f32.views and np.shares_memory(f32._OT, small.O)
+    b32 = b64 = exact.b0
+    for a, o in [(0, 0), (1, 2), (2, 1), (0, 3), (5, 4)]:
+        b32, b64 = f32.update(b32, a, o), f64.update(b64, a, o)
+        assert b32.dtype == np.float64
+        np.testing.assert_allclose(b32, b64, atol=1e-6)
+    g = ExplicitModel(small)
+    assert g._O is small.O
+    u = np.random.default_rng(0).random((500, 2))
+    s = np.random.default_rng(1).integers(0, small.num_states, 500)
+    n32, o32, _ = g.step(s, 1, u)
+    n64, o64, _ = ExplicitModel(exact).step(s, 1, u)
+    assert (n32 == n64).all() and (o32 != o64).sum() <= 2     # a uniform within 1e-7 of a CDF step may differ

@@ -38,7 +38,7 @@ import scipy.sparse as sp
 
 from pearl_pomdp.channels import InputChannel, check_topics, default_channel, parse_input
 from pearl_pomdp.errors import SpecError
-from pearl_pomdp.model.pomdp import DENSE_LIMIT, Pomdp
+from pearl_pomdp.model.pomdp import DENSE_LIMIT, LARGE_O_ENTRIES, Pomdp
 from pearl_pomdp.yaml_lines import LineMap as _Map
 from pearl_pomdp.yaml_lines import line_of as _line_of
 from pearl_pomdp.yaml_lines import parse_yaml
@@ -403,8 +403,10 @@ class FactoredDomain:
             S = self.num_states
             T = [self.transition_matrix(a) for a in range(len(self.actions))]
             # O filled in place and handed over without a copy: at the ward's size (233,280 states,
-            # 15 actions and symbols) each [A, S, Z] copy is 420 MB.
-            O = np.empty((len(self.actions), S, len(self.observations)))
+            # 15 actions and symbols) each float64 [A, S, Z] copy is 420 MB; past LARGE_O_ENTRIES
+            # it is float32 (210 MB).
+            shape = (len(self.actions), S, len(self.observations))
+            O = np.empty(shape, dtype=np.float32 if int(np.prod(shape)) > LARGE_O_ENTRIES else np.float64)
             for a in range(len(self.actions)):
                 O[a] = self.observation_matrix(a)
             model = Pomdp.create(

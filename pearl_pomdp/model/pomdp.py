@@ -37,6 +37,11 @@ def _csr(x):
 
     return sp.csr_matrix(x, dtype=float)
 
+#: Entries of ``O`` past which a model counts as large: :meth:`FactoredDomain.compile` stores its
+#: ``O`` as float32 (the ward: 52M entries, 210 MB instead of 420 MB; probabilities to ~1e-7) and
+#: the belief filter keeps views of it instead of copies (:data:`pearl_pomdp.belief.VIEW_LIMIT`).
+LARGE_O_ENTRIES = 16_000_000
+
 #: A model with more than this many S×S entries per action keeps T sparse.
 DENSE_LIMIT = 4_000_000
 
@@ -89,7 +94,8 @@ class Pomdp:
             sparse: force sparse (True) or dense (False) T; default by size.
             tolerance: how far a probability row may be from summing to 1.
             copy: ``False`` takes ``T`` (CSR / float arrays) and ``O`` over without copying them when
-                their type already fits: for a caller that built them for this model alone
+                their type already fits (``O`` float64, or float32 for a large model): for a caller
+                that built them for this model alone
                 (:meth:`FactoredDomain.compile`; a 233,280-state ``O`` is 420 MB, a copy doubles it).
 
         Raises:
@@ -114,7 +120,8 @@ class Pomdp:
             mats.append(m)
         # Copies: a model never aliases its caller's arrays (editing one must not edit the other),
         # unless the caller says it hands them over (copy=False).
-        O = np.array(O, dtype=float) if copy else np.asarray(O, dtype=float)
+        if copy or not (isinstance(O, np.ndarray) and O.dtype in (np.float32, np.float64)):
+            O = np.array(O, dtype=float)
         if O.shape != (A, S, Z):
             raise ValueError(f"O has shape {O.shape}, expected ({A}, {S}, {Z})")
         R = np.array(R, dtype=float)

@@ -106,7 +106,7 @@ class ExplicitModel:
         self.states = list(model.states)
         self.discount = float(model.discount)
         self.R = np.asarray(model.R, dtype=float)
-        self._O = np.asarray(model.O, dtype=float)
+        self._O = model.O                       # float64, or float32 for a large compiled model: not copied
         self._rows: List[Tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         for Ta in model.T:
             if issparse(Ta):
@@ -137,7 +137,7 @@ class ExplicitModel:
         k = np.searchsorted(cum, target, side="right")
         k = np.clip(k, first, first + np.maximum(lengths, 1) - 1)
         nxt = np.asarray(indices[flat[k]], dtype=np.int64)
-        cdf = np.cumsum(self._O[action][nxt], axis=1)             # [N, Z], only the particles' rows
+        cdf = np.cumsum(self._O[action][nxt], axis=1, dtype=float)  # [N, Z], only the particles' rows
         cdf[:, -1] = np.inf                                        # rounding never runs past the last symbol
         obs = (cdf <= uniforms[:, 1:2]).sum(axis=1).astype(np.int64)
         return nxt, obs, self.R[s, action].copy()
