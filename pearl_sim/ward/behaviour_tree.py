@@ -141,10 +141,10 @@ def build_ward_tree(namespace: str) -> py_trees.behaviour.Behaviour:
         branch("Find the need", lambda bb: bb.lounge_need and bb.location == "lounge" and _next_to_ask(bb) is not None,
                lambda bb: f"Ask{_next_to_ask(bb)}"),
         branch("Go to a call", lambda bb: _oldest(bb.called) is not None,
-               lambda bb: GOTO[ROOM[_oldest(bb.called)]]),
-        branch("Remind here", lambda bb: round_target(bb) is not None and _where(bb, round_target(bb)) == bb.location,
+               lambda bb: GOTO[ROOM[str(_oldest(bb.called))]]),
+        branch("Remind here", lambda bb: round_target(bb) is not None and _where(bb, str(round_target(bb))) == bb.location,
                lambda bb: f"Remind{round_target(bb)}"),
-        branch("Round", lambda bb: round_target(bb) is not None, lambda bb: GOTO[_where(bb, round_target(bb))]),
+        branch("Round", lambda bb: round_target(bb) is not None, lambda bb: GOTO[_where(bb, str(round_target(bb)))]),
         branch("Home", lambda bb: bb.location != HOME, "GoToStation"),
         Act("Idle", ns, "Wait"),
     ])

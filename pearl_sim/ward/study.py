@@ -153,10 +153,11 @@ def _t_ci(values: Sequence[float]) -> dict:
     return t_ci(values)
 
 
-def _percentile(values: Sequence[float], q: float) -> Optional[float]:
+def _ms(values: Sequence[float], q: float) -> Optional[float]:
+    """The ``q``-th percentile of ``values`` (seconds) in milliseconds; ``None`` for no values."""
     import numpy as np
 
-    return float(np.percentile(values, q)) if len(values) else None
+    return 1000.0 * float(np.percentile(values, q)) if len(values) else None
 
 
 def summarise(episodes: Sequence[WardEpisode], baseline: str = BASELINE) -> dict:
@@ -176,9 +177,7 @@ def summarise(episodes: Sequence[WardEpisode], baseline: str = BASELINE) -> dict
             row["success_rate"] = proportion_ci(sum(e.success for e in es), len(es))
             row["request_wait_s"] = _t_ci([t for e in es for t in e.request_wait])
             secs = [t for e in es for t in e.decision_seconds]
-            row["decision_ms"] = {"p50": None if not secs else 1000 * _percentile(secs, 50),
-                                  "p99": None if not secs else 1000 * _percentile(secs, 99),
-                                  "max": None if not secs else 1000 * max(secs), "n": len(secs)}
+            row["decision_ms"] = {"p50": _ms(secs, 50), "p99": _ms(secs, 99), "max": _ms(secs, 100), "n": len(secs)}
             row["episodes"] = len(es)
             per_policy[policy][f"{noise:g}"] = row
     index = {(e.policy, e.scenario, e.noise, e.seed): e for e in episodes}

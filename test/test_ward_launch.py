@@ -1,0 +1,118 @@
+"""The ward robot as a user launches it: ``pearl launch launch/pearl.launch.xml
+domain:=config/ward.domain.yaml policy:=online:5 params_file:=config/ward_nodes.yaml navigation:=false``
+starts the three nodes as separate processes over DDS and plans online at every belief (233,280
+states). The test answers every drive with its arrival and otherwise presses call buttons and
+speaks, and checks every belief against the core's Bayes filter and every action against the core's
+OnlineDecider on it (the same seed and trials: a decision depends on the belief alone). Decision
+times through the nodes are measured by ``bench/ward_launch.py``; start-up (compile, QMDP and blind
+bounds) takes about a minute, so the test is marked slow."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from ros_helpers import DISCOVERY_TIMEOUT, Probe, Proc, allocate_domain_id, configure_test_process, ros_env, wait_for  # noqa: E402
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+import rclpy  # noqa: E402
+
+from pearl_pomdp.belief import BeliefFilter  # noqa: E402
+from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.nodes import conversions as cv  # noqa: E402
+from pearl_pomdp.nodes.common import INPUT_QOS, LATCHED_QOS  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+PEARL = str(Path(sys.executable).parent / "pearl")
+DOMAIN = REPO / "config" / "ward.domain.yaml"
+STARTUP = 600.0      # s: compile (6 s) and the online bounds (~40 s idle; minutes on a loaded machine)
+
+
+@pytest.fixture(scope="module")
+def launched(tmp_path_factory):
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from pearl_pomdp.online.decider import OnlineDecider
+    from pearl_pomdp.online.despot import DespotSettings
+
+    tmp = tmp_path_factory.mktemp("ward_launch")
+    domain = load_domain(DOMAIN)
+    configure_test_process(tmp)
+    domain_id = allocate_domain_id()
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node("ward_probe", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    probe = Probe(node)
+    model = domain.compile()
+    g = {"domain": domain, "model": model, "filter": BeliefFilter(model),
+         "decider": OnlineDecider(model, settings=DespotSettings(trials=5)),
+         "actions": probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS),
+         "beliefs": probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS),
+         "decisions": probe.listen("/pearl/decision", cv.TextMsg, LATCHED_QOS),
+         "arrived": node.create_publisher(cv.TextMsg, "/ward/arrived", INPUT_QOS),
+         "call": node.create_publisher(cv.TextMsg, "/ward/call_button", INPUT_QOS),
+         "speech": node.create_publisher(cv.TextMsg, "/ward/speech", INPUT_QOS)}
+    launch = Proc([PEARL, "launch", "launch/pearl.launch.xml", f"domain:={DOMAIN}", "policy:=online:5",
+                   f"hierarchy:={REPO / 'config' / 'ward.hierarchy.yaml'}",
+                   f"params_file:={REPO / 'config' / 'ward_nodes.yaml'}", "navigation:=false", "step_timeout:=0.0"],
+                  ros_env(domain_id, tmp), tmp, "launch")
+    g["launch"] = launch
+    g["wait"] = lambda predicate, timeout=DISCOVERY_TIMEOUT: wait_for(predicate, timeout, executor)
+    try:
+        ready = g["wait"](lambda: all(g[k].get_subscription_count() >= 1 for k in ("arrived", "call", "speech"))
+                          and len(g["actions"]) >= 1 and len(g["beliefs"]) >= 1, STARTUP)
+        assert ready, f"graph not ready: {launch.stderr()[-3000:]}"
+        yield g
+    finally:
+        g["exit_code"] = launch.stop(timeout=15.0)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def _feed(g, publisher, text, symbol):
+    model = g["model"]
+    n_actions, n_beliefs = len(g["actions"]), len(g["beliefs"])
+    before, action = cv.msg_to_belief(g["beliefs"][-1]), cv.msg_to_action(g["actions"][-1])
+    g[publisher].publish(cv.text_to_msg(text))
+    assert g["wait"](lambda: len(g["actions"]) > n_actions and len(g["beliefs"]) > n_beliefs, 120.0), \
+        f"no answer to {symbol}: {g['launch'].stderr()[-3000:]}"
+    expected = g["filter"].update(before, model.actions.index(action), model.observations.index(symbol))
+    np.testing.assert_allclose(cv.msg_to_belief(g["beliefs"][-1]), expected, atol=1e-9)
+    answer = cv.msg_to_action(g["actions"][-1])
+    assert answer == g["decider"].execute(expected).action_name
+    return answer
+
+
+def test_the_ward_plans_online_through_the_nodes_as_the_core_does(launched):
+    g = launched
+    first = cv.msg_to_action(g["actions"][0])
+    assert first == g["decider"].execute(g["model"].b0).action_name
+    action = first
+    for step in range(4):
+        if action.startswith("GoTo"):
+            place = {"GoToStation": "station", "GoToRoomAnn": "room_ann", "GoToRoomBob": "room_bob",
+                     "GoToRoomCleo": "room_cleo", "GoToLounge": "lounge"}[action]
+            action = _feed(g, "arrived", f"at_{place}", f"at_{place}")
+        elif step % 2 == 0:
+            action = _feed(g, "call", "call_bob", "call_bob")
+        else:
+            action = _feed(g, "speech", "could i have some water", "water")
+    record = json.loads(g["decisions"][-1].data)
+    assert record["search"]["trials"] == 5 and "QMDP" in record["search"]["bounds"]
+
+
+def test_the_launch_stops_cleanly(launched):
+    code = launched["launch"].stop(timeout=15.0)
+    err = launched["launch"].stderr()
+    assert code == 0, err[-3000:]
+    assert "Traceback" not in err
