@@ -25,7 +25,7 @@ import rclpy  # noqa: E402
 from pearl_pomdp.belief import BeliefFilter  # noqa: E402
 from pearl_pomdp.model.factored import load_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
-from pearl_pomdp.nodes.common import INPUT_QOS, LATCHED_QOS  # noqa: E402
+from pearl_pomdp.nodes.common import EVENT_QOS, INPUT_QOS, LATCHED_QOS  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 PEARL = str(Path(sys.executable).parent / "pearl")
@@ -57,7 +57,7 @@ def launched(tmp_path_factory):
          "decider": OnlineDecider(model, settings=DespotSettings(trials=5)),
          "actions": probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS),
          "beliefs": probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS),
-         "decisions": probe.listen("/pearl/decision", cv.TextMsg, LATCHED_QOS),
+         "decisions": probe.listen("/pearl/decision", cv.TextMsg, EVENT_QOS),
          "arrived": node.create_publisher(cv.TextMsg, "/ward/arrived", INPUT_QOS),
          "call": node.create_publisher(cv.TextMsg, "/ward/call_button", INPUT_QOS),
          "speech": node.create_publisher(cv.TextMsg, "/ward/speech", INPUT_QOS)}

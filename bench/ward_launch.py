@@ -1,0 +1,131 @@
+"""Decision times of the ward robot through the nodes: ``pearl launch`` with ``policy:=online:TRIALS``; one JSON object.
+
+Starts ``pearl launch launch/pearl.launch.xml domain:=config/ward.domain.yaml policy:=online:TRIALS
+params_file:=config/ward_nodes.yaml navigation:=false step_timeout:=0.0`` (three node processes
+over DDS on a private domain, localhost discovery), waits for the first action (start-up: compile
+and bounds, reported), then plays a robot for ``--steps`` steps: a drive is answered with its
+arrival, any other action with a call button or a spoken need in turn. Reports per step the
+publish → action wall time (tracker update + belief + decision + action over DDS) and the policy
+node's own decision latency (``latency_s`` of ``/pearl/decision``): p50/p99/max in ms, and the
+machine's load. Issue 24 part 2's target: decision p99 ≤ 100 ms.
+
+    python bench/ward_launch.py [--trials 5] [--steps 100]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+PLACES = {"GoToStation": "station", "GoToRoomAnn": "room_ann", "GoToRoomBob": "room_bob", "GoToRoomCleo": "room_cleo",
+          "GoToLounge": "lounge"}
+INPUTS = [("/ward/call_button", "call_bob"), ("/ward/speech", "could i have some water"),
+          ("/ward/call_button", "call_ann"), ("/ward/speech", "help me up please"), ("/ward/speech", "no")]
+
+
+def _stats(values):
+    import numpy as np
+
+    v = np.asarray(values) * 1000.0
+    return {"p50": round(float(np.percentile(v, 50)), 1), "p99": round(float(np.percentile(v, 99)), 1),
+            "max": round(float(v.max()), 1), "n": int(v.size)}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--trials", type=int, default=5)
+    ap.add_argument("--steps", type=int, default=100)
+    ap.add_argument("--startup-timeout", type=float, default=900.0)
+    args = ap.parse_args()
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from pearl_pomdp.nodes import conversions as cv
+    from pearl_pomdp.nodes.common import EVENT_QOS, INPUT_QOS, LATCHED_QOS
+
+    domain_id = 1 + (os.getpid() * 7) % 101
+    log_dir = Path(tempfile.mkdtemp(prefix="pearl_ward_launch_"))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_profile.xml"), ROS_LOG_DIR=str(log_dir))
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    err = open(log_dir / "launch.err", "wb")
+    t_start = time.perf_counter()
+    launch = subprocess.Popen([str(Path(sys.executable).parent / "pearl"), "launch", "launch/pearl.launch.xml",
+                               f"domain:={REPO / 'config' / 'ward.domain.yaml'}", f"policy:=online:{args.trials}",
+                               f"hierarchy:={REPO / 'config' / 'ward.hierarchy.yaml'}",
+                               f"params_file:={REPO / 'config' / 'ward_nodes.yaml'}", "navigation:=false",
+                               "step_timeout:=0.0"], cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=err)
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node("ward_latency_probe", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    actions, decisions = [], []
+    node.create_subscription(cv.TextMsg, "/pearl/action", lambda m: actions.append((time.perf_counter(), m)), LATCHED_QOS)
+    node.create_subscription(cv.TextMsg, "/pearl/decision", lambda m: decisions.append(m), EVENT_QOS)
+    pubs = {t: node.create_publisher(cv.TextMsg, t, INPUT_QOS) for t in ("/ward/arrived", "/ward/call_button", "/ward/speech")}
+
+    def spin_until(pred, timeout):
+        end = time.perf_counter() + timeout
+        while time.perf_counter() < end:
+            executor.spin_once(timeout_sec=0.01)
+            if pred():
+                return True
+        return False
+
+    wall, report = [], {}
+    try:
+        ok = spin_until(lambda: actions and all(p.get_subscription_count() >= 1 for p in pubs.values()),
+                        args.startup_timeout)
+        if not ok:
+            raise SystemExit(f"bench/ward_launch.py: the graph did not start within {args.startup_timeout} s "
+                             f"(log: {log_dir / 'launch.err'})")
+        startup = time.perf_counter() - t_start
+        k = 0
+        for _ in range(args.steps):
+            action = cv.msg_to_action(actions[-1][1])
+            n = len(actions)
+            if action in PLACES:
+                topic, text = "/ward/arrived", f"at_{PLACES[action]}"
+            else:
+                topic, text = INPUTS[k % len(INPUTS)]
+                k += 1
+            t0 = time.perf_counter()
+            pubs[topic].publish(cv.text_to_msg(text))
+            if not spin_until(lambda: len(actions) > n, 120.0):
+                raise SystemExit(f"bench/ward_launch.py: no action after {text!r} (log: {log_dir / 'launch.err'})")
+            wall.append(actions[-1][0] - t0)
+        spin_until(lambda: len(decisions) >= len(actions), 5.0)
+        node_latency = [json.loads(d.data).get("latency_s") for d in decisions[1:]]
+        report = {"bench": "ward_launch", "policy": f"online:{args.trials}", "steps": len(wall),
+                  "startup_s": round(startup, 1), "observation_to_action_ms": _stats(wall),
+                  "policy_node_decision_ms": _stats([x for x in node_latency if x is not None]),
+                  "target_p99_ms": 100.0, "load_avg_1min": os.getloadavg()[0], "cpus": os.cpu_count()}
+        report["meets_target"] = report["observation_to_action_ms"]["p99"] <= 100.0
+    finally:
+        launch.send_signal(signal.SIGINT)
+        try:
+            launch.wait(30)
+        except subprocess.TimeoutExpired:
+            launch.kill()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        err.close()
+    print(json.dumps(report, indent=1 if sys.stdout.isatty() else None))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
