@@ -362,6 +362,29 @@ def test_policy_online_wires_the_decider_and_decision_messages_carry_the_search(
     assert "7 trials" in text and f"{d.action_name}: [" in text and "o0 " in text
 
 
+def test_the_nodes_time_guard_cuts_a_search_that_its_trials_would_make_too_long(tiger):
+    """``online_time_guard`` (the policy node's parameter) stops a search at its next expansion:
+    a million trials on tiger end within about the guard, and the decision says why it stopped;
+    0 means no guard; a negative guard is a one-line error naming the parameter."""
+    import time
+
+    from pearl_pomdp.nodes.common import NodeSetupError
+    from pearl_pomdp.nodes.hierarchical_policy import HierarchicalPolicyNode, load_decider
+    from pearl_pomdp.online.decider import DEFAULT_TIME_GUARD
+
+    default = {p.name: p.default for p in HierarchicalPolicyNode.PARAMETERS}["online_time_guard"]
+    assert default == DEFAULT_TIME_GUARD > 0
+    guarded = load_decider(tiger, None, "online:1000000", "", time_guard=0.2)
+    assert guarded.settings.time_limit == 0.2 and guarded.settings.trials == 1000000
+    start = time.monotonic()
+    d = guarded.execute(tiger.b0)
+    assert time.monotonic() - start < 0.2 + 1.0              # the guard, plus the scenarios' draw and slack
+    assert d.search["stop"] == "time_limit" and 0 < d.search["trials"] < 1000000
+    assert load_decider(tiger, None, "online:7", "", time_guard=0).settings.time_limit is None
+    with pytest.raises(NodeSetupError, match="parameter online_time_guard: -1.0"):
+        load_decider(tiger, None, "online:7", "", time_guard=-1.0)
+
+
 def test_particle_belief_follows_bayes_and_reinvigorates_when_deprived(tiger):
     """Weighted resampling tracks the exact posterior; when no particle explains the observation
     (a perfect sensor contradicting every particle) the filter reinvigorates instead of starving."""

@@ -21,6 +21,7 @@ import numpy as np
 from rclpy.parameter import Parameter
 
 from pearl_pomdp.errors import BeliefError, PolicyError
+from pearl_pomdp.online.decider import DEFAULT_TIME_GUARD
 from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Param,
                                       load_domain_and_model, resolve_path, run_node)
@@ -34,7 +35,7 @@ OPERATOR_LIVE = ("autonomy", "confirm_categories", "confirm_timeout")
 __all__ = ["HierarchicalPolicyNode", "load_decider", "main"]
 
 
-def load_decider(model, domain, policy: str, hierarchy: str, logger=None):
+def load_decider(model, domain, policy: str, hierarchy: str, logger=None, time_guard: Optional[float] = None):
     """The decider the node runs (an object with ``.execute(belief) -> Decision``).
 
     * ``policy`` a directory: a saved hierarchical policy (``pearl plan --out DIR``).
@@ -42,24 +43,25 @@ def load_decider(model, domain, policy: str, hierarchy: str, logger=None):
       :class:`pearl_pomdp.executive.FlatPolicyDecider`.
     * ``policy`` ``online`` or ``online:TRIALS``: plan online at every belief
       (:class:`pearl_pomdp.online.decider.OnlineDecider`: DESPOT from the exact belief, FIB and
-      blind-policy bounds, ``TRIALS`` trials per decision).
+      blind-policy bounds, ``TRIALS`` trials per decision; ``time_guard`` seconds of wall clock
+      stop a search early, 0 or ``None`` never).
     * ``policy`` empty: PLAN now from ``domain`` and the ``hierarchy`` file.
 
     Raises:
         NodeSetupError: nothing to load, or a file is missing.
     """
     if policy:
-        from pearl_pomdp.online.decider import online_trials
+        from pearl_pomdp.online.decider import online_settings, online_trials
 
         try:
             trials = online_trials(policy, "parameter policy")
+            settings = None if trials is None else online_settings(trials, time_guard, "parameter online_time_guard")
         except PolicyError as err:
             raise NodeSetupError(str(err)) from None
-        if trials is not None:
+        if settings is not None:
             from pearl_pomdp.online.decider import OnlineDecider
-            from pearl_pomdp.online.despot import DespotSettings
 
-            return OnlineDecider(model, settings=DespotSettings(trials=trials))
+            return OnlineDecider(model, settings=settings)
         path = resolve_path(policy, "policy", kind="policy file or directory")
         if path.is_dir():
             from pearl_pomdp.hierarchy import load_hierarchical_policy
@@ -145,6 +147,9 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                                                          "when policy is empty"),
         Param("policy", "", "Planned policy: directory from `pearl plan --out DIR`, or flat .npz; "
                             "online or online:TRIALS: plan online (DESPOT) at every belief; empty: plan at start-up"),
+        Param("online_time_guard", DEFAULT_TIME_GUARD, "With policy online: wall-clock seconds after which a "
+                                                       "decision's search stops at its next expansion (a guard; "
+                                                       "the budget is TRIALS); 0: no guard", range=(0.0, 3600.0)),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
         Param("belief_topic", "/pearl/belief", "Belief input (std_msgs/Float64MultiArray)"),
         Param("action_topic", "/pearl/action", "Primitive action output (std_msgs/String)"),
@@ -198,7 +203,8 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             domain, model = load_domain_and_model(resolve_path(p["domain"], "domain"))
         self.domain, self.model = domain, model
         self.decider = decider if decider is not None else load_decider(model, domain, p["policy"],
-                                                                        p["hierarchy"], self.get_logger())
+                                                                        p["hierarchy"], self.get_logger(),
+                                                                        time_guard=p["online_time_guard"])
         categories = getattr(domain, "categories", {}) if domain is not None else {}
         try:
             self.gate = OperatorGate(self.decider, model.actions, categories, autonomy=p["autonomy"],

@@ -25,7 +25,8 @@ from pearl_pomdp.online.beliefs import sample_belief
 from pearl_pomdp.online.despot import Despot, DespotSettings, SearchResult
 from pearl_pomdp.online.generative import Bounds, ExplicitModel, alpha_bounds
 
-__all__ = ["OnlineDecider", "DEFAULT_TRIALS", "ONLINE_POLICY", "online_trials", "default_bounds", "FIB_LIMIT"]
+__all__ = ["OnlineDecider", "DEFAULT_TRIALS", "DEFAULT_TIME_GUARD", "ONLINE_POLICY", "online_trials", "online_settings",
+           "default_bounds", "FIB_LIMIT"]
 
 #: The policy name that asks for online planning instead of a saved policy (node parameter
 #: ``policy:=online`` or ``online:TRIALS``; ``pearl simulate MODEL online:TRIALS``).
@@ -33,6 +34,12 @@ ONLINE_POLICY = "online"
 
 #: Trials per decision when nothing else is asked (one source for the CLI and the node).
 DEFAULT_TRIALS = 200
+
+#: Wall-clock seconds a decision of the policy node may take before its search stops at the
+#: next expansion: a guard only (the budget is the trials, and a decision the guard cut says
+#: ``stop: "time_limit"`` in /pearl/decision). Half the shipped configs' 10 s step timeout, so a
+#: decision that would come too late to matter is cut well before the step gives up.
+DEFAULT_TIME_GUARD = 5.0
 
 #: Largest ``S·A·Z`` for which the default upper bound is the fast informed bound; past it QMDP
 #: (FIB's backups cost a pass over ``T`` per action and observation: minutes and gigabytes on the
@@ -63,6 +70,22 @@ def online_trials(policy: str, where: str = "policy") -> Optional[int]:
     if not tail.isdigit() or int(tail) < 1:
         raise PolicyError(f"{where}: {text!r}: expected online or online:TRIALS with TRIALS a positive integer")
     return int(tail)
+
+
+def online_settings(trials: int, time_guard: Optional[float] = None, where: str = "time guard") -> DespotSettings:
+    """The search settings of ``online:TRIALS`` with an optional wall-clock guard.
+
+    ``time_guard`` ``None`` or 0: no guard (every decision is the deterministic ``trials`` budget).
+
+    Raises:
+        PolicyError: a negative or non-finite ``time_guard`` (names ``where``).
+    """
+    if time_guard is None or time_guard == 0:
+        return DespotSettings(trials=trials)
+    guard = float(time_guard)
+    if not (guard > 0 and np.isfinite(guard)):
+        raise PolicyError(f"{where}: {time_guard!r}: expected a positive number of seconds, or 0 for no guard")
+    return DespotSettings(trials=trials, time_limit=guard)
 
 
 class OnlineDecider:
