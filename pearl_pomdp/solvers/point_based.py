@@ -1050,8 +1050,10 @@ def _search_c(model: Pomdp, time_limit: Optional[float], epsilon: float,
     """``engine="c"``: the whole search in ``_search_kernel.c`` (HSVI2 with the same bounds as the
     Python engine: blind-policy α-vectors below, FIB vectors and a sawtooth point set above),
     one call, no Python per trial. Its knobs are ``settings.trial_kappa[0]`` (the trials' share
-    of the gap at b0) and ``settings.fib_epsilon`` (the start bounds' tolerance); the rest of
-    the settings steer the Python engine's spreading, which this engine does not do."""
+    of the gap at b0), ``settings.ub_sweep_ratio`` (an upper-bound backup at every visited
+    belief after that many trial backups per visited belief) and ``settings.fib_epsilon`` (the
+    start bounds' tolerance); the rest steer the Python engine's lower-bound spreading (Perseus,
+    PBVI sweeps), which this engine does not do."""
     from . import _search_kernel
 
     t0 = time.perf_counter()
@@ -1070,7 +1072,7 @@ def _search_c(model: Pomdp, time_limit: Optional[float], epsilon: float,
     limit = math.inf if time_limit is None else max(float(time_limit) - (time.perf_counter() - t0), 1e-9)
     out = _search_kernel.search(S, A, Z, g, R, O, t_ptr, t_ind, t_dat, b0, float(epsilon),
                                 float(settings.trial_kappa[0]), init_tol, limit, 100_000,
-                                0 if max_trials is None else int(max_trials))
+                                0 if max_trials is None else int(max_trials), float(settings.ub_sweep_ratio))
     K = int(out["vectors"])
     alphas = np.frombuffer(out["alphas"], dtype=float).reshape(K, S).copy()
     actions = np.frombuffer(out["actions"], dtype=np.int64).copy()
@@ -1085,7 +1087,8 @@ def _search_c(model: Pomdp, time_limit: Optional[float], epsilon: float,
             "engine": "c", "gap": hi - lo, "backups": int(out["backups"]), "vectors": K,
             "ub_points": int(out["ub_points"]), "fib_iterations": int(out["fib_iterations"]),
             "blind_iterations": int(out["blind_iterations"]), "setup_seconds": float(out["init_seconds"]),
-            "stop": out["stop"], "perseus_backups": 0, "sweep_backups": 0,
+            "stop": out["stop"], "perseus_backups": 0, "sweep_backups": 0, "ub_sweeps": int(out["ub_sweeps"]),
+            "ub_sweep_backups": int(out["ub_sweep_backups"]), "trial_backups": int(out["trial_backups"]),
             "history": [(round(seconds, 3), lo, hi)],
         },
     )
