@@ -53,6 +53,12 @@ typedef struct {
     Py_ssize_t K_pruned;                     /* |Gamma| after the last prune */
     double *db;                              /* a dense belief (zero between uses) */
     long ub_sweeps, ub_sweep_backups;
+    /* Cached upper bounds at each entry's successors (A*Z slots, then one for the entry itself),
+     * read at log position uver[p]; plog lists the points in the order their values fell, so a
+     * cached bound is refreshed from the points that fell since (upper bounds only fall: the
+     * cached value stays valid), as the Python engine's versioned sawtooth reads. */
+    double *ucache; i64 *uver; Py_ssize_t ucap;
+    i64 *plog; Py_ssize_t plogn, plogcap;
     /* scratch */
     double *bt; i64 *btnz; char *mark;       /* b T_a, support */
     double *succ; i64 *snz; Py_ssize_t *sn; double *sp;  /* per o successor, support, count, prob */
@@ -239,6 +245,16 @@ static Py_ssize_t belief_entry(ctx_t *c, const double *b, const i64 *nz, Py_ssiz
     for (Py_ssize_t i = 0; i < n; i++)
         if (b[nz[i]] > 0.0) { c->pidx[c->pn + k] = nz[i]; c->pval[c->pn + k] = b[nz[i]]; k++; }
     Py_ssize_t p = c->np_;
+    if (c->np_ + 1 > c->ucap) {
+        Py_ssize_t nc = c->ucap ? 2 * c->ucap : 256;
+        double *uc = realloc(c->ucache, (size_t)nc * (size_t)(c->A * c->Z + 1) * sizeof(double));
+        if (!uc) { PyErr_NoMemory(); return -1; }
+        c->ucache = uc;
+        i64 *uv = realloc(c->uver, (size_t)nc * sizeof(i64));
+        if (!uv) { PyErr_NoMemory(); return -1; }
+        c->uver = uv; c->ucap = nc;
+    }
+    c->uver[p] = -1;
     c->pstart[p] = c->pn; c->plen[p] = m; c->pdelta[p] = INFINITY; c->phash[p] = h;
     c->pn += m; c->np_++;
     Py_ssize_t j = (Py_ssize_t)(h & (uint64_t)(c->hcap - 1));
@@ -248,11 +264,47 @@ static Py_ssize_t belief_entry(ctx_t *c, const double *b, const i64 *nz, Py_ssiz
 }
 
 /* Lower the upper bound at belief entry p to v (a sawtooth point: its excess over b.V_c). */
-static void set_point(ctx_t *c, Py_ssize_t p, double v) {
+static int set_point(ctx_t *c, Py_ssize_t p, double v) {
     const i64 *ix = c->pidx + c->pstart[p]; const double *vx = c->pval + c->pstart[p];
     double base = 0.0;
     for (i64 j = 0; j < c->plen[p]; j++) base += c->Vc[ix[j]] * vx[j];
-    if (v - base < c->pdelta[p]) c->pdelta[p] = v - base;
+    if (v - base < c->pdelta[p]) {
+        c->pdelta[p] = v - base;
+        if (grow((void **)&c->plog, &c->plogcap, c->plogn + 1, sizeof(i64)) < 0) return -1;
+        c->plog[c->plogn++] = p;
+    }
+    return 0;
+}
+
+/* min(cur, b.V_c + min over the points logged from position `from` of phi_i delta_i): a cached
+ * upper bound cur at b refreshed from the points whose values fell since it was read. */
+static double upper_since(const ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, Py_ssize_t from,
+                          double cur) {
+    double base = dot_nz(c->Vc, b, nz, n), best = cur - base;
+    for (Py_ssize_t q = from; q < c->plogn; q++) {
+        i64 p = c->plog[q];
+        double d = c->pdelta[p];
+        if (d >= best) continue;
+        const i64 *ix = c->pidx + c->pstart[p]; const double *vx = c->pval + c->pstart[p];
+        double phi = INFINITY;
+        for (i64 j = 0; j < c->plen[p]; j++) {
+            double r = b[ix[j]] / vx[j];
+            if (r < phi) { phi = r; if (phi * d >= best) break; }
+        }
+        if (phi * d < best) best = phi * d;
+    }
+    return base + best;
+}
+
+/* The upper bound at a belief read through entry p's cache slot (refreshed from the log since
+ * ver, or read in full when that is no cheaper or there is no cached value). */
+static double cached_upper(ctx_t *c, Py_ssize_t p, i64 ver, Py_ssize_t slot, const double *b, const i64 *nz,
+                           Py_ssize_t n) {
+    double *uc = c->ucache + p * (c->A * c->Z + 1) + slot;
+    double v = (ver >= 0 && c->plogn - ver < c->np_) ? upper_since(c, b, nz, n, (Py_ssize_t)ver, *uc)
+                                                     : upper(c, b, nz, n);
+    *uc = v;
+    return v;
 }
 
 /* Keep the vectors that are maximal at some visited belief (the first maximiser, as best_alpha
@@ -294,6 +346,9 @@ static int backup(ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, double
     i64 *kbest = malloc((size_t)Z * sizeof(i64)), *kL = malloc((size_t)Z * sizeof(i64));
     double *excess = malloc((size_t)Z * sizeof(double)), *exU = malloc((size_t)Z * sizeof(double));
     if (!kbest || !kL || !excess || !exU) { free(kbest); free(kL); free(excess); free(exU); PyErr_NoMemory(); return -1; }
+    Py_ssize_t pe = belief_entry(c, b, nz, n);
+    if (pe < 0) { free(kbest); free(kL); free(excess); free(exU); return -1; }
+    i64 ver = c->uver[pe], now = (i64)c->plogn;
     for (Py_ssize_t a = 0; a < A; a++) {
         successors(c, b, nz, n, a);
         double r = 0.0;
@@ -303,7 +358,7 @@ static int backup(ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, double
             excess[o] = -INFINITY;
             if (c->sp[o] <= 0.0) { kbest[o] = -1; continue; }
             const double *sb = c->succ + o * S; const i64 *snz = c->snz + o * S;
-            double lv, uv = upper(c, sb, snz, c->sn[o]);
+            double lv, uv = cached_upper(c, pe, ver, a * Z + o, sb, snz, c->sn[o]);
             kbest[o] = best_alpha(c, sb, snz, c->sn[o], &lv);
             qu += c->g * c->sp[o] * uv;
             ql += c->g * c->sp[o] * lv;
@@ -317,7 +372,8 @@ static int backup(ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, double
     for (Py_ssize_t o = 1; o < Z; o++) if (exU[o] > exU[ob]) ob = o;
     *a_out = aU; *o_out = ob;
     double lb0; best_alpha(c, b, nz, n, &lb0);
-    double ub0 = upper(c, b, nz, n);
+    double ub0 = cached_upper(c, pe, ver, A * Z, b, nz, n);
+    c->uver[pe] = now;
     int rc = 0;
     if (bestQL > lb0 + 1e-12 * (1.0 + fabs(lb0))) {
         /* the backed-up vector: alpha(s) = R(s,a) + g sum_s' T(s,a,s') sum_o O(a,s',o) alpha_k(o)(s') */
@@ -342,13 +398,9 @@ static int backup(ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, double
         c->backups++;
         if (bestQL > lb0) lb0 = bestQL;
     }
-    if (rc == 0) {
-        Py_ssize_t p = belief_entry(c, b, nz, n);
-        if (p < 0) rc = -1;
-        else if (bestQU < ub0 - 1e-12 * (1.0 + fabs(ub0))) {
-            set_point(c, p, bestQU);
-            ub0 = bestQU;
-        }
+    if (rc == 0 && bestQU < ub0 - 1e-12 * (1.0 + fabs(ub0))) {
+        rc = set_point(c, pe, bestQU);
+        ub0 = bestQU;
     }
     free(kbest); free(kL); free(excess); free(exU);
     *lb_out = lb0; *ub_out = ub0;
@@ -358,31 +410,35 @@ static int backup(ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, double
 /* An upper-bound backup at every visited belief, newest first (HSVI2 lowers UB along one path
  * per trial; this carries it to the beliefs the trials passed by, as the Python engine's
  * sweep_upper: web-ad 202 -> 77 trials here, 0.35 -> 0.16 s). */
-static void sweep_upper(ctx_t *c) {
+static int sweep_upper(ctx_t *c) {
     Py_ssize_t S = c->S, A = c->A, Z = c->Z;
     double *b = c->db;
     i64 *sup = malloc((size_t)S * sizeof(i64));
-    if (!sup) return;  /* (a skipped sweep loses nothing but speed) */
+    if (!sup) { PyErr_NoMemory(); return -1; }
     for (Py_ssize_t p = c->np_ - 1; p >= 0; p--) {
         const i64 *ix = c->pidx + c->pstart[p]; const double *vx = c->pval + c->pstart[p];
         Py_ssize_t n = (Py_ssize_t)c->plen[p];
         for (Py_ssize_t j = 0; j < n; j++) { b[ix[j]] = vx[j]; sup[j] = ix[j]; }
         double best = -INFINITY;
+        i64 ver = c->uver[p], now = (i64)c->plogn;
         for (Py_ssize_t a = 0; a < A; a++) {
             successors(c, b, sup, n, a);
             double q = 0.0;
             for (Py_ssize_t j = 0; j < n; j++) q += b[sup[j]] * c->R[sup[j] * A + a];
             for (Py_ssize_t o = 0; o < Z; o++)
-                if (c->sp[o] > 0.0) q += c->g * c->sp[o] * upper(c, c->succ + o * S, c->snz + o * S, c->sn[o]);
+                if (c->sp[o] > 0.0)
+                    q += c->g * c->sp[o] * cached_upper(c, p, ver, a * Z + o, c->succ + o * S, c->snz + o * S, c->sn[o]);
             clear_succ(c);
             if (q > best) best = q;
         }
-        set_point(c, p, best);
+        c->uver[p] = now;
         for (Py_ssize_t j = 0; j < n; j++) b[ix[j]] = 0.0;
+        if (set_point(c, p, best) < 0) { free(sup); return -1; }
         c->ub_sweep_backups++;
     }
     free(sup);
     c->ub_sweeps++;
+    return 0;
 }
 
 static int need(Py_buffer *b, Py_ssize_t item, Py_ssize_t n, const char *name) {
@@ -631,7 +687,7 @@ static PyObject *search(PyObject *Py_UNUSED(self), PyObject *args) {
             trial_backups++;
         }
         if (ub_sweep_ratio > 0.0 && (double)(trial_backups - at_ub_sweep) >= ub_sweep_ratio * (double)c.np_) {
-            sweep_upper(&c);
+            if (sweep_upper(&c) < 0) goto done;
             at_ub_sweep = trial_backups;
         }
         if (c.K > 2 * c.K_pruned + 50 && prune_alphas(&c) < 0) goto done;
@@ -654,7 +710,7 @@ static PyObject *search(PyObject *Py_UNUSED(self), PyObject *args) {
 done:
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) PyBuffer_Release(bufs[i]);
     free(c.Vc); free(c.al); free(c.act); free(c.pidx); free(c.pval); free(c.pstart); free(c.plen); free(c.pdelta);
-    free(c.phash); free(c.htab); free(c.keep); free(c.db);
+    free(c.phash); free(c.htab); free(c.keep); free(c.db); free(c.ucache); free(c.uver); free(c.plog);
     free(c.bt); free(c.btnz); free(c.mark); free(c.succ); free(c.snz); free(c.sn); free(c.sp); free(c.w);
     free(path); free(pnz); free(pn); free(Q); free(al0); free(nz0);
     return out;
