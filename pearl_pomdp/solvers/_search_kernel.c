@@ -59,6 +59,10 @@ typedef struct {
      * cached value stays valid), as the Python engine's versioned sawtooth reads. */
     double *ucache; i64 *uver; Py_ssize_t ucap;
     i64 *plog; Py_ssize_t plogn, plogcap;
+    /* Each point's entries again, most likely state first, with 1/b_i(s): the sawtooth's ratio
+     * min_s b(s)/b_i(s) is usually set by b_i's likely states, so its branch and bound stops
+     * early (the Python engine's probe states). */
+    i64 *sidx; double *sinv; Py_ssize_t scap;
     /* scratch */
     double *bt; i64 *btnz; char *mark;       /* b T_a, support */
     double *succ; i64 *snz; Py_ssize_t *sn; double *sp;  /* per o successor, support, count, prob */
@@ -105,10 +109,10 @@ static double upper(const ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n
     for (Py_ssize_t p = 0; p < c->np_; p++) {
         double d = c->pdelta[p];
         if (d >= best) continue;
-        const i64 *ix = c->pidx + c->pstart[p]; const double *vx = c->pval + c->pstart[p];
+        const i64 *ix = c->sidx + c->pstart[p]; const double *iv = c->sinv + c->pstart[p];
         double phi = INFINITY;
         for (i64 j = 0; j < c->plen[p]; j++) {
-            double r = b[ix[j]] / vx[j];
+            double r = b[ix[j]] * iv[j];
             if (r < phi) { phi = r; if (phi * d >= best) break; }
         }
         if (phi * d < best) best = phi * d;
@@ -241,9 +245,21 @@ static Py_ssize_t belief_entry(ctx_t *c, const double *b, const i64 *nz, Py_ssiz
     cap = c->pcap;
     if (grow((void **)&c->pval, &cap, c->pn + m, sizeof(double)) < 0) return -1;
     c->pcap = cap;
+    cap = c->scap;
+    if (grow((void **)&c->sidx, &cap, c->pn + m, sizeof(i64)) < 0) return -1;
+    cap = c->scap;
+    if (grow((void **)&c->sinv, &cap, c->pn + m, sizeof(double)) < 0) return -1;
+    c->scap = cap;
     Py_ssize_t k = 0;
     for (Py_ssize_t i = 0; i < n; i++)
         if (b[nz[i]] > 0.0) { c->pidx[c->pn + k] = nz[i]; c->pval[c->pn + k] = b[nz[i]]; k++; }
+    i64 *si = c->sidx + c->pn; double *sv = c->sinv + c->pn;
+    for (Py_ssize_t i = 0; i < m; i++) {      /* insertion sort by b_i(s) descending (stable) */
+        i64 s = c->pidx[c->pn + i]; double v = c->pval[c->pn + i];
+        Py_ssize_t j = i;
+        while (j > 0 && 1.0 / sv[j - 1] < v) { si[j] = si[j - 1]; sv[j] = sv[j - 1]; j--; }
+        si[j] = s; sv[j] = 1.0 / v;
+    }
     Py_ssize_t p = c->np_;
     if (c->np_ + 1 > c->ucap) {
         Py_ssize_t nc = c->ucap ? 2 * c->ucap : 256;
@@ -285,10 +301,10 @@ static double upper_since(const ctx_t *c, const double *b, const i64 *nz, Py_ssi
         i64 p = c->plog[q];
         double d = c->pdelta[p];
         if (d >= best) continue;
-        const i64 *ix = c->pidx + c->pstart[p]; const double *vx = c->pval + c->pstart[p];
+        const i64 *ix = c->sidx + c->pstart[p]; const double *iv = c->sinv + c->pstart[p];
         double phi = INFINITY;
         for (i64 j = 0; j < c->plen[p]; j++) {
-            double r = b[ix[j]] / vx[j];
+            double r = b[ix[j]] * iv[j];
             if (r < phi) { phi = r; if (phi * d >= best) break; }
         }
         if (phi * d < best) best = phi * d;
@@ -711,6 +727,7 @@ done:
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) PyBuffer_Release(bufs[i]);
     free(c.Vc); free(c.al); free(c.act); free(c.pidx); free(c.pval); free(c.pstart); free(c.plen); free(c.pdelta);
     free(c.phash); free(c.htab); free(c.keep); free(c.db); free(c.ucache); free(c.uver); free(c.plog);
+    free(c.sidx); free(c.sinv);
     free(c.bt); free(c.btnz); free(c.mark); free(c.succ); free(c.snz); free(c.sn); free(c.sp); free(c.w);
     free(path); free(pnz); free(pn); free(Q); free(al0); free(nz0);
     return out;
