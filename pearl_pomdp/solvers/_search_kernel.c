@@ -50,14 +50,16 @@ typedef struct {
      * point instead of adding one. */
     uint64_t *phash; i64 *htab; Py_ssize_t hcap;
     char *keep;                              /* scratch of prune_alphas */
+    double deadline;                         /* the time limit, on now_s()'s clock */
     Py_ssize_t K_pruned;                     /* |Gamma| after the last prune */
     double *db;                              /* a dense belief (zero between uses) */
-    long ub_sweeps, ub_sweep_backups;
+    long ub_sweeps, ub_sweep_backups, lb_sweep_backups;
     /* Cached upper bounds at each entry's successors (A*Z slots, then one for the entry itself),
      * read at log position uver[p]; plog lists the points in the order their values fell, so a
      * cached bound is refreshed from the points that fell since (upper bounds only fall: the
      * cached value stays valid), as the Python engine's versioned sawtooth reads. */
     double *ucache; i64 *uver; Py_ssize_t ucap;
+    i64 *pact;                               /* per entry: the action of its last LB backup (-1: none) */
     i64 *plog; Py_ssize_t plogn, plogcap;
     /* Each point's entries again, most likely state first, with 1/b_i(s): the sawtooth's ratio
      * min_s b(s)/b_i(s) is usually set by b_i's likely states, so its branch and bound stops
@@ -268,9 +270,12 @@ static Py_ssize_t belief_entry(ctx_t *c, const double *b, const i64 *nz, Py_ssiz
         c->ucache = uc;
         i64 *uv = realloc(c->uver, (size_t)nc * sizeof(i64));
         if (!uv) { PyErr_NoMemory(); return -1; }
-        c->uver = uv; c->ucap = nc;
+        c->uver = uv;
+        i64 *pa = realloc(c->pact, (size_t)nc * sizeof(i64));
+        if (!pa) { PyErr_NoMemory(); return -1; }
+        c->pact = pa; c->ucap = nc;
     }
-    c->uver[p] = -1;
+    c->uver[p] = -1; c->pact[p] = -1;
     c->pstart[p] = c->pn; c->plen[p] = m; c->pdelta[p] = INFINITY; c->phash[p] = h;
     c->pn += m; c->np_++;
     Py_ssize_t j = (Py_ssize_t)(h & (uint64_t)(c->hcap - 1));
@@ -324,13 +329,18 @@ static double cached_upper(ctx_t *c, Py_ssize_t p, i64 ver, Py_ssize_t slot, con
 }
 
 /* Keep the vectors that are maximal at some visited belief (the first maximiser, as best_alpha
- * picks), dropping the rest: the lower bound at every visited belief is unchanged, and b0 is
- * one of them. Pays one product with Gamma per visited belief, so it waits until |Gamma| has
+ * picks) or at one of its successors under the action its last lower-bound backup took, dropping
+ * the rest: the lower bound at every visited belief is unchanged, and b0 is one of them. (Vectors
+ * that serve only successors carry the lower bound there: without them TagAvoid's lower bound
+ * stalled, -6.7 instead of -6.1 after 20 s; those of every action's successors, marked as the
+ * backups used them, kept hallway's Gamma ten times larger.) Pays one product with Gamma per visited belief, so it waits until |Gamma| has
  * doubled (see the trial loop). */
 static int prune_alphas(ctx_t *c) {
     Py_ssize_t S = c->S, cap = 0;
     if (grow((void **)&c->keep, &cap, c->K, 1) < 0) return -1;
     memset(c->keep, 0, (size_t)c->K);
+    i64 *sup = malloc((size_t)S * sizeof(i64));
+    if (!sup) { PyErr_NoMemory(); return -1; }
     for (Py_ssize_t p = 0; p < c->np_; p++) {
         const i64 *ix = c->pidx + c->pstart[p]; const double *vx = c->pval + c->pstart[p];
         Py_ssize_t best = 0; double bv = -INFINITY;
@@ -340,7 +350,17 @@ static int prune_alphas(ctx_t *c) {
             if (v > bv) { bv = v; best = k; }
         }
         c->keep[best] = 1;
+        if (c->pact[p] < 0) continue;
+        /* and at its successors under the action its last lower-bound backup took */
+        Py_ssize_t n = (Py_ssize_t)c->plen[p];
+        for (Py_ssize_t j = 0; j < n; j++) { c->db[ix[j]] = vx[j]; sup[j] = ix[j]; }
+        successors(c, c->db, sup, n, (Py_ssize_t)c->pact[p]);
+        for (Py_ssize_t o = 0; o < c->Z; o++)
+            if (c->sp[o] > 0.0) c->keep[best_alpha(c, c->succ + o * S, c->snz + o * S, c->sn[o], &bv)] = 1;
+        clear_succ(c);
+        for (Py_ssize_t j = 0; j < n; j++) c->db[sup[j]] = 0.0;
     }
+    free(sup);
     Py_ssize_t k = 0;
     for (Py_ssize_t j = 0; j < c->K; j++) {
         if (!c->keep[j]) continue;
@@ -355,7 +375,7 @@ static int prune_alphas(ctx_t *c) {
 /* One backup at b: both bounds updated there. Returns the best action by the upper bound
  * (before this backup's points) and, through *o_out, the observation with the largest weighted
  * excess width at depth+1 (threshold thr); lb_out and ub_out: the bounds at b after the backup. */
-static int backup(ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, double thr,
+static int backup(ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, double thr, int with_upper,
                   Py_ssize_t *a_out, Py_ssize_t *o_out, double *lb_out, double *ub_out) {
     Py_ssize_t S = c->S, A = c->A, Z = c->Z;
     double bestQU = -INFINITY, bestQL = -INFINITY; Py_ssize_t aU = 0, aL = 0;
@@ -374,7 +394,7 @@ static int backup(ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, double
             excess[o] = -INFINITY;
             if (c->sp[o] <= 0.0) { kbest[o] = -1; continue; }
             const double *sb = c->succ + o * S; const i64 *snz = c->snz + o * S;
-            double lv, uv = cached_upper(c, pe, ver, a * Z + o, sb, snz, c->sn[o]);
+            double lv, uv = with_upper ? cached_upper(c, pe, ver, a * Z + o, sb, snz, c->sn[o]) : 0.0;
             kbest[o] = best_alpha(c, sb, snz, c->sn[o], &lv);
             qu += c->g * c->sp[o] * uv;
             ql += c->g * c->sp[o] * lv;
@@ -384,12 +404,16 @@ static int backup(ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, double
         if (qu > bestQU) { bestQU = qu; aU = a; memcpy(exU, excess, (size_t)Z * sizeof(double)); }
         if (ql > bestQL) { bestQL = ql; aL = a; memcpy(kL, kbest, (size_t)Z * sizeof(i64)); }
     }
+    c->pact[pe] = aL;
     Py_ssize_t ob = 0;
     for (Py_ssize_t o = 1; o < Z; o++) if (exU[o] > exU[ob]) ob = o;
     *a_out = aU; *o_out = ob;
     double lb0; best_alpha(c, b, nz, n, &lb0);
-    double ub0 = cached_upper(c, pe, ver, A * Z, b, nz, n);
-    c->uver[pe] = now;
+    double ub0 = INFINITY;
+    if (with_upper) {
+        ub0 = cached_upper(c, pe, ver, A * Z, b, nz, n);
+        c->uver[pe] = now;
+    }
     int rc = 0;
     if (bestQL > lb0 + 1e-12 * (1.0 + fabs(lb0))) {
         /* the backed-up vector: alpha(s) = R(s,a) + g sum_s' T(s,a,s') sum_o O(a,s',o) alpha_k(o)(s') */
@@ -414,7 +438,7 @@ static int backup(ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, double
         c->backups++;
         if (bestQL > lb0) lb0 = bestQL;
     }
-    if (rc == 0 && bestQU < ub0 - 1e-12 * (1.0 + fabs(ub0))) {
+    if (rc == 0 && with_upper && bestQU < ub0 - 1e-12 * (1.0 + fabs(ub0))) {
         rc = set_point(c, pe, bestQU);
         ub0 = bestQU;
     }
@@ -432,6 +456,7 @@ static int sweep_upper(ctx_t *c) {
     i64 *sup = malloc((size_t)S * sizeof(i64));
     if (!sup) { PyErr_NoMemory(); return -1; }
     for (Py_ssize_t p = c->np_ - 1; p >= 0; p--) {
+        if ((p & 63) == 0 && now_s() >= c->deadline) break;   /* (a partial sweep is still valid) */
         const i64 *ix = c->pidx + c->pstart[p]; const double *vx = c->pval + c->pstart[p];
         Py_ssize_t n = (Py_ssize_t)c->plen[p];
         for (Py_ssize_t j = 0; j < n; j++) { b[ix[j]] = vx[j]; sup[j] = ix[j]; }
@@ -457,6 +482,33 @@ static int sweep_upper(ctx_t *c) {
     return 0;
 }
 
+/* n lower-bound backups at visited beliefs, round-robin from the newest (a deterministic
+ * Perseus, Spaan & Vlassis 2005: the trials raise LB along their paths only; on models too big
+ * to close the gap this spreads the vectors to the beliefs beside them, as the Python engine's
+ * perseus_share). Returns the number of new vectors, or -1 on a memory error. */
+static long sweep_lower(ctx_t *c, long n_backups, Py_ssize_t *cursor) {
+    Py_ssize_t S = c->S;
+    double *b = c->db;
+    i64 *sup = malloc((size_t)S * sizeof(i64));
+    if (!sup) { PyErr_NoMemory(); return -1; }
+    long before = c->backups;
+    for (long i = 0; i < n_backups && c->np_ > 0; i++) {
+        if ((i & 63) == 63 && now_s() >= c->deadline) break;
+        if (*cursor < 0 || *cursor >= c->np_) *cursor = c->np_ - 1;
+        Py_ssize_t p = (*cursor)--;
+        const i64 *ix = c->pidx + c->pstart[p]; const double *vx = c->pval + c->pstart[p];
+        Py_ssize_t n = (Py_ssize_t)c->plen[p];
+        for (Py_ssize_t j = 0; j < n; j++) { b[ix[j]] = vx[j]; sup[j] = ix[j]; }
+        Py_ssize_t a, o; double l, u;
+        int rc = backup(c, b, sup, n, 0.0, 0, &a, &o, &l, &u);
+        for (Py_ssize_t j = 0; j < n; j++) b[sup[j]] = 0.0;
+        if (rc < 0) { free(sup); return -1; }
+        c->lb_sweep_backups++;
+    }
+    free(sup);
+    return c->backups - before;
+}
+
 static int need(Py_buffer *b, Py_ssize_t item, Py_ssize_t n, const char *name) {
     if (b->len != n * item) {
         PyErr_Format(PyExc_ValueError, "_search_kernel.search: %s has %zd bytes, expected %zd (%zd items of %zd bytes)",
@@ -468,8 +520,9 @@ static int need(Py_buffer *b, Py_ssize_t item, Py_ssize_t n, const char *name) {
 
 /* The fast informed bound (Hauskrecht 2000), in place (Gauss-Seidel) from the constant
  * Rmax/(1-g), which H maps below itself: the iterates decrease monotonically, so each is an upper
- * bound; stops when no entry moved by more than tol (or after max_it sweeps). Q[s*A+a]. */
-static Py_ssize_t fib(ctx_t *c, double *Q, double tol, Py_ssize_t max_it) {
+ * bound; stops when no entry moved by more than tol, after max_it sweeps or at the clock's
+ * deadline (a looser start, not a wrong one). Q[s*A+a]. */
+static Py_ssize_t fib(ctx_t *c, double *Q, double tol, Py_ssize_t max_it, double deadline) {
     Py_ssize_t S = c->S, A = c->A, Z = c->Z, it = 0;
     double rmax = -INFINITY;
     for (Py_ssize_t i = 0; i < S * A; i++) if (c->R[i] > rmax) rmax = c->R[i];
@@ -504,15 +557,15 @@ static Py_ssize_t fib(ctx_t *c, double *Q, double tol, Py_ssize_t max_it) {
                     Q[s * A + a] = v;
                 }
             }
-        if (moved <= tol) break;
+        if (moved <= tol || now_s() >= deadline) break;
     }
     return it;
 }
 
 /* The blind policies "always do a" (Hauskrecht 2000), each from the constant min_s R(s,a)/(1-g)
  * below its value, in place: the iterates rise monotonically and stay below the policy's value,
- * so each is a valid lower bound. al[a*S+s]. */
-static Py_ssize_t blind(ctx_t *c, double *al, double tol, Py_ssize_t max_it) {
+ * so each is a valid lower bound (also when the deadline stops them). al[a*S+s]. */
+static Py_ssize_t blind(ctx_t *c, double *al, double tol, Py_ssize_t max_it, double deadline) {
     Py_ssize_t S = c->S, A = c->A, it_max = 0;
     for (Py_ssize_t a = 0; a < A; a++) {
         double rmin = INFINITY, *v = al + a * S;
@@ -528,7 +581,7 @@ static Py_ssize_t blind(ctx_t *c, double *al, double tol, Py_ssize_t max_it) {
                 double nv = c->R[s * A + a] + c->g * acc;
                 if (nv > v[s]) { if (nv - v[s] > moved) moved = nv - v[s]; v[s] = nv; }
             }
-            if (moved <= tol) break;
+            if (moved <= tol || now_s() >= deadline) break;
         }
         if (it > it_max) it_max = it;
     }
@@ -536,10 +589,12 @@ static Py_ssize_t blind(ctx_t *c, double *al, double tol, Py_ssize_t max_it) {
 }
 
 static PyObject *search(PyObject *Py_UNUSED(self), PyObject *args) {
-    Py_ssize_t S, A, Z, init_max_it; double g, eps, kappa, limit, init_tol, ub_sweep_ratio; long long max_trials;
+    Py_ssize_t S, A, Z, init_max_it; double g, eps, kappa, limit, init_tol, ub_sweep_ratio, lb_share;
+    long long max_trials; Py_ssize_t backoff;
     Py_buffer R, O, b0, tp, ti, td;
-    if (!PyArg_ParseTuple(args, "nnndy*y*y*y*y*y*ddddnLd", &S, &A, &Z, &g, &R, &O, &tp, &ti, &td, &b0,
-                          &eps, &kappa, &init_tol, &limit, &init_max_it, &max_trials, &ub_sweep_ratio))
+    if (!PyArg_ParseTuple(args, "nnndy*y*y*y*y*y*ddddnLddn", &S, &A, &Z, &g, &R, &O, &tp, &ti, &td, &b0,
+                          &eps, &kappa, &init_tol, &limit, &init_max_it, &max_trials, &ub_sweep_ratio,
+                          &lb_share, &backoff))
         return NULL;
     Py_buffer *bufs[] = {&R, &O, &b0, &tp, &ti, &td};
     PyObject *out = NULL;
@@ -551,11 +606,12 @@ static PyObject *search(PyObject *Py_UNUSED(self), PyObject *args) {
         goto done;
     }
     if (!(g > 0.0 && g < 1.0) || !(eps > 0.0) || !(kappa > 0.0 && kappa <= 1.0) || !(limit > 0.0) ||
-        !(init_tol > 0.0) || init_max_it < 1 || !(ub_sweep_ratio >= 0.0)) {
+        !(init_tol > 0.0) || init_max_it < 1 || !(ub_sweep_ratio >= 0.0) || !(lb_share >= 0.0) || backoff < 0) {
         PyErr_Format(PyExc_ValueError, "_search_kernel.search: need 0 < discount < 1 (got %g), epsilon > 0 (got %g), "
                      "0 < kappa <= 1 (got %g), time limit > 0 (got %g), init tolerance > 0 (got %g) and "
-                     "init iterations >= 1 (got %zd) and ub_sweep_ratio >= 0 (got %g)", g, eps, kappa, limit,
-                     init_tol, init_max_it, ub_sweep_ratio);
+                     "init iterations >= 1 (got %zd), ub_sweep_ratio >= 0 (got %g), lb_share >= 0 (got %g) "
+                     "and backoff >= 0 (got %zd)", g, eps, kappa, limit, init_tol, init_max_it, ub_sweep_ratio,
+                     lb_share, backoff);
         goto done;
     }
     if (need(&R, 8, S * A, "R") || need(&O, 8, A * S * Z, "O") || need(&b0, 8, S, "b0") ||
@@ -611,15 +667,18 @@ static PyObject *search(PyObject *Py_UNUSED(self), PyObject *args) {
         goto done;
     }
     double t0 = now_s();
+    c.deadline = t0 + limit;
     /* Bounds to start from: FIB above (with the corner values of the sawtooth), blind policies below. */
-    Py_ssize_t fib_it = fib(&c, Q, init_tol, init_max_it);
+    /* The start bounds get a tenth of the time limit (at least 0.5 s), as the Python engine's FIB. */
+    double init_deadline = t0 + (limit < 5.0 ? (limit < 0.5 ? limit : 0.5) : 0.1 * limit);
+    Py_ssize_t fib_it = fib(&c, Q, init_tol, init_max_it, init_deadline);
     c.Q = Q;
     for (Py_ssize_t s = 0; s < S; s++) {
         double m = -INFINITY;
         for (Py_ssize_t a = 0; a < A; a++) if (Q[s * A + a] > m) m = Q[s * A + a];
         c.Vc[s] = m;
     }
-    Py_ssize_t blind_it = blind(&c, al0, init_tol, init_max_it);
+    Py_ssize_t blind_it = blind(&c, al0, init_tol, init_max_it, init_deadline + 0.5 * (init_deadline - t0));
     for (Py_ssize_t a = 0; a < A; a++)
         if (add_alpha(&c, al0 + a * S, a) < 0) goto done;
     c.K_pruned = c.K;
@@ -633,6 +692,7 @@ static PyObject *search(PyObject *Py_UNUSED(self), PyObject *args) {
 
     Py_ssize_t dcap = 0;
     long long trials = 0, trial_backups = 0, at_ub_sweep = 0;
+    Py_ssize_t lb_cursor = -1, lb_skip = 0, lb_wait = 0;
     const char *stop = "time";
     Py_ssize_t n0 = 0;
     for (Py_ssize_t s = 0; s < S; s++) if (c.b0[s] > 0.0) nz0[n0++] = s;
@@ -670,7 +730,7 @@ static PyObject *search(PyObject *Py_UNUSED(self), PyObject *args) {
             }
             double scale = pow(g, -(double)d);
             Py_ssize_t a, o; double l, u;
-            if (backup(&c, b, nz, pn[d], eps_t * scale / g, &a, &o, &l, &u) < 0) goto done;
+            if (backup(&c, b, nz, pn[d], eps_t * scale / g, 1, &a, &o, &l, &u) < 0) goto done;
             if (u - l <= eps_t * scale || d + 1 >= max_d) break;
             /* step to the successor b^{a,o} */
             successors(&c, b, nz, pn[d], a);
@@ -699,12 +759,28 @@ static PyObject *search(PyObject *Py_UNUSED(self), PyObject *args) {
         /* backward: both bounds backed up at every belief of the path, deepest first */
         for (Py_ssize_t k = d; k >= 0; k--) {
             Py_ssize_t a, o; double l, u;
-            if (backup(&c, path + k * S, pnz + k * S, pn[k], 0.0, &a, &o, &l, &u) < 0) goto done;
+            if (backup(&c, path + k * S, pnz + k * S, pn[k], 0.0, 1, &a, &o, &l, &u) < 0) goto done;
             trial_backups++;
         }
         if (ub_sweep_ratio > 0.0 && (double)(trial_backups - at_ub_sweep) >= ub_sweep_ratio * (double)c.np_) {
             if (sweep_upper(&c) < 0) goto done;
             at_ub_sweep = trial_backups;
+        }
+        if (lb_share > 0.0) {
+            /* lb_share LB backups per trial backup at the visited beliefs; a round that adds no
+             * vector makes the next rounds wait 1, 2, 4, ... trials (at most backoff), one that
+             * does resets the wait (the Python engine's spread_backoff). */
+            if (lb_wait > 0) lb_wait--;
+            else {
+                long gained = sweep_lower(&c, (long)ceil(lb_share * (double)(d + 1)), &lb_cursor);
+                if (gained < 0) goto done;
+                if (gained > 0 || backoff == 0) lb_skip = 0;
+                else {
+                    lb_skip = lb_skip ? 2 * lb_skip : 1;
+                    if (lb_skip > backoff) lb_skip = backoff;
+                }
+                lb_wait = lb_skip;
+            }
         }
         if (c.K > 2 * c.K_pruned + 50 && prune_alphas(&c) < 0) goto done;
         best_alpha(&c, c.b0, nz0, n0, &lb);
@@ -716,17 +792,18 @@ static PyObject *search(PyObject *Py_UNUSED(self), PyObject *args) {
         PyObject *alb = PyBytes_FromStringAndSize((const char *)c.al, (Py_ssize_t)(c.K * S * (Py_ssize_t)sizeof(double)));
         PyObject *acb = PyBytes_FromStringAndSize((const char *)c.act, (Py_ssize_t)(c.K * (Py_ssize_t)sizeof(i64)));
         if (alb && acb)
-            out = Py_BuildValue("{s:N,s:N,s:n,s:d,s:d,s:L,s:l,s:n,s:s,s:d,s:d,s:n,s:n,s:L,s:l,s:l}", "alphas", alb, "actions", acb,
+            out = Py_BuildValue("{s:N,s:N,s:n,s:d,s:d,s:L,s:l,s:n,s:s,s:d,s:d,s:n,s:n,s:L,s:l,s:l,s:l}", "alphas", alb, "actions", acb,
                                 "vectors", c.K, "lower", lb, "upper", ub, "trials", trials, "backups", c.backups,
                                 "ub_points", c.np_, "stop", stop, "seconds", now_s() - t0, "init_seconds", init_s,
                                 "fib_iterations", fib_it, "blind_iterations", blind_it, "trial_backups", trial_backups,
-                                "ub_sweeps", c.ub_sweeps, "ub_sweep_backups", c.ub_sweep_backups);
+                                "ub_sweeps", c.ub_sweeps, "ub_sweep_backups", c.ub_sweep_backups,
+                                "lb_sweep_backups", c.lb_sweep_backups);
         else { Py_XDECREF(alb); Py_XDECREF(acb); }
     }
 done:
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) PyBuffer_Release(bufs[i]);
     free(c.Vc); free(c.al); free(c.act); free(c.pidx); free(c.pval); free(c.pstart); free(c.plen); free(c.pdelta);
-    free(c.phash); free(c.htab); free(c.keep); free(c.db); free(c.ucache); free(c.uver); free(c.plog);
+    free(c.phash); free(c.htab); free(c.keep); free(c.db); free(c.ucache); free(c.uver); free(c.pact); free(c.plog);
     free(c.sidx); free(c.sinv);
     free(c.bt); free(c.btnz); free(c.mark); free(c.succ); free(c.snz); free(c.sn); free(c.sp); free(c.w);
     free(path); free(pnz); free(pn); free(Q); free(al0); free(nz0);
@@ -736,7 +813,7 @@ done:
 static PyMethodDef methods[] = {
     {"search", search, METH_VARARGS,
      "search(S, A, Z, discount, R, O, t_ptr, t_ind, t_dat, b0, epsilon, kappa, init_tol, time_limit,\n"
-     "       init_max_iterations, max_trials, ub_sweep_ratio) -> dict: the whole HSVI2 search (see point_based.py)."},
+     "       init_max_iterations, max_trials, ub_sweep_ratio, lb_share, backoff) -> dict: the whole HSVI2 search (see point_based.py)."},
     {NULL, NULL, 0, NULL},
 };
 

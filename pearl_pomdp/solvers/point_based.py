@@ -1072,7 +1072,8 @@ def _search_c(model: Pomdp, time_limit: Optional[float], epsilon: float,
     limit = math.inf if time_limit is None else max(float(time_limit) - (time.perf_counter() - t0), 1e-9)
     out = _search_kernel.search(S, A, Z, g, R, O, t_ptr, t_ind, t_dat, b0, float(epsilon),
                                 float(settings.trial_kappa[0]), init_tol, limit, 100_000,
-                                0 if max_trials is None else int(max_trials), float(settings.ub_sweep_ratio))
+                                0 if max_trials is None else int(max_trials), float(settings.ub_sweep_ratio),
+                                float(settings.perseus_share), int(settings.spread_backoff))
     K = int(out["vectors"])
     alphas = np.frombuffer(out["alphas"], dtype=float).reshape(K, S).copy()
     actions = np.frombuffer(out["actions"], dtype=np.int64).copy()
@@ -1089,6 +1090,7 @@ def _search_c(model: Pomdp, time_limit: Optional[float], epsilon: float,
             "blind_iterations": int(out["blind_iterations"]), "setup_seconds": float(out["init_seconds"]),
             "stop": out["stop"], "perseus_backups": 0, "sweep_backups": 0, "ub_sweeps": int(out["ub_sweeps"]),
             "ub_sweep_backups": int(out["ub_sweep_backups"]), "trial_backups": int(out["trial_backups"]),
+            "lb_sweep_backups": int(out["lb_sweep_backups"]),
             "history": [(round(seconds, 3), lo, hi)],
         },
     )
