@@ -70,12 +70,13 @@ def test_c_engine_is_deterministic():
     assert c.upper_bound - c.value_at_start > a.upper_bound - a.value_at_start
 
 
-def test_auto_is_c_unless_settings_or_progress_ask_for_python():
+def test_auto_is_c_unless_settings_or_a_trial_budget_ask_for_python():
     from pearl_pomdp.solvers.point_based import PointBasedSettings
 
     m = tiger()
     assert solve_point_based(m, time_limit=10.0).extra["engine"] == "c"
     assert solve_point_based(m, time_limit=10.0, settings=PointBasedSettings()).extra["engine"] == "python"
+    assert solve_point_based(m, time_limit=None, max_trials=3).extra["engine"] == "python"
     assert ENGINES == ("auto", "c", "python")
 
 

@@ -216,7 +216,8 @@ static int add_alpha(ctx_t *c, const double *v, i64 a) {
         i64 *act = acc ? realloc(c->act, (size_t)nc * sizeof(i64)) : NULL;
         if (act) c->act = act;
         if (!al || !acc || !act) { free(al); PyErr_NoMemory(); return -1; }
-        for (Py_ssize_t s = 0; s < S; s++) memcpy(al + s * nc, c->al + s * Kc, (size_t)K * sizeof(double));
+        if (K > 0)   /* (c->al is NULL before the first vector) */
+            for (Py_ssize_t s = 0; s < S; s++) memcpy(al + s * nc, c->al + s * Kc, (size_t)K * sizeof(double));
         free(c->al);
         c->al = al; c->Kcap = Kc = nc;
     }

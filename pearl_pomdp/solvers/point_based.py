@@ -1119,8 +1119,10 @@ def solve_point_based(model: Pomdp, time_limit: Optional[float] = 60.0, epsilon:
             progress line); ``"python"``: :class:`PointBasedSolver` (adds Perseus/PBVI
             spreading over the visited beliefs and the tuning knobs of ``settings``);
             ``"auto"`` (the default): ``"c"`` unless ``settings`` or ``progress`` asks for what
-            only the Python engine has. Both return the same kind of result: the α-vectors of
-            a lower bound, an upper bound, ``converged`` when ``UB(b0) − LB(b0) ≤ epsilon``.
+            only the Python engine has, or ``max_trials`` is given (a trial budget counts the
+            Python engine's trials, which the study's protocols fix). Both return the same
+            kind of result: the α-vectors of a lower bound, an upper bound, ``converged`` when
+            ``UB(b0) − LB(b0) ≤ epsilon``.
 
     Returns:
         :class:`SolveResult` with method ``"pointbased"``: the lower-bound α-vectors as the
@@ -1137,7 +1139,10 @@ def solve_point_based(model: Pomdp, time_limit: Optional[float] = 60.0, epsilon:
     if engine not in ENGINES:
         raise ValueError(f"solve_point_based: engine must be one of {', '.join(map(repr, ENGINES))}, got {engine!r}")
     if engine == "auto":
-        engine = "python" if settings is not None or progress else "c"
+        # A trial budget keeps the Python engine's trials: the study's protocols fix flat
+        # policies by a trial count (pearl experiment --flat-trials), and a C trial is another
+        # amount of work, so the same count would plan another policy.
+        engine = "python" if settings is not None or progress or max_trials is not None else "c"
     if engine == "c":
         if not model.discount < 1.0:
             raise ValueError("the point-based solver needs a discount below 1 (got %g)" % model.discount)
