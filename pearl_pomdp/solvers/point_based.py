@@ -55,6 +55,12 @@ until the trials since the last one did about one backup per visited belief.
 The search is deterministic (costs are counted in backups, not seconds, except
 for the time limit itself); ``seed`` fixes the Perseus order and the order in
 which exactly tied observations are considered.
+
+``solve_point_based(engine="c")`` (the default under ``"auto"``) runs the same kind of search
+in one C call, ``_search_kernel.c``: HSVI2 trials with these bounds, each distinct belief
+stored once with cached successor upper bounds, upper-bound sweeps, round-robin lower-bound
+backups in place of Perseus, and no per-trial Python (docs/solvers.md, "The C engine on issue
+24's seven files").
 """
 from __future__ import annotations
 
