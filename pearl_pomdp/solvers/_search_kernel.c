@@ -47,7 +47,7 @@ typedef struct {
     double *al, *kacc; i64 *act; Py_ssize_t K, Kcap;
     /* upper bound points: sparse beliefs */
     i64 *pidx; double *pval; Py_ssize_t pn, pcap;        /* entries */
-    i64 *pstart, *plen; double *pdelta; Py_ssize_t np_, npcap;
+    i64 *pstart, *plen; double *pdelta, *pv; Py_ssize_t np_, npcap;
     /* The visited beliefs are the points (one entry per distinct belief, found by its hash;
      * pdelta = +inf until a backup lowers UB there), so a belief seen again lowers its own
      * point instead of adding one. */
@@ -64,6 +64,9 @@ typedef struct {
     double *ucache; i64 *uver; Py_ssize_t ucap;
     i64 *pact;                               /* per entry: the action of its last LB backup (-1: none) */
     i64 *plog; Py_ssize_t plogn, plogcap;
+    /* A corner value fell at log position vc_logpos (every delta moved): a cache read before it
+     * is re-read in full. */
+    Py_ssize_t vc_logpos; long corner_updates;
     /* Each point's entries again, most likely state first, with 1/b_i(s): the sawtooth's ratio
      * min_s b(s)/b_i(s) is usually set by b_i's likely states, so its branch and bound stops
      * early (the Python engine's probe states). */
@@ -283,6 +286,8 @@ static Py_ssize_t belief_entry(ctx_t *c, const double *b, const i64 *nz, Py_ssiz
     cap = c->npcap;
     if (grow((void **)&c->pdelta, &cap, c->np_ + 1, sizeof(double)) < 0) return -1;
     cap = c->npcap;
+    if (grow((void **)&c->pv, &cap, c->np_ + 1, sizeof(double)) < 0) return -1;
+    cap = c->npcap;
     if (grow((void **)&c->phash, &cap, c->np_ + 1, sizeof(uint64_t)) < 0) return -1;
     c->npcap = cap;
     cap = c->pcap;
@@ -319,7 +324,7 @@ static Py_ssize_t belief_entry(ctx_t *c, const double *b, const i64 *nz, Py_ssiz
         c->pact = pa; c->ucap = nc;
     }
     c->uver[p] = -1; c->pact[p] = -1;
-    c->pstart[p] = c->pn; c->plen[p] = m; c->pdelta[p] = INFINITY; c->phash[p] = h;
+    c->pstart[p] = c->pn; c->plen[p] = m; c->pdelta[p] = INFINITY; c->pv[p] = INFINITY; c->phash[p] = h;
     c->pn += m; c->np_++;
     Py_ssize_t j = (Py_ssize_t)(h & (uint64_t)(c->hcap - 1));
     while (c->htab[j] >= 0) j = (j + 1) & (c->hcap - 1);
@@ -327,13 +332,36 @@ static Py_ssize_t belief_entry(ctx_t *c, const double *b, const i64 *nz, Py_ssiz
     return p;
 }
 
-/* Lower the upper bound at belief entry p to v (a sawtooth point: its excess over b.V_c). */
+/* Lower the upper bound at belief entry p to v (a sawtooth point: its excess over b.V_c). At a
+ * corner (a belief on one state s) the corner value V_c(s) itself falls, and with it the base
+ * b.V_c of every read: the sawtooth then adds the corner's gain to the best point's instead of
+ * taking the better of the two (HSVI2's corner update, as the Python engine's _set_upper; on
+ * 4x5x2, whose beliefs often collapse to one cell, it cut the trials to the gap threefold). */
 static int set_point(ctx_t *c, Py_ssize_t p, double v) {
     const i64 *ix = c->pidx + c->pstart[p]; const double *vx = c->pval + c->pstart[p];
+    if (c->plen[p] == 1) {
+        i64 s = ix[0];
+        if (!(v < c->Vc[s] - 1e-12 * (1.0 + fabs(c->Vc[s])))) return 0;
+        c->Vc[s] = v;
+        c->pv[p] = v;
+        for (Py_ssize_t q = 0; q < c->np_; q++) {
+            if (c->pv[q] == INFINITY) continue;
+            const i64 *iq = c->pidx + c->pstart[q]; const double *vq = c->pval + c->pstart[q];
+            double base = 0.0;
+            for (i64 j = 0; j < c->plen[q]; j++) base += c->Vc[iq[j]] * vq[j];
+            c->pdelta[q] = c->pv[q] - base;
+        }
+        if (grow((void **)&c->plog, &c->plogcap, c->plogn + 1, sizeof(i64)) < 0) return -1;
+        c->plog[c->plogn++] = p;
+        c->vc_logpos = c->plogn;
+        c->corner_updates++;
+        return 0;
+    }
     double base = 0.0;
     for (i64 j = 0; j < c->plen[p]; j++) base += c->Vc[ix[j]] * vx[j];
     if (v - base < c->pdelta[p]) {
         c->pdelta[p] = v - base;
+        c->pv[p] = v;
         if (grow((void **)&c->plog, &c->plogcap, c->plogn + 1, sizeof(i64)) < 0) return -1;
         c->plog[c->plogn++] = p;
     }
@@ -365,8 +393,12 @@ static double upper_since(const ctx_t *c, const double *b, const i64 *nz, Py_ssi
 static double cached_upper(ctx_t *c, Py_ssize_t p, i64 ver, Py_ssize_t slot, const double *b, const i64 *nz,
                            Py_ssize_t n) {
     double *uc = c->ucache + p * (c->A * c->Z + 1) + slot;
-    double v = (ver >= 0 && c->plogn - ver < c->np_) ? upper_since(c, b, nz, n, (Py_ssize_t)ver, *uc)
-                                                     : upper(c, b, nz, n);
+    double v;
+    if (ver >= 0 && ver >= c->vc_logpos && c->plogn - ver < c->np_) v = upper_since(c, b, nz, n, (Py_ssize_t)ver, *uc);
+    else {
+        v = upper(c, b, nz, n);
+        if (ver >= 0 && *uc < v) v = *uc;   /* (both are upper bounds) */
+    }
     *uc = v;
     return v;
 }
@@ -830,17 +862,17 @@ static PyObject *search(PyObject *Py_UNUSED(self), PyObject *args) {
         }
         PyObject *acb = PyBytes_FromStringAndSize((const char *)c.act, (Py_ssize_t)(c.K * (Py_ssize_t)sizeof(i64)));
         if (alb && acb)
-            out = Py_BuildValue("{s:N,s:N,s:n,s:d,s:d,s:L,s:l,s:n,s:s,s:d,s:d,s:n,s:n,s:L,s:l,s:l,s:l}", "alphas", alb, "actions", acb,
+            out = Py_BuildValue("{s:N,s:N,s:n,s:d,s:d,s:L,s:l,s:n,s:s,s:d,s:d,s:n,s:n,s:L,s:l,s:l,s:l,s:l}", "alphas", alb, "actions", acb,
                                 "vectors", c.K, "lower", lb, "upper", ub, "trials", trials, "backups", c.backups,
                                 "ub_points", c.np_, "stop", stop, "seconds", now_s() - t0, "init_seconds", init_s,
                                 "fib_iterations", fib_it, "blind_iterations", blind_it, "trial_backups", trial_backups,
                                 "ub_sweeps", c.ub_sweeps, "ub_sweep_backups", c.ub_sweep_backups,
-                                "lb_sweep_backups", c.lb_sweep_backups);
+                                "lb_sweep_backups", c.lb_sweep_backups, "corner_updates", c.corner_updates);
         else { Py_XDECREF(alb); Py_XDECREF(acb); }
     }
 done:
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) PyBuffer_Release(bufs[i]);
-    free(c.Vc); free(c.al); free(c.kacc); free(c.act); free(c.pidx); free(c.pval); free(c.pstart); free(c.plen); free(c.pdelta);
+    free(c.Vc); free(c.al); free(c.kacc); free(c.act); free(c.pidx); free(c.pval); free(c.pstart); free(c.plen); free(c.pdelta); free(c.pv);
     free(c.phash); free(c.htab); free(c.keep); free(c.db); free(c.ucache); free(c.uver); free(c.pact); free(c.plog);
     free(c.sidx); free(c.sinv);
     free(c.bt); free(c.btnz); free(c.mark); free(c.succ); free(c.snz); free(c.sn); free(c.sp); free(c.w);

@@ -5,7 +5,8 @@ Array arguments are C-contiguous numpy arrays (float64, or int64 for ``t_ptr``/`
 T[a][s, :]), ``b0[S]``. The result holds ``alphas`` (bytes: K × S float64), ``actions`` (bytes:
 K int64), ``vectors``, ``lower``, ``upper``, ``trials``, ``backups``, ``ub_points``, ``stop``
 ("epsilon", "time" or "trials"), ``seconds``, ``init_seconds``, ``fib_iterations``,
-``blind_iterations``, ``trial_backups``, ``ub_sweeps``, ``ub_sweep_backups``, ``lb_sweep_backups``.
+``blind_iterations``, ``trial_backups``, ``ub_sweeps``, ``ub_sweep_backups``, ``lb_sweep_backups``,
+``corner_updates``.
 """
 from typing import Any, Dict
 

@@ -1096,7 +1096,7 @@ def _search_c(model: Pomdp, time_limit: Optional[float], epsilon: float,
             "blind_iterations": int(out["blind_iterations"]), "setup_seconds": float(out["init_seconds"]),
             "stop": out["stop"], "perseus_backups": 0, "sweep_backups": 0, "ub_sweeps": int(out["ub_sweeps"]),
             "ub_sweep_backups": int(out["ub_sweep_backups"]), "trial_backups": int(out["trial_backups"]),
-            "lb_sweep_backups": int(out["lb_sweep_backups"]),
+            "lb_sweep_backups": int(out["lb_sweep_backups"]), "corner_updates": int(out["corner_updates"]),
             "history": [(round(seconds, 3), lo, hi)],
         },
     )
