@@ -1091,7 +1091,7 @@ def _search_c(model: Pomdp, time_limit: Optional[float], epsilon: float,
         policy=AlphaVectorPolicy(alphas, actions), method="pointbased", value_at_start=lo, upper_bound=hi,
         iterations=int(out["trials"]), seconds=seconds, converged=hi - lo <= epsilon,
         extra={
-            "engine": "c", "gap": hi - lo, "backups": int(out["backups"]), "vectors": K,
+            "engine": "c", "gap": hi - lo, "kernel_lower": float(out["lower"]), "backups": int(out["backups"]), "vectors": K,
             "ub_points": int(out["ub_points"]), "fib_iterations": int(out["fib_iterations"]),
             "blind_iterations": int(out["blind_iterations"]), "setup_seconds": float(out["init_seconds"]),
             "stop": out["stop"], "perseus_backups": 0, "sweep_backups": 0, "ub_sweeps": int(out["ub_sweeps"]),
