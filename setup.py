@@ -41,8 +41,8 @@ CLUSTER = ["distributed>=2024.1"]
 
 #: The solvers' compiled kernels (one C file each, Python's C API and the buffer protocol
 #: only: no numpy headers needed to build). Each is the only implementation of its loops, for
-#: every model size: the exact solver's prune (with its own warm-started simplex) and the
-#: point-based solver's per-belief inner loops.
+#: every model size: the exact solver's prune (with its own warm-started simplex), the
+#: point-based solver's per-belief inner loops and its whole search (engine="c").
 #: Every build shows any warning (test/test_kernel_build.py fails CI on one: -Werror there,
 #: not here, so a user's newer compiler with new warnings still installs).
 WARNINGS = ["-Wall", "-Wextra"]
@@ -50,6 +50,8 @@ KERNELS = [
     Extension(f"{PACKAGE}.solvers._prune", [f"{PACKAGE}/solvers/_prune.c"],
               extra_compile_args=["-O2", "-std=c99", *WARNINGS]),
     Extension(f"{PACKAGE}.solvers._pointbased_kernel", [f"{PACKAGE}/solvers/_pointbased_kernel.c"],
+              extra_compile_args=["-O3", *WARNINGS]),
+    Extension(f"{PACKAGE}.solvers._search_kernel", [f"{PACKAGE}/solvers/_search_kernel.c"],
               extra_compile_args=["-O3", *WARNINGS]),
 ]
 

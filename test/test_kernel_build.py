@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-KERNELS = ["pearl_pomdp/solvers/_prune.c", "pearl_pomdp/solvers/_pointbased_kernel.c"]
+KERNELS = ["pearl_pomdp/solvers/_prune.c", "pearl_pomdp/solvers/_pointbased_kernel.c",
+           "pearl_pomdp/solvers/_search_kernel.c"]
 STRICT = ["-Wall", "-Wextra", "-Werror"]
 
 

@@ -185,8 +185,8 @@ def test_settings_object_and_attributes_are_the_same_knobs():
     assert len(solver._arm_gain) == 1
     res = solver.run(time_limit=20.0, epsilon=1e-3)
     assert res.converged and solver.perseus_backups == 0 and solver.sweeps == 0
-    # The defaults are the solver's defaults: same search, same bounds.
-    a = solve_point_based(model, time_limit=20.0, epsilon=1e-3)
+    # The defaults are the Python engine's defaults (settings= is its knobs): same search, same bounds.
+    a = solve_point_based(model, time_limit=20.0, epsilon=1e-3, engine="python")
     b = solve_point_based(model, time_limit=20.0, epsilon=1e-3, settings=PointBasedSettings())
     assert (a.value_at_start, a.upper_bound, a.iterations) == (b.value_at_start, b.upper_bound, b.iterations)
     with pytest.raises(TypeError, match="PointBasedSettings"):

@@ -23,17 +23,23 @@ from pearl_pomdp.model.pomdp_format import format_pomdp, parse_pomdp, read_pomdp
 EXPECTED = {
     "1d.POMDP": (4, 2, 2, 0.75),
     "4x3.95.POMDP": (11, 4, 6, 0.95),
+    "4x5x2.95.POMDP": (39, 4, 4, 0.95),
     "cheese.95.POMDP": (11, 4, 7, 0.95),
     "hallway.POMDP": (60, 5, 21, 0.95),
     "hallway2.POMDP": (92, 5, 17, 0.95),
+    "mini-hall2.POMDP": (13, 3, 9, 0.95),
     "network.POMDP": (7, 4, 2, 0.95),
+    "paint.95.POMDP": (4, 4, 2, 0.95),
     "parr95.95.POMDP": (7, 3, 6, 0.95),
     "RockSample_4_4.pomdp": (257, 9, 2, 0.95),
     "RockSample_7_8.pomdp": (12545, 13, 2, 0.95),
+    "saci-s12-a6-z5.95.POMDP": (12, 6, 5, 0.95),
     "shuttle.95.POMDP": (8, 3, 5, 0.95),
+    "stand-tiger.95.POMDP": (4, 4, 4, 0.95),
     "TagAvoid.pomdp": (870, 5, 30, 0.95),
     "tiger.95.POMDP": (2, 3, 2, 0.95),
     "tiger.aaai.POMDP": (2, 3, 2, 0.75),
+    "web-ad.POMDP": (4, 3, 5, 0.95),
 }
 
 _CACHE: dict = {}

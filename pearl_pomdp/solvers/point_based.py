@@ -55,6 +55,12 @@ until the trials since the last one did about one backup per visited belief.
 The search is deterministic (costs are counted in backups, not seconds, except
 for the time limit itself); ``seed`` fixes the Perseus order and the order in
 which exactly tied observations are considered.
+
+``solve_point_based(engine="c")`` (the default under ``"auto"``) runs the same kind of search
+in one C call, ``_search_kernel.c``: HSVI2 trials with these bounds, each distinct belief
+stored once with cached successor upper bounds, upper-bound sweeps, round-robin lower-bound
+backups in place of Perseus, and no per-trial Python (docs/solvers.md, "The C engine on issue
+24's seven files").
 """
 from __future__ import annotations
 
@@ -71,7 +77,7 @@ from . import _pointbased_kernel as _kernel
 from .base import AlphaVectorPolicy, SolveResult
 from .mdp import blind_lower_bound, fib_q
 
-__all__ = ["solve_point_based", "PointBasedSolver", "PointBasedSettings", "transition_block"]
+__all__ = ["solve_point_based", "PointBasedSolver", "PointBasedSettings", "transition_block", "ENGINES"]
 
 
 @dataclass(frozen=True)
@@ -1041,9 +1047,64 @@ class PointBasedSolver:
         )
 
 
+#: The values of ``solve_point_based(engine=...)``.
+ENGINES = ("auto", "c", "python")
+
+
+def _search_c(model: Pomdp, time_limit: Optional[float], epsilon: float,
+              settings: PointBasedSettings, max_trials: Optional[int]) -> SolveResult:
+    """``engine="c"``: the whole search in ``_search_kernel.c`` (HSVI2 with the same bounds as the
+    Python engine: blind-policy α-vectors below, FIB vectors and a sawtooth point set above),
+    one call, no Python per trial. Its knobs are ``settings.trial_kappa[0]`` (the trials' share
+    of the gap at b0), ``settings.ub_sweep_ratio`` (an upper-bound backup at every visited
+    belief after that many trial backups per visited belief) and ``settings.fib_epsilon`` (the
+    start bounds' tolerance); the rest steer the Python engine's lower-bound spreading (Perseus,
+    PBVI sweeps), which this engine does not do."""
+    from . import _search_kernel
+
+    t0 = time.perf_counter()
+    S, A, Z = model.num_states, model.num_actions, model.num_observations
+    g = float(model.discount)
+    coo = [_nonzeros(t) for t in model.T]
+    # (A·S) × S CSR: row a·S + s is T[a][s, :] (each action's non-zeros come row-major already).
+    t_ptr = _row_pointers(np.concatenate([r + a * S for a, (r, _, _) in enumerate(coo)]), A * S)
+    t_ind = np.ascontiguousarray(np.concatenate([c for _, c, _ in coo]), dtype=np.int64)
+    t_dat = np.ascontiguousarray(np.concatenate([v for _, _, v in coo]), dtype=float)
+    R = np.ascontiguousarray(model.R, dtype=float)
+    O = np.ascontiguousarray(model.O, dtype=float)
+    b0 = np.ascontiguousarray(model.b0, dtype=float)
+    # The start bounds stop where a further sweep moves no entry by more than this (fib_q's rule).
+    init_tol = settings.fib_epsilon * (1.0 - g) / (2.0 * g)
+    limit = math.inf if time_limit is None else max(float(time_limit) - (time.perf_counter() - t0), 1e-9)
+    out = _search_kernel.search(S, A, Z, g, R, O, t_ptr, t_ind, t_dat, b0, float(epsilon),
+                                float(settings.trial_kappa[0]), init_tol, limit, 100_000,
+                                0 if max_trials is None else int(max_trials), float(settings.ub_sweep_ratio),
+                                float(settings.perseus_share), int(settings.spread_backoff))
+    K = int(out["vectors"])
+    alphas = np.frombuffer(out["alphas"], dtype=float).reshape(K, S).copy()
+    actions = np.frombuffer(out["actions"], dtype=np.int64).copy()
+    # The policy's own value at b0 (what the vectors achieve there), the kernel's upper bound.
+    lo = float(np.max(alphas @ b0))
+    hi = float(out["upper"])
+    seconds = time.perf_counter() - t0
+    return SolveResult(
+        policy=AlphaVectorPolicy(alphas, actions), method="pointbased", value_at_start=lo, upper_bound=hi,
+        iterations=int(out["trials"]), seconds=seconds, converged=hi - lo <= epsilon,
+        extra={
+            "engine": "c", "gap": hi - lo, "kernel_lower": float(out["lower"]), "backups": int(out["backups"]), "vectors": K,
+            "ub_points": int(out["ub_points"]), "fib_iterations": int(out["fib_iterations"]),
+            "blind_iterations": int(out["blind_iterations"]), "setup_seconds": float(out["init_seconds"]),
+            "stop": out["stop"], "perseus_backups": 0, "sweep_backups": 0, "ub_sweeps": int(out["ub_sweeps"]),
+            "ub_sweep_backups": int(out["ub_sweep_backups"]), "trial_backups": int(out["trial_backups"]),
+            "lb_sweep_backups": int(out["lb_sweep_backups"]), "corner_updates": int(out["corner_updates"]),
+            "history": [(round(seconds, 3), lo, hi)],
+        },
+    )
+
+
 def solve_point_based(model: Pomdp, time_limit: Optional[float] = 60.0, epsilon: float = 1e-3, seed: int = 0,
                       progress: bool = False, settings: Optional[PointBasedSettings] = None,
-                      max_trials: Optional[int] = None) -> SolveResult:
+                      max_trials: Optional[int] = None, engine: str = "auto") -> SolveResult:
     """Anytime point-based solve with bounds (HSVI2/SARSOP style; see the module docstring).
 
     Args:
@@ -1058,6 +1119,16 @@ def solve_point_based(model: Pomdp, time_limit: Optional[float] = 60.0, epsilon:
             with ``time_limit=None`` the FIB initialisation runs to convergence and the
             search to this count, so the same seed gives the same policy on a busy and a
             quiet machine (the study plans the flat policy this way).
+        engine: ``"c"``: the whole search in one C call (``_search_kernel.c``: HSVI2 trials
+            with both bounds backed up along each trial's path; no per-trial Python, so small
+            and medium files solve in milliseconds; deterministic, ``seed`` unused; no
+            progress line); ``"python"``: :class:`PointBasedSolver` (adds Perseus/PBVI
+            spreading over the visited beliefs and the tuning knobs of ``settings``);
+            ``"auto"`` (the default): ``"c"`` unless ``settings`` or ``progress`` asks for what
+            only the Python engine has, or ``max_trials`` is given (a trial budget counts the
+            Python engine's trials, which the study's protocols fix). Both return the same
+            kind of result: the α-vectors of a lower bound, an upper bound, ``converged`` when
+            ``UB(b0) − LB(b0) ≤ epsilon``.
 
     Returns:
         :class:`SolveResult` with method ``"pointbased"``: the lower-bound α-vectors as the
@@ -1071,6 +1142,21 @@ def solve_point_based(model: Pomdp, time_limit: Optional[float] = 60.0, epsilon:
         raise ValueError(f"solve_point_based: max_trials must be an integer >= 1, got {max_trials!r}")
     if time_limit is None and max_trials is None and not epsilon > 0:
         raise ValueError("solve_point_based: with time_limit=None give max_trials or an epsilon > 0")
+    if engine not in ENGINES:
+        raise ValueError(f"solve_point_based: engine must be one of {', '.join(map(repr, ENGINES))}, got {engine!r}")
+    if engine == "auto":
+        # A trial budget keeps the Python engine's trials: the study's protocols fix flat
+        # policies by a trial count (pearl experiment --flat-trials), and a C trial is another
+        # amount of work, so the same count would plan another policy.
+        engine = "python" if settings is not None or progress or max_trials is not None else "c"
+    if engine == "c":
+        if not model.discount < 1.0:
+            raise ValueError("the point-based solver needs a discount below 1 (got %g)" % model.discount)
+        if not epsilon > 0:
+            raise ValueError(f"solve_point_based: engine='c' needs an epsilon > 0, got {epsilon!r}")
+        if time_limit is not None and not time_limit > 0:
+            raise ValueError(f"solve_point_based: time_limit must be > 0 or None, got {time_limit!r}")
+        return _search_c(model, time_limit, epsilon, settings or PointBasedSettings(), max_trials)
     t0 = time.perf_counter()
     # Without a clock limit FIB runs to its own convergence (deterministic), else it
     # gets a tenth of the budget.
@@ -1082,4 +1168,5 @@ def solve_point_based(model: Pomdp, time_limit: Optional[float] = 60.0, epsilon:
     res = solver.run(time_limit=search_time, epsilon=epsilon, progress=progress, max_trials=max_trials)
     res.seconds = time.perf_counter() - t0
     res.extra["setup_seconds"] = setup
+    res.extra["engine"] = "python"
     return res
