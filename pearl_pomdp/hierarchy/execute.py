@@ -604,6 +604,27 @@ class HierarchicalPolicy:
         memo[name] = offers[np.arange(B.shape[0]), np.argmax(values, axis=1)]
         return memo[name]
 
+    def corner_picks(self, name: str) -> np.ndarray:
+        """``[S]`` int64: the primitive subtask ``name`` picks at the belief certain of each state (``π_h(s)``).
+
+        A subtask of primitives decides on its own model's marginal alone, and a certain belief
+        projects onto one model state: one pick per model state is enough (the ward's 233,280
+        corners cost 180 one-step searches, not 233,280 dense rows). A group asks its children at
+        every corner, 256 corners at a time."""
+        sub = self.subtasks[name]
+        S = self.num_states
+        if name in self._groups:
+            return np.concatenate([self._pick_batch(name, np.eye(S)[lo:lo + 256], {})
+                                   for lo in range(0, S, 256)]).astype(np.int64)
+        used = np.unique(sub.state_to_model)
+        corners = np.zeros((used.size, sub.alphas.shape[1]))
+        corners[np.arange(used.size), used] = 1.0
+        Q = sub.one_step.q_rows(corners)
+        prims = np.array([self._index[c] for c in sub.actions], dtype=np.int64)
+        pick = np.zeros(sub.alphas.shape[1], dtype=np.int64)
+        pick[used] = prims[np.argmax(Q[:, self._to_model[name][prims]], axis=1)]
+        return pick[sub.state_to_model]
+
     def _offer_columns(self, children: Sequence[str], B: np.ndarray, memo: Dict[str, np.ndarray]) -> List[np.ndarray]:
         """:meth:`offers` for every row of ``B`` at once: one ``[N]`` column of primitives per offer, in its order."""
         cols: List[np.ndarray] = []

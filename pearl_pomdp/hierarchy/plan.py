@@ -34,7 +34,8 @@ from typing import Dict, Optional
 import numpy as np
 
 from pearl_pomdp.errors import PearlError
-from pearl_pomdp.hierarchy.abstraction import AbstractionTooLarge, AbstractSubtask, KernelBuilder, abstract_subtask
+from pearl_pomdp.hierarchy.abstraction import (AbstractionTooLarge, AbstractSubtask, KernelBuilder, SeparableTerms,
+                                               abstract_subtask, separable_reward_terms)
 from pearl_pomdp.hierarchy.execute import HierarchicalPolicy, Lookahead, SubtaskPolicy
 from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
 from pearl_pomdp.hierarchy.spec import Hierarchy, SubtaskSpec
@@ -113,6 +114,16 @@ def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optiona
     return _plan_corner(domain, hierarchy, abstraction, solver, seed, progress, strict_local_reward, time_limit)
 
 
+def _separate(sub, factored, primitives, charged_under, abstraction: bool) -> SeparableTerms:
+    """The separable reward terms of a subtask (:func:`separable_reward_terms`), taken out of ``sub.R``
+    (nothing when the abstraction is off: ``--no-abstraction`` solves the subtask as it is)."""
+    if not abstraction or factored is None:
+        return SeparableTerms([], np.zeros(0), [])
+    separable = separable_reward_terms(factored, primitives, charged_under)
+    sub.R = separable.apply(sub.R)
+    return separable
+
+
 def _left(deadline: Optional[float], own: Optional[float]) -> Optional[float]:
     """The smaller of a subtask's own limit and what is left of the plan's (``None``: none)."""
     if deadline is None:
@@ -149,8 +160,12 @@ def _plan_corner(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
                 raise PearlError(f"{hierarchy.source}: subtasks.{name}: {problem}")
             log.warning("%s", problem)
         child_relevant = sorted({f for c in spec.children if c in abstracts for f in abstracts[c].relevant})
+        # Eq. 15-17's subtask never stops: a term charged under each of its primitives alike is separable.
+        below = hierarchy.descendants(name)
+        separable = _separate(sub, factored, below, below, abstraction)
         try:
-            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder)
+            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder,
+                                    dropped=separable.rules)
         except AbstractionTooLarge as e:
             raise PearlError(f"{hierarchy.source}: subtasks.{name}: {e}") from None
         t1 = time.perf_counter()
@@ -197,6 +212,7 @@ def _plan_corner(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
             "value_at_start": float(result.value_at_start),
             "upper_bound": None if result.upper_bound is None else float(result.upper_bound),
             "parameterize": "corner",
+            "separable_reward_terms": separable.described,
             "stop_reason": result.extra.get("stop_reason"),
             "warnings": list(sub.warnings) + ([f"subtask {name!r}: the solver stopped by "
                                                f"{result.extra.get('stop_reason', 'its time limit')} "
@@ -369,8 +385,12 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
                 raise PearlError(f"{hierarchy.source}: subtasks.{name}: {problem}")
             log.warning("%s", problem)
         child_relevant = sorted({f for c in spec.children if c in abstracts for f in abstracts[c].relevant})
+        # An option hands the step back to its parent when it stops: a term is separable only when
+        # every action of the domain pays it (the root never stops: its own primitives suffice).
+        separable = _separate(sub, factored, below, below if is_root else list(model.actions), abstraction)
         try:
-            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder)
+            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder,
+                                    dropped=separable.rules)
         except AbstractionTooLarge as e:
             raise PearlError(f"{hierarchy.source}: subtasks.{name}: {e}") from None
         solve_model = abst.model if is_root else with_exit(abst.model)
@@ -462,6 +482,7 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
             "starts": int(result.extra.get("starts", 1)),
             "max_start_gap": result.extra.get("max_start_gap"),
             "offers_asked": 0 if offers is None else offers.asked,
+            "separable_reward_terms": separable.described,
             "warnings": list(sub.warnings) + notes,
             **abst.summary(),
         }
@@ -490,8 +511,6 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
     # π_h(s) for the record (`pearl explain`, `pearl hierarchy`): the primitive each subtask
     # picks at the belief certain of s.
     for name in order:
-        eff = np.concatenate([hp._pick_batch(name, np.eye(model.num_states)[lo:lo + 256], {})
-                              for lo in range(0, model.num_states, 256)])
-        policies[name].effective = eff.astype(np.int64)
+        policies[name].effective = hp.corner_picks(name)
     hp.abstract_models = abstracts  # kept for inspection (tests, `pearl hierarchy`); not saved
     return hp
