@@ -310,6 +310,31 @@ def _starts(abst: AbstractSubtask, n_model: int, entries: np.ndarray) -> np.ndar
     return np.array(rows) if rows else np.zeros((0, n_model))
 
 
+def _online_root(spec: SubtaskSpec, model, policies: Dict[str, SubtaskPolicy], seed: int, features) -> SubtaskPolicy:
+    """The placeholder policy of a root that plans online (``solver: online``): its children and the
+    search's record; EXECUTE runs :class:`~pearl_pomdp.hierarchy.online_root.OnlineRoot`."""
+    from pearl_pomdp.online.despot import DespotSettings
+
+    base = DespotSettings()
+    record = {"trials": spec.trials, "time_limit": spec.time_limit, "scenarios": base.scenarios,
+              "depth": base.depth, "seed": int(seed)}
+    S = model.num_states
+    pol = SubtaskPolicy(name=spec.name, actions=list(spec.children), abstract=[c in policies for c in spec.children],
+                        alphas=np.zeros((1, 1)), alpha_actions=np.zeros(1, dtype=np.int64),
+                        state_to_model=np.zeros(S, dtype=np.int64), effective=np.full(S, -1, dtype=np.int64),
+                        online=record)
+    pol.info = {
+        "name": spec.name, "parameterize": "policy", "solver": "online", "states_full": S, "states_abstract": S,
+        "model_states": S, "observations_full": model.num_observations,
+        "observations_abstract": model.num_observations, "actions": list(spec.children), "option": False,
+        "alpha_vectors": 0, "seconds": 0.0, "solve_seconds": 0.0, "exact": False, "horizon": None, "lookahead": 0,
+        "trials_budget": spec.trials, "online": record, "warnings": [], "separable_reward_terms": [],
+        "relevant_features": list(features), "irrelevant_features": [], "stop_reason": "online",
+        "value_at_start": float("nan"), "upper_bound": None, "gap": None,
+    }
+    return pol
+
+
 class _ChildOffers:
     """The action filter of a policy-contingent parent: at a belief over the parent's model,
     the primitives its children offer there (:meth:`HierarchicalPolicy.offers`: what each child
@@ -355,7 +380,7 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
     from pearl_pomdp.solvers.point_based import PointBasedSettings, PointBasedSolver
 
     if solver not in (None, "pointbased", "incprune"):
-        raise PearlError(f"unknown solver {solver!r}; choose pointbased or incprune")
+        raise PearlError(f"unknown solver {solver!r}; choose pointbased or incprune (an online root stays online)")
     t_start = time.perf_counter()
     deadline = None if time_limit is None else t_start + time_limit
     model = domain.compile() if isinstance(domain, FactoredDomain) else domain
@@ -377,6 +402,13 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
         is_root = name == hierarchy.root
         t0 = time.perf_counter()
         below = hierarchy.descendants(name)
+        if is_root and spec.solver == "online":
+            # Not planned here: DESPOT over its actions at run time (bound to the model below).
+            policies[name] = _online_root(spec, model, policies, seed, factors.names)
+            reports.append(policies[name].info)
+            if bar is not None:
+                bar.update(1)
+            continue
         # The subtask over the primitives below it (eq. 11–14 for each), abstracted exactly.
         flat_spec = dataclasses.replace(spec, children=list(below))
         sub = parameterize(model, flat_spec, {}, factors)
@@ -509,8 +541,23 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
     hp = HierarchicalPolicy(hierarchy.root, {n: policies[n] for n in order}, list(model.actions),
                             model.fingerprint(), report, hierarchy.name, model.name)
     # π_h(s) for the record (`pearl explain`, `pearl hierarchy`): the primitive each subtask
-    # picks at the belief certain of s.
+    # picks at the belief certain of s (an online root has none: -1).
     for name in order:
-        policies[name].effective = hp.corner_picks(name)
+        if policies[name].online is None:
+            policies[name].effective = hp.corner_picks(name)
+    if hp.online:
+        t_bounds = time.perf_counter()
+        hp.bind_model(model)
+        info = policies[hierarchy.root].info
+        info["bounds"] = hp.online_root.bounds.description
+        info["bounds_seconds"] = round(time.perf_counter() - t_bounds, 6)
+        # One decision at b0: the search's size and root bounds, as the online decider reports them.
+        first = hp.execute(np.asarray(model.b0, dtype=float))
+        search = dict(first.search or {})
+        info.update(value_at_start=float(search["lower"]), upper_bound=float(search["upper"]), gap=float(search["gap"]),
+                    b0_decision={"action": first.action_name, "trace": [t.choice for t in first.trace],
+                                 **{k: search[k] for k in ("trials", "nodes", "expansions", "seconds", "stop")}})
+        info["seconds"] = round(info["seconds"] + info["bounds_seconds"], 6)
+        report["total_seconds"] = round(time.perf_counter() - t_start, 6)
     hp.abstract_models = abstracts  # kept for inspection (tests, `pearl hierarchy`); not saved
     return hp

@@ -25,7 +25,8 @@ from pearl_pomdp.online.beliefs import sample_belief
 from pearl_pomdp.online.despot import Despot, DespotSettings, SearchResult
 from pearl_pomdp.online.generative import Bounds, ExplicitModel, alpha_bounds
 
-__all__ = ["OnlineDecider", "DEFAULT_TRIALS", "ONLINE_POLICY", "online_trials", "default_bounds", "FIB_LIMIT"]
+__all__ = ["OnlineDecider", "DEFAULT_TRIALS", "ONLINE_POLICY", "online_trials", "default_bounds", "FIB_LIMIT",
+           "decision_seed"]
 
 #: The policy name that asks for online planning instead of a saved policy (node parameter
 #: ``policy:=online`` or ``online:TRIALS``; ``pearl simulate MODEL online:TRIALS``).
@@ -65,6 +66,13 @@ def online_trials(policy: str, where: str = "policy") -> Optional[int]:
     return int(tail)
 
 
+def decision_seed(belief: np.ndarray, seed: int) -> int:
+    """The seed of an online decision at ``belief``: the belief rounded to 12 digits, hashed, mixed with
+    ``seed`` — the same belief always gets the same search (a replayed bag reproduces the choices)."""
+    data = np.round(np.asarray(belief, dtype=float), 12).tobytes()
+    return (zlib.crc32(data) ^ (int(seed) * 0x9E3779B1)) & 0xFFFFFFFF
+
+
 class OnlineDecider:
     """DESPOT at every decision over an explicit :class:`~pearl_pomdp.model.pomdp.Pomdp`.
 
@@ -90,9 +98,8 @@ class OnlineDecider:
         self.last_search: Optional[SearchResult] = None
 
     def decision_seed(self, belief: np.ndarray) -> int:
-        """The seed of the decision at ``belief`` (the belief rounded to 12 digits, then hashed)."""
-        data = np.round(np.asarray(belief, dtype=float), 12).tobytes()
-        return (zlib.crc32(data) ^ (self.seed * 0x9E3779B1)) & 0xFFFFFFFF
+        """The seed of the decision at ``belief`` (:func:`decision_seed` with this decider's seed)."""
+        return decision_seed(belief, self.seed)
 
     def search(self, belief) -> SearchResult:
         """The DESPOT search at ``belief`` ``[S]`` (scenarios drawn from it)."""
