@@ -249,19 +249,23 @@ def _plan_corner(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
 
 # ------------------------------------------------------------------ policy-contingent PLAN
 def entry_beliefs(model, seed: int = 0, episodes: int = ENTRY_EPISODES, steps: int = ENTRY_STEPS,
-                  every: int = ENTRY_EVERY) -> np.ndarray:
+                  every: int = ENTRY_EVERY, qmdp: Optional[np.ndarray] = None) -> np.ndarray:
     """Beliefs a cheap policy meets in the full model: ``[N, S]``, deterministic for ``seed``.
 
     QMDP (one α-vector per action, solved in milliseconds) is run for ``episodes`` episodes
     of ``steps`` steps — start state from ``b0``, next state from ``T``, observation from
     ``O``, belief by eq. 5 — and every ``every``-th belief is kept. QMDP does every service of
     the task (it reminds, walks, answers; it only never asks), so these beliefs are the
-    situations in which parents will consult their children."""
+    situations in which parents will consult their children. ``qmdp``: the QMDP ``Q [S, A]`` when
+    it is already computed (an online root's upper bound past ``FIB_LIMIT``: the same value
+    iteration, not run twice on the ward's 233,280 states)."""
     from pearl_pomdp.belief import BeliefFilter
     from pearl_pomdp.simulate import _RowSampler
+    from pearl_pomdp.solvers.base import AlphaVectorPolicy
     from pearl_pomdp.solvers.mdp import solve_qmdp
 
-    policy = solve_qmdp(model).policy
+    policy = solve_qmdp(model).policy if qmdp is None else AlphaVectorPolicy(
+        np.asarray(qmdp, dtype=float).T.copy(), np.arange(model.num_actions))
     rng = np.random.default_rng(seed)
     S, Z = model.num_states, model.num_observations
     filt = BeliefFilter(model)
@@ -387,7 +391,17 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
     factored = domain if isinstance(domain, FactoredDomain) else None
     factors = StateFactors.from_domain(domain)
     builder = KernelBuilder(model)
-    entries = entry_beliefs(model, seed=seed)
+    online_bounds, bounds_seconds, qmdp = None, 0.0, None
+    if hierarchy.subtasks[hierarchy.root].solver == "online":
+        from pearl_pomdp.online.decider import default_bounds, default_upper
+
+        # The online root's bounds first: past FIB_LIMIT their upper bound is the QMDP Q the entry
+        # beliefs' policy needs too (one value iteration over the full model, not two).
+        t_bounds = time.perf_counter()
+        online_bounds = default_bounds(model)
+        bounds_seconds = time.perf_counter() - t_bounds
+        qmdp = getattr(online_bounds, "upper_q", None) if default_upper(model) == "qmdp" else None
+    entries = entry_beliefs(model, seed=seed, qmdp=qmdp)
     policies: Dict[str, SubtaskPolicy] = {}
     abstracts: Dict[str, AbstractSubtask] = {}
     reports = []
@@ -546,11 +560,10 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
         if policies[name].online is None:
             policies[name].effective = hp.corner_picks(name)
     if hp.online:
-        t_bounds = time.perf_counter()
-        hp.bind_model(model)
+        hp.bind_model(model, bounds=online_bounds)
         info = policies[hierarchy.root].info
         info["bounds"] = hp.online_root.bounds.description
-        info["bounds_seconds"] = round(time.perf_counter() - t_bounds, 6)
+        info["bounds_seconds"] = round(bounds_seconds, 6)
         # One decision at b0: the search's size and root bounds, as the online decider reports them.
         first = hp.execute(np.asarray(model.b0, dtype=float))
         search = dict(first.search or {})

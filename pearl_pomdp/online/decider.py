@@ -26,7 +26,7 @@ from pearl_pomdp.online.despot import Despot, DespotSettings, SearchResult
 from pearl_pomdp.online.generative import Bounds, ExplicitModel, alpha_bounds
 
 __all__ = ["OnlineDecider", "DEFAULT_TRIALS", "ONLINE_POLICY", "online_trials", "default_bounds", "FIB_LIMIT",
-           "decision_seed"]
+           "decision_seed", "default_upper"]
 
 #: The policy name that asks for online planning instead of a saved policy (node parameter
 #: ``policy:=online`` or ``online:TRIALS``; ``pearl simulate MODEL online:TRIALS``).
@@ -41,10 +41,15 @@ DEFAULT_TRIALS = 200
 FIB_LIMIT = 5_000_000
 
 
+def default_upper(model: Pomdp) -> str:
+    """The default upper bound's name for ``model``: ``"fib"``, or ``"qmdp"`` past :data:`FIB_LIMIT`."""
+    size = model.num_states * model.num_actions * model.num_observations
+    return "fib" if size <= FIB_LIMIT else "qmdp"
+
+
 def default_bounds(model: Pomdp) -> Bounds:
     """:func:`~pearl_pomdp.online.generative.alpha_bounds` with FIB above, or QMDP past :data:`FIB_LIMIT`."""
-    size = model.num_states * model.num_actions * model.num_observations
-    return alpha_bounds(model, upper="fib" if size <= FIB_LIMIT else "qmdp")
+    return alpha_bounds(model, upper=default_upper(model))
 
 
 def online_trials(policy: str, where: str = "policy") -> Optional[int]:
