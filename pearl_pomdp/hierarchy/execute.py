@@ -563,7 +563,7 @@ class HierarchicalPolicy:
             value = float(q[table[prim]])
             if best is None or value > best[2]:
                 best = (prim, k, value, (k,))
-        if banned:
+        if banned or best is None:
             return best
         if len(self._pick_cache) >= self.PICK_CACHE:
             self._pick_cache.clear()
