@@ -161,3 +161,18 @@ def test_bad_online_settings_name_the_field(text, where, words):
         parse_hierarchy(text, domain.actions, _features(domain), source="toy.hierarchy.yaml")
     message = str(err.value)
     assert "toy.hierarchy.yaml" in message and where in message and words in message, message
+
+
+def test_the_simulator_and_the_executive_run_it(planned):
+    """The same class through `simulate` (batched protocol) and the core executive (what the policy node
+    and `pearl experiment` run)."""
+    from pearl_pomdp.executive import Executive
+    from pearl_pomdp.simulate import simulate
+    from pearl_pomdp.tracking import StepSettings
+
+    domain, model, policy = planned
+    result = simulate(model, policy, episodes=2, steps=6, seed=1)
+    assert np.isfinite(result["mean"]) and result["episodes"] == 2
+    decision = Executive(model, policy, domain=domain, settings=StepSettings(timeout_observation="quiet")).decide()
+    assert decision.trace[0].subtask == "Care" and decision.search["trials"] == 40
+    assert decision.action == policy.execute(model.b0).action
