@@ -31,6 +31,9 @@ def main() -> int:
     ap.add_argument("--noise", type=float, default=0.1, help="recogniser word error rate")
     ap.add_argument("--seed-index", type=int, default=0, help="k: the world's seed is the episode's + 1000 k")
     ap.add_argument("--seed", type=int, default=0, help="the planner's seed")
+    ap.add_argument("--compare-flat", type=int, default=20, metavar="N",
+                    help="also time the flat online decider (DESPOT over all 15 actions, the root's trials and "
+                         "bounds) at the episode's first N beliefs (0: not)")
     args = ap.parse_args()
 
     import numpy as np
@@ -55,6 +58,7 @@ def main() -> int:
                 for s in policy.report["subtasks"]]
 
     searches = []
+    beliefs: list = []
 
     class Recorded:
         """The policy, each decision's wall time and search record kept."""
@@ -63,10 +67,13 @@ def main() -> int:
             self.inner = inner
 
         def execute(self, belief):
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             d = self.inner.execute(belief)
             s = d.search or {}
-            searches.append({"seconds": time.perf_counter() - t, "trace": [x.choice for x in d.trace],
+            if len(beliefs) < args.compare_flat:
+                beliefs.append(np.array(belief, dtype=float))
+            searches.append({"seconds": time.perf_counter() - t, "cpu": time.process_time() - c,
+                             "trace": [x.choice for x in d.trace],
                              **{k: s.get(k) for k in ("trials", "nodes", "expansions", "gap")}})
             return d
 
@@ -81,9 +88,30 @@ def main() -> int:
                                seed=scenario.seed + 1000 * args.seed_index, word_error_rate=args.noise, model=model)
     w4, c4 = clocks()
     secs = np.array([s["seconds"] for s in searches])
+    cpus = np.array([s["cpu"] for s in searches])
 
-    def ms(q):
-        return round(1000 * float(np.percentile(secs, q)), 1) if secs.size else None
+    def ms(q, values=None):
+        v = secs if values is None else values
+        return round(1000 * float(np.percentile(v, q)), 1) if v.size else None
+
+    flat = None
+    if beliefs:
+        from pearl_pomdp.online.decider import OnlineDecider
+        from pearl_pomdp.online.despot import DespotSettings
+
+        root = policy.online_root
+        online = OnlineDecider(model, bounds=root.bounds, settings=DespotSettings(trials=root.settings.trials),
+                               seed=args.seed)
+        own = np.array([s["cpu"] for s in searches[:len(beliefs)]])
+        wall, cpu = [], []
+        for b in beliefs:
+            t, c = time.perf_counter(), time.process_time()
+            online.execute(b)
+            wall.append(time.perf_counter() - t)
+            cpu.append(time.process_time() - c)
+        flat = {"beliefs": len(beliefs), "trials": root.settings.trials,
+                "flat_cpu_ms_p50": ms(50, np.array(cpu)), "flat_wall_ms_p50": ms(50, np.array(wall)),
+                "hierarchy_cpu_ms_p50_same_beliefs": ms(50, own)}
 
     child = sum(1 for s in searches if len(s["trace"]) > 1)
     print(json.dumps({
@@ -96,10 +124,12 @@ def main() -> int:
                     "pills_taken": f"{episode.pills_taken}/{episode.pills}", "wrong_actions": episode.wrong_actions,
                     "wall_s": round(w4 - w3, 1), "cpu_s": round(c4 - c3, 1), "actions": episode.actions},
         "decisions": {"n": int(secs.size), "p50_ms": ms(50), "p99_ms": ms(99), "max_ms": ms(100),
+                      "cpu_p50_ms": ms(50, cpus), "cpu_p99_ms": ms(99, cpus),
                       "through_a_child": child,
                       "nodes_p50": float(np.median([s["nodes"] for s in searches])) if searches else None,
                       "expansions_p50": float(np.median([s["expansions"] for s in searches])) if searches else None,
                       "root_gap_p50": round(float(np.median([s["gap"] for s in searches])), 2) if searches else None},
+        "flat_online_same_beliefs": flat,
     }, default=float))
     return 0
 
