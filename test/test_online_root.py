@@ -176,3 +176,19 @@ def test_the_simulator_and_the_executive_run_it(planned):
     decision = Executive(model, policy, domain=domain, settings=StepSettings(timeout_observation="quiet")).decide()
     assert decision.trace[0].subtask == "Care" and decision.search["trials"] == 40
     assert decision.action == policy.execute(model.b0).action
+
+
+def test_the_policy_node_loads_it_from_a_plan_directory_or_plans_it(planned, tmp_path):
+    """The policy node's loader (no node started): a saved directory comes back with its search bound to
+    the model; an empty policy plans the hierarchy file at start-up, the root online."""
+    pytest.importorskip("rclpy")
+    from pearl_pomdp.nodes.hierarchical_policy import load_decider
+
+    domain, model, policy = planned
+    saved = policy.save(tmp_path / "toy")
+    decider = load_decider(model, domain, str(saved), "")
+    assert decider.execute(model.b0).action == policy.execute(model.b0).action
+    hfile = tmp_path / "toy.hierarchy.yaml"
+    hfile.write_text(HIERARCHY)
+    fresh = load_decider(model, domain, "", str(hfile))
+    assert fresh.online and fresh.execute(model.b0).action == policy.execute(model.b0).action
