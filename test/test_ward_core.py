@@ -154,3 +154,38 @@ def test_a_large_compiled_model_keeps_O_as_float32_and_the_filter_and_sampler_us
     n32, o32, _ = g.step(s, 1, u)
     n64, o64, _ = ExplicitModel(exact).step(s, 1, u)
     assert (n32 == n64).all() and (o32 != o64).sum() <= 2     # a uniform within 1e-7 of a CDF step may differ
+
+
+def test_ward_hierarchy_has_an_online_root_over_per_resident_subtasks():
+    """config/ward.hierarchy.yaml: the root plans online over the three residents' subtasks, the drives
+    and Wait; every child is a subtask of primitives (planned offline)."""
+    from pearl_pomdp.hierarchy import load_hierarchy
+    from pearl_pomdp.model.factored import load_domain
+
+    domain = load_domain("config/ward.domain.yaml")
+    hierarchy = load_hierarchy("config/ward.hierarchy.yaml", domain)
+    root = hierarchy.subtasks[hierarchy.root]
+    assert root.solver == "online" and root.trials == 20
+    assert [c for c in root.children if c in hierarchy.subtasks] == ["CareAnn", "CareBob", "CareCleo"]
+    assert all(hierarchy.subtasks[c].solver == "pointbased" for c in ("CareAnn", "CareBob", "CareCleo"))
+
+
+@pytest.mark.slow
+def test_care_ann_keeps_her_features_and_the_robot_place_only():
+    """Bob's and Cleo's every-action costs are separable from CareAnn (docs/hierarchy.md): its abstraction
+    keeps RobotAt and Ann's three features, 5 x 36 = 180 states (compiling the ward takes ~7 s)."""
+    from pearl_pomdp.hierarchy.abstraction import abstract_subtask, separable_reward_terms
+    from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
+    from pearl_pomdp.hierarchy.spec import SubtaskSpec
+    from pearl_pomdp.model.factored import load_domain
+
+    domain = load_domain("config/ward.domain.yaml")
+    model = domain.compile()
+    prims = ["RemindAnn", "AskAnn", "ServeAnn"]
+    factors = StateFactors.from_domain(domain)
+    sub = parameterize(model, SubtaskSpec(name="CareAnn", children=prims, solver="pointbased"), {}, factors)
+    sep = separable_reward_terms(domain, prims, list(model.actions))
+    assert len(sep.rules) == 6 and all("Ann" not in domain.rewards[i].why for i in sep.rules)
+    sub.R = sep.apply(sub.R)
+    abst = abstract_subtask(sub, factors, domain, dropped=sep.rules)
+    assert abst.relevant == ["RobotAt", "AnnAt", "AnnPill", "AnnNeed"] and abst.lumped_states == 180
