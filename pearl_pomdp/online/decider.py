@@ -25,8 +25,7 @@ from pearl_pomdp.online.beliefs import sample_belief
 from pearl_pomdp.online.despot import Despot, DespotSettings, SearchResult
 from pearl_pomdp.online.generative import Bounds, ExplicitModel, alpha_bounds
 
-__all__ = ["OnlineDecider", "DEFAULT_TRIALS", "ONLINE_POLICY", "online_trials", "default_bounds", "FIB_LIMIT",
-           "decision_seed", "default_upper"]
+__all__ = ["OnlineDecider", "DEFAULT_TRIALS", "ONLINE_POLICY", "online_trials", "default_bounds", "FIB_LIMIT"]
 
 #: The policy name that asks for online planning instead of a saved policy (node parameter
 #: ``policy:=online`` or ``online:TRIALS``; ``pearl simulate MODEL online:TRIALS``).
@@ -52,6 +51,13 @@ def default_bounds(model: Pomdp) -> Bounds:
     return alpha_bounds(model, upper=default_upper(model))
 
 
+def decision_seed(belief: np.ndarray, seed: int) -> int:
+    """The seed of an online decision at ``belief``: the belief rounded to 12 digits, hashed, mixed with
+    ``seed`` — the same belief always gets the same search (a replayed bag reproduces the choices)."""
+    data = np.round(np.asarray(belief, dtype=float), 12).tobytes()
+    return (zlib.crc32(data) ^ (int(seed) * 0x9E3779B1)) & 0xFFFFFFFF
+
+
 def online_trials(policy: str, where: str = "policy") -> Optional[int]:
     """The trial budget ``policy`` asks for when it names online planning, else ``None``.
 
@@ -69,13 +75,6 @@ def online_trials(policy: str, where: str = "policy") -> Optional[int]:
     if not tail.isdigit() or int(tail) < 1:
         raise PolicyError(f"{where}: {text!r}: expected online or online:TRIALS with TRIALS a positive integer")
     return int(tail)
-
-
-def decision_seed(belief: np.ndarray, seed: int) -> int:
-    """The seed of an online decision at ``belief``: the belief rounded to 12 digits, hashed, mixed with
-    ``seed`` — the same belief always gets the same search (a replayed bag reproduces the choices)."""
-    data = np.round(np.asarray(belief, dtype=float), 12).tobytes()
-    return (zlib.crc32(data) ^ (int(seed) * 0x9E3779B1)) & 0xFFFFFFFF
 
 
 class OnlineDecider:
