@@ -107,9 +107,10 @@ def test_the_online_deciders_default_upper_bound_is_qmdp_past_the_fib_limit(monk
 
 
 def test_planning_refuses_a_subtask_whose_state_pairs_do_not_fit_in_one_line_naming_it(monkeypatch):
-    """The ward's CareAnn keeps all 233,280 states (5.4e10 pairs): planning stops with one line naming
-    the hierarchy file, the subtask and the features kept. Checked on the reception robot with the
-    limit lowered below its Welcome subtask's 36² pairs (the ward itself takes a minute to get there)."""
+    """A subtask that keeps too many state pairs stops planning with one line naming the hierarchy file,
+    the subtask and the features kept (the ward's CareAnn kept all 233,280 states, 5.4e10 pairs, before
+    separable reward terms). Checked on the reception robot with the limit lowered below its Welcome
+    subtask's 18² pairs (Battery's cost is separable from Welcome: docs/hierarchy.md)."""
     import pearl_pomdp.hierarchy.abstraction as abstraction
     from pearl_pomdp.errors import PearlError
     from pearl_pomdp.hierarchy import load_hierarchy, plan
@@ -117,13 +118,13 @@ def test_planning_refuses_a_subtask_whose_state_pairs_do_not_fit_in_one_line_nam
 
     domain = load_domain("config/reception.domain.yaml")
     hierarchy = load_hierarchy("config/reception.hierarchy.yaml", domain)
-    monkeypatch.setattr(abstraction, "MAX_PAIRS", 35 ** 2)
+    monkeypatch.setattr(abstraction, "MAX_PAIRS", 17 ** 2)
     with pytest.raises(PearlError) as err:
         plan(domain, hierarchy, seed=0)
     text = str(err.value)
     assert "\n" not in text
-    assert text.startswith("config/reception.hierarchy.yaml: subtasks.Welcome: subtask Welcome: its abstraction keeps 36 states")
-    assert "Visitor, Wish, RobotAt, Battery" in text and "1.3e+03 state pairs > 2^31" in text
+    assert text.startswith("config/reception.hierarchy.yaml: subtasks.Welcome: subtask Welcome: its abstraction keeps 18 states")
+    assert "(3 features: Visitor, Wish, RobotAt)" in text and "324 state pairs > 2^31" in text
 
 
 def test_a_large_compiled_model_keeps_O_as_float32_and_the_filter_and_sampler_use_it_uncopied(monkeypatch):
@@ -153,3 +154,38 @@ def test_a_large_compiled_model_keeps_O_as_float32_and_the_filter_and_sampler_us
     n32, o32, _ = g.step(s, 1, u)
     n64, o64, _ = ExplicitModel(exact).step(s, 1, u)
     assert (n32 == n64).all() and (o32 != o64).sum() <= 2     # a uniform within 1e-7 of a CDF step may differ
+
+
+def test_ward_hierarchy_has_an_online_root_over_per_resident_subtasks():
+    """config/ward.hierarchy.yaml: the root plans online over the three residents' subtasks, the drives
+    and Wait; every child is a subtask of primitives (planned offline)."""
+    from pearl_pomdp.hierarchy import load_hierarchy
+    from pearl_pomdp.model.factored import load_domain
+
+    domain = load_domain("config/ward.domain.yaml")
+    hierarchy = load_hierarchy("config/ward.hierarchy.yaml", domain)
+    root = hierarchy.subtasks[hierarchy.root]
+    assert root.solver == "online" and root.trials == 20
+    assert [c for c in root.children if c in hierarchy.subtasks] == ["CareAnn", "CareBob", "CareCleo"]
+    assert all(hierarchy.subtasks[c].solver == "pointbased" for c in ("CareAnn", "CareBob", "CareCleo"))
+
+
+@pytest.mark.slow
+def test_care_ann_keeps_her_features_and_the_robot_place_only():
+    """Bob's and Cleo's every-action costs are separable from CareAnn (docs/hierarchy.md): its abstraction
+    keeps RobotAt and Ann's three features, 5 x 36 = 180 states (compiling the ward takes ~7 s)."""
+    from pearl_pomdp.hierarchy.abstraction import abstract_subtask, separable_reward_terms
+    from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
+    from pearl_pomdp.hierarchy.spec import SubtaskSpec
+    from pearl_pomdp.model.factored import load_domain
+
+    domain = load_domain("config/ward.domain.yaml")
+    model = domain.compile()
+    prims = ["RemindAnn", "AskAnn", "ServeAnn"]
+    factors = StateFactors.from_domain(domain)
+    sub = parameterize(model, SubtaskSpec(name="CareAnn", children=prims, solver="pointbased"), {}, factors)
+    sep = separable_reward_terms(domain, prims, list(model.actions))
+    assert len(sep.rules) == 6 and all("Ann" not in domain.rewards[i].why for i in sep.rules)
+    sub.R = sep.apply(sub.R)
+    abst = abstract_subtask(sub, factors, domain, dropped=sep.rules)
+    assert abst.relevant == ["RobotAt", "AnnAt", "AnnPill", "AnnNeed"] and abst.lumped_states == 180

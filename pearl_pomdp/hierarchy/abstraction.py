@@ -56,7 +56,8 @@ from pearl_pomdp.errors import PearlError
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.model.factored import FactoredDomain
 
-__all__ = ["AbstractSubtask", "abstract_subtask", "KernelBuilder", "AbstractionTooLarge", "MAX_PAIRS"]
+__all__ = ["AbstractSubtask", "abstract_subtask", "KernelBuilder", "AbstractionTooLarge", "MAX_PAIRS",
+           "SeparableTerms", "separable_reward_terms"]
 
 #: Two probabilities (or rewards) closer than this are equal for the condition checks.
 TOL = 1e-10
@@ -219,14 +220,20 @@ def _lumping(factors: StateFactors, keep: Sequence[int]):
     return factors.state_values[:, list(keep)] @ strides, X
 
 
-def _seed(sub: SubtaskModel, factors: StateFactors, domain, child_relevant: Sequence[str]) -> List[int]:
-    """Step 1: reward features of the executed primitives (+ children's X+), closed under transition parents."""
+def _seed(sub: SubtaskModel, factors: StateFactors, domain, child_relevant: Sequence[str],
+          dropped: Sequence[int] = ()) -> List[int]:
+    """Step 1: reward features of the executed primitives (+ children's X+), closed under transition parents.
+
+    ``dropped``: indices into ``domain.rewards`` of the separable terms taken out of the subtask's
+    reward (:func:`separable_reward_terms`): their features are not seeded."""
     names = factors.names
     seed = set(n for n in child_relevant if n in names)
     prims = [sub.model.actions[int(p)] for p in np.unique(sub.source)]
     if isinstance(domain, FactoredDomain):
+        skip = set(dropped)
         for p in prims:
-            seed |= set(domain.reward_features(p))
+            seed |= {f for i, rule in enumerate(domain.rewards) if i not in skip and p in rule.actions
+                     for f in rule.when}
         grew = True
         parents = {p: domain.transition_parents(p) for p in prims}
         while grew:
@@ -241,7 +248,8 @@ def _seed(sub: SubtaskModel, factors: StateFactors, domain, child_relevant: Sequ
 
 
 def abstract_subtask(sub: SubtaskModel, factors: StateFactors, domain=None, child_relevant: Sequence[str] = (),
-                     enabled: bool = True, builder: Optional[KernelBuilder] = None, tol: float = TOL) -> AbstractSubtask:
+                     enabled: bool = True, builder: Optional[KernelBuilder] = None, tol: float = TOL,
+                     dropped: Sequence[int] = ()) -> AbstractSubtask:
     """Compute X+ / Z+ for subtask ``sub`` and build its abstract, standard-form model.
 
     Args:
@@ -254,6 +262,8 @@ def abstract_subtask(sub: SubtaskModel, factors: StateFactors, domain=None, chil
             conversion of the state-pair observation model is done).
         builder: a shared :class:`KernelBuilder` (caches sparse T).
         tol: equality tolerance of the checks.
+        dropped: indices into ``domain.rewards`` of separable reward terms already taken out
+            of ``sub.R`` (:func:`separable_reward_terms`); their features are not seeded.
 
     Returns:
         The :class:`AbstractSubtask`.
@@ -268,7 +278,7 @@ def abstract_subtask(sub: SubtaskModel, factors: StateFactors, domain=None, chil
     Z = model.num_observations
     partners = _partners(factors)
     if enabled:
-        seed = _seed(sub, factors, domain, child_relevant)
+        seed = _seed(sub, factors, domain, child_relevant, dropped)
         keep = set(seed)
         # (1) reward: features R_h reads.
         keep |= {f for f in range(F) if _differs(sub.R, partners[f], 1e-9)}
@@ -497,3 +507,89 @@ def _state_names(factors: StateFactors, order, X) -> List[str]:
             parts.append(value if factors.names == ["state"] else f"{factors.names[f]}={value}")
         names[x] = ",".join(parts)
     return names
+
+
+# ------------------------------------------------------------------ separable reward terms
+@dataclass
+class SeparableTerms:
+    """The reward rules a subtask may leave out of its local reward (:func:`separable_reward_terms`).
+
+    Attributes:
+        rules: indices into ``domain.rewards``.
+        term: ``[S]`` the sum of those rules' rewards in each state (subtracted from every action's
+            reward of the subtask).
+        described: per rule, ``"<where>: <why>"`` for the plan report.
+    """
+
+    rules: List[int]
+    term: np.ndarray
+    described: List[str]
+
+    def apply(self, R: np.ndarray) -> np.ndarray:
+        """``R [S, A_h]`` without the separable terms (every column minus :attr:`term`)."""
+        return R - self.term[:, None] if self.rules else R
+
+
+def _autonomous(domain: FactoredDomain, features: Sequence[str], primitives: Sequence[str]) -> bool:
+    """True when the features, closed under transition parents, move the same way under every primitive:
+    each feature of the closure has the same parents and the same table under all of ``primitives``."""
+    closure = set(features)
+    frontier = list(features)
+    while frontier:
+        f = frontier.pop()
+        tables = [domain.transition_table(p, f) for p in primitives]
+        parents0, table0 = tables[0]
+        for parents, table in tables[1:]:
+            if parents != parents0 or table.shape != table0.shape or not np.array_equal(table, table0):
+                return False
+        for q in parents0:
+            if q not in closure:
+                closure.add(q)
+                frontier.append(q)
+    return True
+
+
+def separable_reward_terms(domain, primitives: Sequence[str], charged_under: Sequence[str]) -> SeparableTerms:
+    """The reward rules whose value no action of a subtask can change, so its choice does not depend on them.
+
+    A rule is separable from a subtask whose actions execute ``primitives`` when
+
+    1. it reads at least one feature (a rule without ``when`` buys no abstraction: it is kept);
+    2. it is charged under every action of ``charged_under`` — the subtask's primitives, and for an
+       option (a subtask that may stop, :mod:`~pearl_pomdp.hierarchy.options`) every primitive of
+       the domain, since stopping hands the step to the parent, which pays the rule too; and
+    3. its features are *autonomous* under the subtask: closed under the transition parents, each
+       of them has the same parents and table under every one of ``primitives`` — so no action of
+       the subtask (nor anything its actions change) moves them.
+
+    Then the rule adds ``E[Σ_t γ^t c(x_t) | b]`` to the value of every policy of the subtask alike
+    (the law of an autonomous chain does not depend on the actions taken), and to every action's
+    Q-value alike: leaving it out changes no choice (docs/hierarchy.md, "Separable reward terms").
+
+    Args:
+        domain: the FactoredDomain (a flat model has no rules: nothing is separable).
+        primitives: the primitives below the subtask.
+        charged_under: the actions the rule must be charged under (see 2.).
+
+    Returns:
+        :class:`SeparableTerms` (empty when nothing qualifies).
+    """
+    if not isinstance(domain, FactoredDomain) or not primitives:
+        return SeparableTerms([], np.zeros(0), [])
+    S = domain.num_states
+    term = np.zeros(S)
+    rules, described = [], []
+    need = set(charged_under) | set(primitives)
+    sv = domain.state_values
+    for i, rule in enumerate(domain.rewards):
+        if not rule.when or not need <= set(rule.actions):
+            continue
+        if not _autonomous(domain, list(rule.when), list(primitives)):
+            continue
+        mask = np.ones(S, dtype=bool)
+        for fname, vals in rule.when.items():
+            mask &= np.isin(sv[:, domain.feature_index(fname)], vals)
+        term[mask] += rule.reward
+        rules.append(i)
+        described.append(f"{rule.where or f'rewards[{i}]'}: {rule.why}".strip())
+    return SeparableTerms(rules, term, described)

@@ -227,6 +227,9 @@ class SubtaskPolicy:
         search_depth: policy-contingent only: steps of forward search EXECUTE takes over the
             children's choices (1: one Bellman step with the vectors at the leaves).
         expansions: the deeper search's budget of expanded beliefs per decision (depth > 1).
+        online: the root only, when it plans online (``solver: online``): the search's record
+            (``trials``, ``time_limit``, ``scenarios``, ``depth``, ``seed``); its vectors are a
+            placeholder and EXECUTE runs :class:`~pearl_pomdp.hierarchy.online_root.OnlineRoot`.
     """
 
     name: str
@@ -242,6 +245,7 @@ class SubtaskPolicy:
     exit: bool = False
     search_depth: int = 1
     expansions: int = 256
+    online: Optional[dict] = None
 
     def __post_init__(self) -> None:
         self.alphas = np.atleast_2d(np.asarray(self.alphas, dtype=float))
@@ -275,6 +279,11 @@ class SubtaskPolicy:
     def contingent(self) -> bool:
         """Whether EXECUTE compares the children's picks through this subtask's model (see ``model_actions``)."""
         return self.model_actions is not None
+
+    def project_states(self, states: np.ndarray) -> np.ndarray:
+        """The particle belief of full states ``states [K]`` (equal weights) → this subtask's model states."""
+        states = np.asarray(states, dtype=np.int64)
+        return np.bincount(self.state_to_model[states], minlength=self.alphas.shape[1]) / float(states.shape[0])
 
     def project(self, B: np.ndarray) -> np.ndarray:
         """Full beliefs ``[N, S]`` (or ``[S]``) → this subtask's model states (the X+ marginal)."""
@@ -357,13 +366,18 @@ class HierarchicalPolicy:
         self.model_name = model_name
         self._index = {name: i for i, name in enumerate(self.action_names)}
         self.num_states = int(next(iter(subtasks.values())).state_to_model.shape[0])
+        #: The root plans online over its children (``solver: online``): :meth:`bind_model` builds the search.
+        self.online = subtasks[root].online is not None
+        self.online_root: Any = None
         #: Policy-contingent (every subtask solved as in :mod:`pearl_pomdp.hierarchy.plan`'s
         #: default) or the paper's eq. 15–17 corner parameterisation.
-        self.contingent = bool(subtasks[root].contingent)
+        self.contingent = bool(subtasks[root].contingent) or self.online
         if self.contingent:
             # Per subtask: full primitive index -> its model's action index (-1: not below it).
             self._to_model = {}
             for name, sub in subtasks.items():
+                if sub.model_actions is None:
+                    continue   # the online root: no model of its own
                 table = np.full(len(self.action_names), -1, dtype=np.int64)
                 for a, act in enumerate(cast(List[str], sub.model_actions)):
                     if act in self._index:
@@ -379,6 +393,36 @@ class HierarchicalPolicy:
         self._below: Dict[str, FrozenSet[int]] = {}
         for name in subtasks:
             self._primitives_below(name)
+
+    def bind_model(self, model, bounds=None) -> None:
+        """Give an online root (``solver: online``) the full model its search steps (PLAN and
+        :func:`load_hierarchical_policy` call this); nothing to do for an offline root.
+
+        Args:
+            model: the full :class:`~pearl_pomdp.model.pomdp.Pomdp` the policy was planned for.
+            bounds: the search's bounds (default: :func:`~pearl_pomdp.online.decider.default_bounds`).
+        """
+        if not self.online:
+            return
+        from pearl_pomdp.hierarchy.online_root import OnlineRoot, online_settings
+
+        record = cast(dict, self.subtasks[self.root].online)
+        self.online_root = OnlineRoot(self, model, online_settings(record), seed=int(record.get("seed", 0)),
+                                      bounds=bounds)
+
+    def action_index(self, name: str) -> int:
+        """The full model's index of primitive ``name``."""
+        return self._index[name]
+
+    def is_group(self, name: str) -> bool:
+        """Whether subtask ``name`` has subtasks among its children (it passes their offers up)."""
+        return name in self._groups
+
+    def _online(self):
+        if self.online_root is None:
+            raise PolicyError(f"the root {self.root!r} plans online and needs the model: load the policy with "
+                              f"load_hierarchical_policy(directory, domain) (or call bind_model)")
+        return self.online_root
 
     def _primitives_below(self, name: str) -> FrozenSet[int]:
         got = self._below.get(name)
@@ -403,6 +447,8 @@ class HierarchicalPolicy:
         b = np.asarray(belief, dtype=float)
         if b.shape != (self.num_states,):
             raise ValueError(f"belief has shape {b.shape}, expected ({self.num_states},)")
+        if self.online:
+            return self._online().execute(b)
         if self.contingent:
             return self._execute_contingent(b)
         trace = []
@@ -437,6 +483,8 @@ class HierarchicalPolicy:
         b = np.asarray(belief, dtype=float)
         if b.shape != (self.num_states,):
             raise ValueError(f"belief has shape {b.shape}, expected ({self.num_states},)")
+        if self.online:
+            return self._online().execute(b, banned)
         if self.contingent:
             return self._execute_contingent(b, banned)
         trace = []
@@ -489,6 +537,38 @@ class HierarchicalPolicy:
                 if offer is not None:
                     out.append((offer[0], (k,)))
         return out
+
+    def pick(self, name: str, b: np.ndarray, memo: Dict[str, Any], banned: FrozenSet[int] = frozenset()) -> Any:
+        """:meth:`_pick`: ``(primitive, child index, value, path)`` subtask ``name`` chooses at the full belief ``b``."""
+        return self._pick(name, b, memo, banned)
+
+    def pick_projected(self, name: str, bh: np.ndarray, banned: FrozenSet[int] = frozenset()) -> Any:
+        """:meth:`_pick` of a subtask of primitives given its model belief ``bh`` directly (what it decides
+        on: the X+ marginal), e.g. the particle belief of an online root's search node. ``None`` when every
+        child is banned."""
+        if name in self._groups:
+            raise PolicyError(f"subtask {name!r} has subtasks among its children: pick it at a full belief")
+        key = (name, np.asarray(bh, dtype=float).tobytes())
+        got = None if banned else self._pick_cache.get(key)
+        if got is not None:
+            return got
+        sub = self.subtasks[name]
+        q = sub.one_step.q(bh)
+        table = self._to_model[name]
+        best: Optional[tuple] = None
+        for k, child in enumerate(sub.actions):
+            prim = self._index[child]
+            if prim in banned:
+                continue
+            value = float(q[table[prim]])
+            if best is None or value > best[2]:
+                best = (prim, k, value, (k,))
+        if banned or best is None:
+            return best
+        if len(self._pick_cache) >= self.PICK_CACHE:
+            self._pick_cache.clear()
+        self._pick_cache[key] = best
+        return best
 
     def _pick(self, name: str, b: np.ndarray, memo: Dict[str, Any], banned: FrozenSet[int] = frozenset()) -> Any:
         """``(primitive index, child index, value, path)`` subtask ``name`` chooses at the full belief ``b``.
@@ -604,6 +684,27 @@ class HierarchicalPolicy:
         memo[name] = offers[np.arange(B.shape[0]), np.argmax(values, axis=1)]
         return memo[name]
 
+    def corner_picks(self, name: str) -> np.ndarray:
+        """``[S]`` int64: the primitive subtask ``name`` picks at the belief certain of each state (``π_h(s)``).
+
+        A subtask of primitives decides on its own model's marginal alone, and a certain belief
+        projects onto one model state: one pick per model state is enough (the ward's 233,280
+        corners cost 180 one-step searches, not 233,280 dense rows). A group asks its children at
+        every corner, 256 corners at a time."""
+        sub = self.subtasks[name]
+        S = self.num_states
+        if name in self._groups:
+            return np.concatenate([self._pick_batch(name, np.eye(S)[lo:lo + 256], {})
+                                   for lo in range(0, S, 256)]).astype(np.int64)
+        used = np.unique(sub.state_to_model)
+        corners = np.zeros((used.size, sub.alphas.shape[1]))
+        corners[np.arange(used.size), used] = 1.0
+        Q = sub.one_step.q_rows(corners)
+        prims = np.array([self._index[c] for c in sub.actions], dtype=np.int64)
+        pick = np.zeros(sub.alphas.shape[1], dtype=np.int64)
+        pick[used] = prims[np.argmax(Q[:, self._to_model[name][prims]], axis=1)]
+        return pick[sub.state_to_model]
+
     def _offer_columns(self, children: Sequence[str], B: np.ndarray, memo: Dict[str, np.ndarray]) -> List[np.ndarray]:
         """:meth:`offers` for every row of ``B`` at once: one ``[N]`` column of primitives per offer, in its order."""
         cols: List[np.ndarray] = []
@@ -626,6 +727,8 @@ class HierarchicalPolicy:
         A policy-contingent root with a deeper search decides belief by belief (the search
         is per belief); otherwise every level is batched."""
         B = np.asarray(beliefs, dtype=float)
+        if self.online:
+            return np.array([self.execute(b).action for b in np.atleast_2d(B)], dtype=np.int64)
         if self.contingent:
             if self.subtasks[self.root].search_depth > 1:
                 return np.array([self.execute(b).action for b in np.atleast_2d(B)], dtype=np.int64)
@@ -648,6 +751,10 @@ class HierarchicalPolicy:
     def values(self, belief) -> Dict[str, float]:
         """Every subtask's value at ``belief`` (not only those on the trace)."""
         b = np.asarray(belief, dtype=float)
+        if self.online:
+            memo_o: Dict[str, tuple] = {}
+            out = {name: self._pick(name, b, memo_o)[2] for name in self.subtasks if name != self.root}
+            return {self.root: self.execute(b).trace[0].value, **out}
         if self.contingent:
             memo: Dict[str, tuple] = {}
             return {name: self._pick(name, b, memo)[2] for name in self.subtasks}
@@ -678,6 +785,8 @@ class HierarchicalPolicy:
             if sub.contingent:
                 entry["contingent"] = {"model_actions": sub.model_actions, "exit": sub.exit,
                                        "search_depth": sub.search_depth, "expansions": sub.expansions}
+            if sub.online is not None:
+                entry["online"] = sub.online
             subtasks.append(entry)
         buffer = io.BytesIO()
         np.savez_compressed(buffer, **arrays)  # type: ignore[arg-type]  # numpy stubs type **kwds as allow_pickle
@@ -750,12 +859,14 @@ def load_hierarchical_policy(directory: Union[str, Path], domain) -> Hierarchica
                 info=entry.get("info", {}), lookahead=search,
                 model_actions=None if not contingent else list(contingent["model_actions"]),
                 exit=bool(contingent.get("exit", False)), search_depth=int(contingent.get("search_depth", 1)),
-                expansions=int(contingent.get("expansions", 256)))
+                expansions=int(contingent.get("expansions", 256)), online=entry.get("online"))
         except KeyError as err:
             raise PolicyError(f"{npath}: missing array {err} for subtask {entry['name']!r}") from None
         except (ValueError, TypeError, IndexError) as err:
             raise PolicyError(f"{npath}: inconsistent arrays for subtask {entry['name']!r}: {err}") from None
     if header["root"] not in subtasks:
         raise PolicyError(f"{jpath}: root {header['root']!r} is not among the subtasks")
-    return HierarchicalPolicy(header["root"], subtasks, list(model.actions), fp, header.get("report"),
-                              header.get("hierarchy", ""), header.get("model_name", ""))
+    policy = HierarchicalPolicy(header["root"], subtasks, list(model.actions), fp, header.get("report"),
+                                header.get("hierarchy", ""), header.get("model_name", ""))
+    policy.bind_model(model)   # an online root's search steps the model (nothing for an offline root)
+    return policy

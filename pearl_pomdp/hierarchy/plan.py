@@ -34,7 +34,8 @@ from typing import Dict, Optional
 import numpy as np
 
 from pearl_pomdp.errors import PearlError
-from pearl_pomdp.hierarchy.abstraction import AbstractionTooLarge, AbstractSubtask, KernelBuilder, abstract_subtask
+from pearl_pomdp.hierarchy.abstraction import (AbstractionTooLarge, AbstractSubtask, KernelBuilder, SeparableTerms,
+                                               abstract_subtask, separable_reward_terms)
 from pearl_pomdp.hierarchy.execute import HierarchicalPolicy, Lookahead, SubtaskPolicy
 from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
 from pearl_pomdp.hierarchy.spec import Hierarchy, SubtaskSpec
@@ -113,6 +114,16 @@ def plan(domain, hierarchy: Hierarchy, abstraction: bool = True, solver: Optiona
     return _plan_corner(domain, hierarchy, abstraction, solver, seed, progress, strict_local_reward, time_limit)
 
 
+def _separate(sub, factored, primitives, charged_under, abstraction: bool) -> SeparableTerms:
+    """The separable reward terms of a subtask (:func:`separable_reward_terms`), taken out of ``sub.R``
+    (nothing when the abstraction is off: ``--no-abstraction`` solves the subtask as it is)."""
+    if not abstraction or factored is None:
+        return SeparableTerms([], np.zeros(0), [])
+    separable = separable_reward_terms(factored, primitives, charged_under)
+    sub.R = separable.apply(sub.R)
+    return separable
+
+
 def _left(deadline: Optional[float], own: Optional[float]) -> Optional[float]:
     """The smaller of a subtask's own limit and what is left of the plan's (``None``: none)."""
     if deadline is None:
@@ -149,8 +160,12 @@ def _plan_corner(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
                 raise PearlError(f"{hierarchy.source}: subtasks.{name}: {problem}")
             log.warning("%s", problem)
         child_relevant = sorted({f for c in spec.children if c in abstracts for f in abstracts[c].relevant})
+        # Eq. 15-17's subtask never stops: a term charged under each of its primitives alike is separable.
+        below = hierarchy.descendants(name)
+        separable = _separate(sub, factored, below, below, abstraction)
         try:
-            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder)
+            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder,
+                                    dropped=separable.rules)
         except AbstractionTooLarge as e:
             raise PearlError(f"{hierarchy.source}: subtasks.{name}: {e}") from None
         t1 = time.perf_counter()
@@ -197,6 +212,7 @@ def _plan_corner(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
             "value_at_start": float(result.value_at_start),
             "upper_bound": None if result.upper_bound is None else float(result.upper_bound),
             "parameterize": "corner",
+            "separable_reward_terms": separable.described,
             "stop_reason": result.extra.get("stop_reason"),
             "warnings": list(sub.warnings) + ([f"subtask {name!r}: the solver stopped by "
                                                f"{result.extra.get('stop_reason', 'its time limit')} "
@@ -233,19 +249,23 @@ def _plan_corner(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
 
 # ------------------------------------------------------------------ policy-contingent PLAN
 def entry_beliefs(model, seed: int = 0, episodes: int = ENTRY_EPISODES, steps: int = ENTRY_STEPS,
-                  every: int = ENTRY_EVERY) -> np.ndarray:
+                  every: int = ENTRY_EVERY, qmdp: Optional[np.ndarray] = None) -> np.ndarray:
     """Beliefs a cheap policy meets in the full model: ``[N, S]``, deterministic for ``seed``.
 
     QMDP (one α-vector per action, solved in milliseconds) is run for ``episodes`` episodes
     of ``steps`` steps — start state from ``b0``, next state from ``T``, observation from
     ``O``, belief by eq. 5 — and every ``every``-th belief is kept. QMDP does every service of
     the task (it reminds, walks, answers; it only never asks), so these beliefs are the
-    situations in which parents will consult their children."""
+    situations in which parents will consult their children. ``qmdp``: the QMDP ``Q [S, A]`` when
+    it is already computed (an online root's upper bound past ``FIB_LIMIT``: the same value
+    iteration, not run twice on the ward's 233,280 states)."""
     from pearl_pomdp.belief import BeliefFilter
     from pearl_pomdp.simulate import _RowSampler
+    from pearl_pomdp.solvers.base import AlphaVectorPolicy
     from pearl_pomdp.solvers.mdp import solve_qmdp
 
-    policy = solve_qmdp(model).policy
+    policy = solve_qmdp(model).policy if qmdp is None else AlphaVectorPolicy(
+        np.asarray(qmdp, dtype=float).T.copy(), np.arange(model.num_actions))
     rng = np.random.default_rng(seed)
     S, Z = model.num_states, model.num_observations
     filt = BeliefFilter(model)
@@ -294,6 +314,31 @@ def _starts(abst: AbstractSubtask, n_model: int, entries: np.ndarray) -> np.ndar
     return np.array(rows) if rows else np.zeros((0, n_model))
 
 
+def _online_root(spec: SubtaskSpec, model, policies: Dict[str, SubtaskPolicy], seed: int, features) -> SubtaskPolicy:
+    """The placeholder policy of a root that plans online (``solver: online``): its children and the
+    search's record; EXECUTE runs :class:`~pearl_pomdp.hierarchy.online_root.OnlineRoot`."""
+    from pearl_pomdp.online.despot import DespotSettings
+
+    base = DespotSettings()
+    record = {"trials": spec.trials, "time_limit": spec.time_limit, "scenarios": base.scenarios,
+              "depth": base.depth, "seed": int(seed)}
+    S = model.num_states
+    pol = SubtaskPolicy(name=spec.name, actions=list(spec.children), abstract=[c in policies for c in spec.children],
+                        alphas=np.zeros((1, 1)), alpha_actions=np.zeros(1, dtype=np.int64),
+                        state_to_model=np.zeros(S, dtype=np.int64), effective=np.full(S, -1, dtype=np.int64),
+                        online=record)
+    pol.info = {
+        "name": spec.name, "parameterize": "policy", "solver": "online", "states_full": S, "states_abstract": S,
+        "model_states": S, "observations_full": model.num_observations,
+        "observations_abstract": model.num_observations, "actions": list(spec.children), "option": False,
+        "alpha_vectors": 0, "seconds": 0.0, "solve_seconds": 0.0, "exact": False, "horizon": None, "lookahead": 0,
+        "trials_budget": spec.trials, "online": record, "warnings": [], "separable_reward_terms": [],
+        "relevant_features": list(features), "irrelevant_features": [], "stop_reason": "online",
+        "value_at_start": float("nan"), "upper_bound": None, "gap": None,
+    }
+    return pol
+
+
 class _ChildOffers:
     """The action filter of a policy-contingent parent: at a belief over the parent's model,
     the primitives its children offer there (:meth:`HierarchicalPolicy.offers`: what each child
@@ -339,14 +384,24 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
     from pearl_pomdp.solvers.point_based import PointBasedSettings, PointBasedSolver
 
     if solver not in (None, "pointbased", "incprune"):
-        raise PearlError(f"unknown solver {solver!r}; choose pointbased or incprune")
+        raise PearlError(f"unknown solver {solver!r}; choose pointbased or incprune (an online root stays online)")
     t_start = time.perf_counter()
     deadline = None if time_limit is None else t_start + time_limit
     model = domain.compile() if isinstance(domain, FactoredDomain) else domain
     factored = domain if isinstance(domain, FactoredDomain) else None
     factors = StateFactors.from_domain(domain)
     builder = KernelBuilder(model)
-    entries = entry_beliefs(model, seed=seed)
+    online_bounds, bounds_seconds, qmdp = None, 0.0, None
+    if hierarchy.subtasks[hierarchy.root].solver == "online":
+        from pearl_pomdp.online.decider import default_bounds, default_upper
+
+        # The online root's bounds first: past FIB_LIMIT their upper bound is the QMDP Q the entry
+        # beliefs' policy needs too (one value iteration over the full model, not two).
+        t_bounds = time.perf_counter()
+        online_bounds = default_bounds(model)
+        bounds_seconds = time.perf_counter() - t_bounds
+        qmdp = getattr(online_bounds, "upper_q", None) if default_upper(model) == "qmdp" else None
+    entries = entry_beliefs(model, seed=seed, qmdp=qmdp)
     policies: Dict[str, SubtaskPolicy] = {}
     abstracts: Dict[str, AbstractSubtask] = {}
     reports = []
@@ -361,6 +416,13 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
         is_root = name == hierarchy.root
         t0 = time.perf_counter()
         below = hierarchy.descendants(name)
+        if is_root and spec.solver == "online":
+            # Not planned here: DESPOT over its actions at run time (bound to the model below).
+            policies[name] = _online_root(spec, model, policies, seed, factors.names)
+            reports.append(policies[name].info)
+            if bar is not None:
+                bar.update(1)
+            continue
         # The subtask over the primitives below it (eq. 11–14 for each), abstracted exactly.
         flat_spec = dataclasses.replace(spec, children=list(below))
         sub = parameterize(model, flat_spec, {}, factors)
@@ -369,8 +431,12 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
                 raise PearlError(f"{hierarchy.source}: subtasks.{name}: {problem}")
             log.warning("%s", problem)
         child_relevant = sorted({f for c in spec.children if c in abstracts for f in abstracts[c].relevant})
+        # An option hands the step back to its parent when it stops: a term is separable only when
+        # every action of the domain pays it (the root never stops: its own primitives suffice).
+        separable = _separate(sub, factored, below, below if is_root else list(model.actions), abstraction)
         try:
-            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder)
+            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder,
+                                    dropped=separable.rules)
         except AbstractionTooLarge as e:
             raise PearlError(f"{hierarchy.source}: subtasks.{name}: {e}") from None
         solve_model = abst.model if is_root else with_exit(abst.model)
@@ -462,6 +528,7 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
             "starts": int(result.extra.get("starts", 1)),
             "max_start_gap": result.extra.get("max_start_gap"),
             "offers_asked": 0 if offers is None else offers.asked,
+            "separable_reward_terms": separable.described,
             "warnings": list(sub.warnings) + notes,
             **abst.summary(),
         }
@@ -488,10 +555,22 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
     hp = HierarchicalPolicy(hierarchy.root, {n: policies[n] for n in order}, list(model.actions),
                             model.fingerprint(), report, hierarchy.name, model.name)
     # π_h(s) for the record (`pearl explain`, `pearl hierarchy`): the primitive each subtask
-    # picks at the belief certain of s.
+    # picks at the belief certain of s (an online root has none: -1).
     for name in order:
-        eff = np.concatenate([hp._pick_batch(name, np.eye(model.num_states)[lo:lo + 256], {})
-                              for lo in range(0, model.num_states, 256)])
-        policies[name].effective = eff.astype(np.int64)
+        if policies[name].online is None:
+            policies[name].effective = hp.corner_picks(name)
+    if hp.online:
+        hp.bind_model(model, bounds=online_bounds)
+        info = policies[hierarchy.root].info
+        info["bounds"] = hp.online_root.bounds.description
+        info["bounds_seconds"] = round(bounds_seconds, 6)
+        # One decision at b0: the search's size and root bounds, as the online decider reports them.
+        first = hp.execute(np.asarray(model.b0, dtype=float))
+        search = dict(first.search or {})
+        info.update(value_at_start=float(search["lower"]), upper_bound=float(search["upper"]), gap=float(search["gap"]),
+                    b0_decision={"action": first.action_name, "trace": [t.choice for t in first.trace],
+                                 **{k: search[k] for k in ("trials", "nodes", "expansions", "seconds", "stop")}})
+        info["seconds"] = round(info["seconds"] + info["bounds_seconds"], 6)
+        report["total_seconds"] = round(time.perf_counter() - t_start, 6)
     hp.abstract_models = abstracts  # kept for inspection (tests, `pearl hierarchy`); not saved
     return hp

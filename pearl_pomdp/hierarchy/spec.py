@@ -12,6 +12,7 @@ The YAML form (``config/pearl.hierarchy.yaml`` is a complete example)::
     parameterize: policy            # policy (default) | corner: how a parent models a child
     defaults:                       # optional; per-subtask keys override
       solver: pointbased            # pointbased (default) | incprune (exact; subtasks of primitives)
+                                    # | online (the root only: DESPOT at run time over its children)
       trials: 100                   # pointbased: trial budget (deterministic; null: until epsilon)
       epsilon: 0.01                 # pointbased: target gap at every start belief / incprune: tolerance
       horizon: null                 # incprune: epochs (null = until converged)
@@ -35,6 +36,11 @@ among the primitives its children would execute *at that belief*, valued in its 
 (policy-contingent), so it sees each child as the child acts. Shaping rules then name
 primitives below the subtask. ``lookahead: d`` adds ``d`` steps of forward search over the
 children's choices at execution, within ``expansions`` expanded beliefs per decision.
+
+``solver: online`` on the root (``parameterize: policy`` only) leaves the root unplanned: at run
+time it runs DESPOT over its own actions, each child resolved at every search node to the
+primitive its offline policy picks there (:mod:`pearl_pomdp.hierarchy.online_root`); its
+``trials`` are the search's trials per decision and ``time_limit`` a guard per decision.
 
 ``parameterize: corner`` is the paper's PARAMETERIZE (eq. 15–17): an abstract action is the
 primitive its child picks at the belief concentrated on each state; the subtask is solved
@@ -65,8 +71,8 @@ from pearl_pomdp.model.factored import FactoredDomain
 __all__ = ["Hierarchy", "SubtaskSpec", "ShapingRule", "load_hierarchy", "parse_hierarchy",
            "flat_hierarchy", "SOLVERS", "PARAMETERIZATIONS", "BUILTIN_DEFAULTS"]
 
-#: Solver names a subtask may ask for.
-SOLVERS = ("incprune", "pointbased")
+#: Solver names a subtask may ask for (``online``: the root only, planned at run time by DESPOT).
+SOLVERS = ("incprune", "pointbased", "online")
 _SUBTASK_KEYS = {"actions", "solver", "horizon", "lookahead", "epsilon", "time_limit", "trials", "expansions",
                  "shaping", "description"}
 _DEFAULT_KEYS = {"solver", "horizon", "lookahead", "epsilon", "time_limit", "trials", "expansions"}
@@ -361,6 +367,12 @@ def parse_hierarchy(text: str, primitives: Sequence[str], features: Optional[Map
                           primitives=list(primitives), source=source, parameterize=parameterize)
     if parameterize == "policy":
         _check_policy_settings(chk, hierarchy)
+    else:
+        for name, spec in subtasks.items():
+            if spec.solver == "online":
+                raise chk.fail(f"subtasks.{name}.solver" if "solver" in (raw_subtasks[name] or {}) else "defaults.solver",
+                               "solver online needs parameterize: policy (an online root consults its children's "
+                               "policy-contingent picks; corner children have none)")
     covered = set(hierarchy.descendants(root))
     missing = [p for p in primitives if p not in covered]
     if missing:
@@ -376,6 +388,24 @@ def _check_policy_settings(chk: _Checker, hierarchy: Hierarchy) -> None:
     for name, spec in hierarchy.subtasks.items():
         where = f"subtasks.{name}"
         abstract = [c for c in spec.children if c in hierarchy.subtasks]
+        if spec.solver == "online":
+            if name != hierarchy.root:
+                raise chk.fail(f"{where}.solver", f"only the root ({hierarchy.root!r}) can plan online: {name!r} is a "
+                                                  f"child of {hierarchy.parent_of(name)!r}, which consults its offline "
+                                                  "policy (a 'solver: online' under defaults makes every subtask online)")
+            if spec.trials is None and spec.time_limit is None:
+                raise chk.fail(f"{where}.trials", "an online root needs trials (DESPOT trials per decision) or a "
+                                                  "time_limit (seconds per decision)")
+            if spec.horizon is not None:
+                raise chk.fail(f"{where}.horizon", "an online root has no horizon of its own (DESPOT's depth bounds "
+                                                   "its search); remove horizon")
+            if spec.lookahead:
+                raise chk.fail(f"{where}.lookahead", "lookahead is EXECUTE's search over an offline policy; an online "
+                                                     "root searches by itself (its depth is DESPOT's)")
+            if spec.shaping:
+                raise chk.fail(f"{where}.shaping", "an online root plans with the domain's own rewards: shaping is for "
+                                                   "offline subtasks")
+            continue
         if spec.solver == "incprune" and abstract:
             raise chk.fail(f"{where}.solver", f"incprune cannot solve {name!r}: it has abstract children "
                                               f"({', '.join(abstract)}), whose picks depend on the belief; use "

@@ -47,10 +47,22 @@ DEFAULT_TIME_GUARD = 5.0
 FIB_LIMIT = 5_000_000
 
 
+def default_upper(model: Pomdp) -> str:
+    """The default upper bound's name for ``model``: ``"fib"``, or ``"qmdp"`` past :data:`FIB_LIMIT`."""
+    size = model.num_states * model.num_actions * model.num_observations
+    return "fib" if size <= FIB_LIMIT else "qmdp"
+
+
 def default_bounds(model: Pomdp) -> Bounds:
     """:func:`~pearl_pomdp.online.generative.alpha_bounds` with FIB above, or QMDP past :data:`FIB_LIMIT`."""
-    size = model.num_states * model.num_actions * model.num_observations
-    return alpha_bounds(model, upper="fib" if size <= FIB_LIMIT else "qmdp")
+    return alpha_bounds(model, upper=default_upper(model))
+
+
+def decision_seed(belief: np.ndarray, seed: int) -> int:
+    """The seed of an online decision at ``belief``: the belief rounded to 12 digits, hashed, mixed with
+    ``seed`` — the same belief always gets the same search (a replayed bag reproduces the choices)."""
+    data = np.round(np.asarray(belief, dtype=float), 12).tobytes()
+    return (zlib.crc32(data) ^ (int(seed) * 0x9E3779B1)) & 0xFFFFFFFF
 
 
 def online_trials(policy: str, where: str = "policy") -> Optional[int]:
@@ -113,9 +125,8 @@ class OnlineDecider:
         self.last_search: Optional[SearchResult] = None
 
     def decision_seed(self, belief: np.ndarray) -> int:
-        """The seed of the decision at ``belief`` (the belief rounded to 12 digits, then hashed)."""
-        data = np.round(np.asarray(belief, dtype=float), 12).tobytes()
-        return (zlib.crc32(data) ^ (self.seed * 0x9E3779B1)) & 0xFFFFFFFF
+        """The seed of the decision at ``belief`` (:func:`decision_seed` with this decider's seed)."""
+        return decision_seed(belief, self.seed)
 
     def search(self, belief) -> SearchResult:
         """The DESPOT search at ``belief`` ``[S]`` (scenarios drawn from it)."""
