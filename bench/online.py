@@ -20,7 +20,9 @@ drawing the root's scenarios) with its p50/p99/max against the budget. ``--max-m
 stops starting new episodes of one configuration after that many minutes (the count run is
 reported). Offline beside it where an explicit model exists (``--offline-time``): the
 project's point-based solver (SARSOP-style, docs/solvers.md) on RockSample(7,8) and Tag,
-simulated on the same episodes' seeds (SARSOP itself is not run here: say so, not guess).
+simulated on the same episodes' seeds; with ``--sarsop PATH`` also APPL SARSOP's policy
+(``pomdpsol``, built outside this repository) on the same file for ``--sarsop-time`` seconds,
+read from its ``.policy`` file and simulated on the same seeds.
 
 The published DESPOT/POMCP figures are quoted in ``published`` with their source; a figure we
 could not find is ``null`` with a note (none is invented).
@@ -236,22 +238,26 @@ def run_tag(budget, episodes, steps, seed, max_minutes, lower: str = "blind") ->
             "wall_minutes": round(minutes, 2)}
 
 
+def _explicit_file(problem: str, tmp: Path) -> Path:
+    """The explicit ``.pomdp`` file of ``problem`` (RockSample(7,8) unpacked into ``tmp``)."""
+    if problem == "tag":
+        return ROOT / "test/data/pomdp/TagAvoid.pomdp"
+    import lzma
+
+    path = tmp / "RockSample_7_8.pomdp"
+    path.write_bytes(lzma.decompress((ROOT / "test/data/pomdp/RockSample_7_8.pomdp.xz").read_bytes()))
+    return path
+
+
 def run_offline(problem, time_limit, episodes, steps, seed) -> dict:
     """The project's point-based solver's offline policy, simulated on the same seeds."""
+    import tempfile
+
+    from pearl_pomdp.model import load_model
     from pearl_pomdp.solvers.registry import solve
 
-    if problem == "tag":
-        model = _tag_model()
-    else:
-        import lzma
-        import tempfile
-
-        from pearl_pomdp.model import load_model
-
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "RockSample_7_8.pomdp"
-            path.write_bytes(lzma.decompress((ROOT / "test/data/pomdp/RockSample_7_8.pomdp.xz").read_bytes()))
-            model = load_model(str(path))
+    with tempfile.TemporaryDirectory() as tmp:
+        model = load_model(str(_explicit_file(problem, Path(tmp))))
     res = solve(model, "pointbased", time_limit=time_limit, seed=seed)
     policy = res.policy
     returns, _, minutes = _simulate_explicit(model, lambda b: policy.action(b), episodes, steps, seed, 1e9)
@@ -259,6 +265,75 @@ def run_offline(problem, time_limit, episodes, steps, seed) -> dict:
     return {"solver": "pearl pointbased (SARSOP-style, docs/solvers.md)", "time_limit_s": time_limit,
             "lower_bound_b0": res.value_at_start, "upper_bound_b0": res.upper_bound,
             "solve_seconds": round(res.seconds, 1), "episodes": len(returns), "mean": mean, "ci95": half}
+
+
+def read_appl_policy(path: Path, num_states: int):
+    """α-vectors and their actions from an APPL (SARSOP) ``.policy`` file: ``<Vector action=…>`` rows
+    of ``vectorLength`` values, or ``<SparseVector>`` rows of ``<Entry>state value</Entry>``.
+
+    Raises:
+        SystemExit: the file is not such a policy, or its vector length is not ``num_states``.
+    """
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as err:
+        raise SystemExit(f"bench/online.py: {path}: not a readable APPL policy file: {err}") from None
+    block = root.find("AlphaVector")
+    if block is None or int(block.get("vectorLength", -1)) != num_states:
+        raise SystemExit(f"bench/online.py: {path}: AlphaVector: expected vectorLength {num_states}, "
+                         f"found {None if block is None else block.get('vectorLength')}")
+    alphas, actions = [], []
+    for row in block:
+        vec = np.zeros(num_states)
+        if row.tag == "Vector":
+            vec[:] = np.array((row.text or "").split(), dtype=float)
+        elif row.tag == "SparseVector":
+            for entry in row.findall("Entry"):
+                s, v = (entry.text or "").split()
+                vec[int(s)] = float(v)
+        else:
+            continue
+        alphas.append(vec)
+        actions.append(int(row.get("action", -1)))
+    if not alphas:
+        raise SystemExit(f"bench/online.py: {path}: AlphaVector holds no vectors")
+    return np.array(alphas), np.array(actions)
+
+
+def run_sarsop_offline(binary: str, problem: str, time_limit: float, episodes: int, steps: int, seed: int) -> dict:
+    """APPL SARSOP (``pomdpsol --timeout T --precision 1e-3``) on the problem's explicit file; its
+    policy (the action of the best α-vector at the exact belief) simulated on the same seeds."""
+    import re
+    import subprocess
+    import tempfile
+
+    from pearl_pomdp.model import load_model
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _explicit_file(problem, Path(tmp))
+        model = load_model(str(path))
+        policy_file = Path(tmp) / "out.policy"
+        cmd = [binary, str(path), "--timeout", f"{time_limit:g}", "--precision", "1e-3", "-o", str(policy_file)]
+        t0 = time.perf_counter()
+        done = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=time_limit * 10 + 600)
+        wall = time.perf_counter() - t0
+        if done.returncode != 0 or not policy_file.exists():
+            return {"solver": "APPL SARSOP (pomdpsol)", "command": " ".join(cmd),
+                    "error": f"exit {done.returncode}: {done.stderr.strip()[-300:]}"}
+        alphas, actions = read_appl_policy(policy_file, model.num_states)
+    rows = re.findall(r"^\s*([\d.]+)\s+(\d+)\s+(\d+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(\d+)\s+(\d+)\s*$",
+                      done.stdout, flags=re.M)
+    lower, upper = (float(rows[-1][3]), float(rows[-1][4])) if rows else (None, None)
+    returns, _, _ = _simulate_explicit(model, lambda b: int(actions[int(np.argmax(alphas @ b))]),
+                                       episodes, steps, seed, 1e9)
+    mean, half = _ci(returns)
+    return {"solver": "APPL SARSOP (pomdpsol), built outside this repository", "time_limit_s": time_limit,
+            "command": " ".join([Path(binary).name, path.name, *cmd[2:-1], policy_file.name]), "wall_s": round(wall, 1),
+            "timeout_clock": "SARSOP's own (it reports 'Actual Time' in CPU seconds)",
+            "lower_bound_b0": lower, "upper_bound_b0": upper, "vectors": int(len(alphas)),
+            "episodes": len(returns), "mean": mean, "ci95": half}
 
 
 def run_despot_peer(binary: str, problem: str, budget: float, runs: int, steps: int, seed: int,
@@ -363,7 +438,11 @@ def main(argv=None) -> int:
                     help="DESPOT's own rock_sample example (AdaCompNUS/despot, built outside this repository): "
                          "run on the same RockSample problems and budgets, --despot-runs episodes each")
     ap.add_argument("--despot-runs", type=int, default=30)
-    ap.add_argument("--despot-only", action="store_true", help="run only the DESPOT peer (with --despot)")
+    ap.add_argument("--sarsop", metavar="PATH",
+                    help="APPL SARSOP's pomdpsol (built outside this repository): its offline policy on rs7_8 and "
+                         "tag (the explicit files), --sarsop-time seconds, simulated on the same seeds")
+    ap.add_argument("--sarsop-time", type=float, default=60.0, help="SARSOP's --timeout (seconds; default 60)")
+    ap.add_argument("--despot-only", action="store_true", help="run only the peers (--despot, --sarsop), not our planner")
     ap.add_argument("--json", action="store_true", help="(the output is always one JSON object)")
     args = ap.parse_args(argv)
     problems = [p for p in args.problems.split(",") if p]
@@ -396,6 +475,11 @@ def main(argv=None) -> int:
                     args.despot, p, budget, args.despot_runs, args.steps, args.seed, args.max_minutes)
         if args.offline_time > 0 and p in ("rs7_8", "tag"):
             out["offline"][p] = run_offline(p, args.offline_time, args.episodes, args.steps, args.seed)
+        if args.sarsop and p in ("rs7_8", "tag"):
+            out.setdefault("sarsop", {})[p] = r = run_sarsop_offline(args.sarsop, p, args.sarsop_time, args.episodes,
+                                                                   args.steps, args.seed)
+            print(f"SARSOP {p} ({args.sarsop_time:g} s): {r.get('mean', float('nan')):.2f} ± "
+                  f"{r.get('ci95', float('nan')):.2f}", file=sys.stderr, flush=True)
     out["acceptance"] = acceptance(out["results"])
     if "despot" in out:
         out["acceptance"]["vs DESPOT run here"] = against_local_despot(out["results"], out["despot"])
