@@ -54,12 +54,17 @@ def test_bt_node_drives_the_tracker_over_dds(tmp_path):
         procs.append(Proc([str(BIN / "belief_tracker"), "--ros-args", "-p", f"domain:={DOMAIN}",
                            "-p", "step_timeout:=0.0"], env, tmp_path, "tracker"))
         procs.append(Proc([str(BIN / "pearl_bt"), "--ros-args", "-p", f"domain:={DOMAIN}"], env, tmp_path, "bt"))
-        assert wait_for(lambda: not probe.unmatched() and len(actions) >= 1, DISCOVERY_TIMEOUT, executor), \
+        # The tracker's latched b0 marginals (no action, no observation yet) must be in before the
+        # steps are counted: arriving after the first input, it was once taken for that step's.
+        assert wait_for(lambda: not probe.unmatched() and len(actions) >= 1 and len(marginals) >= 1,
+                        DISCOVERY_TIMEOUT, executor), \
             f"no first action; bt stderr: {procs[1].stderr()[-400:]} tracker: {procs[0].stderr()[-400:]}"
 
         reference = PearlBehaviourTree(actions=list(load_domain(DOMAIN).actions))
         expected = [reference.execute(None).action_name]
         assert actions[0].data == expected[0] == "DoNothing"
+        first = json.loads(marginals[0].data)
+        assert (first["action"], first["observation"]) == (None, None)
         for topic, text, symbol in INPUTS:
             # The tracker has opened the step with the last action when its step count moved on.
             seen, seen_steps = len(actions), len(marginals)
