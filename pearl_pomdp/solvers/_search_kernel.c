@@ -115,6 +115,20 @@ static Py_ssize_t best_alpha(const ctx_t *c, const double *b, const i64 *nz, Py_
     return best_k(c, nz, NULL, b, n, val);
 }
 
+/* min(best, phi_p delta_p) for sawtooth point p at b: phi_p = min over its entries of b(s)/b_p(s),
+ * read most likely state first so the scan stops once phi_p delta_p can no longer beat best. */
+static inline double point_drop(const ctx_t *c, i64 p, const double *b, double best) {
+    double d = c->pdelta[p];
+    if (d >= best) return best;
+    const i64 *ix = c->sidx + c->pstart[p]; const double *iv = c->sinv + c->pstart[p];
+    double phi = INFINITY;
+    for (i64 j = 0; j < c->plen[p]; j++) {
+        double r = b[ix[j]] * iv[j];
+        if (r < phi) { phi = r; if (phi * d >= best) break; }
+    }
+    return phi * d < best ? phi * d : best;
+}
+
 static double upper(const ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n) {
     Py_ssize_t A = c->A;
     double fib;
@@ -125,17 +139,7 @@ static double upper(const ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n
         if (v > fib) fib = v;
     }
     double base = dot_nz(c->Vc, b, nz, n), best = 0.0;
-    for (Py_ssize_t p = 0; p < c->np_; p++) {
-        double d = c->pdelta[p];
-        if (d >= best) continue;
-        const i64 *ix = c->sidx + c->pstart[p]; const double *iv = c->sinv + c->pstart[p];
-        double phi = INFINITY;
-        for (i64 j = 0; j < c->plen[p]; j++) {
-            double r = b[ix[j]] * iv[j];
-            if (r < phi) { phi = r; if (phi * d >= best) break; }
-        }
-        if (phi * d < best) best = phi * d;
-    }
+    for (Py_ssize_t p = 0; p < c->np_; p++) best = point_drop(c, p, b, best);
     double saw = base + best;
     return saw < fib ? saw : fib;
 }
@@ -373,18 +377,7 @@ static int set_point(ctx_t *c, Py_ssize_t p, double v) {
 static double upper_since(const ctx_t *c, const double *b, const i64 *nz, Py_ssize_t n, Py_ssize_t from,
                           double cur) {
     double base = dot_nz(c->Vc, b, nz, n), best = cur - base;
-    for (Py_ssize_t q = from; q < c->plogn; q++) {
-        i64 p = c->plog[q];
-        double d = c->pdelta[p];
-        if (d >= best) continue;
-        const i64 *ix = c->sidx + c->pstart[p]; const double *iv = c->sinv + c->pstart[p];
-        double phi = INFINITY;
-        for (i64 j = 0; j < c->plen[p]; j++) {
-            double r = b[ix[j]] * iv[j];
-            if (r < phi) { phi = r; if (phi * d >= best) break; }
-        }
-        if (phi * d < best) best = phi * d;
-    }
+    for (Py_ssize_t q = from; q < c->plogn; q++) best = point_drop(c, c->plog[q], b, best);
     return base + best;
 }
 
