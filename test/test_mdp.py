@@ -129,3 +129,74 @@ def test_most_likely_state_policy_tiger():
 def test_blind_rejects_undiscounted():
     with pytest.raises(ValueError):
         mdp.blind_lower_bound(tiger(discount=1.0))
+
+
+def random_sparse_model(S=3000, A=4, discount=0.97, seed=5):
+    """A sparse MDP large enough for the Krylov path (each row: 3 random successors)."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(seed)
+    T = []
+    for _ in range(A):
+        cols = rng.integers(0, S, size=(S, 3))
+        vals = rng.random((S, 3)) + 0.05
+        vals /= vals.sum(axis=1, keepdims=True)
+        T.append(sp.csr_matrix((vals.ravel(), cols.ravel(), np.arange(0, 3 * S + 1, 3)), shape=(S, S)))
+    R = rng.normal(size=(S, A))
+    names = lambda n, k: [f"{k}{i}" for i in range(n)]
+    model = Pomdp.create(names(S, "s"), names(A, "a"), ["o"], T, np.ones((A, S, 1)), R, discount=discount, sparse=True)
+    return model, T, R
+
+
+def _value_iteration_reference(T, R, g, sweeps):
+    """Plain value iteration, written out here: the independent number the solver must meet."""
+    V = np.zeros(R.shape[0])
+    for _ in range(sweeps):
+        V = np.max(R + g * np.stack([Ta @ V for Ta in T], axis=1), axis=1)
+    return V
+
+
+def test_mdp_values_on_a_sparse_model_match_plain_value_iteration_and_are_certified():
+    model, T, R = random_sparse_model()
+    g = model.discount
+    V, Q = mdp.mdp_value_iteration(model)
+    # 1500 sweeps at γ = 0.97 leave an error below 0.97**1500 · 1e3 ≈ 1e-17: exact to rounding.
+    reference = _value_iteration_reference(T, R, g, 1500)
+    assert np.abs(V - reference).max() < 1e-6
+    # The certificate: HV <= V holds exactly, so V is an upper bound whatever the solver did.
+    HV = np.max(R + g * np.stack([Ta @ V for Ta in T], axis=1), axis=1)
+    assert (HV <= V).all()
+    assert (Q.max(axis=1) <= V).all()
+    alphas = mdp.blind_lower_bound(model)
+    for a, Ta in enumerate(T):
+        assert (R[:, a] + g * (Ta @ alphas[a]) >= alphas[a]).all()
+        assert np.abs(alphas[a] - _value_iteration_reference([Ta], R[:, [a]], g, 1500)).max() < 1e-6
+
+
+def test_bounds_stay_valid_when_the_linear_solver_is_wrong(monkeypatch):
+    # A solver that returns its answer off by up to ±5: the certificate must move V up (and the
+    # blind vectors down) far enough that they are still bounds of the true values.
+    model, T, R = random_sparse_model(S=800, seed=9)
+    g = model.discount
+    exact_V = _value_iteration_reference(T, R, g, 1500)
+    true_evaluate = mdp._evaluate
+    rng = np.random.default_rng(0)
+
+    def sloppy(P, r, g_, v0, tol, max_iterations):
+        v = true_evaluate(P, r, g_, v0, tol, max_iterations)
+        return v + rng.uniform(-5, 5, size=v.shape)
+
+    monkeypatch.setattr(mdp, "_evaluate", sloppy)
+    V, _ = mdp.mdp_value_iteration(model)
+    assert (V >= exact_V - 1e-9).all()
+    alphas = mdp.blind_lower_bound(model)
+    for a, Ta in enumerate(T):
+        assert (alphas[a] <= _value_iteration_reference([Ta], R[:, [a]], g, 1500) + 1e-9).all()
+
+
+def test_stalled_krylov_falls_back_to_sweeps(monkeypatch):
+    # One Krylov iteration cannot reach the tolerance: the sweeps must finish the job.
+    monkeypatch.setattr(mdp, "_KRYLOV_MAX_ITERATIONS", 1)
+    model, T, R = random_sparse_model(S=1000, seed=2)
+    V, _ = mdp.mdp_value_iteration(model)
+    assert np.abs(V - _value_iteration_reference(T, R, model.discount, 1500)).max() < 1e-6
