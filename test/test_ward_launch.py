@@ -1,9 +1,12 @@
 """The ward robot as a user launches it: ``pearl launch launch/pearl.launch.xml
 domain:=config/ward.domain.yaml policy:=online:5 params_file:=config/ward_nodes.yaml navigation:=false``
 starts the three nodes as separate processes over DDS and plans online at every belief (233,280
-states). The test answers every drive with its arrival and otherwise presses call buttons and
-speaks, and checks every belief against the core's Bayes filter and every action against the core's
-OnlineDecider on it (the same seed and trials: a decision depends on the belief alone). Decision
+states); with ``policy:=`` empty the policy node plans ``config/ward.hierarchy.yaml`` at start-up
+(the residents' subtasks offline, the root online) and answers with the hierarchy. The test answers
+every drive with its arrival and otherwise presses call buttons and speaks, and checks every belief
+against the core's Bayes filter and every action against the core's decider on it — OnlineDecider
+with the same trials, or the hierarchy planned here from the same files (a decision depends on the
+belief alone). The test's reference is built while the nodes start, on the other core. Decision
 times through the nodes are measured by ``bench/ward_launch.py``; start-up (compile 6 s, QMDP and blind
 bounds by policy iteration ~2 s, in the node and again here) makes it the suite's slowest setup, so
 the test is marked slow."""
@@ -34,8 +37,8 @@ DOMAIN = REPO / "config" / "ward.domain.yaml"
 STARTUP = 600.0      # s: compile (6 s) and the online bounds (~2 s idle): a guard for a heavily loaded machine
 
 
-@pytest.fixture(scope="module")
-def launched(tmp_path_factory):
+@pytest.fixture(scope="module", params=["online:5", "hierarchical"])
+def launched(request, tmp_path_factory):
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
@@ -53,22 +56,31 @@ def launched(tmp_path_factory):
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     probe = Probe(node)
-    model = domain.compile()
-    g = {"domain": domain, "model": model, "filter": BeliefFilter(model),
-         "decider": OnlineDecider(model, settings=DespotSettings(trials=5)),
+    policy = request.param
+    g = {"domain": domain, "policy": policy,
          "actions": probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS),
          "beliefs": probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS),
          "decisions": probe.listen("/pearl/decision", cv.TextMsg, EVENT_QOS),
          "arrived": node.create_publisher(cv.TextMsg, "/ward/arrived", INPUT_QOS),
          "call": node.create_publisher(cv.TextMsg, "/ward/call_button", INPUT_QOS),
          "speech": node.create_publisher(cv.TextMsg, "/ward/speech", INPUT_QOS)}
-    launch = Proc([PEARL, "launch", "launch/pearl.launch.xml", f"domain:={DOMAIN}", "policy:=online:5",
+    launch = Proc([PEARL, "launch", "launch/pearl.launch.xml", f"domain:={DOMAIN}",
+                   f"policy:={policy if policy != 'hierarchical' else ''}",
                    f"hierarchy:={REPO / 'config' / 'ward.hierarchy.yaml'}",
                    f"params_file:={REPO / 'config' / 'ward_nodes.yaml'}", "navigation:=false", "step_timeout:=0.0"],
                   ros_env(domain_id, tmp), tmp, "launch")
     g["launch"] = launch
     g["wait"] = lambda predicate, timeout=DISCOVERY_TIMEOUT: wait_for(predicate, timeout, executor)
     try:
+        # The reference, built while the nodes compile and plan in their own processes.
+        g["model"] = model = domain.compile()
+        g["filter"] = BeliefFilter(model)
+        if policy == "hierarchical":
+            from pearl_pomdp.hierarchy import load_hierarchy, plan
+
+            g["decider"] = plan(domain, load_hierarchy(REPO / "config" / "ward.hierarchy.yaml", domain))
+        else:
+            g["decider"] = OnlineDecider(model, settings=DespotSettings(trials=5))
         ready = g["wait"](lambda: all(g[k].get_subscription_count() >= 1 for k in ("arrived", "call", "speech"))
                           and len(g["actions"]) >= 1 and len(g["beliefs"]) >= 1, STARTUP)
         assert ready, f"graph not ready: {launch.stderr()[-3000:]}"
@@ -109,7 +121,12 @@ def test_the_ward_plans_online_through_the_nodes_as_the_core_does(launched):
         else:
             action = _feed(g, "speech", "could i have some water", "water")
     record = json.loads(g["decisions"][-1].data)
-    assert record["search"]["trials"] == 5 and "QMDP" in record["search"]["bounds"]
+    if g["policy"] == "hierarchical":
+        # The root searched (20 trials, config/ward.hierarchy.yaml) and the trace starts at the root.
+        assert record["trace"][0]["subtask"] == "Ward", record
+        assert record["search"]["trials"] == 20 and "QMDP" in record["search"]["bounds"]
+    else:
+        assert record["search"]["trials"] == 5 and "QMDP" in record["search"]["bounds"]
 
 
 def test_the_launch_stops_cleanly(launched):
