@@ -6,6 +6,10 @@ it compares, how it builds them, its scenario loader, its episode runner and its
 a :class:`WorldExperiment`; :func:`run_world_experiment` does the rest, the same for every such
 world: the option checks, the noise levels, the cells (study file × noise levels × seeds ×
 controllers) run on this machine's processes, the summary, ``study.json`` and the printout.
+The pieces of their study modules that are the same are here too: the tracker's step rules of a
+scenario (:func:`episode_settings`), one episode through the one step loop scored by its discounted
+return (:func:`run_scored_episode`), the per-policy rows (:func:`per_policy_rows`) and the paired
+differences over the same cells (:func:`paired_differences`).
 The nursing-home study (``pearl_sim/experiment.py``) has its own runner: residents, SNR axes and a
 cluster this one does not have.
 """
@@ -17,9 +21,10 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
-__all__ = ["WorldExperiment", "run_world_experiment"]
+__all__ = ["WorldExperiment", "run_world_experiment", "episode_settings", "run_scored_episode",
+           "per_policy_rows", "paired_differences"]
 
 #: ``pearl experiment --residents``' default: these worlds' people are in their study file, so any other
 #: value is refused (``WorldExperiment.residents_reason``).
@@ -177,3 +182,90 @@ def run_world_experiment(args: argparse.Namespace, world: WorldExperiment) -> in
     print(study.format_table(summary))
     print(f"{len(episodes)} episodes in {episode_seconds:.1f} s ({args.jobs} job(s)); wrote {out / 'study.json'}")
     return 0
+
+
+def episode_settings(scenario, params_file: Union[str, Path]):
+    """The belief tracker's step rules for ``scenario``: the params file's, then the scenario's step timeout
+    (``scenario.tracker_parameters()``)."""
+    from pearl_pomdp.params import step_settings
+
+    return step_settings(params_file, **scenario.tracker_parameters())
+
+
+def run_scored_episode(world, executive, domain, model, on_step=None,
+                       on_start: Optional[Callable[[str], None]] = None) -> Tuple[Any, float]:
+    """Run ``world`` with ``executive`` through the one step loop (:func:`pearl_sim.loop.run_episode`).
+
+    Args:
+        world: the simulated world (``truth()``: its true state, feature → value).
+        executive: the core executive deciding for the robot.
+        domain, model: the domain and its compiled POMDP (R and γ of the return).
+        on_step: ``(world, result, waits, executive)`` after every action, or ``None``.
+        on_start: ``(action)`` when an action starts (before it is scored), or ``None``.
+
+    Returns:
+        The loop's trace and the discounted return Σ_t γ^t R[s_t, a_t], s_t the world's true state
+        when a_t starts.
+    """
+    from pearl_sim.loop import ExecutiveBackend, run_episode
+
+    index = {a: i for i, a in enumerate(model.actions)}
+    score = {"total": 0.0, "discount": 1.0}
+
+    def start(action: str) -> None:
+        if on_start is not None:
+            on_start(action)
+        state = domain.state_index(world.truth())
+        score["total"] += score["discount"] * float(model.R[state, index[action]])
+        score["discount"] *= model.discount
+
+    def after(result, waits) -> None:
+        if on_step is not None:
+            on_step(world, result, waits, executive)
+
+    trace = run_episode(world, ExecutiveBackend(executive), before_action=start, on_action=after)
+    return trace, score["total"]
+
+
+def per_policy_rows(episodes: Sequence[Any], scores: Sequence[str],
+                    extra: Callable[[List[Any]], Dict[str, Any]]) -> Dict[str, Dict[str, dict]]:
+    """policy → noise level (``f"{noise:g}"``) → a row: every score's mean with a 95 % t CI, task
+    success with a Wilson CI (``success_rate``), the world's ``extra(episodes)`` and ``episodes``.
+
+    Policies in the order they first appear, noise levels ascending.
+    """
+    from pearl_sim.stats import proportion_ci, t_ci
+
+    groups: Dict[str, Dict[float, List[Any]]] = {}
+    for e in episodes:
+        groups.setdefault(e.policy, {}).setdefault(e.noise, []).append(e)
+    per_policy: Dict[str, Dict[str, dict]] = {}
+    for policy, by_noise in groups.items():
+        per_policy[policy] = {}
+        for noise, es in sorted(by_noise.items()):
+            row: Dict[str, Any] = {s: t_ci([float(getattr(e, s)) for e in es]) for s in scores}
+            row["success_rate"] = proportion_ci(sum(e.success for e in es), len(es))
+            row.update(extra(es))
+            row["episodes"] = len(es)
+            per_policy[policy][f"{noise:g}"] = row
+    return per_policy
+
+
+def paired_differences(episodes: Sequence[Any], scores: Sequence[str], policy: str,
+                       other: str) -> Dict[str, Dict[str, dict]]:
+    """noise level → score → mean and 95 % t CI of ``policy`` − ``other`` over the cells both ran
+    (the same scenario, noise level and seed: the same world), for every noise level of ``episodes``."""
+    from pearl_sim.stats import t_ci
+
+    index = {(e.policy, e.scenario, e.noise, e.seed): e for e in episodes}
+    out = {}
+    for noise in sorted({e.noise for e in episodes}):
+        diffs: Dict[str, List[float]] = {s: [] for s in scores}
+        for (p, sc, n, seed), e in index.items():
+            base = index.get((other, sc, n, seed))
+            if p != policy or n != noise or base is None:
+                continue
+            for s in scores:
+                diffs[s].append(float(getattr(e, s)) - float(getattr(base, s)))
+        out[f"{noise:g}"] = {s: t_ci(v) for s, v in diffs.items()}
+    return out
