@@ -141,7 +141,9 @@ def test_no_pearl_name_in_the_reception_sources_config_or_output(run):
     pattern = re.compile(r"(?<![A-Za-z0-9_])(" + "|".join(sorted(map(re.escape, words), key=len, reverse=True))
                          + r")(?![A-Za-z0-9_])")
     checked = [*sorted((REPO / "pearl_sim" / "reception").glob("*.py")), REPO / "pearl_sim" / "loop.py",
-               REPO / "pearl_sim" / "messages.py", REPO / "pearl_sim" / "planning.py", DOMAIN, PARAMS,
+               REPO / "pearl_sim" / "messages.py", REPO / "pearl_sim" / "planning.py",
+               REPO / "pearl_sim" / "world_study.py", REPO / "pearl_sim" / "world_scenario.py",
+               REPO / "pearl_sim" / "world_base.py", REPO / "pearl_sim" / "world_tree.py", DOMAIN, PARAMS,
                REPO / "config" / "reception.hierarchy.yaml", *sorted((REPO / "config/scenarios/reception").glob("*"))]
     checked += [p for p in run["out"].rglob("*") if p.is_file() and p.name != "report.json"]
     assert len(checked) > 15

@@ -44,13 +44,13 @@ Rules and thresholds, each with its reason:
 from __future__ import annotations
 
 import itertools
-import math
 from typing import Callable, List, Optional
 
 import py_trees
-from py_trees.common import Access, Status
+from py_trees.common import Status
 
-from pearl_pomdp.interfaces import Decision, TraceStep
+from pearl_sim.world_tree import Act, TreeDecider
+from pearl_sim.world_tree import branch as tree_branch
 
 __all__ = ["ReceptionBehaviourTree", "build_reception_tree", "ASK_ATTEMPTS", "ASK_BACKOFF_TICKS",
            "CONFIRM_ATTEMPTS"]
@@ -75,46 +75,12 @@ KEYS = ("action", "heard", "location", "visitor", "destination", "confirmed", "a
 _instances = itertools.count()
 
 
-class _Behaviour(py_trees.behaviour.Behaviour):
-    """A behaviour with a blackboard client on the tree's namespace."""
-
-    def __init__(self, name: str, namespace: str, write: bool = False):
-        super().__init__(name=name)
-        self.bb = self.attach_blackboard_client(name=name, namespace=namespace)
-        for key in KEYS:
-            self.bb.register_key(key=key, access=Access.WRITE if write else Access.READ)
-
-
-class Guard(_Behaviour):
-    """SUCCESS when ``predicate(blackboard)`` holds, else FAILURE."""
-
-    def __init__(self, name: str, namespace: str, predicate: Callable):
-        super().__init__(name, namespace)
-        self.predicate = predicate
-
-    def update(self) -> Status:
-        return Status.SUCCESS if self.predicate(self.bb) else Status.FAILURE
-
-
-class Act(_Behaviour):
-    """Chooses ``action`` (or ``action(blackboard)``) for this step: writes it and succeeds."""
-
-    def __init__(self, name: str, namespace: str, action):
-        super().__init__(name, namespace, write=True)
-        self.action = action
-
-    def update(self) -> Status:
-        self.bb.action = self.action(self.bb) if callable(self.action) else self.action
-        return Status.SUCCESS
-
-
 def build_reception_tree(namespace: str) -> py_trees.behaviour.Behaviour:
     """The tree of the module doc, its blackboard keys under ``namespace``."""
     ns = namespace
 
     def branch(name: str, guard: Callable, action) -> py_trees.behaviour.Behaviour:
-        return py_trees.composites.Sequence(name, memory=False, children=[
-            Guard(f"{name}?", ns, guard), Act(name, ns, action)])
+        return tree_branch(name, ns, KEYS, guard, action)
 
     return py_trees.composites.Selector("Reception", memory=False, children=[
         branch("Charge", lambda bb: bb.battery_low and not bb.visitor, "Dock"),
@@ -126,11 +92,11 @@ def build_reception_tree(namespace: str) -> py_trees.behaviour.Behaviour:
         branch("Ask", lambda bb: bb.visitor and bb.destination is None and bb.backoff == 0, "AskDestination"),
         branch("Greet", lambda bb: not bb.visitor and bb.location == "desk" and bb.seen, "Greet"),
         branch("Back to desk", lambda bb: not bb.visitor and bb.location != "desk", "ReturnToDesk"),
-        Act("Idle", ns, "Wait"),
+        Act("Idle", ns, KEYS, "Wait"),
     ])
 
 
-class ReceptionBehaviourTree:
+class ReceptionBehaviourTree(TreeDecider):
     """The tree as an :class:`~pearl_pomdp.interfaces.ObservingDecider` and a controller
     (``name``, ``decider``) for the reception study and demo.
 
@@ -140,19 +106,10 @@ class ReceptionBehaviourTree:
     """
 
     def __init__(self, name: str = "behaviour_tree", actions: Optional[List[str]] = None):
-        self.name = name
-        self.decider = self
-        self.actions = list(actions) if actions is not None else [
+        super().__init__(name, list(actions) if actions is not None else [
             "Wait", "Greet", "AskDestination", "ConfirmGallery", "ConfirmOffice", "EscortToGallery",
-            "EscortToOffice", "HandOver", "ReturnToDesk", "Dock"]
-        self._index = {a: i for i, a in enumerate(self.actions)}
-        self.namespace = f"/reception_bt_{next(_instances)}"
-        self.root = build_reception_tree(self.namespace)
-        self.tree = py_trees.trees.BehaviourTree(self.root)
-        self.blackboard = py_trees.blackboard.Client(name=f"{name} executive", namespace=self.namespace)
-        for key in KEYS:
-            self.blackboard.register_key(key=key, access=Access.WRITE)
-        self.reset()
+            "EscortToOffice", "HandOver", "ReturnToDesk", "Dock"], f"/reception_bt_{next(_instances)}", KEYS,
+            build_reception_tree)
 
     def reset(self) -> None:
         """A fresh episode: the robot at the desk, nobody there, the battery taken as fine."""
@@ -217,18 +174,3 @@ class ReceptionBehaviourTree:
             bb.seen = False
         if action == "Dock" and heard in PLACES:
             bb.battery_low = False
-
-    def execute(self, belief=None) -> Decision:
-        """Tick the tree; the action its chosen leaf names (the belief is not used)."""
-        bb = self.blackboard
-        bb.action = None
-        self.tree.tick()
-        action = bb.action if bb.action is not None else "Wait"
-        tip = self.root.tip()
-        where = tip.name if tip is not None else "Reception"
-        return Decision(self._index[action], action, [TraceStep(self.name, where, math.nan),
-                                                      TraceStep(where, action, math.nan)])
-
-    def snapshot(self) -> dict:
-        """The blackboard's values (for tests and transcripts)."""
-        return {key: getattr(self.blackboard, key) for key in KEYS}

@@ -4,16 +4,13 @@ Plans the compared controllers once (the hierarchy beside the domain, a flat poi
 QMDP) and builds the reception behaviour tree, runs every controller in every cell of the study
 file × noise levels × seeds through the one step loop, and reports per controller and noise level
 the return, task success and wrong actions with 95 % CIs and the paired differences against the
-behaviour tree. Writes ``study.json`` into ``--out``.
+behaviour tree. Writes ``study.json`` into ``--out``. The runner is the one the worlds of a study
+file share (:mod:`pearl_sim.world_study`); here is what is the reception's own.
 """
 from __future__ import annotations
 
 import argparse
-import json
-import sys
-import time
-from pathlib import Path
-from typing import Any, Dict, List
+from typing import List
 
 __all__ = ["run_cli", "DEFAULT_NOISE", "DEFAULT_SEEDS"]
 
@@ -21,114 +18,36 @@ __all__ = ["run_cli", "DEFAULT_NOISE", "DEFAULT_SEEDS"]
 DEFAULT_NOISE = "0,0.2,0.4"
 DEFAULT_SEEDS = 20
 
-_jobs: Dict[str, Any] = {}
 
-
-def _one(item):
-    from pearl_sim.reception.study import run_reception_episode
-
-    sc, noise, k, name = item
-    w = _jobs
-    return run_reception_episode(sc, w["agents"][name], w["domain"], w["params"], seed=sc.seed + 1000 * k,
-                                 word_error_rate=noise, model=w["model"])
-
-
-def run_cli(args: argparse.Namespace) -> int:
-    """Run the reception study from ``pearl experiment``'s arguments (the Pearl-only ones refused)."""
-    from pearl_pomdp.cli import print_json
-    from pearl_pomdp.cli._inputs import require_file
-    from pearl_pomdp.cli._progress import show_progress
-    from pearl_pomdp.cli.plan import resolve_hierarchy_path
+def _check_policies(policies: List[str]) -> None:
     from pearl_pomdp.errors import SpecError
-    from pearl_pomdp.model.factored import load_domain
-    from pearl_sim.cli.demo import _share
     from pearl_sim.reception import study
-    from pearl_sim.reception.scenario import load_reception_scenarios
-    from pearl_sim.worlds import WORLDS
 
-    world = WORLDS["reception"]
-    if args.snr is not None:
-        raise SpecError("<command line>", "--snr", "the reception world has the word-error recogniser only; use --noise")
-    for option, value in (("--noise-kind", getattr(args, "noise_kind", None)),
-                          ("--speech-rows", getattr(args, "speech_rows", None)),
-                          ("--measured-policies", getattr(args, "measured_policies", None)),
-                          ("--cluster", getattr(args, "cluster", None))):
-        if value is not None:
-            raise SpecError("<command line>", option, "is for the nursing-home study; the reception study runs "
-                                                      "on this machine's processes (--jobs) with word error rates")
-    if args.residents != "paper,generated:6":
-        raise SpecError("<command line>", "--residents", "the reception world's visitors are in its study file (--study)")
-    if args.flat_trials is not None and args.flat_time_limit is not None:
-        raise SpecError("<command line>", "--flat-trials", "give --flat-trials or --flat-time-limit, not both")
-    seeds = DEFAULT_SEEDS if args.episodes is None else args.episodes
-    if seeds < 1:
-        raise SpecError("<command line>", "--episodes", f"{seeds}: at least 1 seed per cell is needed")
-    if args.jobs < 1:
-        raise SpecError("<command line>", "--jobs", f"{args.jobs}: at least 1 process")
-    text = DEFAULT_NOISE if args.noise is None else args.noise
-    try:
-        noise = sorted({float(x) for x in text.split(",") if x.strip()})
-    except ValueError:
-        raise SpecError("<command line>", "--noise", f"{text!r}: expected comma-separated numbers") from None
-    if not noise or any(not 0.0 <= x <= 1.0 for x in noise):
-        raise SpecError("<command line>", "--noise", f"{text!r}: word error rates in [0, 1] are needed")
-    policies = list(study.DEFAULT_POLICIES) if args.policies is None else [
-        p.strip() for p in args.policies.split(",") if p.strip()]
     known = set(study.DEFAULT_POLICIES) | {"most_likely_state"}
     bad = [p for p in policies if p not in known]
     if bad or not policies:
         raise SpecError("<command line>", "--policies", f"{bad[0] if bad else ''!r}: the reception world compares "
                         f"{', '.join(sorted(known))}")
-    study_path = args.study or _share(world.study)
-    require_file(study_path, "study file (--study)")
-    params = _share(world.params_file)
-    scenarios = load_reception_scenarios(study_path)
-    hierarchy = resolve_hierarchy_path(args.domain, args.hierarchy) if "hierarchical" in policies else None
-    if "hierarchical" in policies and hierarchy is None:
-        raise SpecError(args.domain, "", "no hierarchy beside the domain for the hierarchical policy (--hierarchy)")
-    started = time.perf_counter()
-    terminal = show_progress(args)
-    log = (lambda t: print(t, file=sys.stderr, flush=True)) if terminal else None  # noqa: E731
-    domain = load_domain(args.domain)
-    flat_trials = args.flat_trials
-    agents = study.reception_agents(domain, hierarchy, policies=policies, seed=args.seed, flat_trials=flat_trials,
-                                    flat_time_limit=args.flat_time_limit, log=log)
-    t0 = time.perf_counter()
-    items = [(sc, x, k, name) for x in noise for sc in scenarios for k in range(seeds) for name in agents]
-    _jobs.update(agents=agents, domain=domain, params=params, model=domain.compile())
-    try:
-        if args.jobs > 1:
-            import multiprocessing
 
-            with multiprocessing.get_context("fork").Pool(args.jobs) as pool:
-                episodes: List[Any] = list(pool.imap(_one, items, chunksize=8))
-        else:
-            from tqdm import tqdm
 
-            episodes = [_one(i) for i in tqdm(items, desc="reception study", disable=not terminal, leave=False)]
-    finally:
-        _jobs.clear()
-    episode_seconds = time.perf_counter() - t0
-    summary = study.summarise(episodes)
-    out = Path(args.out) if args.out else Path("out") / f"reception-study-{time.strftime('%Y%m%d-%H%M%S')}"
-    out.mkdir(parents=True, exist_ok=True)
-    report = {
-        "world": "reception",
-        "protocol": {"study": str(study_path), "episodes_per_cell": [s.name for s in scenarios], "noise_levels": noise,
-                     "noise_axis": "word_error_rate", "seeds_per_cell": seeds, "policies": policies,
-                     "baseline": study.BASELINE, "episodes": len(episodes), "jobs": args.jobs,
-                     "params_file": str(params), "hierarchy": str(hierarchy) if hierarchy else None},
-        "plan_seconds": dict(agents.timings),
-        **summary,
-        "episode_seconds": round(episode_seconds, 1),
-        "seconds": round(time.perf_counter() - started, 1),
-        "files": {"json": str(out / "study.json")},
-    }
-    (out / "study.json").write_text(json.dumps(dict(report, episodes=study.episodes_json(episodes)), indent=1),
-                                    encoding="utf-8")
-    if args.json:
-        print_json(report)
-        return 0
-    print(study.format_table(summary))
-    print(f"{len(episodes)} episodes in {episode_seconds:.1f} s ({args.jobs} job(s)); wrote {out / 'study.json'}")
-    return 0
+def _agents(domain, hierarchy, policies: List[str], args: argparse.Namespace, log):
+    from pearl_sim.reception import study
+
+    return study.reception_agents(domain, hierarchy, policies=policies, seed=args.seed, flat_trials=args.flat_trials,
+                                  flat_time_limit=args.flat_time_limit, log=log)
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    """Run the reception study from ``pearl experiment``'s arguments (the Pearl-only ones refused)."""
+    from pearl_sim.reception import study
+    from pearl_sim.reception.scenario import load_reception_scenarios
+    from pearl_sim.world_study import WorldExperiment, run_world_experiment
+
+    return run_world_experiment(args, WorldExperiment(
+        name="reception", default_noise=DEFAULT_NOISE, default_seeds=DEFAULT_SEEDS,
+        refused=("--noise-kind", "--speech-rows", "--measured-policies", "--cluster"),
+        refused_reason="is for the nursing-home study; the reception study runs on this machine's processes "
+                       "(--jobs) with word error rates",
+        residents_reason="the reception world's visitors are in its study file (--study)",
+        study=study, load_scenarios=load_reception_scenarios, run_episode=study.run_reception_episode,
+        check_policies=_check_policies, build_agents=_agents, chunksize=8))

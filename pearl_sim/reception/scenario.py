@@ -21,12 +21,11 @@ Every value is range-checked; an error names the file and the field path
 """
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Tuple, Union
+from typing import Dict, List, Tuple, Union
 
-from pearl_pomdp.errors import SpecError
+from pearl_sim.world_scenario import Checker, PlacesAndTimeout, load_episodes, read_map, read_seed_and_steps
 
 __all__ = ["Visitor", "ReceptionScenario", "load_reception_scenarios", "DESTINATIONS", "HOME"]
 
@@ -64,7 +63,7 @@ class Visitor:
 
 
 @dataclass
-class ReceptionScenario:
+class ReceptionScenario(PlacesAndTimeout):
     """One episode of the reception world (see the module doc for the file format)."""
 
     name: str
@@ -85,15 +84,6 @@ class ReceptionScenario:
     visitors: List[Visitor] = field(default_factory=list)
     source: str = ""
 
-    def distance(self, a: str, b: str) -> float:
-        """Straight-line distance in metres between two named places."""
-        (xa, ya), (xb, yb) = self.map[a], self.map[b]
-        return float(((xa - xb) ** 2 + (ya - yb) ** 2) ** 0.5)
-
-    def tracker_parameters(self) -> Dict[str, Any]:
-        """The belief tracker's parameters this scenario sets: its step timeout."""
-        return {"step_timeout": float(self.step_timeout)}
-
 
 _TOP = ("world", "name", "seed", "description", "step_timeout", "max_steps", "map", "robot", "detector", "speech",
         "visitors", "episodes")
@@ -101,56 +91,15 @@ _VISITOR = ("name", "arrive", "wish", "walking_speed", "says_hello", "touchscree
             "word_error_rate")
 
 
-def _merge(base: dict, over: dict) -> dict:
-    out = copy.deepcopy(base)
-    for k, v in over.items():
-        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else copy.deepcopy(v)
-    return out
-
-
-class _Checker:
-    def __init__(self, source: str):
-        self.source = source
-
-    def fail(self, where: str, problem: str) -> SpecError:
-        return SpecError(self.source, where, problem)
-
-    def number(self, node: dict, key: str, where: str, default: float, low: float, high: float, unit: str = "") -> float:
-        value = node.get(key, default)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(f"{where}{key}", f"{value!r} is not a number")
-        if not low <= float(value) <= high:
-            raise self.fail(f"{where}{key}", f"{value}{(' ' + unit) if unit else ''} is outside [{low:g}, {high:g}]")
-        return float(value)
-
-    def mapping(self, node: Any, where: str, keys: Tuple[str, ...]) -> dict:
-        if node is None:
-            return {}
-        if not isinstance(node, dict):
-            raise self.fail(where, "expected a mapping")
-        unknown = [k for k in node if k not in keys]
-        if unknown:
-            raise self.fail(f"{where}.{unknown[0]}" if where else str(unknown[0]),
-                            f"unknown field; expected one of {', '.join(keys)}")
-        return node
-
-
 def _episode(data: dict, source: str, prefix: str) -> ReceptionScenario:
-    c = _Checker(source)
+    c = Checker(source)
     data = c.mapping(data, prefix.rstrip("."), _TOP)
     robot = c.mapping(data.get("robot"), f"{prefix}robot", ("speed", "battery", "idle_hours", "drive_hours",
                                                              "charge_minutes"))
     detector = c.mapping(data.get("detector"), f"{prefix}detector", ("miss", "passers_per_minute"))
     speech = c.mapping(data.get("speech"), f"{prefix}speech", ("word_error_rate",))
-    places = data.get("map", {"desk": [0, 0], "gallery": [30, 10], "office": [12, -20]})
-    if not isinstance(places, dict) or set(places) != {HOME, *DESTINATIONS}:
-        raise c.fail(f"{prefix}map", f"expected the places {HOME}, {', '.join(DESTINATIONS)} with [x, y] in metres")
-    the_map = {}
-    for name, xy in places.items():
-        if (not isinstance(xy, (list, tuple)) or len(xy) != 2
-                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in xy)):
-            raise c.fail(f"{prefix}map.{name}", f"{xy!r} is not [x, y] in metres")
-        the_map[str(name)] = (float(xy[0]), float(xy[1]))
+    the_map = read_map(c, data, prefix, (HOME, *DESTINATIONS),
+                       {"desk": [0, 0], "gallery": [30, 10], "office": [12, -20]})
     visitors = []
     raw = data.get("visitors", []) or []
     if not isinstance(raw, list):
@@ -170,12 +119,7 @@ def _episode(data: dict, source: str, prefix: str) -> ReceptionScenario:
             volunteers=c.number(v, "volunteers", where, 0.2, 0.0, 1.0),
             patience=c.number(v, "patience", where, 240.0, 10.0, 86400.0, "s"),
             word_error_rate=None if wer is None else c.number(v, "word_error_rate", where, 0.0, 0.0, 1.0)))
-    seed = data.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int):
-        raise c.fail(f"{prefix}seed", f"{seed!r} is not an integer")
-    steps = data.get("max_steps", 40)
-    if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= 10000:
-        raise c.fail(f"{prefix}max_steps", f"{steps!r} is not an integer in [1, 10000]")
+    seed, steps = read_seed_and_steps(c, data, prefix, 40, 10000)
     return ReceptionScenario(
         name=str(data.get("name", Path(source).stem)), seed=seed, description=str(data.get("description", "")),
         step_timeout=c.number(data, "step_timeout", prefix, 8.0, 0.5, 120.0, "s"), max_steps=steps, map=the_map,
@@ -196,23 +140,4 @@ def load_reception_scenarios(path: Union[str, Path]) -> List[ReceptionScenario]:
     Raises:
         SpecError: a field is missing, unknown or out of range (file and field path named).
     """
-    from pearl_pomdp.yaml_lines import load_yaml
-
-    source = str(path)
-    data = load_yaml(path)
-    if not isinstance(data, dict):
-        raise SpecError(source, "", "expected a mapping (a scenario)")
-    if data.get("world", "reception") != "reception":
-        raise SpecError(source, "world", f"{data.get('world')!r}: this file is not for the reception world")
-    episodes = data.get("episodes")
-    top = {k: v for k, v in data.items() if k != "episodes"}
-    if episodes is None:
-        return [_episode(top, source, "")]
-    if not isinstance(episodes, list) or not episodes:
-        raise SpecError(source, "episodes", "expected a non-empty list of episode overrides")
-    out = []
-    for i, ep in enumerate(episodes):
-        if not isinstance(ep, dict):
-            raise SpecError(source, f"episodes[{i}]", "expected a mapping of overrides")
-        out.append(_episode(_merge(top, ep), source, f"episodes[{i}]."))
-    return out
+    return load_episodes(path, "reception", _episode)

@@ -17,9 +17,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Union
 
-from pearl_sim.messages import StepResult
 from pearl_sim.reception.scenario import ReceptionScenario
 from pearl_sim.reception.world import ReceptionWorld
+from pearl_sim.world_study import episode_settings, paired_differences, per_policy_rows, run_scored_episode
 
 __all__ = ["ReceptionEpisode", "run_reception_episode", "reception_agents", "run_study", "summarise",
            "BASELINE", "DEFAULT_POLICIES", "SCORES"]
@@ -59,13 +59,6 @@ class ReceptionEpisode:
     record: Dict[str, Any] = field(default_factory=dict)
 
 
-def episode_settings(scenario: ReceptionScenario, params_file: Union[str, Path]):
-    """The belief tracker's step rules for ``scenario``: the params file's, then the scenario's step timeout."""
-    from pearl_pomdp.params import step_settings
-
-    return step_settings(params_file, **scenario.tracker_parameters())
-
-
 def run_reception_episode(scenario: ReceptionScenario, agent, domain, params_file: Union[str, Path],
                           seed: Optional[int] = None, word_error_rate: Optional[float] = None, model=None,
                           on_step=None) -> ReceptionEpisode:
@@ -76,30 +69,13 @@ def run_reception_episode(scenario: ReceptionScenario, agent, domain, params_fil
     (:meth:`ReceptionWorld.truth`) when a_t starts.
     """
     from pearl_pomdp.executive import Executive
-    from pearl_sim.loop import ExecutiveBackend, run_episode
 
     model = model if model is not None else domain.compile()
     world = ReceptionWorld(scenario, seed=seed, word_error_rate=word_error_rate)
     executive = Executive(model, agent.decider, domain=domain, settings=episode_settings(scenario, params_file))
-    index = {a: i for i, a in enumerate(model.actions)}
-    score = {"total": 0.0, "discount": 1.0}
-
-    def before(action: str) -> None:
-        state = domain.state_index(world.truth())
-        score["total"] += score["discount"] * float(model.R[state, index[action]])
-        score["discount"] *= model.discount
-
-    def after(result: StepResult, waits: List[StepResult]) -> None:
-        if on_step is not None:
-            on_step(world, result, waits, executive)
-
     states: List[Dict[str, str]] = []
-
-    def start(action: str) -> None:
-        states.append(world.truth())
-        before(action)
-
-    trace = run_episode(world, ExecutiveBackend(executive), before_action=start, on_action=after)
+    trace, total = run_scored_episode(world, executive, domain, model, on_step=on_step,
+                                      on_start=lambda action: states.append(world.truth()))
     states.append(world.truth())
     # Closed steps of actions the world carried out: queued observations can close the steps of
     # actions decided but not yet carried out when the step budget ends.
@@ -107,7 +83,7 @@ def run_reception_episode(scenario: ReceptionScenario, agent, domain, params_fil
     m = world.metrics
     return ReceptionEpisode(
         policy=agent.name, scenario=scenario.name, noise=float(world.word_error_rate), seed=world.seed,
-        discounted_return=score["total"], success=world.served_all, visitors=len(scenario.visitors),
+        discounted_return=total, success=world.served_all, visitors=len(scenario.visitors),
         visitors_served=m.visitors_served, visitors_left=m.visitors_left, wrong_actions=m.wrong_actions,
         clarifications=m.clarifications, unprompted_questions=m.unprompted_questions, stranded=m.stranded,
         docks=m.docks, steps=m.steps, seconds=float(world.time), time_to_handover=list(m.time_to_handover),
@@ -122,9 +98,7 @@ def reception_agents(domain, hierarchy_path, policies: Sequence[str] = DEFAULT_P
                      flat_trials: Optional[int] = None, flat_time_limit: Optional[float] = None, log=None):
     """Plan the POMDP controllers (as the nursing-home study plans them: :func:`pearl_sim.planning.plan_controller`)
     and build the reception behaviour tree; name → controller, with ``.timings``."""
-    import time
-
-    from pearl_sim.planning import PlannedAgents, plan_controller
+    from pearl_sim.planning import plan_controller, plan_each
     from pearl_sim.policies import DEFAULT_FLAT_TRIALS
     from pearl_sim.reception.behaviour_tree import ReceptionBehaviourTree
 
@@ -133,18 +107,14 @@ def reception_agents(domain, hierarchy_path, policies: Sequence[str] = DEFAULT_P
     if unknown:
         raise ValueError(f"unknown policy {unknown[0]!r} for the reception world; known: {', '.join(sorted(known))}")
     model = domain.compile()
-    agents = PlannedAgents()
-    for name in policies:
-        t0 = time.perf_counter()
+
+    def build(name: str):
         if name == BASELINE:
-            agents[name] = ReceptionBehaviourTree(name, list(model.actions))
-        else:
-            agents[name] = plan_controller(name, domain, model, hierarchy_path, seed=seed,
-                                           flat_trials=flat_trials or DEFAULT_FLAT_TRIALS, flat_time_limit=flat_time_limit)
-        agents.timings[name] = time.perf_counter() - t0
-        if log:
-            log(f"planned {name} in {agents.timings[name]:.1f} s")
-    return agents
+            return ReceptionBehaviourTree(name, list(model.actions))
+        return plan_controller(name, domain, model, hierarchy_path, seed=seed,
+                               flat_trials=flat_trials or DEFAULT_FLAT_TRIALS, flat_time_limit=flat_time_limit)
+
+    return plan_each(policies, build, log)
 
 
 def run_study(domain, agents, scenarios: Sequence[ReceptionScenario], noise_levels: Sequence[float], seeds: int,
@@ -162,48 +132,18 @@ def run_study(domain, agents, scenarios: Sequence[ReceptionScenario], noise_leve
     return out
 
 
-def _t_ci(values: Sequence[float]) -> dict:
-    from pearl_sim.stats import t_ci
-
-    return t_ci(values)
-
-
-def _value(e: ReceptionEpisode, score: str) -> float:
-    return float(getattr(e, score))
-
-
 def summarise(episodes: Sequence[ReceptionEpisode], baseline: str = BASELINE) -> dict:
     """``per_policy`` (policy → noise → score → mean, 95 % t CI, n; task success with a Wilson CI;
     mean seconds to hand-over) and ``paired`` (policy → noise → score → mean and 95 % CI of
     policy − baseline over the same cells)."""
-    from pearl_sim.stats import proportion_ci
+    from pearl_sim.stats import t_ci
 
-    groups: Dict[str, Dict[float, List[ReceptionEpisode]]] = {}
-    for e in episodes:
-        groups.setdefault(e.policy, {}).setdefault(e.noise, []).append(e)
-    per_policy: Dict[str, Dict[str, dict]] = {}
-    for policy, by_noise in groups.items():
-        per_policy[policy] = {}
-        for noise, es in sorted(by_noise.items()):
-            row: Dict[str, Any] = {s: _t_ci([_value(e, s) for e in es]) for s in SCORES}
-            row["success_rate"] = proportion_ci(sum(e.success for e in es), len(es))
-            row["time_to_handover_s"] = _t_ci([t for e in es for t in e.time_to_handover])
-            row["stranded"] = int(sum(e.stranded for e in es))
-            row["episodes"] = len(es)
-            per_policy[policy][f"{noise:g}"] = row
-    index = {(e.policy, e.scenario, e.noise, e.seed): e for e in episodes}
-    paired: Dict[str, Dict[str, dict]] = {}
-    for policy in sorted(set(groups) - {baseline}):
-        paired[policy] = {}
-        for noise in sorted({e.noise for e in episodes}):
-            diffs: Dict[str, List[float]] = {s: [] for s in SCORES}
-            for (p, sc, n, seed), e in index.items():
-                base = index.get((baseline, sc, n, seed))
-                if p != policy or n != noise or base is None:
-                    continue
-                for s in SCORES:
-                    diffs[s].append(_value(e, s) - _value(base, s))
-            paired[policy][f"{noise:g}"] = {s: _t_ci(v) for s, v in diffs.items()}
+    def extra(es: List[ReceptionEpisode]) -> Dict[str, Any]:
+        return {"time_to_handover_s": t_ci([t for e in es for t in e.time_to_handover]),
+                "stranded": int(sum(e.stranded for e in es))}
+
+    per_policy = per_policy_rows(episodes, SCORES, extra)
+    paired = {p: paired_differences(episodes, SCORES, p, baseline) for p in sorted(set(per_policy) - {baseline})}
     per_scenario: Dict[str, Dict[str, List[ReceptionEpisode]]] = {}
     for e in episodes:
         per_scenario.setdefault(e.scenario, {}).setdefault(e.policy, []).append(e)

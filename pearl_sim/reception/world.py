@@ -39,11 +39,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional
 
-import numpy as np
-
-from pearl_sim.asr import SpeechRecogniser
 from pearl_sim.messages import Message, StepResult
 from pearl_sim.reception.scenario import DESTINATIONS, HOME, ReceptionScenario, Visitor
+from pearl_sim.world_base import StudyWorld
 
 __all__ = ["ReceptionWorld", "ReceptionMetrics", "UTTERANCES", "CONFUSIONS", "SPEAK_SECONDS", "ANSWER_SECONDS",
            "BATTERY_PERIOD", "LOW_BATTERY", "HELLO_AGAIN_SECONDS"]
@@ -116,7 +114,7 @@ class _Person:
     next_hello: float = 0.0
 
 
-class ReceptionWorld:
+class ReceptionWorld(StudyWorld):
     """Ground-truth simulation of one reception episode.
 
     Args:
@@ -126,20 +124,17 @@ class ReceptionWorld:
             level); a visitor's own ``word_error_rate`` still wins for their speech.
     """
 
+    UTTERANCES = UTTERANCES
+    CONFUSIONS = CONFUSIONS
+    scenario: ReceptionScenario
+
     def __init__(self, scenario: ReceptionScenario, seed: Optional[int] = None,
                  word_error_rate: Optional[float] = None):
-        self.scenario = scenario
-        self.seed = scenario.seed if seed is None else int(seed)
-        self.rng = np.random.default_rng(self.seed)
-        self.word_error_rate = scenario.word_error_rate if word_error_rate is None else float(word_error_rate)
-        self._recognisers: Dict[float, SpeechRecogniser] = {}
-        self.time = 0.0
-        self.robot_at = HOME
+        super().__init__(scenario, seed, word_error_rate, HOME)
         self.battery = float(scenario.battery)
         self.docked = False                     # on the charger (after Dock, until the next drive)
         self.people = [_Person(v) for v in scenario.visitors]
         self.metrics = ReceptionMetrics()
-        self._pending: List[Message] = []       # messages produced and not yet handed to the loop
         self._next_battery = 0.0                # the driver's first reading comes at once
         self._next_passer = self._draw_passer(0.0)
         self._happen([], at_desk=True)
@@ -152,13 +147,6 @@ class ReceptionWorld:
         nxt = current or next((p for p in self.people if p.state == "coming"), None)
         return {"Visitor": visitor, "Wish": nxt.spec.wish if nxt is not None else DESTINATIONS[0],
                 "RobotAt": self.robot_at, "Battery": "low" if self.battery < LOW_BATTERY else "ok"}
-
-    def truth_record(self, phase: str, action: str = "", result: Optional[StepResult] = None) -> dict:
-        """The true state now as a JSON body (``phase`` ``start``/``end`` of an action)."""
-        body = {"time": self.time, "phase": phase, "action": action, "state": self.truth()}
-        if result is not None:
-            body.update(events=result.events, wrong=result.wrong)
-        return body
 
     @property
     def served_all(self) -> bool:
@@ -193,21 +181,10 @@ class ReceptionWorld:
             if reply is not None and speaker is not None:
                 self._advance(ANSWER_SECONDS, events)
                 self._pending.append(self._say(speaker.spec, reply))
-        if wrong:
-            self.metrics.wrong_actions += 1
-            self.metrics.wrong.append(f"{action}: {wrong}")
-            events.append(f"wrong action: {wrong}")
-        messages, self._pending = sorted(self._pending, key=lambda m: m.time), []
-        return StepResult(action, start, self.time, messages, events, wrong)
+        return self._close(action, start, events, wrong)
 
-    def wait(self, until: float) -> StepResult:
-        """Let time pass with the robot idle until a message is produced or ``until`` (world seconds)."""
-        start = self.time
-        events: List[str] = []
-        while not self._pending and self.time < until - 1e-9:
-            self._advance(min(1.0, until - self.time), events)
-        messages, self._pending = self._pending, []
-        return StepResult("", start, self.time, messages, events, None)
+    def _idle(self, seconds: float, events: List[str]) -> None:
+        self._advance(seconds, events)
 
     # ------------------------------------------------------------ spoken actions
     def _act_Wait(self, engaged: Optional[_Person], events):
@@ -366,11 +343,4 @@ class ReceptionWorld:
         else an utterance through the recogniser."""
         if intent in TOUCH and self.rng.random() < visitor.touchscreen:
             return Message(self.time, "Touch", TOUCH[intent], said=f"(touches '{TOUCH[intent]}')", meant=intent)
-        options = UTTERANCES[intent]
-        said = options[self.rng.integers(len(options))]
-        wer = self.word_error_rate if visitor.word_error_rate is None else visitor.word_error_rate
-        if wer not in self._recognisers:
-            # One recogniser per error rate, each seeded from the episode (reproducible per seed).
-            self._recognisers[wer] = SpeechRecogniser(word_error_rate=wer, confusions=dict(CONFUSIONS),
-                                                      seed=self.seed + 7919 + len(self._recognisers))
-        return Message(self.time, "Voice", self._recognisers[wer].recognise(said), said=said, meant=intent)
+        return self._spoken(visitor, intent)

@@ -39,14 +39,14 @@ Rules and thresholds, each with its reason:
 from __future__ import annotations
 
 import itertools
-import math
 from typing import Callable, Dict, List, Optional
 
 import py_trees
-from py_trees.common import Access, Status
+from py_trees.common import Status
 
-from pearl_pomdp.interfaces import Decision, TraceStep
 from pearl_sim.ward.scenario import HOME, RESIDENTS
+from pearl_sim.world_tree import Act, TreeDecider
+from pearl_sim.world_tree import branch as tree_branch
 
 __all__ = ["WardBehaviourTree", "build_ward_tree", "ROUND_STEPS", "ACTIONS"]
 
@@ -64,37 +64,6 @@ ARRIVALS = {f"at_{p}": p for p in GOTO}
 KEYS = ("action", "location", "step", "need", "called", "round_due", "round_tried", "lounge_need", "lounge_asked")
 
 _instances = itertools.count()
-
-
-class _Behaviour(py_trees.behaviour.Behaviour):
-    def __init__(self, name: str, namespace: str, write: bool = False):
-        super().__init__(name=name)
-        self.bb = self.attach_blackboard_client(name=name, namespace=namespace)
-        for key in KEYS:
-            self.bb.register_key(key=key, access=Access.WRITE if write else Access.READ)
-
-
-class Guard(_Behaviour):
-    """SUCCESS when ``predicate(blackboard)`` holds, else FAILURE."""
-
-    def __init__(self, name: str, namespace: str, predicate: Callable):
-        super().__init__(name, namespace)
-        self.predicate = predicate
-
-    def update(self) -> Status:
-        return Status.SUCCESS if self.predicate(self.bb) else Status.FAILURE
-
-
-class Act(_Behaviour):
-    """Chooses ``action`` (or ``action(blackboard)``) for this step: writes it and succeeds."""
-
-    def __init__(self, name: str, namespace: str, action):
-        super().__init__(name, namespace, write=True)
-        self.action = action
-
-    def update(self) -> Status:
-        self.bb.action = self.action(self.bb) if callable(self.action) else self.action
-        return Status.SUCCESS
 
 
 def _where(bb, n: str) -> str:
@@ -129,8 +98,7 @@ def build_ward_tree(namespace: str) -> py_trees.behaviour.Behaviour:
     ns = namespace
 
     def branch(name: str, guard: Callable, action) -> py_trees.behaviour.Behaviour:
-        return py_trees.composites.Sequence(name, memory=False, children=[
-            Guard(f"{name}?", ns, guard), Act(name, ns, action)])
+        return tree_branch(name, ns, KEYS, guard, action)
 
     def round_target(bb) -> Optional[str]:
         n = _round_due(bb)
@@ -146,11 +114,11 @@ def build_ward_tree(namespace: str) -> py_trees.behaviour.Behaviour:
                lambda bb: f"Remind{round_target(bb)}"),
         branch("Round", lambda bb: round_target(bb) is not None, lambda bb: GOTO[_where(bb, str(round_target(bb)))]),
         branch("Home", lambda bb: bb.location != HOME, "GoToStation"),
-        Act("Idle", ns, "Wait"),
+        Act("Idle", ns, KEYS, "Wait"),
     ])
 
 
-class WardBehaviourTree:
+class WardBehaviourTree(TreeDecider):
     """The tree as an :class:`~pearl_pomdp.interfaces.ObservingDecider` and a controller (``name``,
     ``decider``) for the ward study.
 
@@ -160,17 +128,8 @@ class WardBehaviourTree:
     """
 
     def __init__(self, name: str = "behaviour_tree", actions: Optional[List[str]] = None):
-        self.name = name
-        self.decider = self
-        self.actions = list(actions) if actions is not None else list(ACTIONS)
-        self._index = {a: i for i, a in enumerate(self.actions)}
-        self.namespace = f"/ward_bt_{next(_instances)}"
-        self.root = build_ward_tree(self.namespace)
-        self.tree = py_trees.trees.BehaviourTree(self.root)
-        self.blackboard = py_trees.blackboard.Client(name=f"{name} executive", namespace=self.namespace)
-        for key in KEYS:
-            self.blackboard.register_key(key=key, access=Access.WRITE)
-        self.reset()
+        super().__init__(name, list(actions) if actions is not None else list(ACTIONS), f"/ward_bt_{next(_instances)}",
+                         KEYS, build_ward_tree)
 
     def reset(self) -> None:
         """A fresh episode: at the station, nothing known; each resident's first round staggered
@@ -227,18 +186,3 @@ class WardBehaviourTree:
                 need[n] = ROOM[n]                    # at the room of a call: serve them there
                 called[n] = None
         bb.need, bb.called, bb.round_due, bb.round_tried, bb.lounge_asked = need, called, due, tried, asked
-
-    def execute(self, belief=None) -> Decision:
-        """Tick the tree; the action its chosen leaf names (the belief is not used)."""
-        bb = self.blackboard
-        bb.action = None
-        self.tree.tick()
-        action = bb.action if bb.action is not None else "Wait"
-        tip = self.root.tip()
-        where = tip.name if tip is not None else "Ward"
-        return Decision(self._index[action], action, [TraceStep(self.name, where, math.nan),
-                                                      TraceStep(where, action, math.nan)])
-
-    def snapshot(self) -> dict:
-        """The blackboard's values (for tests and transcripts)."""
-        return {key: getattr(self.blackboard, key) for key in KEYS}

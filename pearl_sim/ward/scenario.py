@@ -24,12 +24,11 @@ range-checked; an error names the file and the field path
 """
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Tuple, Union
+from typing import Dict, List, Tuple, Union
 
-from pearl_pomdp.errors import SpecError
+from pearl_sim.world_scenario import Checker, PlacesAndTimeout, load_episodes, read_map, read_seed_and_steps
 
 __all__ = ["Resident", "WardScenario", "load_ward_scenarios", "RESIDENTS", "PLACES", "NEEDS", "HOME"]
 
@@ -80,7 +79,7 @@ class Resident:
 
 
 @dataclass
-class WardScenario:
+class WardScenario(PlacesAndTimeout):
     """One episode of the ward world (see the module doc for the file format)."""
 
     name: str
@@ -97,87 +96,19 @@ class WardScenario:
     residents: List[Resident] = field(default_factory=list)
     source: str = ""
 
-    def distance(self, a: str, b: str) -> float:
-        """Straight-line distance in metres between two places."""
-        (xa, ya), (xb, yb) = self.map[a], self.map[b]
-        return float(((xa - xb) ** 2 + (ya - yb) ** 2) ** 0.5)
-
-    def tracker_parameters(self) -> Dict[str, Any]:
-        """The belief tracker's parameters this scenario sets: its step timeout."""
-        return {"step_timeout": float(self.step_timeout)}
-
 
 _TOP = ("world", "name", "seed", "description", "step_timeout", "max_steps", "map", "robot", "detector", "speech",
         "residents", "episodes")
 _RESIDENT = ("name", "at", "pills", "late_after", "requests", "moves", "speaks_up", "presses_call", "word_error_rate")
 
 
-def _merge(base: dict, over: dict) -> dict:
-    out = copy.deepcopy(base)
-    for k, v in over.items():
-        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else copy.deepcopy(v)
-    return out
-
-
-class _Checker:
-    def __init__(self, source: str):
-        self.source = source
-
-    def fail(self, where: str, problem: str) -> SpecError:
-        return SpecError(self.source, where, problem)
-
-    def number(self, node: dict, key: str, where: str, default: float, low: float, high: float, unit: str = "") -> float:
-        value = node.get(key, default)
-        return self.value(value, f"{where}{key}", low, high, unit)
-
-    def value(self, value: Any, where: str, low: float, high: float, unit: str = "") -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(where, f"{value!r} is not a number")
-        if not low <= float(value) <= high:
-            raise self.fail(where, f"{value}{(' ' + unit) if unit else ''} is outside [{low:g}, {high:g}]")
-        return float(value)
-
-    def mapping(self, node: Any, where: str, keys: Tuple[str, ...]) -> dict:
-        if node is None:
-            return {}
-        if not isinstance(node, dict):
-            raise self.fail(where, "expected a mapping")
-        unknown = [k for k in node if k not in keys]
-        if unknown:
-            raise self.fail(f"{where}.{unknown[0]}" if where else str(unknown[0]),
-                            f"unknown field; expected one of {', '.join(keys)}")
-        return node
-
-    def timed(self, node: Any, where: str, key: str, choices: Tuple[str, ...]) -> List[Tuple[float, str]]:
-        if node is None:
-            return []
-        if not isinstance(node, list):
-            raise self.fail(where, f"expected a list of {{at: seconds, {key}: ...}}")
-        out = []
-        for i, item in enumerate(node):
-            item = self.mapping(item, f"{where}[{i}]", ("at", key))
-            value = item.get(key)
-            if value not in choices:
-                raise self.fail(f"{where}[{i}].{key}", f"{value!r} is not a {key} ({', '.join(choices)})")
-            out.append((self.value(item.get("at"), f"{where}[{i}].at", 0.0, 86400.0, "s"), str(value)))
-        return sorted(out)
-
-
 def _episode(data: dict, source: str, prefix: str) -> WardScenario:
-    c = _Checker(source)
+    c = Checker(source)
     data = c.mapping(data, prefix.rstrip("."), _TOP)
     robot = c.mapping(data.get("robot"), f"{prefix}robot", ("speed",))
     detector = c.mapping(data.get("detector"), f"{prefix}detector", ("miss",))
     speech = c.mapping(data.get("speech"), f"{prefix}speech", ("word_error_rate",))
-    places = data.get("map", {p: xy for p, xy in WardScenario("x").map.items()})
-    if not isinstance(places, dict) or set(places) != set(PLACES):
-        raise c.fail(f"{prefix}map", f"expected the places {', '.join(PLACES)} with [x, y] in metres")
-    the_map = {}
-    for name, xy in places.items():
-        if (not isinstance(xy, (list, tuple)) or len(xy) != 2
-                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in xy)):
-            raise c.fail(f"{prefix}map.{name}", f"{xy!r} is not [x, y] in metres")
-        the_map[str(name)] = (float(xy[0]), float(xy[1]))
+    the_map = read_map(c, data, prefix, PLACES, {p: xy for p, xy in WardScenario("x").map.items()})
     raw = data.get("residents")
     if not isinstance(raw, list):
         raise c.fail(f"{prefix}residents", f"expected a list of the residents {', '.join(RESIDENTS)}")
@@ -206,12 +137,7 @@ def _episode(data: dict, source: str, prefix: str) -> WardScenario:
     missing = [n for n in RESIDENTS if n not in residents]
     if missing:
         raise c.fail(f"{prefix}residents", f"{missing[0]} is missing: the domain has residents {', '.join(RESIDENTS)}")
-    seed = data.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int):
-        raise c.fail(f"{prefix}seed", f"{seed!r} is not an integer")
-    steps = data.get("max_steps", 60)
-    if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= 100000:
-        raise c.fail(f"{prefix}max_steps", f"{steps!r} is not an integer in [1, 100000]")
+    seed, steps = read_seed_and_steps(c, data, prefix, 60, 100000)
     return WardScenario(
         name=str(data.get("name", Path(source).stem)), seed=seed, description=str(data.get("description", "")),
         step_timeout=c.number(data, "step_timeout", prefix, 10.0, 0.5, 120.0, "s"), max_steps=steps, map=the_map,
@@ -227,23 +153,4 @@ def load_ward_scenarios(path: Union[str, Path]) -> List[WardScenario]:
     Raises:
         SpecError: a field is missing, unknown or out of range (file and field path named).
     """
-    from pearl_pomdp.yaml_lines import load_yaml
-
-    source = str(path)
-    data = load_yaml(path)
-    if not isinstance(data, dict):
-        raise SpecError(source, "", "expected a mapping (a scenario)")
-    if data.get("world", "ward") != "ward":
-        raise SpecError(source, "world", f"{data.get('world')!r}: this file is not for the ward world")
-    episodes = data.get("episodes")
-    top = {k: v for k, v in data.items() if k != "episodes"}
-    if episodes is None:
-        return [_episode(top, source, "")]
-    if not isinstance(episodes, list) or not episodes:
-        raise SpecError(source, "episodes", "expected a non-empty list of episode overrides")
-    out = []
-    for i, ep in enumerate(episodes):
-        if not isinstance(ep, dict):
-            raise SpecError(source, f"episodes[{i}]", "expected a mapping of overrides")
-        out.append(_episode(_merge(top, ep), source, f"episodes[{i}]."))
-    return out
+    return load_episodes(path, "ward", _episode)

@@ -13,9 +13,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Union
 
-from pearl_sim.messages import StepResult
 from pearl_sim.ward.scenario import WardScenario
 from pearl_sim.ward.world import WardWorld
+from pearl_sim.world_study import episode_settings, paired_differences, per_policy_rows, run_scored_episode
 
 __all__ = ["WardEpisode", "run_ward_episode", "ward_agents", "summarise", "BASELINE", "DEFAULT_POLICIES", "SCORES",
            "ONLINE_TRIALS"]
@@ -72,13 +72,6 @@ class _Timed:
         return getattr(self._decider, name)
 
 
-def episode_settings(scenario: WardScenario, params_file: Union[str, Path]):
-    """The belief tracker's step rules for ``scenario``: the params file's, then the scenario's step timeout."""
-    from pearl_pomdp.params import step_settings
-
-    return step_settings(params_file, **scenario.tracker_parameters())
-
-
 def run_ward_episode(scenario: WardScenario, agent, domain, params_file: Union[str, Path], seed: Optional[int] = None,
                      word_error_rate: Optional[float] = None, model=None, on_step=None) -> WardEpisode:
     """Run ``agent`` (``name`` and ``decider``) in a fresh :class:`WardWorld` through the one step loop, and score it.
@@ -87,7 +80,6 @@ def run_ward_episode(scenario: WardScenario, agent, domain, params_file: Union[s
     (:meth:`WardWorld.truth`) when a_t starts.
     """
     from pearl_pomdp.executive import Executive
-    from pearl_sim.loop import ExecutiveBackend, run_episode
 
     model = model if model is not None else domain.compile()
     world = WardWorld(scenario, seed=seed, word_error_rate=word_error_rate)
@@ -96,23 +88,11 @@ def run_ward_episode(scenario: WardScenario, agent, domain, params_file: Union[s
     seconds: List[float] = []
     decider = agent.decider if hasattr(agent.decider, "observe") else _Timed(agent.decider, seconds)
     executive = Executive(model, decider, domain=domain, settings=episode_settings(scenario, params_file))
-    index = {a: i for i, a in enumerate(model.actions)}
-    score = {"total": 0.0, "discount": 1.0}
-
-    def start(action: str) -> None:
-        state = domain.state_index(world.truth())
-        score["total"] += score["discount"] * float(model.R[state, index[action]])
-        score["discount"] *= model.discount
-
-    def after(result: StepResult, waits: List[StepResult]) -> None:
-        if on_step is not None:
-            on_step(world, result, waits, executive)
-
-    trace = run_episode(world, ExecutiveBackend(executive), before_action=start, on_action=after)
+    trace, total = run_scored_episode(world, executive, domain, model, on_step=on_step)
     m = world.metrics
     return WardEpisode(
         policy=agent.name, scenario=scenario.name, noise=float(world.word_error_rate), seed=world.seed,
-        discounted_return=score["total"], success=world.all_met, requests=m.requests, requests_met=m.requests_met,
+        discounted_return=total, success=world.all_met, requests=m.requests, requests_met=m.requests_met,
         pills=m.pills, pills_taken=m.pills_on_time + m.pills_overdue, pills_on_time=m.pills_on_time,
         wrong_actions=m.wrong_actions, questions=m.questions, unprompted_questions=m.unprompted_questions,
         steps=m.steps, seconds=float(world.time), decision_seconds=seconds, request_wait=list(m.request_wait),
@@ -127,30 +107,20 @@ def ward_agents(domain, hierarchy_path, policies: Sequence[str] = DEFAULT_POLICI
     """
     from pearl_pomdp.online.decider import OnlineDecider, online_trials
     from pearl_pomdp.online.despot import DespotSettings
-    from pearl_sim.planning import Controller, PlannedAgents, plan_controller
+    from pearl_sim.planning import Controller, plan_controller, plan_each
     from pearl_sim.ward.behaviour_tree import WardBehaviourTree
 
     model = domain.compile()
-    agents = PlannedAgents()
-    for name in policies:
-        t0 = time.perf_counter()
+
+    def build(name: str):
         if name == BASELINE:
-            agents[name] = WardBehaviourTree(name, list(model.actions))
-        elif name == "online" or name.startswith("online:"):
+            return WardBehaviourTree(name, list(model.actions))
+        if name == "online" or name.startswith("online:"):
             trials = ONLINE_TRIALS if name == "online" else online_trials(name, "--policies")
-            agents[name] = Controller(name, OnlineDecider(model, settings=DespotSettings(trials=trials), seed=seed))
-        else:
-            agents[name] = plan_controller(name, domain, model, hierarchy_path, seed=seed)
-        agents.timings[name] = time.perf_counter() - t0
-        if log:
-            log(f"planned {name} in {agents.timings[name]:.1f} s")
-    return agents
+            return Controller(name, OnlineDecider(model, settings=DespotSettings(trials=trials), seed=seed))
+        return plan_controller(name, domain, model, hierarchy_path, seed=seed)
 
-
-def _t_ci(values: Sequence[float]) -> dict:
-    from pearl_sim.stats import t_ci
-
-    return t_ci(values)
+    return plan_each(policies, build, log)
 
 
 def _ms(values: Sequence[float], q: float) -> Optional[float]:
@@ -164,40 +134,19 @@ def summarise(episodes: Sequence[WardEpisode], baseline: str = BASELINE) -> dict
     """``per_policy`` (policy → noise → score → mean, 95 % t CI; success with a Wilson CI; decision
     seconds p50/p99/max) and ``paired_vs_baseline`` (policy → noise → score → mean and 95 % CI of
     policy − baseline over the same cells), and ``paired`` between every two POMDP controllers."""
-    from pearl_sim.stats import proportion_ci
+    from pearl_sim.stats import t_ci
 
-    groups: Dict[str, Dict[float, List[WardEpisode]]] = {}
-    for e in episodes:
-        groups.setdefault(e.policy, {}).setdefault(e.noise, []).append(e)
-    per_policy: Dict[str, Dict[str, dict]] = {}
-    for policy, by_noise in groups.items():
-        per_policy[policy] = {}
-        for noise, es in sorted(by_noise.items()):
-            row: Dict[str, Any] = {s: _t_ci([float(getattr(e, s)) for e in es]) for s in SCORES}
-            row["success_rate"] = proportion_ci(sum(e.success for e in es), len(es))
-            row["request_wait_s"] = _t_ci([t for e in es for t in e.request_wait])
-            secs = [t for e in es for t in e.decision_seconds]
-            row["decision_ms"] = {"p50": _ms(secs, 50), "p99": _ms(secs, 99), "max": _ms(secs, 100), "n": len(secs)}
-            row["episodes"] = len(es)
-            per_policy[policy][f"{noise:g}"] = row
-    index = {(e.policy, e.scenario, e.noise, e.seed): e for e in episodes}
+    def extra(es: List[WardEpisode]) -> Dict[str, Any]:
+        secs = [t for e in es for t in e.decision_seconds]
+        return {"request_wait_s": t_ci([t for e in es for t in e.request_wait]),
+                "decision_ms": {"p50": _ms(secs, 50), "p99": _ms(secs, 99), "max": _ms(secs, 100), "n": len(secs)}}
 
-    def paired(a: str, b: str) -> Dict[str, dict]:
-        out = {}
-        for noise in sorted({e.noise for e in episodes}):
-            diffs: Dict[str, List[float]] = {s: [] for s in SCORES}
-            for (p, sc, n, seed), e in index.items():
-                other = index.get((b, sc, n, seed))
-                if p != a or n != noise or other is None:
-                    continue
-                for s in SCORES:
-                    diffs[s].append(float(getattr(e, s)) - float(getattr(other, s)))
-            out[f"{noise:g}"] = {s: _t_ci(v) for s, v in diffs.items()}
-        return out
-
-    names = sorted(groups)
-    vs_base = {p: paired(p, baseline) for p in names if p != baseline and baseline in groups}
-    between = {f"{a} - {b}": paired(a, b) for a in names for b in names if a < b and baseline not in (a, b)}
+    per_policy = per_policy_rows(episodes, SCORES, extra)
+    names = sorted(per_policy)
+    vs_base = {p: paired_differences(episodes, SCORES, p, baseline) for p in names
+               if p != baseline and baseline in per_policy}
+    between = {f"{a} - {b}": paired_differences(episodes, SCORES, a, b) for a in names for b in names
+               if a < b and baseline not in (a, b)}
     return {"per_policy": per_policy, "paired_vs_baseline": vs_base, "paired": between}
 
 

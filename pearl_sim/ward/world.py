@@ -30,11 +30,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional
 
-import numpy as np
-
-from pearl_sim.asr import SpeechRecogniser
 from pearl_sim.messages import Message, StepResult
 from pearl_sim.ward.scenario import HOME, RESIDENTS, Resident, WardScenario
+from pearl_sim.world_base import StudyWorld
 
 __all__ = ["WardWorld", "WardMetrics", "UTTERANCES", "CONFUSIONS", "SPEAK_SECONDS", "ANSWER_SECONDS",
            "CALL_AGAIN_SECONDS", "SPEAK_AGAIN_SECONDS"]
@@ -108,7 +106,7 @@ class _Person:
     requests: List = field(default_factory=list)
 
 
-class WardWorld:
+class WardWorld(StudyWorld):
     """Ground-truth simulation of one ward episode.
 
     Args:
@@ -118,18 +116,15 @@ class WardWorld:
             a resident's own ``word_error_rate`` still wins for their speech.
     """
 
+    UTTERANCES = UTTERANCES
+    CONFUSIONS = CONFUSIONS
+    scenario: WardScenario
+
     def __init__(self, scenario: WardScenario, seed: Optional[int] = None, word_error_rate: Optional[float] = None):
-        self.scenario = scenario
-        self.seed = scenario.seed if seed is None else int(seed)
-        self.rng = np.random.default_rng(self.seed)
-        self.word_error_rate = scenario.word_error_rate if word_error_rate is None else float(word_error_rate)
-        self._recognisers: Dict[float, SpeechRecogniser] = {}
-        self.time = 0.0
-        self.robot_at = HOME
+        super().__init__(scenario, seed, word_error_rate, HOME)
         self.people = {r.name: _Person(r, at=r.at, moves=list(r.moves), pills=list(r.pills),
                                        requests=list(r.requests)) for r in scenario.residents}
         self.metrics = WardMetrics()
-        self._pending: List[Message] = []
         self._happen()
 
     # ------------------------------------------------------------------ queries
@@ -144,13 +139,6 @@ class WardWorld:
             p = self.people[name]
             state.update({f"{name}At": p.at, f"{name}Pill": p.pill, f"{name}Need": p.need})
         return state
-
-    def truth_record(self, phase: str, action: str = "", result: Optional[StepResult] = None) -> dict:
-        """The true state now as a JSON body (``phase`` ``start``/``end`` of an action)."""
-        body = {"time": self.time, "phase": phase, "action": action, "state": self.truth()}
-        if result is not None:
-            body.update(events=result.events, wrong=result.wrong)
-        return body
 
     @property
     def all_met(self) -> bool:
@@ -177,21 +165,10 @@ class WardWorld:
                     break
             else:
                 raise ValueError(f"the ward world does not know action {action!r}")
-        if wrong:
-            self.metrics.wrong_actions += 1
-            self.metrics.wrong.append(f"{action}: {wrong}")
-            events.append(f"wrong action: {wrong}")
-        messages, self._pending = sorted(self._pending, key=lambda m: m.time), []
-        return StepResult(action, start, self.time, messages, events, wrong)
+        return self._close(action, start, events, wrong)
 
-    def wait(self, until: float) -> StepResult:
-        """Let time pass with the robot idle until a message is produced or ``until`` (world seconds)."""
-        start = self.time
-        events: List[str] = []
-        while not self._pending and self.time < until - 1e-9:
-            self._advance(min(1.0, until - self.time), events, idle=True)
-        messages, self._pending = self._pending, []
-        return StepResult("", start, self.time, messages, events, None)
+    def _idle(self, seconds: float, events: List[str]) -> None:
+        self._advance(seconds, events, idle=True)
 
     # ------------------------------------------------------------ spoken actions
     def _here(self, p: _Person) -> bool:
@@ -303,10 +280,4 @@ class WardWorld:
 
     def _say(self, resident: Resident, intent: str) -> Message:
         """What ``resident`` says for ``intent``, through the recogniser at their (or the ward's) error rate."""
-        options = UTTERANCES[intent]
-        said = options[self.rng.integers(len(options))]
-        wer = self.word_error_rate if resident.word_error_rate is None else resident.word_error_rate
-        if wer not in self._recognisers:
-            self._recognisers[wer] = SpeechRecogniser(word_error_rate=wer, confusions=dict(CONFUSIONS),
-                                                      seed=self.seed + 7919 + len(self._recognisers))
-        return Message(self.time, "Voice", self._recognisers[wer].recognise(said), said=said, meant=intent)
+        return self._spoken(resident, intent)
