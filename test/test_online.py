@@ -420,3 +420,37 @@ def test_random_rocksample_lays_out_as_despots_code_does():
     assert all(0 <= x < 15 and 0 <= y < 15 for x, y in a.rocks)
     assert a.rocks != random_rocksample(15, 15, np.random.default_rng(5)).rocks
     assert a.num_states == 15 * 15 * 2 ** 15 + 1
+
+
+# (action, nodes, lower, upper) of 30-trial searches, recorded with the search as it was before its
+# expansion grouped every action's children in one sort and its trials backed up only the action
+# they took (same tree: the full trees' states, scenarios, bounds and rewards hashed equal on these
+# and on the ward, docs/online.md "Speed"). Explicit models step through _step_kernel.c.
+_RECORDED = {
+    ("rs7_8", 1): (6, 3041, 12.82736801302025, 26.26842381611665),
+    ("rs7_8", 7): (6, 2996, 13.376687636790763, 26.462771164902048),
+    ("tiger", 1): (0, 466, -9.562110248974983, 70.0893690701326),
+    ("tiger", 7): (0, 476, -9.98964618322967, 69.69931119506954),
+    ("reception", 1): (0, 1898, -10.344567847557222, 27.954043476799185),
+    ("reception", 7): (0, 2300, -9.592616804646749, 26.725320046484374),
+}
+
+
+@pytest.mark.parametrize("problem,seed", sorted(_RECORDED))
+def test_the_search_builds_the_tree_it_built_before_its_bookkeeping_was_batched(problem, seed, tiger):
+    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.online.beliefs import sample_belief
+    from pearl_pomdp.online.decider import default_bounds
+
+    if problem == "rs7_8":
+        rs = rocksample("7_8")
+        model, bounds, roots = rs, RockSampleBounds(rs), rs.initial_belief().sample(300, np.random.default_rng(3))
+    elif problem == "tiger":
+        model, bounds, roots = ExplicitModel(tiger), alpha_bounds(tiger), sample_belief(tiger.b0, 500, np.random.default_rng(1))
+    else:
+        m = load_domain("config/reception.domain.yaml").compile()
+        model, bounds, roots = ExplicitModel(m), default_bounds(m), sample_belief(m.b0, 500, np.random.default_rng(2))
+    res = Despot(model, bounds, DespotSettings(trials=30)).search(roots, seed)
+    action, nodes, lower, upper = _RECORDED[problem, seed]
+    assert (res.action, res.nodes) == (action, nodes)
+    assert res.lower == lower and res.upper == upper
