@@ -97,8 +97,8 @@ class ExplicitModel:
     otherwise), the last entry with ``p_k > 0`` takes the residue. An entry of zero probability is
     never drawn; the same uniforms give the same outcome.
 
-    The draws run in the C kernel ``_step_kernel.c`` (about 15x faster than the numpy version it
-    replaced on the ward, docs/ward.md), which reads the model's own arrays in place: sparse ``T``
+    The draws run in the C kernel ``_step_kernel.c`` (on the ward ~9x less step time than the numpy
+    version it replaced, docs/ward.md), which reads the model's own arrays in place: sparse ``T``
     stays CSR with its int32 or int64 indices, ``O`` stays float64 or float32 (a large compiled
     model's, the ward's 210 MB), so the adapter adds no ``nnz``-sized or ``[A, S, Z]``-sized array
     to the model's: only each T row's mass (``[S]`` float64 per action, 28 MB on the ward), so that a
