@@ -2,9 +2,10 @@
 
 * It equals, bit for bit, :func:`reference_step`: numpy on the definition (each row's entries
   summed left to right in float64, the first entry whose running sum exceeds ``u · mass``, the
-  last entry of positive mass when rounding leaves none), on random CSR rows and observation
-  rows with zero entries, empty rows and rows without mass, int32 and int64 indices, float32 and
-  float64 data and O, uniforms on the rows' exact CDF steps and next to 1.
+  last entry of positive mass when rounding leaves none), on random CSR rows (short ones, and ones
+  of many of the kernel's blocks) and observation rows with zero entries, entries just below zero,
+  empty rows and rows without mass, int32 and int64 indices, float32 and float64 data and O,
+  uniforms on the rows' exact CDF steps and next to 1.
 * Its draws have the model's frequencies on a small hand-made model (zero-probability entries never drawn).
 * Bad input is a ValueError naming the argument; nothing is copied from the model.
 
@@ -61,16 +62,21 @@ def reference_step(g: ExplicitModel, states, action: int, uniforms):
     return reference_draws(indptr, indices, data, g._O, g.R, action, states, uniforms)
 
 
+def _tables(indptr, data):
+    blocks = data.shape[0] // _step_kernel.BLOCK + 1
+    mass, ends, peaks = np.empty(indptr.shape[0] - 1), np.empty(blocks), np.empty(blocks)
+    _step_kernel.row_tables(indptr, data, mass, ends, peaks)
+    return mass, ends, peaks
+
+
 def _masses(indptr, data):
-    mass = np.empty(indptr.shape[0] - 1)
-    _step_kernel.row_masses(indptr, data, mass)
-    return mass
+    return _tables(indptr, data)[0]
 
 
 def _kernel(indptr, indices, data, O, R, a, s, u):
     n = s.shape[0]
     out = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n)
-    _step_kernel.step(indptr, indices, data, _masses(indptr, data), O, R, a, s, u, *out)
+    _step_kernel.step(indptr, indices, data, *_tables(indptr, data), O, R, a, s, u, *out)
     return out
 
 
@@ -81,10 +87,13 @@ def _random_case(seed, index_types, data_type, o_type):
     S, A, Z = int(rng.integers(1, 9)), int(rng.integers(1, 4)), int(rng.integers(1, 6))
     T = []
     for _ in range(A):
-        lengths = rng.integers(0, 6, S)
+        # rows of 0-5 entries, and in half the cases some of up to 150 (several of the kernel's blocks)
+        lengths = rng.integers(0, 6, S) if rng.random() < 0.5 else rng.integers(0, 150, S)
         indptr = np.concatenate(([0], np.cumsum(lengths))).astype(index_types[0])
         indices = rng.integers(0, S, int(lengths.sum())).astype(index_types[1])
         data = rng.random(int(lengths.sum())) * (rng.random(int(lengths.sum())) < 0.7)
+        if rng.random() < 0.3:      # entries a little below zero, as a model within Pomdp's tolerance may hold
+            data[rng.random(data.shape[0]) < 0.1] = -1e-7
         T.append((indptr, indices, (data / max(data.max(initial=0), 1e-300) * rng.choice([1.0, 3e-9, 7.0, 1e-320])).astype(data_type)))
     O = (rng.random((A, S, Z)) * (rng.random((A, S, Z)) < 0.6)).astype(o_type)
     O[..., int(rng.integers(Z))] += o_type(0.01)          # every observation row has mass
@@ -103,7 +112,7 @@ def _uniforms_on_steps(rng, rows_mass, n):
         on = np.flatnonzero(pick >= 0.6)
         for i in on:
             row = steps[int(rng.integers(len(steps)))]
-            u[i] = min(float(row[int(rng.integers(row.shape[0]))]), np.nextafter(1.0, 0.0))
+            u[i] = min(max(float(row[int(rng.integers(row.shape[0]))]), 0.0), np.nextafter(1.0, 0.0))
     return u
 
 
@@ -116,7 +125,7 @@ def test_kernel_equals_the_numpy_definition_bit_for_bit(seed, index_types, data_
     checked = 0
     for a, (indptr, indices, data) in enumerate(T):
         rows = [data[indptr[s]:indptr[s + 1]].astype(np.float64) for s in range(S)]
-        live = [s for s in range(S) if rows[s].size and rows[s].sum() > 0]
+        live = [s for s in range(S) if rows[s].size and np.cumsum(rows[s])[-1] > 0]
         if not live:
             continue
         n = int(rng.integers(1, 60))
@@ -131,12 +140,14 @@ def test_kernel_equals_the_numpy_definition_bit_for_bit(seed, index_types, data_
         # never an entry of probability zero
         pos = [np.flatnonzero((indices[indptr[s]:indptr[s + 1]] == t)
                               & (data[indptr[s]:indptr[s + 1]] > 0)).size for s, t in zip(states, got[0])]
-        assert all(p > 0 for p in pos)
+        if (data >= 0).all():
+            assert all(p > 0 for p in pos)
         assert (O[a, got[0], got[1]] > 0).all()
         checked += 1
     # A particle in a row without mass (no entries, or only zeros) is an error for both.
     for a, (indptr, indices, data) in enumerate(T):
-        dead = [s for s in range(S) if not (data[indptr[s]:indptr[s + 1]].astype(np.float64).sum() > 0)]
+        mass = _masses(indptr, data)
+        dead = [s for s in range(S) if not mass[s] > 0]
         if dead:
             s = np.array([dead[0]], dtype=np.int64)
             u = np.full((1, 2), 0.5)
@@ -216,7 +227,8 @@ def test_step_many_is_step_under_every_action():
 
 def _args(**override):
     args = dict(indptr=np.array([0, 1, 2], dtype=np.int32), indices=np.array([1, 0], dtype=np.int32),
-                data=np.array([1.0, 1.0]), mass=np.array([1.0, 1.0]), O=np.full((1, 2, 2), 0.5), R=np.zeros((2, 1)), action=0,
+                data=np.array([1.0, 1.0]), mass=np.array([1.0, 1.0]), ends=np.zeros(1), peaks=np.full(1, 1.0),
+                O=np.full((1, 2, 2), 0.5), R=np.zeros((2, 1)), action=0,
                 states=np.array([0, 1], dtype=np.int64), uniforms=np.full((2, 2), 0.5),
                 next_out=np.empty(2, dtype=np.int64), obs_out=np.empty(2, dtype=np.int64), reward_out=np.empty(2))
     args.update(override)
@@ -246,6 +258,8 @@ def _args(**override):
     (dict(mass=np.array([1.0, 0.0])), r"T\[0\] row 1 \(1 entries\) has no positive finite mass \(sum 0.0\)"),
     (dict(mass=np.array([1.0])), r"mass has 1 entries, expected S = 2"),
     (dict(mass=np.array([1.0, 1.0], dtype=np.float32)), r"mass must hold float64"),
+    (dict(ends=np.zeros(2)), r"ends and peaks have 2 and 1 entries, expected len\(data\) // BLOCK \+ 1 = 1"),
+    (dict(peaks=np.zeros((1, 1))), r"peaks must be 1-D, got 2-D"),
     (dict(O=np.array([[[0.5, 0.5], [0.0, 0.0]]])), r"O\[0, 1, :\] \(reached from state 0\) has no positive finite mass"),
     (dict(uniforms=np.array([[0.5, 0.5], [0.5, 1.0]])), r"uniforms\[1, 1\] \(particle in state 1\) = 1.0 is not in \[0, 1\)"),
     (dict(uniforms=np.array([[np.nan, 0.5], [0.5, 0.5]])), r"uniforms\[0, 0\] .* = nan"),
@@ -272,12 +286,39 @@ def test_row_masses_sum_each_row_left_to_right_and_reject_a_bad_indptr():
     assert _masses(indptr.astype(np.int32), data.astype(np.float32)).tolist() == [
         float(np.cumsum(data.astype(np.float32)[a:b], dtype=np.float64)[-1]) if b > a else 0.0
         for a, b in zip(indptr[:-1], indptr[1:])]
-    with pytest.raises(ValueError, match=r"row_masses: the row of state 2, indptr\[2:2 \+ 2\] = \[3, 9\]"):
+    with pytest.raises(ValueError, match=r"row_tables: the row of state 2, indptr\[2:2 \+ 2\] = \[3, 9\]"):
         _masses(np.array([0, 3, 3, 9]), data)
-    with pytest.raises(ValueError, match=r"row_masses: out has 2 entries, indptr 4"):
-        _step_kernel.row_masses(np.array([0, 3, 3, 5]), data, np.empty(2))
-    with pytest.raises(ValueError, match=r"row_masses: indptr must hold int32 or int64"):
-        _step_kernel.row_masses(np.array([0.0, 3.0]), data, np.empty(1))
+    with pytest.raises(ValueError, match=r"row_tables: the row of state 1, indptr\[1:1 \+ 2\] = \[3, 2\]"):
+        _masses(np.array([0, 3, 2, 5]), data)                   # a row may not end before it starts
+    with pytest.raises(ValueError, match=r"row_tables: mass has 2 entries, indptr 4"):
+        _step_kernel.row_tables(np.array([0, 3, 3, 5]), data, np.empty(2), np.empty(1), np.empty(1))
+    with pytest.raises(ValueError, match=r"row_tables: ends and peaks have 2 and 1 entries"):
+        _step_kernel.row_tables(np.array([0, 3, 3, 5]), data, np.empty(3), np.empty(2), np.empty(1))
+    with pytest.raises(ValueError, match=r"row_tables: indptr must hold int32 or int64"):
+        _step_kernel.row_tables(np.array([0.0, 3.0]), data, np.empty(1), np.empty(1), np.empty(1))
+
+
+def test_row_tables_hold_each_rows_running_sums_on_the_grid():
+    """ends[b] / peaks[b]: the running sum before position b·BLOCK of the row holding it / the largest
+    running sum of that row over the block; a row that starts after a grid point leaves it to the row before."""
+    B = _step_kernel.BLOCK
+    rng = np.random.default_rng(8)
+    lengths = np.array([3, 0, 2 * B + 5, 1, B, 4 * B + 1])
+    indptr = np.concatenate(([0], np.cumsum(lengths)))
+    data = rng.random(int(lengths.sum()))
+    data[rng.random(data.shape[0]) < 0.2] = -1e-7
+    mass, ends, peaks = _tables(indptr, data)
+    for b in range(ends.shape[0]):
+        j = b * B
+        if j >= indptr[-1]:
+            assert ends[b] == 0.0 and peaks[b] == -np.inf
+            continue
+        r = int(np.searchsorted(indptr, j, side="right")) - 1
+        run = np.cumsum(data[indptr[r]:indptr[r + 1]])
+        before = run[j - indptr[r] - 1] if j > indptr[r] else 0.0
+        assert ends[b] == before
+        assert peaks[b] == run[j - indptr[r]:min(j + B, indptr[r + 1]) - indptr[r]].max()
+    assert mass.tolist() == [float(np.cumsum(data[a:b])[-1]) if b > a else 0.0 for a, b in zip(indptr[:-1], indptr[1:])]
 
 
 def test_explicit_model_names_the_model_and_action_in_its_errors():
