@@ -454,3 +454,34 @@ def test_the_search_builds_the_tree_it_built_before_its_bookkeeping_was_batched(
     action, nodes, lower, upper = _RECORDED[problem, seed]
     assert (res.action, res.nodes) == (action, nodes)
     assert res.lower == lower and res.upper == upper
+
+
+def test_a_search_pauses_the_garbage_collector_and_frees_its_tree(tiger):
+    """The collector is paused during a search (its tree of ~10^3 nodes would start collections in
+    the middle of a decision) and restored after; the tree is freed by reference counting."""
+    import gc
+
+    from pearl_pomdp.online import despot as despot_module
+
+    bounds = alpha_bounds(tiger)
+    seen = []
+
+    class Watching:
+        description = bounds.description
+
+        def many(self, groups, rng):
+            seen.append(gc.isenabled())
+            return bounds.many(groups, rng)
+
+    planner = Despot(ExplicitModel(tiger), Watching(), DespotSettings(trials=200))
+    roots = np.random.default_rng(0).integers(0, 2, 500)
+    try:
+        result = planner.search(roots, seed=3)
+        assert gc.isenabled()
+        alive = sum(isinstance(o, despot_module._Belief) for o in gc.get_objects())
+        gc.disable()
+        planner.search(roots, seed=3)
+        assert not gc.isenabled()      # (a caller's paused collector stays paused)
+    finally:
+        gc.enable()
+    assert result.nodes > 2000 and len(seen) > 100 and not any(seen) and alive == 0
