@@ -7,10 +7,7 @@ and bounds, reported), then plays a robot for ``--steps`` steps: a drive is answ
 arrival, any other action with a call button or a spoken need in turn. Reports per step the
 publish → action wall time (tracker update + belief + decision + action over DDS) and the policy
 node's own decision latency (``latency_s`` of ``/pearl/decision``): p50/p99/max in ms, and the
-machine's load. Issue 24 part 2's target: decision p99 ≤ 100 ms. The arrival of the tracker's
-``/pearl/belief_marginals`` (published right after the belief) splits each step: publish →
-marginals (the tracker's update of the belief, its publication and the marginals) and marginals →
-action (the belief's transfer, the policy node's decision, the action back).
+machine's load. Issue 24 part 2's target: decision p99 ≤ 100 ms.
 
     python bench/ward_launch.py [--trials 5] [--steps 100]
 """
@@ -77,7 +74,9 @@ def main() -> int:
     actions, decisions, marginals = [], [], []
     node.create_subscription(cv.TextMsg, "/pearl/action", lambda m: actions.append((time.perf_counter(), m)), LATCHED_QOS)
     # The tracker publishes the belief, then its marginals (a small message): their arrival splits a
-    # step's time into the tracker's part and the rest (belief transfer, decision, action back).
+    # step's time into publish_to_marginals_ms (the tracker's update of the belief, its publication
+    # and the marginals) and marginals_to_action_ms (the belief's transfer, the policy node's
+    # decision, the action back).
     node.create_subscription(cv.TextMsg, "/pearl/belief_marginals", lambda m: marginals.append(time.perf_counter()),
                              LATCHED_QOS)
     node.create_subscription(cv.TextMsg, "/pearl/decision", lambda m: decisions.append(m), EVENT_QOS)
