@@ -1,7 +1,7 @@
 """In-process decision times of the flat online planner on the ward (issue 24); one JSON object.
 
 Compiles ``config/ward.domain.yaml`` (233,280 states), computes the online decider's default
-bounds once (QMDP above, blind policies below: ~40 s, not timed) and walks ``--decisions``
+bounds once (QMDP above, blind policies below; not timed) and walks ``--decisions``
 beliefs: ``b0``, then each next belief from the decision's action, a true state drawn from the
 belief, its step and the tracker's update (``BeliefFilter``). The same beliefs are then decided
 by ``OnlineDecider(model, bounds, DespotSettings(trials=T)).execute(belief)`` for every ``T`` of

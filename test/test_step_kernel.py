@@ -82,7 +82,8 @@ def _kernel(indptr, indices, data, O, R, a, s, u):
 
 def _random_case(seed, index_types, data_type, o_type):
     """A random CSR T[a] per action (rows of 0-5 entries, some of probability 0, some rows without
-    mass, some of subnormal mass: the rounding-residue case), O with zero entries, states in rows with mass, and uniforms on exact CDF steps, at 0 and next to 1."""
+    mass, some of subnormal mass: the rounding-residue case), O with zero entries, states in rows with
+    mass, and uniforms on exact CDF steps, at 0 and next to 1."""
     rng = np.random.default_rng(seed)
     S, A, Z = int(rng.integers(1, 9)), int(rng.integers(1, 4)), int(rng.integers(1, 6))
     T = []
@@ -94,7 +95,8 @@ def _random_case(seed, index_types, data_type, o_type):
         data = rng.random(int(lengths.sum())) * (rng.random(int(lengths.sum())) < 0.7)
         if rng.random() < 0.3:      # entries a little below zero, as a model within Pomdp's tolerance may hold
             data[rng.random(data.shape[0]) < 0.1] = -1e-7
-        T.append((indptr, indices, (data / max(data.max(initial=0), 1e-300) * rng.choice([1.0, 3e-9, 7.0, 1e-320])).astype(data_type)))
+        scale = rng.choice([1.0, 3e-9, 7.0, 1e-320]) / max(data.max(initial=0), 1e-300)
+        T.append((indptr, indices, (data * scale).astype(data_type)))
     O = (rng.random((A, S, Z)) * (rng.random((A, S, Z)) < 0.6)).astype(o_type)
     O[..., int(rng.integers(Z))] += o_type(0.01)          # every observation row has mass
     R = rng.normal(size=(S, A))

@@ -120,7 +120,8 @@ class ExplicitModel:
         self.discount = float(model.discount)
         self.R = np.ascontiguousarray(model.R, dtype=float)
         O = model.O   # float64, or float32 for a large compiled model: not copied
-        self._O = O if O.dtype in (np.float32, np.float64) and O.flags.c_contiguous else np.ascontiguousarray(O, dtype=float)
+        usable = O.dtype in (np.float32, np.float64) and O.flags.c_contiguous
+        self._O = O if usable else np.ascontiguousarray(O, dtype=float)
         self._rows: List[Tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         for Ta in model.T:
             if issparse(Ta):
