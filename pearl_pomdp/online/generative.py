@@ -97,7 +97,7 @@ class ExplicitModel:
     otherwise), the last entry with ``p_k > 0`` takes the residue. An entry of zero probability is
     never drawn; the same uniforms give the same outcome.
 
-    The draws run in the C kernel ``_step_kernel.c`` (on the ward ~9x less step time than the numpy
+    The draws run in the C kernel ``_step_kernel.c`` (on the ward ~20x less step time than the numpy
     version it replaced, docs/ward.md), which reads the model's own arrays in place: sparse ``T``
     stays CSR with its int32 or int64 indices, ``O`` stays float64 or float32 (a large compiled
     model's, the ward's 210 MB), so the adapter adds no ``nnz``-sized or ``[A, S, Z]``-sized array
