@@ -39,10 +39,11 @@ SPEECH = ["pocketsphinx>=5,<6", "espeakng-loader>=0.2"]
 #: the test starts a local cluster). Nothing else needs it: --jobs stays the default.
 CLUSTER = ["distributed>=2024.1"]
 
-#: The solvers' compiled kernels (one C file each, Python's C API and the buffer protocol
-#: only: no numpy headers needed to build). Each is the only implementation of its loops, for
-#: every model size: the exact solver's prune (with its own warm-started simplex), the
-#: point-based solver's per-belief inner loops and its whole search (engine="c").
+#: The compiled kernels (one C file each, Python's C API and the buffer protocol only: no numpy
+#: headers needed to build). Each is the only implementation of its loops, for every model size:
+#: the exact solver's prune (with its own warm-started simplex), the point-based solver's
+#: per-belief inner loops and its whole search (engine="c"), and the online planner's step of an
+#: explicit model's particles (ExplicitModel.step).
 #: Every build shows any warning (test/test_kernel_build.py fails CI on one: -Werror there,
 #: not here, so a user's newer compiler with new warnings still installs).
 WARNINGS = ["-Wall", "-Wextra"]
@@ -53,13 +54,15 @@ KERNELS = [
               extra_compile_args=["-O3", *WARNINGS]),
     Extension(f"{PACKAGE}.solvers._search_kernel", [f"{PACKAGE}/solvers/_search_kernel.c"],
               extra_compile_args=["-O3", *WARNINGS]),
+    Extension(f"{PACKAGE}.online._step_kernel", [f"{PACKAGE}/online/_step_kernel.c"],
+              extra_compile_args=["-O3", "-std=c99", *WARNINGS]),
 ]
 
 setup(
     name=PACKAGE,
     version=_version(),
     packages=find_packages(exclude=["test", "test.*", "bench"]),
-    package_data={PACKAGE: ["py.typed", "solvers/*.pyi"]},
+    package_data={PACKAGE: ["py.typed", "solvers/*.pyi", "online/*.pyi"]},
     ext_modules=KERNELS,
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),

@@ -77,8 +77,14 @@ def main() -> int:
     node = rclpy.create_node("ward_latency_probe", context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    actions, decisions = [], []
+    actions, decisions, marginals = [], [], []
     node.create_subscription(cv.TextMsg, "/pearl/action", lambda m: actions.append((time.perf_counter(), m)), LATCHED_QOS)
+    # The tracker publishes the belief, then its marginals (a small message): their arrival splits a
+    # step's time into publish_to_marginals_ms (the tracker's update of the belief, its publication
+    # and the marginals) and marginals_to_action_ms (the belief's transfer, the policy node's
+    # decision, the action back).
+    node.create_subscription(cv.TextMsg, "/pearl/belief_marginals", lambda m: marginals.append(time.perf_counter()),
+                             LATCHED_QOS)
     node.create_subscription(cv.TextMsg, "/pearl/decision", lambda m: decisions.append(m), EVENT_QOS)
     pubs = {t: node.create_publisher(cv.TextMsg, t, INPUT_QOS) for t in ("/ward/arrived", "/ward/call_button", "/ward/speech")}
 
@@ -90,7 +96,7 @@ def main() -> int:
                 return True
         return False
 
-    wall, report = [], {}
+    wall, tracker, rest, report = [], [], [], {}
     try:
         ok = spin_until(lambda: actions and all(p.get_subscription_count() >= 1 for p in pubs.values()),
                         args.startup_timeout)
@@ -107,16 +113,22 @@ def main() -> int:
             else:
                 topic, text = INPUTS[k % len(INPUTS)]
                 k += 1
+            m = len(marginals)
             t0 = time.perf_counter()
             pubs[topic].publish(cv.text_to_msg(text))
             if not spin_until(lambda: len(actions) > n, 120.0):
                 raise SystemExit(f"bench/ward_launch.py: no action after {text!r} (log: {log_dir / 'launch.err'})")
             wall.append(actions[-1][0] - t0)
+            if len(marginals) > m and marginals[m] <= actions[-1][0]:
+                tracker.append(marginals[m] - t0)
+                rest.append(actions[-1][0] - marginals[m])
         spin_until(lambda: len(decisions) >= len(actions), 5.0)
         node_latency = [json.loads(d.data).get("latency_s") for d in decisions[1:]]
         report = {"bench": "ward_launch", "policy": f"online:{args.trials}" if args.policy == "online" else "hierarchical", "steps": len(wall),
                   "startup_s": round(startup, 1), "observation_to_action_ms": _stats(wall),
                   "policy_node_decision_ms": _stats([x for x in node_latency if x is not None]),
+                  "publish_to_marginals_ms": _stats(tracker) if tracker else None,
+                  "marginals_to_action_ms": _stats(rest) if rest else None,
                   "target_p99_ms": 100.0, "load_avg_1min": os.getloadavg()[0], "cpus": os.cpu_count()}
         report["meets_target"] = report["observation_to_action_ms"]["p99"] <= 100.0
     finally:

@@ -1,4 +1,4 @@
-"""The solvers' C kernels compile without a single warning (-Wall -Wextra -Werror).
+"""The C kernels (the solvers' and the online planner's step) compile without a single warning (-Wall -Wextra -Werror).
 
 The package build (setup.py) passes -Wall -Wextra, so a new warning shows in every build
 log; this test makes one fail CI. It compiles each kernel the way setup.py does (the
@@ -15,7 +15,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 KERNELS = ["pearl_pomdp/solvers/_prune.c", "pearl_pomdp/solvers/_pointbased_kernel.c",
-           "pearl_pomdp/solvers/_search_kernel.c"]
+           "pearl_pomdp/solvers/_search_kernel.c", "pearl_pomdp/online/_step_kernel.c"]
 STRICT = ["-Wall", "-Wextra", "-Werror"]
 
 

@@ -11,7 +11,7 @@ import pytest
 from pearl_pomdp.model import load_model
 from pearl_pomdp.online.decider import OnlineDecider
 from pearl_pomdp.online.despot import Despot, DespotSettings
-from pearl_pomdp.online.generative import ExplicitModel, alpha_bounds
+from pearl_pomdp.online.generative import AlphaBounds, ExplicitModel, alpha_bounds
 from pearl_pomdp.online.rocksample import RockSampleBounds, mdp_upper_values, random_rocksample, rocksample
 
 
@@ -420,3 +420,84 @@ def test_random_rocksample_lays_out_as_despots_code_does():
     assert all(0 <= x < 15 and 0 <= y < 15 for x, y in a.rocks)
     assert a.rocks != random_rocksample(15, 15, np.random.default_rng(5)).rocks
     assert a.num_states == 15 * 15 * 2 ** 15 + 1
+
+
+# (action, nodes, lower, upper) of 30-trial searches, recorded with the search as it was before its
+# expansion grouped every action's children in one sort and its trials backed up only the action
+# they took (same tree: the full trees' states, scenarios, bounds and rewards hashed equal on these
+# and on the ward, docs/online.md "Speed"). Explicit models step through _step_kernel.c; their
+# bounds are _plain_bounds (this file's arithmetic, so the record does not move with the solvers').
+_RECORDED = {
+    ("rs7_8", 1): (6, 3041, 12.82736801302025, 26.26842381611665),
+    ("rs7_8", 7): (6, 2996, 13.376687636790763, 26.462771164902048),
+    ("tiger", 1): (0, 468, -9.397683822513516, 142.8045699934929),
+    ("tiger", 7): (0, 450, -10.044701027751165, 142.5278970600568),
+    ("reception", 1): (0, 1898, -9.353217731163186, 30.2944539178281),
+    ("reception", 7): (0, 2147, -8.644312359651211, 28.93759418097821),
+}
+
+
+def _plain_bounds(model):
+    """Bounds by a fixed number of plain sweeps: Q of 60 QMDP sweeps from 0 above, the blind policies'
+    values after 60 sweeps from 0 below (not bounds of anything: only a fixed input for the record)."""
+    from pearl_pomdp.model.pomdp import issparse
+
+    T = [t.toarray() if issparse(t) else np.asarray(t, dtype=float) for t in model.T]
+    R, g = np.asarray(model.R, dtype=float), float(model.discount)
+    V, blind = np.zeros(R.shape[0]), np.zeros(R.shape[::-1])
+    for _ in range(60):
+        Q = R + g * np.stack([Ta @ V for Ta in T], axis=1)
+        V = Q.max(axis=1)
+        blind = np.stack([R[:, a] + g * (T[a] @ blind[a]) for a in range(len(T))])
+    return AlphaBounds(Q, blind, "plain sweeps (test)")
+
+
+def _recorded_case(problem, tiger):
+    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.online.beliefs import sample_belief
+
+    if problem == "rs7_8":
+        rs = rocksample("7_8")
+        return rs, RockSampleBounds(rs), rs.initial_belief().sample(300, np.random.default_rng(3))
+    m = tiger if problem == "tiger" else load_domain("config/reception.domain.yaml").compile()
+    return ExplicitModel(m), _plain_bounds(m), sample_belief(m.b0, 500, np.random.default_rng(1 if problem == "tiger" else 2))
+
+
+@pytest.mark.parametrize("problem,seed", sorted(_RECORDED))
+def test_the_search_builds_the_tree_it_built_before_its_bookkeeping_was_batched(problem, seed, tiger):
+    model, bounds, roots = _recorded_case(problem, tiger)
+    res = Despot(model, bounds, DespotSettings(trials=30)).search(roots, seed)
+    action, nodes, lower, upper = _RECORDED[problem, seed]
+    assert (res.action, res.nodes) == (action, nodes)
+    assert res.lower == lower and res.upper == upper
+
+
+def test_a_search_pauses_the_garbage_collector_and_frees_its_tree(tiger):
+    """The collector is paused during a search (its tree of ~10^3 nodes would start collections in
+    the middle of a decision) and restored after; the tree is freed by reference counting."""
+    import gc
+
+    from pearl_pomdp.online import despot as despot_module
+
+    bounds = alpha_bounds(tiger)
+    seen = []
+
+    class Watching:
+        description = bounds.description
+
+        def many(self, groups, rng):
+            seen.append(gc.isenabled())
+            return bounds.many(groups, rng)
+
+    planner = Despot(ExplicitModel(tiger), Watching(), DespotSettings(trials=200))
+    roots = np.random.default_rng(0).integers(0, 2, 500)
+    try:
+        result = planner.search(roots, seed=3)
+        assert gc.isenabled()
+        alive = sum(isinstance(o, despot_module._Belief) for o in gc.get_objects())
+        gc.disable()
+        planner.search(roots, seed=3)
+        assert not gc.isenabled()      # (a caller's paused collector stays paused)
+    finally:
+        gc.enable()
+    assert result.nodes > 2000 and len(seen) > 100 and not any(seen) and alive == 0

@@ -47,7 +47,7 @@ def test_explicit_model_is_the_inverse_cdf_of_each_row_without_copies():
             expect = cols[min(int(np.searchsorted(cdf, u[i, 0] * cdf[-1], side="right")), len(cols) - 1)]
             assert nxt[i] == expect
             ocdf = np.cumsum(model.O[a, expect])
-            assert obs[i] == min(int(np.searchsorted(ocdf, u[i, 1], side="right")), model.num_observations - 1)
+            assert obs[i] == min(int(np.searchsorted(ocdf, u[i, 1] * ocdf[-1], side="right")), model.num_observations - 1)
             assert rew[i] == model.R[s, a]
     # The adapter holds the model's own arrays: no nnz-sized or [A, S, Z]-sized copy.
     assert g._O is model.O

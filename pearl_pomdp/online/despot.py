@@ -19,6 +19,7 @@ end past it at the pace of the slowest expansion so far (the trial under way sto
 """
 from __future__ import annotations
 
+import gc
 import time
 from dataclasses import dataclass
 from typing import Dict, List, Optional
@@ -158,7 +159,22 @@ class Despot:
 
         Everything random comes from ``numpy.random.default_rng(seed)``: the same seed and
         particles give the same tree and the same action (with ``trials`` as the budget).
+
+        Python's cyclic garbage collector is paused during the search (and restored after). The
+        tree has no cycles (nodes point only down), so reference counting frees it as the search
+        returns; the thousands of nodes it allocates would otherwise start collections in the
+        middle of the decision, and a full one walks every object of the process: ~30 ms on the
+        ward, every ~10 decisions in bench/ward_decision.py (docs/ward.md).
         """
+        paused = gc.isenabled()
+        gc.disable()
+        try:
+            return self._search(root_states, seed)
+        finally:
+            if paused:
+                gc.enable()
+
+    def _search(self, root_states: np.ndarray, seed: int) -> SearchResult:
         st = self.settings
         now = self._now = CLOCKS[st.clock]
         t0 = now()
@@ -234,33 +250,34 @@ class Despot:
     def _expand(self, node: _Belief) -> None:
         self._expansions += 1
         K = self._K
+        A = len(self.model.actions)
         u = self._uniforms[node.scenarios, node.depth]
-        rewards = []
-        groups = []          # every child of every action, in action order
-        keys = []            # per child: (action, observation)
         step_many = getattr(self.model, "step_many", None)   # every action in one pass, when offered
-        stepped = step_many(node.states, u) if step_many is not None else None
-        for a in range(len(self.model.actions)):
-            if stepped is not None:
-                nxt, obs, rew = stepped[0][a], stepped[1][a], stepped[2][a]
-            else:
-                nxt, obs, rew = self.model.step(node.states, a, u)
-            rewards.append(float(rew.sum()) / K)
-            if obs.shape[0] and (obs == obs[0]).all():
-                groups.append((nxt, node.scenarios))
-                keys.append((a, int(obs[0])))
-            else:
-                order = np.argsort(obs, kind="stable")
-                sorted_obs = obs[order]
-                cuts = np.flatnonzero(np.diff(sorted_obs)) + 1
-                for idx in np.split(order, cuts):
-                    groups.append((nxt[idx], node.scenarios[idx]))
-                    keys.append((a, int(obs[idx[0]])))
+        if step_many is not None:   # ([A, N] arrays, or a sequence of A [N] arrays each)
+            nxt, obs, rew = (np.asarray(x) for x in step_many(node.states, u))
+        else:
+            nxt, obs, rew = (np.stack(x) for x in zip(*(self.model.step(node.states, a, u) for a in range(A))))
+        rewards = [float(rew[a].sum()) / K for a in range(A)]
+        # Every child of every action at once: one stable sort of the particles by (action, observation)
+        # puts each child's particles together, in action order, then observation order, each child's
+        # particles in the node's order (as a stable sort per action did); the children's arrays are
+        # slices of the sorted arrays.
+        N = node.states.shape[0]
+        low = int(obs.min())
+        span = int(obs.max()) - low + 1
+        keys = ((obs - low) + span * np.arange(A)[:, None]).ravel()
+        order = np.argsort(keys, kind="stable")
+        sorted_keys = keys[order]
+        starts = np.flatnonzero(np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1])))
+        ends = np.append(starts[1:], keys.shape[0])
+        states = nxt.ravel()[order]
+        scenarios = node.scenarios[order % N]
+        groups = [(states[i:j], scenarios[i:j]) for i, j in zip(starts.tolist(), ends.tolist())]
         children = self._leaves(groups, node.depth + 1)
         self._nodes += len(children)
         by_action: List[Dict[int, _Belief]] = [{} for _ in rewards]
-        for (a, o), child in zip(keys, children):
-            by_action[a][o] = child
+        for key, child in zip(sorted_keys[starts].tolist(), children):
+            by_action[key // span][key % span + low] = child
         actions = []
         for reward, kids in zip(rewards, by_action):
             an = _Action(reward, kids)
@@ -286,6 +303,7 @@ class Despot:
 
     def _trial(self, root: _Belief) -> None:
         path = [root]
+        taken: List[Optional[_Action]] = []   # per node of the path: the action the trial went down
         node = root
         root_gap = root.upper - root.lower
         while node.depth < self.settings.depth and not node.terminal:
@@ -303,11 +321,16 @@ class Despot:
             child = max(best.children.values(), key=lambda c: self._excess(c, root_gap))
             if self._excess(child, root_gap) <= 0:
                 break
+            taken.append(best)
             node = child
             path.append(node)
-        for n in reversed(path):
+        taken.append(None)
+        # Only the nodes of the path changed, so at each only the action the trial took needs its
+        # bounds backed up again (the others' children are as they were at their last backup: the
+        # same sums); then the node's own bounds over all its actions.
+        for n, an in zip(reversed(path), reversed(taken)):
             if n.actions is not None:
-                for an in n.actions:
+                if an is not None:
                     self._backup_action(an, n.depth)
                 self._backup_belief(n)
 

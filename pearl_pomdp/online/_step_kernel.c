@@ -1,0 +1,443 @@
+/* ExplicitModel.step in C: one step of N particles of an explicit POMDP (pearl_pomdp/online/generative.py).
+ *
+ * Why C: DESPOT steps a node's particles once per action and expansion. On the ward (233,280
+ * states, 15 actions) the numpy version cost ~0.25 ms a call, ~80 % of a decision, nearly all of it
+ * numpy's fixed cost per call and the temporaries of a few hundred particles. This is the only
+ * implementation of the step (no Python twin in the package; the tests hold a numpy reference of
+ * the definition below and compare bit for bit).
+ *
+ * The definition (one for both draws; "the row" is T[a][s, :] as its CSR entries in stored order,
+ * or O[a, s', :]):
+ *   c_k = p_1 + ... + p_k, summed left to right in double (float32 entries are widened first);
+ *   M = c_n (the row's mass, the same sum); the target t = u * M;
+ *   the draw is the first k with c_k > t; when there is none (t rounded up to M), the last k with
+ *   p_k > 0 takes the rounding residue. An entry with p_k = 0 is never drawn. (Because M is the
+ *   same running sum, u < 1 gives t < M = c_n for any normal M: the residue clause is reached only
+ *   by a subnormal mass. The numpy code before this kernel compared against one cumulative sum
+ *   across all particles' rows, where rounding could move a draw across a step; here each row is
+ *   summed on its own.)
+ * s' is drawn from T[a][s, :] with u = uniforms[i, 0], o from O[a, s', :] with u = uniforms[i, 1],
+ * and the reward is R[s, a]. A row whose mass is not a positive finite number is an error.
+ *
+ * T's rows come with tables made once per model (row_tables): each row's mass ([S] float64 per
+ * action, 28 MB on the ward) and, at every BLOCK-th position j of data (a global grid), the running
+ * sum of j's row before j ("ends") and the largest running sum of that row over j..j+BLOCK-1
+ * ("peaks"): 2 * nnz / BLOCK doubles, 10 MB on the ward. A draw adds up the entries before the
+ * row's first grid point, then skips each block whose peak is <= t (no c_k > t in it) and scans
+ * the first one whose peak is > t from its end value: the same c_k, the same comparisons, the same
+ * k as the plain scan, in ~n / BLOCK + 2 * BLOCK steps instead of ~n / 2. The ward's rows at its
+ * beliefs hold ~380 entries; summing each twice was ~3/4 of the step, scanning once ~2/3 of the
+ * rest. O's rows (Z entries) are summed here.
+ *
+ * Arrays come through the buffer protocol (no numpy headers), C-contiguous, never copied: the
+ * CSR index arrays as int32 or int64, T's data and O as float32 or float64 (the ward's O is
+ * 210 MB of float32). Their formats and shapes are checked, and so is every index this call reads
+ * (the particles' states, their rows' bounds in indptr, each drawn column): bad input is a
+ * ValueError naming the argument, never a read out of bounds. The GIL is released for the loop.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+/* The element kinds this kernel reads. */
+enum { K_I32, K_I64, K_F32, K_F64 };
+
+static const char *kind_name[] = {"int32", "int64", "float32", "float64"};
+
+/* The kind of a buffer's format ("i", "l", "q", "f", "d", with an optional native byte-order
+ * prefix), or -1. */
+static int buffer_kind(const Py_buffer *b) {
+    const char *f = b->format ? b->format : "B";
+    if (*f == '@' || *f == '=') f++;
+#if PY_LITTLE_ENDIAN
+    else if (*f == '<') f++;
+#else
+    else if (*f == '>' || *f == '!') f++;
+#endif
+    if (f[0] == '\0' || f[1] != '\0') return -1;
+    switch (f[0]) {
+    case 'i': case 'l': case 'q':
+        if (b->itemsize == 4) return K_I32;
+        if (b->itemsize == 8) return K_I64;
+        return -1;
+    case 'f': return b->itemsize == 4 ? K_F32 : -1;
+    case 'd': return b->itemsize == 8 ? K_F64 : -1;
+    default: return -1;
+    }
+}
+
+/* Takes obj's buffer as a C-contiguous array of ndim dimensions whose kind is one of the
+ * allowed (a bit mask of 1 << kind); 0 on success, -1 with a ValueError naming `name`. */
+static int take(const char *fn, PyObject *obj, Py_buffer *b, int writable, int ndim, unsigned allowed,
+                const char *name) {
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, b, flags) < 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_ValueError, "_step_kernel.%s: %s must be a C-contiguous%s array (got %.80s)", fn, name,
+                     writable ? ", writable" : "", Py_TYPE(obj)->tp_name);
+        b->obj = NULL;
+        return -1;
+    }
+    int kind = buffer_kind(b);
+    if (kind < 0 || !(allowed & (1u << kind))) {
+        char want[64] = "";
+        for (int k = K_I32; k <= K_F64; k++)
+            if (allowed & (1u << k)) {
+                if (want[0]) strcat(want, " or ");
+                strcat(want, kind_name[k]);
+            }
+        PyErr_Format(PyExc_ValueError, "_step_kernel.%s: %s must hold %s, got format '%s' (%zd-byte items)", fn, name,
+                     want, b->format ? b->format : "B", b->itemsize);
+        PyBuffer_Release(b);
+        b->obj = NULL;
+        return -1;
+    }
+    if (b->ndim != ndim) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.%s: %s must be %d-D, got %d-D", fn, name, ndim, b->ndim);
+        PyBuffer_Release(b);
+        b->obj = NULL;
+        return -1;
+    }
+    return kind;
+}
+
+static inline int64_t ix_at(const void *p, int kind, Py_ssize_t k) {
+    return kind == K_I64 ? ((const int64_t *)p)[k] : (int64_t)((const int32_t *)p)[k];
+}
+
+static inline double val_at(const void *p, int kind, Py_ssize_t k) {
+    return kind == K_F64 ? ((const double *)p)[k] : (double)((const float *)p)[k];
+}
+
+/* The row's mass: its n entries at p summed left to right in double. */
+static inline double row_sum(const void *p, int kind, Py_ssize_t n) {
+    double m = 0.0;
+    for (Py_ssize_t k = 0; k < n; k++) m += val_at(p, kind, k);
+    return m;
+}
+
+/* The draw of the definition above from the n entries at p, whose row_sum is m (a positive
+ * finite number): their position. */
+static inline Py_ssize_t draw_in(const void *p, int kind, Py_ssize_t n, double u, double m) {
+    double t = u * m, c = 0.0;
+    for (Py_ssize_t k = 0; k < n; k++) {
+        c += val_at(p, kind, k);
+        if (c > t) return k;
+    }
+    for (Py_ssize_t k = n - 1; k >= 0; k--)
+        if (val_at(p, kind, k) > 0.0) return k;
+    return n - 1;   /* (not reached: M > 0 needs a positive entry) */
+}
+
+static inline int usable_mass(double m) { return m > 0.0 && isfinite(m); }
+
+/* The grid of row_tables' blocks (positions of data). */
+#define BLOCK 32
+
+/* How many particles ahead step asks for the rows it will read (a hint: no effect on results). */
+#define PREFETCH 8
+#if defined(__GNUC__) || defined(__clang__)
+#define PREFETCH_AT(p) __builtin_prefetch((p), 0, 1)
+#else
+#define PREFETCH_AT(p) ((void)(p))
+#endif
+
+/* The draw of the definition in T's row [lo, hi) of data (positions of the whole array at td),
+ * mass m (a positive finite number), with row_tables' ends and peaks: the position in the row. */
+static inline Py_ssize_t draw_row(const void *td, int kind, int64_t lo, int64_t hi, double u, double m,
+                                  const double *ends, const double *peaks) {
+    double t = u * m, c = 0.0;
+    int64_t grid = (lo + BLOCK - 1) / BLOCK * BLOCK, stop = grid < hi ? grid : hi;
+    for (int64_t k = lo; k < stop; k++) {
+        c += val_at(td, kind, (Py_ssize_t)k);
+        if (c > t) return (Py_ssize_t)(k - lo);
+    }
+    for (int64_t j = grid; j < hi; j += BLOCK) {
+        if (!(peaks[j / BLOCK] > t)) continue;          /* no running sum in this block exceeds t */
+        int64_t end = j + BLOCK < hi ? j + BLOCK : hi;
+        c = ends[j / BLOCK];                            /* the running sum before j, as the scan has it */
+        for (int64_t k = j; k < end; k++) {
+            c += val_at(td, kind, (Py_ssize_t)k);
+            if (c > t) return (Py_ssize_t)(k - lo);
+        }
+    }
+    for (int64_t k = hi - 1; k >= lo; k--)
+        if (val_at(td, kind, (Py_ssize_t)k) > 0.0) return (Py_ssize_t)(k - lo);
+    return (Py_ssize_t)(hi - lo - 1);   /* (not reached: M > 0 needs a positive entry) */
+}
+
+/* What went wrong inside the loop (raised after the GIL is back). */
+enum { E_NONE, E_STATE, E_UNIFORM, E_INDPTR, E_COLUMN, E_T_MASS, E_O_MASS };
+
+typedef struct {
+    int code;
+    Py_ssize_t i;        /* the particle */
+    int64_t s, v, w;     /* its state; the offending value(s) */
+    double x;
+} fault_t;
+
+/* A ValueError whose format ends with %s for x (PyErr_Format has no float conversion). The
+ * three integer arguments come first in the format: a Py_ssize_t and two long longs. */
+static void raise_with_number(const char *format, double x, Py_ssize_t i, long long v, long long w) {
+    char *text = PyOS_double_to_string(x, 'r', 0, Py_DTSF_ADD_DOT_0, NULL);
+    if (text == NULL) return;
+    PyErr_Format(PyExc_ValueError, format, i, v, w, text);
+    PyMem_Free(text);
+}
+
+static PyObject *step(PyObject *Py_UNUSED(self), PyObject *args) {
+    PyObject *o_ptr, *o_ind, *o_dat, *o_ms, *o_en, *o_pk, *o_O, *o_R, *o_st, *o_u, *o_nx, *o_ob, *o_rw;
+    Py_ssize_t a;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOnOOOOO:step", &o_ptr, &o_ind, &o_dat, &o_ms, &o_en, &o_pk, &o_O, &o_R, &a,
+                          &o_st, &o_u, &o_nx, &o_ob, &o_rw))
+        return NULL;
+    Py_buffer ptr = {0}, ind = {0}, dat = {0}, ms = {0}, en = {0}, pk = {0}, O = {0}, R = {0}, st = {0}, uu = {0},
+              nx = {0}, ob = {0}, rw = {0};
+    Py_buffer *all[] = {&ptr, &ind, &dat, &ms, &en, &pk, &O, &R, &st, &uu, &nx, &ob, &rw};
+    PyObject *ret = NULL;
+    const unsigned INTS = (1u << K_I32) | (1u << K_I64), FLOATS = (1u << K_F32) | (1u << K_F64);
+    int kp, ki, kd, ko;
+    const unsigned F64 = 1u << K_F64, I64 = 1u << K_I64;
+    if ((kp = take("step", o_ptr, &ptr, 0, 1, INTS, "indptr")) < 0
+        || (ki = take("step", o_ind, &ind, 0, 1, INTS, "indices")) < 0
+        || (kd = take("step", o_dat, &dat, 0, 1, FLOATS, "data")) < 0 || take("step", o_ms, &ms, 0, 1, F64, "mass") < 0
+        || take("step", o_en, &en, 0, 1, F64, "ends") < 0 || take("step", o_pk, &pk, 0, 1, F64, "peaks") < 0
+        || (ko = take("step", o_O, &O, 0, 3, FLOATS, "O")) < 0 || take("step", o_R, &R, 0, 2, F64, "R") < 0
+        || take("step", o_st, &st, 0, 1, I64, "states") < 0 || take("step", o_u, &uu, 0, 2, F64, "uniforms") < 0
+        || take("step", o_nx, &nx, 1, 1, I64, "next_out") < 0 || take("step", o_ob, &ob, 1, 1, I64, "obs_out") < 0
+        || take("step", o_rw, &rw, 1, 1, F64, "reward_out") < 0)
+        goto done;
+    Py_ssize_t A = O.shape[0], S = O.shape[1], Z = O.shape[2], N = st.shape[0], nnz = ind.shape[0];
+    if (S < 1 || Z < 1 || A < 1) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.step: O has shape (%zd, %zd, %zd): expected [A, S, Z], none empty",
+                     A, S, Z);
+        goto done;
+    }
+    if (a < 0 || a >= A) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.step: action %zd is not in 0..%zd (O has %zd actions)", a, A - 1, A);
+        goto done;
+    }
+    if (ptr.shape[0] != S + 1) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.step: indptr has %zd entries, expected S + 1 = %zd (O's S = %zd)",
+                     ptr.shape[0], S + 1, S);
+        goto done;
+    }
+    if (dat.shape[0] != nnz) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.step: data has %zd entries, indices %zd: expected the same", dat.shape[0],
+                     nnz);
+        goto done;
+    }
+    if (ms.shape[0] != S) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.step: mass has %zd entries, expected S = %zd (O's S)", ms.shape[0], S);
+        goto done;
+    }
+    if (en.shape[0] != nnz / BLOCK + 1 || pk.shape[0] != nnz / BLOCK + 1) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.step: ends and peaks have %zd and %zd entries, expected "
+                     "len(data) // BLOCK + 1 = %zd (BLOCK = %d)", en.shape[0], pk.shape[0], nnz / BLOCK + 1, BLOCK);
+        goto done;
+    }
+    if (R.shape[0] != S || R.shape[1] != A) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.step: R has shape (%zd, %zd), expected [S, A] = (%zd, %zd)", R.shape[0],
+                     R.shape[1], S, A);
+        goto done;
+    }
+    if (uu.shape[0] != N || uu.shape[1] < 2) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.step: uniforms has shape (%zd, %zd), expected [N, >= 2] with N = %zd "
+                     "(the states)", uu.shape[0], uu.shape[1], N);
+        goto done;
+    }
+    if (nx.shape[0] != N || ob.shape[0] != N || rw.shape[0] != N) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.step: next_out, obs_out, reward_out have %zd, %zd, %zd entries, "
+                     "expected N = %zd (the states)", nx.shape[0], ob.shape[0], rw.shape[0], N);
+        goto done;
+    }
+    {
+        const void *tp = ptr.buf, *ti = ind.buf, *td = dat.buf;
+        const char *Ob = (const char *)O.buf;
+        const double *Rb = (const double *)R.buf, *ub = (const double *)uu.buf, *mb = (const double *)ms.buf;
+        const double *eb = (const double *)en.buf, *pb = (const double *)pk.buf;
+        const int64_t *sb = (const int64_t *)st.buf;
+        int64_t *nxt = (int64_t *)nx.buf, *obs = (int64_t *)ob.buf;
+        double *rew = (double *)rw.buf;
+        Py_ssize_t U = uu.shape[1], osize = O.itemsize;
+        fault_t f = {E_NONE, 0, 0, 0, 0, 0.0};
+        Py_BEGIN_ALLOW_THREADS
+        /* Two passes, s' for every particle, then o: the particles' rows are scattered over hundreds of
+         * MB, so each pass asks for the rows of the particles PREFETCH ahead before it reads its own
+         * (the outcomes are those of one pass: only the order of the reads changes). */
+        for (Py_ssize_t i = 0; i < N; i++) {
+            if (i + 2 * PREFETCH < N) {
+                int64_t sp = sb[i + 2 * PREFETCH];
+                if (sp >= 0 && sp < S) {
+                    PREFETCH_AT(kp == K_I64 ? (const void *)((const int64_t *)tp + sp) : (const void *)((const int32_t *)tp + sp));
+                    PREFETCH_AT(mb + sp);
+                }
+            }
+            if (i + PREFETCH < N) {
+                int64_t sp = sb[i + PREFETCH];
+                if (sp >= 0 && sp < S) {
+                    int64_t lp = ix_at(tp, kp, sp), hp = ix_at(tp, kp, sp + 1);
+                    if (lp >= 0 && lp < hp && hp <= nnz) {
+                        PREFETCH_AT(kd == K_F64 ? (const void *)((const double *)td + lp) : (const void *)((const float *)td + lp));
+                        PREFETCH_AT(pb + lp / BLOCK);
+                    }
+                }
+            }
+            int64_t s = sb[i];
+            double u0 = ub[i * U], u1 = ub[i * U + 1], mass;
+            if (s < 0 || s >= S) { f = (fault_t){E_STATE, i, s, 0, 0, 0.0}; break; }
+            if (!(u0 >= 0.0 && u0 < 1.0)) { f = (fault_t){E_UNIFORM, i, s, 0, 0, u0}; break; }
+            if (!(u1 >= 0.0 && u1 < 1.0)) { f = (fault_t){E_UNIFORM, i, s, 1, 0, u1}; break; }
+            int64_t lo = ix_at(tp, kp, s), hi = ix_at(tp, kp, s + 1);
+            if (lo < 0 || hi < lo || hi > nnz) { f = (fault_t){E_INDPTR, i, s, lo, hi, 0.0}; break; }
+            mass = mb[s];
+            if (!usable_mass(mass)) { f = (fault_t){E_T_MASS, i, s, hi - lo, 0, mass}; break; }
+            Py_ssize_t k = draw_row(td, kd, lo, hi, u0, mass, eb, pb);
+            int64_t s2 = ix_at(ti, ki, (Py_ssize_t)lo + k);
+            if (s2 < 0 || s2 >= S) { f = (fault_t){E_COLUMN, i, s, s2, lo + k, 0.0}; break; }
+            nxt[i] = s2;
+            rew[i] = Rb[s * A + a];
+        }
+        for (Py_ssize_t i = 0; f.code == E_NONE && i < N; i++) {
+            if (i + PREFETCH < N)
+                PREFETCH_AT(Ob + ((size_t)a * (size_t)S + (size_t)nxt[i + PREFETCH]) * (size_t)Z * (size_t)osize);
+            int64_t s2 = nxt[i];
+            const void *orow = Ob + ((size_t)a * (size_t)S + (size_t)s2) * (size_t)Z * (size_t)osize;
+            double mass = row_sum(orow, ko, Z);
+            if (!usable_mass(mass)) { f = (fault_t){E_O_MASS, i, sb[i], s2, 0, mass}; break; }
+            obs[i] = draw_in(orow, ko, Z, ub[i * U + 1], mass);
+        }
+        Py_END_ALLOW_THREADS
+        switch (f.code) {
+        case E_NONE:
+            ret = Py_None;
+            Py_INCREF(ret);
+            break;
+        case E_STATE:
+            PyErr_Format(PyExc_ValueError, "_step_kernel.step: states[%zd] = %lld is not a state (0..%zd)", f.i,
+                         (long long)f.s, S - 1);
+            break;
+        case E_UNIFORM:
+            raise_with_number("_step_kernel.step: uniforms[%zd, %lld] (particle in state %lld) = %s is not in [0, 1)", f.x,
+                              f.i, (long long)f.v, (long long)f.s);
+            break;
+        case E_INDPTR:
+            PyErr_Format(PyExc_ValueError, "_step_kernel.step: the row of state %lld, indptr[%lld:%lld + 2] = [%lld, %lld], "
+                         "is not a range within the %zd indices", (long long)f.s, (long long)f.s, (long long)f.s,
+                         (long long)f.v, (long long)f.w, nnz);
+            break;
+        case E_COLUMN:
+            PyErr_Format(PyExc_ValueError, "_step_kernel.step: indices[%lld] = %lld (row %lld) is not a state (0..%zd)",
+                         (long long)f.w, (long long)f.v, (long long)f.s, S - 1);
+            break;
+        case E_T_MASS:
+            raise_with_number("_step_kernel.step: T[%zd] row %lld (%lld entries) has no positive finite mass (sum %s)",
+                              f.x, a, (long long)f.s, (long long)f.v);
+            break;
+        case E_O_MASS:
+            raise_with_number("_step_kernel.step: O[%zd, %lld, :] (reached from state %lld) has no positive finite mass "
+                              "(sum %s)", f.x, a, (long long)f.v, (long long)f.s);
+            break;
+        }
+    }
+done:
+    for (size_t j = 0; j < sizeof all / sizeof all[0]; j++)
+        if (all[j]->obj != NULL) PyBuffer_Release(all[j]);
+    return ret;
+}
+
+/* row_tables(indptr, data, mass, ends, peaks): mass[s] = row s's entries summed left to right in
+ * double, exactly as step sums them; for each grid position j = b * BLOCK of data inside a row:
+ * ends[b] = that row's running sum before j, peaks[b] = its largest running sum over
+ * j..min(j + BLOCK, row end) - 1 (positions outside every row: ends 0, peaks -inf). indptr must
+ * be non-decreasing and within data. */
+static PyObject *row_tables(PyObject *Py_UNUSED(self), PyObject *args) {
+    PyObject *o_ptr, *o_dat, *o_out, *o_en, *o_pk;
+    if (!PyArg_ParseTuple(args, "OOOOO:row_tables", &o_ptr, &o_dat, &o_out, &o_en, &o_pk)) return NULL;
+    Py_buffer ptr = {0}, dat = {0}, out = {0}, en = {0}, pk = {0};
+    Py_buffer *all[] = {&ptr, &dat, &out, &en, &pk};
+    PyObject *ret = NULL;
+    int kp, kd;
+    if ((kp = take("row_tables", o_ptr, &ptr, 0, 1, (1u << K_I32) | (1u << K_I64), "indptr")) < 0
+        || (kd = take("row_tables", o_dat, &dat, 0, 1, (1u << K_F32) | (1u << K_F64), "data")) < 0
+        || take("row_tables", o_out, &out, 1, 1, 1u << K_F64, "mass") < 0
+        || take("row_tables", o_en, &en, 1, 1, 1u << K_F64, "ends") < 0
+        || take("row_tables", o_pk, &pk, 1, 1, 1u << K_F64, "peaks") < 0)
+        goto done;
+    Py_ssize_t S = ptr.shape[0] - 1, nnz = dat.shape[0];
+    if (S < 0 || out.shape[0] != S) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.row_tables: mass has %zd entries, indptr %zd: expected one fewer",
+                     out.shape[0], ptr.shape[0]);
+        goto done;
+    }
+    if (en.shape[0] != nnz / BLOCK + 1 || pk.shape[0] != nnz / BLOCK + 1) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.row_tables: ends and peaks have %zd and %zd entries, expected "
+                     "len(data) // BLOCK + 1 = %zd (BLOCK = %d)", en.shape[0], pk.shape[0], nnz / BLOCK + 1, BLOCK);
+        goto done;
+    }
+    {
+        double *mo = (double *)out.buf, *eo = (double *)en.buf, *po = (double *)pk.buf;
+        Py_ssize_t bad = -1;
+        int64_t blo = 0, bhi = 0, prev = 0;
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t b = 0; b <= nnz / BLOCK; b++) { eo[b] = 0.0; po[b] = -INFINITY; }
+        for (Py_ssize_t s = 0; s < S; s++) {
+            int64_t lo = ix_at(ptr.buf, kp, s), hi = ix_at(ptr.buf, kp, s + 1);
+            if (lo < prev || hi < lo || hi > nnz) { bad = s; blo = lo; bhi = hi; break; }
+            prev = hi;
+            double c = 0.0;
+            int64_t blk = -1;
+            for (int64_t k = lo; k < hi; k++) {
+                if (k % BLOCK == 0) { blk = k / BLOCK; eo[blk] = c; }
+                c += val_at(dat.buf, kd, (Py_ssize_t)k);
+                if (blk >= 0 && c > po[blk]) po[blk] = c;
+            }
+            mo[s] = c;
+        }
+        Py_END_ALLOW_THREADS
+        if (bad >= 0)
+            PyErr_Format(PyExc_ValueError, "_step_kernel.row_tables: the row of state %zd, indptr[%zd:%zd + 2] = [%lld, %lld], "
+                         "is not a range within the %zd entries of data", bad, bad, bad,
+                         (long long)blo, (long long)bhi, nnz);
+        else {
+            ret = Py_None;
+            Py_INCREF(ret);
+        }
+    }
+done:
+    for (size_t j = 0; j < sizeof all / sizeof all[0]; j++)
+        if (all[j]->obj != NULL) PyBuffer_Release(all[j]);
+    return ret;
+}
+
+static PyMethodDef methods[] = {
+    {"row_tables", row_tables, METH_VARARGS,
+     "row_tables(indptr, data, mass, ends, peaks) -> None\n\n"
+     "The tables step reads for T[action] as CSR (indptr [S+1] int32 or int64, non-decreasing; data float32 or\n"
+     "float64): mass [S] float64 = each row summed as step sums it; ends, peaks [len(data) // BLOCK + 1] float64\n"
+     "(see the file's comment). Raises ValueError on bad input."},
+    {"step", step, METH_VARARGS,
+     "step(indptr, indices, data, mass, ends, peaks, O, R, action, states, uniforms, next_out, obs_out,\n"
+     "     reward_out) -> None\n\n"
+     "One step of N particles under `action` (see the file's comment for the definition): T[action] as CSR\n"
+     "(indptr [S+1], indices [nnz] int32 or int64; data [nnz] float32 or float64) with its row_tables (mass,\n"
+     "ends, peaks), O [A, S, Z] float32 or\n"
+     "float64, R [S, A] float64, states [N] int64, uniforms [N, >=2] float64 in [0, 1); writes next_out [N]\n"
+     "int64, obs_out [N] int64, reward_out [N] float64. Raises ValueError on bad input."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_step_kernel",
+                                    "ExplicitModel.step of the online planner in C (inverse-CDF draws per row).", -1,
+                                    methods, NULL, NULL, NULL, NULL};
+
+PyMODINIT_FUNC PyInit__step_kernel(void) {
+    PyObject *m = PyModule_Create(&module);
+    if (m != NULL && PyModule_AddIntConstant(m, "BLOCK", BLOCK) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

@@ -1,0 +1,20 @@
+"""Type stub of the C kernel ``_step_kernel.c`` (:meth:`pearl_pomdp.online.generative.ExplicitModel.step`).
+
+Arrays are C-contiguous numpy arrays, read in place: ``indptr``/``indices`` of ``T[action]`` as CSR
+(int32 or int64), ``data`` and ``O[A, S, Z]`` float32 or float64, and T[action]'s tables from
+``row_tables`` (``mass[S]``: each CSR row summed left to right, as ``step`` sums it; ``ends``/``peaks``
+``[len(data) // BLOCK + 1]``: the rows' running sums on a grid of BLOCK entries), all float64, ``R[S, A]``,
+``states[N]`` int64, ``uniforms[N, >= 2]`` float64 in [0, 1). The outputs ``next_out``/``obs_out`` (int64) and
+``reward_out`` (float64), ``[N]`` each, are written. Bad input raises ``ValueError``.
+"""
+import numpy as np
+
+#: The grid (in entries of ``data``) of ``row_tables``' ``ends``/``peaks``.
+BLOCK: int
+
+def row_tables(indptr: np.ndarray, data: np.ndarray, mass: np.ndarray, ends: np.ndarray,
+               peaks: np.ndarray) -> None: ...
+
+def step(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, mass: np.ndarray, ends: np.ndarray,
+         peaks: np.ndarray, O: np.ndarray, R: np.ndarray, action: int, states: np.ndarray, uniforms: np.ndarray,
+         next_out: np.ndarray, obs_out: np.ndarray, reward_out: np.ndarray) -> None: ...
