@@ -122,8 +122,9 @@ def _evaluate(P, r: np.ndarray, g: float, v0: np.ndarray, tol: float, max_iterat
 
     system = (sp.identity(S, format="csr") - g * P).tocsr()
     v, info = bicgstab(system, r, x0=v0, rtol=0.0, atol=tol * (1.0 - g) / 4.0, maxiter=_KRYLOV_MAX_ITERATIONS)
-    if info != 0 or not np.all(np.isfinite(v)):
-        v = v0 if not np.all(np.isfinite(v)) else v
+    if not np.all(np.isfinite(v)):
+        v, info = v0, 1
+    if info != 0:
         v = _sweep_to(P, r, g, v, tol, max_iterations)
     return v
 
