@@ -748,7 +748,6 @@ class BeliefTracker:
                 flat_channels(model.observations, "speech" if keyword_filter is not None else "symbol")
         self._mapper = _ObservationMapper(model, channels, domain.keywords if domain is not None else {},
                                           keyword_filter, settings.confidence_floor)
-        self._marginal_index: Optional[list] = None
         self.history: Optional[Deque[StepResult]] = None
 
     # ------------------------------------------------------------ read-only
@@ -864,13 +863,8 @@ class BeliefTracker:
         b = self.belief if belief is None else belief
         if self.domain is None:
             return {"state": {s: float(pv) for s, pv in zip(self.model.states, b)}}
-        if self._marginal_index is None:
-            # state_values[s, f] = value index of feature f in state s: a marginal is one bincount.
-            values = np.asarray(self.domain.state_values)
-            self._marginal_index = [(f.name, [str(v) for v in f.values], values[:, i])
-                                    for i, f in enumerate(self.domain.features)]
-        return {name: dict(zip(names, np.bincount(col, weights=b, minlength=len(names)).tolist()))
-                for name, names, col in self._marginal_index}
+        marginals = self.domain.feature_marginals(b)
+        return {f.name: dict(zip((str(v) for v in f.values), marginals[f.name].tolist())) for f in self.domain.features}
 
     def likely_place(self) -> Optional[str]:
         """The most likely value of ``place_feature`` under the current belief (``None`` without a drive timer)."""

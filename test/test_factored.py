@@ -117,6 +117,23 @@ def test_state_index_values_and_marginals():
         d.state_index({"Door": "ajar", "Light": "on"})
 
 
+def test_feature_marginals_equal_sums_over_the_states_with_each_value():
+    """Per feature and value, the marginal is the belief summed over the states whose assignment
+    has that value (computed here state by state from state_assignment, not from the product order)."""
+    d = load_domain(__import__("pathlib").Path(__file__).resolve().parents[1] / "config" / "pearl.domain.yaml")
+    assert len(set(d.radix.tolist())) > 1   # uneven radices: a wrong reshape would mix features
+    b = np.random.default_rng(3).random(d.num_states)
+    b /= b.sum()
+    expected = {f.name: np.zeros(len(f)) for f in d.features}
+    for s in range(d.num_states):
+        for name, value in d.state_assignment(s).items():
+            expected[name][d.feature(name).index(value)] += b[s]
+    marg = d.feature_marginals(b)
+    assert list(marg) == [f.name for f in d.features]
+    for name, values in expected.items():
+        assert np.allclose(marg[name], values, atol=1e-14, rtol=0), name
+
+
 def test_sparse_transition_build_equals_brute_force_product():
     """transition_matrix expands supports feature by feature; compare with Π_f P(s'_f | s) on every (s, s')."""
     d = load_domain(__import__("pathlib").Path(__file__).resolve().parents[1] / "config" / "pearl.domain.yaml")

@@ -265,8 +265,19 @@ class FactoredDomain:
         b = np.asarray(belief, dtype=float).ravel()
         if b.shape[0] != self.num_states:
             raise ValueError(f"belief has {b.shape[0]} entries, the domain has {self.num_states} states")
-        sv = self.state_values
-        return {f.name: np.bincount(sv[:, i], weights=b, minlength=len(f)) for i, f in enumerate(self.features)}
+        # The states are the features' product in C order (last feature fastest), so the joint
+        # marginal of features 0..i reshaped to [·, |values(i)|] has feature i along its columns:
+        # its column sums are feature i's marginal and its row sums the joint of features 0..i-1.
+        # Two matrix-vector products per feature on ever smaller arrays: ~0.25 ms on the ward's
+        # 233,280 states, where a weighted bincount per feature took ~10 ms (the tracker's
+        # marginals, published every step, sit on the path from an input to the robot's action).
+        out: Dict[str, np.ndarray] = {}
+        joint = b
+        for f, size in zip(reversed(self.features), reversed(self.radix)):
+            table = joint.reshape(-1, size)
+            out[f.name] = np.ones(table.shape[0]) @ table
+            joint = table @ np.ones(size)
+        return {f.name: out[f.name] for f in self.features}
 
     # ---------------------------------------------------------------- structure for the hierarchy
     def _action_index(self, action: Union[str, int]) -> int:
