@@ -76,8 +76,10 @@ def _ci(values):
 
 
 def run_rocksample(name: str, budget: float, episodes: int, steps: int, seed: int, max_minutes: float,
-                   clock: str = "wall", layouts: str = "fixed") -> dict:
-    """``layouts="random"``: every episode on its own layout drawn as DESPOT's code draws one
+                   clock: str = "wall", layouts: str = "fixed", first_episode: int = 0) -> dict:
+    """Episodes ``first_episode … first_episode + episodes - 1`` (each seeded by its index alone, so a
+    run of episodes 65–99 continues one of 0–64 exactly as a single run of 0–99 would).
+    ``layouts="random"``: every episode on its own layout drawn as DESPOT's code draws one
     (:func:`~pearl_pomdp.online.rocksample.random_rocksample`, seeded per episode), its bounds
     rebuilt each time (their set-up is not in the decision times)."""
     settings = DespotSettings(trials=None, time_limit=GUARD_SHARE * budget, clock=clock)
@@ -93,14 +95,14 @@ def run_rocksample(name: str, budget: float, episodes: int, steps: int, seed: in
         bounds = RockSampleBounds(model)
         return model, bounds, time.perf_counter() - t_bounds
 
-    model, bounds, bound_seconds = instance(0)
+    model, bounds, bound_seconds = instance(first_episode)
     planner = Despot(model, bounds, settings)
     returns, times, walls, trials, gaps, nodes = [], [], [], [], [], []
     start = time.perf_counter()
-    for ep in range(episodes):
+    for ep in range(first_episode, first_episode + episodes):
         if (time.perf_counter() - start) / 60.0 > max_minutes:
             break
-        if layouts == "random" and ep > 0:
+        if layouts == "random" and ep > first_episode:
             model, bounds, seconds = instance(ep)
             bound_seconds += seconds
             planner = Despot(model, bounds, settings)
@@ -127,7 +129,8 @@ def run_rocksample(name: str, budget: float, episodes: int, steps: int, seed: in
     mean, half = _ci(returns)
     return {"states": model.num_states, "actions": len(model.actions), "bounds": bounds.description,
             "bound_setup_seconds": round(bound_seconds, 2), "budget_s": budget, "episodes": len(returns),
-            "layouts": layouts, "mean": mean, "ci95": half, "clock": clock, **_timing(times, budget),
+            "first_episode": first_episode, "returns": returns, "layouts": layouts, "mean": mean, "ci95": half,
+            "clock": clock, **_timing(times, budget),
             "wall_decision_s_p99": float(np.percentile(walls, 99)), "mean_trials": float(np.mean(trials)),
             "mean_nodes": float(np.mean(nodes)), "mean_root_gap": float(np.mean(gaps)),
             "wall_minutes": round((time.perf_counter() - start) / 60.0, 2)}
@@ -423,6 +426,8 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--steps", type=int, default=100, help="steps per episode at most (γ^100 = 0.006)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--first-episode", type=int, default=0,
+                    help="RockSample: start at this episode index (continue an earlier run; see --combine)")
     ap.add_argument("--max-minutes", type=float, default=15.0, help="per configuration: no new episode after this")
     ap.add_argument("--offline-time", type=float, default=0.0,
                     help="seconds for the offline point-based policy (0: skip)")
@@ -466,7 +471,7 @@ def main(argv=None) -> int:
                     r = run_tag(budget, args.episodes, args.steps, args.seed, args.max_minutes, args.tag_lower)
                 else:
                     r = run_rocksample(p[2:], budget, args.episodes, args.steps, args.seed, args.max_minutes,
-                                       args.clock, args.layouts)
+                                       args.clock, args.layouts, args.first_episode)
                 out["results"][p][f"{budget:g}s"] = r
                 print(f"{p} {budget:g}s: {r['mean']:.2f} ± {r['ci95']:.2f} over {r['episodes']} episodes, "
                       f"p99 {r['decision_s_p99']:.3f} s", file=sys.stderr, flush=True)

@@ -134,6 +134,14 @@ def test_feature_marginals_equal_sums_over_the_states_with_each_value():
         assert np.allclose(marg[name], values, atol=1e-14, rtol=0), name
 
 
+def test_state_names_spell_each_states_assignment_in_index_order():
+    d = load_domain(__import__("pathlib").Path(__file__).resolve().parents[1] / "config" / "pearl.domain.yaml")
+    names = d.state_names()
+    assert len(names) == d.num_states
+    for s, name in enumerate(names):
+        assert name == ",".join(f"{k}={v}" for k, v in d.state_assignment(s).items()), s
+
+
 def test_sparse_transition_build_equals_brute_force_product():
     """transition_matrix expands supports feature by feature; compare with Π_f P(s'_f | s) on every (s, s')."""
     d = load_domain(__import__("pathlib").Path(__file__).resolve().parents[1] / "config" / "pearl.domain.yaml")

@@ -227,6 +227,19 @@ def test_step_many_is_step_under_every_action():
             assert np.array_equal(got[a], want)
 
 
+def test_step_actions_repeats_and_orders_rows_as_asked():
+    model = _hand_model(np.float32)
+    g = ExplicitModel(model)
+    s = np.array([0, 1, 2, 0, 2], dtype=np.int64)
+    u = np.random.default_rng(1).random((5, 2))
+    got = g.step_actions(s, [1, 0, 1], u)
+    for row, a in enumerate([1, 0, 1]):
+        for part, want in zip(got, g.step(s, a, u)):
+            assert np.array_equal(part[row], want)
+    with pytest.raises(ValueError, match="action 2 is not an action index"):
+        g.step_actions(s, [0, 2], u)
+
+
 def _args(**override):
     args = dict(indptr=np.array([0, 1, 2], dtype=np.int32), indices=np.array([1, 0], dtype=np.int32),
                 data=np.array([1.0, 1.0]), mass=np.array([1.0, 1.0]), ends=np.zeros(1), peaks=np.full(1, 1.0),

@@ -88,16 +88,7 @@ class RootModel:
 
     def step_many(self, states, uniforms):
         """Every root action's ``(next_states, observations, rewards)`` for one node's particles."""
-        resolved = self.resolve(states)
-        done: Dict[int, tuple] = {}
-        nxt, obs, rew = [], [], []
-        for p, _ in resolved:
-            if p not in done:
-                done[p] = self.explicit.step(states, p, uniforms)
-            nxt.append(done[p][0])
-            obs.append(done[p][1])
-            rew.append(done[p][2])
-        return nxt, obs, rew
+        return self.explicit.step_actions(states, [p for p, _ in self.resolve(states)], uniforms)
 
     def step(self, states, action, uniforms):
         p = self.resolve(states)[action][0]

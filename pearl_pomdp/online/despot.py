@@ -257,7 +257,7 @@ class Despot:
             nxt, obs, rew = (np.asarray(x) for x in step_many(node.states, u))
         else:
             nxt, obs, rew = (np.stack(x) for x in zip(*(self.model.step(node.states, a, u) for a in range(A))))
-        rewards = [float(rew[a].sum()) / K for a in range(A)]
+        rewards = (rew.sum(axis=1) / K).tolist()   # (each row summed as rew[a].sum() sums it)
         # Every child of every action at once: one stable sort of the particles by (action, observation)
         # puts each child's particles together, in action order, then observation order, each child's
         # particles in the node's order (as a stable sort per action did); the children's arrays are

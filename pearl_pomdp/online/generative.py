@@ -25,7 +25,7 @@ policy that sees only the history. Which ones are used is explicit:
 """
 from __future__ import annotations
 
-from typing import List, Optional, Protocol, Sequence, Tuple, runtime_checkable
+from typing import Dict, List, Optional, Protocol, Sequence, Tuple, runtime_checkable
 
 import numpy as np
 
@@ -162,14 +162,32 @@ class ExplicitModel:
 
     def step_many(self, states, uniforms):
         """``step`` under every action with the same uniforms: ``[A, N]`` next states, observations, rewards."""
+        return self.step_actions(states, range(len(self._rows)), uniforms)
+
+    def step_actions(self, states, actions, uniforms):
+        """``step`` under each of ``actions`` (indices, repeats allowed) with the same uniforms:
+        ``[len(actions), N]`` next states, observations, rewards. The kernel writes each row in
+        place (no per-action arrays to stack afterwards) and a repeated action is stepped once."""
         s = np.ascontiguousarray(states, dtype=np.int64)
         u = np.ascontiguousarray(uniforms, dtype=float)
-        A, n = len(self._rows), s.shape[0]
-        nxt, obs, rew = np.empty((A, n), dtype=np.int64), np.empty((A, n), dtype=np.int64), np.empty((A, n))
-        for a, ((indptr, indices, data), (mass, ends, peaks)) in enumerate(zip(self._rows, self._tables)):
+        actions = [int(a) for a in actions]
+        n = s.shape[0]
+        nxt = np.empty((len(actions), n), dtype=np.int64)
+        obs = np.empty((len(actions), n), dtype=np.int64)
+        rew = np.empty((len(actions), n))
+        first: Dict[int, int] = {}
+        for row, a in enumerate(actions):
+            if a in first:
+                done = first[a]
+                nxt[row], obs[row], rew[row] = nxt[done], obs[done], rew[done]
+                continue
+            if not 0 <= a < len(self._rows):
+                raise ValueError(f"{self.name}: action {a!r} is not an action index (0..{len(self._rows) - 1})")
+            first[a] = row
+            (indptr, indices, data), (mass, ends, peaks) = self._rows[a], self._tables[a]
             try:
-                _step_kernel.step(indptr, indices, data, mass, ends, peaks, self._O, self.R, a, s, u, nxt[a], obs[a],
-                                  rew[a])
+                _step_kernel.step(indptr, indices, data, mass, ends, peaks, self._O, self.R, a, s, u, nxt[row],
+                                  obs[row], rew[row])
             except ValueError as err:
                 raise ValueError(f"{self.name}: step under action {self.actions[a]!r}: {err}") from None
         return nxt, obs, rew
