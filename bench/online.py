@@ -41,6 +41,7 @@ import platform
 import sys
 import time
 from pathlib import Path
+from typing import Dict, Sequence
 
 import numpy as np
 
@@ -419,6 +420,36 @@ def against_local_despot(results: dict, despot: dict) -> dict:
     return out
 
 
+def pooled(parts: Sequence[dict]) -> dict:
+    """One result from runs of disjoint episodes of the same configuration (``--first-episode``):
+    the mean and the 95 % CI half width of all their episodes, exactly as one run would report them
+    (the pooled sample variance from each part's count, mean and CI; no per-episode returns needed,
+    so runs from before ``returns`` was recorded pool too)."""
+    n = np.array([p["episodes"] for p in parts], dtype=float)
+    means = np.array([p["mean"] for p in parts], dtype=float)
+    # (a part of one episode has no CI, and no spread of its own to add)
+    sds = np.array([p["ci95"] * math.sqrt(k) / 1.96 if k > 1 else 0.0 for p, k in zip(parts, n)])
+    total = float(n.sum())
+    mean = float((n * means).sum() / total)
+    ss = float(((n - 1) * sds ** 2).sum() + (n * (means - mean) ** 2).sum())
+    return {"episodes": int(total), "mean": mean, "ci95": 1.96 * math.sqrt(ss / (total - 1)) / math.sqrt(total),
+            "decision_s_p99_max": max(p["decision_s_p99"] for p in parts),
+            "parts": [{k: p.get(k) for k in ("first_episode", "episodes", "mean", "ci95", "decision_s_p99",
+                                             "mean_trials")} for p in parts]}
+
+
+def combine(paths: Sequence[str]) -> dict:
+    """``--combine``: per problem and budget, :func:`pooled` over the JSON outputs ``paths``."""
+    found: Dict[str, Dict[str, list]] = {}
+    for path in paths:
+        with open(path) as fh:
+            for problem, by_budget in json.load(fh)["results"].items():
+                for budget, r in by_budget.items():
+                    found.setdefault(problem, {}).setdefault(budget, []).append(r)
+    return {"combined": list(paths),
+            "results": {p: {b: pooled(rs) for b, rs in by_b.items()} for p, by_b in found.items()}}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--problems", default=",".join(PROBLEMS), help=f"comma-separated: {', '.join(PROBLEMS)}")
@@ -448,8 +479,13 @@ def main(argv=None) -> int:
                          "tag (the explicit files), --sarsop-time seconds, simulated on the same seeds")
     ap.add_argument("--sarsop-time", type=float, default=60.0, help="SARSOP's --timeout (seconds; default 60)")
     ap.add_argument("--despot-only", action="store_true", help="run only the peers (--despot, --sarsop), not our planner")
+    ap.add_argument("--combine", nargs="+", metavar="JSON",
+                    help="pool earlier outputs of disjoint episodes (see --first-episode) and print the result")
     ap.add_argument("--json", action="store_true", help="(the output is always one JSON object)")
     args = ap.parse_args(argv)
+    if args.combine:
+        print(json.dumps(combine(args.combine), indent=1))
+        return 0
     problems = [p for p in args.problems.split(",") if p]
     unknown = sorted(set(problems) - set(PROBLEMS))
     if unknown:
