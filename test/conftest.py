@@ -2,17 +2,18 @@
 import lzma
 import os
 import shutil
+from pathlib import Path
+
+import pytest
 
 # One BLAS/OpenMP thread per process, for this process and every process a test starts (they
 # inherit the environment). The ROS tests run three or four processes on this machine's two
 # cores; with a thread per core in each, OpenBLAS's spinning workers fight over the cores: the
 # ward launch test's start-up (four processes compiling 233,280 states and solving bounds) took
-# 25 s against 12 s single-threaded. Set before numpy is imported; a caller's setting is kept.
+# 25 s against 12 s single-threaded. Set before any test module imports numpy; a caller's
+# setting is kept.
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
-from pathlib import Path
-
-import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 #: The benchmark .pomdp files with their provenance (test/data/pomdp/README.md).

@@ -146,19 +146,8 @@ class ExplicitModel:
             self._tables.append((mass, ends, peaks))
 
     def step(self, states, action, uniforms):
-        s = np.ascontiguousarray(states, dtype=np.int64)
-        u = np.ascontiguousarray(uniforms, dtype=float)
-        if not 0 <= action < len(self._rows):
-            raise ValueError(f"{self.name}: action {action!r} is not an action index (0..{len(self._rows) - 1})")
-        n = s.shape[0]
-        nxt, obs, rew = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n)
-        indptr, indices, data = self._rows[action]
-        mass, ends, peaks = self._tables[action]
-        try:
-            _step_kernel.step(indptr, indices, data, mass, ends, peaks, self._O, self.R, int(action), s, u, nxt, obs, rew)
-        except ValueError as err:
-            raise ValueError(f"{self.name}: step under action {self.actions[action]!r}: {err}") from None
-        return nxt, obs, rew
+        nxt, obs, rew = self.step_actions(states, [action], uniforms)
+        return nxt[0], obs[0], rew[0]
 
     def step_many(self, states, uniforms):
         """``step`` under every action with the same uniforms: ``[A, N]`` next states, observations, rewards."""
