@@ -24,8 +24,9 @@ simulated on the same episodes' seeds; with ``--sarsop PATH`` also APPL SARSOP's
 (``pomdpsol``, built outside this repository) on the same file for ``--sarsop-time`` seconds,
 read from its ``.policy`` file and simulated on the same seeds.
 
-The published DESPOT/POMCP figures are quoted in ``published`` with their source; a figure we
-could not find is ``null`` with a note (none is invented).
+The published DESPOT/POMCP figures are quoted in ``published`` with their source (RS(15,15) and
+Tag, from a 2025 paper's table that reproduces them); a figure we could not find is ``null`` with a
+note (none is invented), and the ``acceptance`` block judges our mean against each DESPOT figure.
 
     OMP_NUM_THREADS=1 .venv/bin/python bench/online.py --problems rs11_11 --budgets 1.0 --episodes 100 --max-minutes 20
 
@@ -51,17 +52,30 @@ sys.path.insert(0, str(ROOT))
 from pearl_pomdp.online.despot import CLOCKS, Despot, DespotSettings  # noqa: E402
 from pearl_pomdp.online.rocksample import RockSampleBounds, random_rocksample, rocksample  # noqa: E402
 
-#: Published figures (average discounted return ± 95 % CI), with where each is from.
+#: Published figures (average total discounted return ± the table's printed half width), with where
+#: each is from. Per problem, per planner: ``[mean, half]``, or ``None`` where no figure was found here.
 PUBLISHED = {
-    "source": "Ye, Somani, Hsu & Lee, DESPOT: Online POMDP Planning with Regularization, JAIR 58 (2017) "
-              "231-266, the table comparing online algorithms at 1 s per step (arXiv:1609.03250); "
-              "Somani, Ye, Hsu & Lee, NIPS 2013, Table 1",
-    "note": "the table's numbers could not be read from the sources reachable here (the search tools return "
-            "only the first page of the paper's stored copies); they are left null rather than quoted from "
-            "memory: fill them in from the paper before judging the acceptance criterion",
-    # (mean, 95 % CI half width) per planner, once read from the paper; None: not available here.
-    "figures": {p: {"DESPOT": None, "POMCP": None} for p in ("rs7_8", "rs11_11", "rs15_15", "tag")},
+    "source": "Dam, Stenger, Schneider, Pajarinen, D'Eramo & Maillard, Monte-Carlo Tree Search with "
+              "Uncertainty Propagation via Optimal Transport, ICML 2025 (PMLR 267), Table 2 'Average total "
+              "discounted reward', whose POMCP and DESPOT rows are stated to be 'taken from (Somani et al., "
+              "2013)' (Somani, Ye, Hsu & Lee, DESPOT: Online POMDP Planning with Regularization, NIPS 2013; "
+              "AR-/AB-DESPOT are the variants of its journal version, Ye et al., JAIR 58, 2017)",
+    "note": "quoted from the citing paper's table, not read from the DESPOT papers themselves (those were not "
+            "reachable here). The table gives RS(15,15), Tag, LaserTag and Pocman only: RockSample(7,8) and "
+            "(11,11) have no figure here (null, none invented). The citing table does not say whether ± is a "
+            "standard error or a 95 % CI half width, nor the time per step; the verdict takes the printed ± as "
+            "the half width, the narrower reading, so a pass holds under either. Our (15,15) plays DESPOT's "
+            "random layouts (--layouts random), as its code draws them for a size it has no layout for",
+    "figures": {
+        "rs7_8": {"AR-DESPOT": None, "AB-DESPOT": None, "POMCP": None},
+        "rs11_11": {"AR-DESPOT": None, "AB-DESPOT": None, "POMCP": None},
+        "rs15_15": {"AR-DESPOT": [18.57, 0.30], "AB-DESPOT": [18.18, 0.30], "POMCP": [12.23, 0.32]},
+        "tag": {"AR-DESPOT": [-6.26, 0.28], "AB-DESPOT": [-6.57, 0.26], "POMCP": [-7.14, 0.28]},
+    },
 }
+
+#: The DESPOT rows of :data:`PUBLISHED` a result is judged against (every one given must be met).
+DESPOT_VARIANTS = ("AR-DESPOT", "AB-DESPOT")
 
 PROBLEMS = ("rs7_8", "rs11_11", "rs15_15", "tag")
 
@@ -150,8 +164,9 @@ def _tag_model():
     return load_model(str(ROOT / "test/data/pomdp/TagAvoid.pomdp"))
 
 
-def _simulate_explicit(model, decide, episodes, steps, seed, max_minutes, record=None):
-    """Episodes on an explicit model: the world samples with ExplicitModel, the belief is exact."""
+def _simulate_explicit(model, decide, episodes, steps, seed, max_minutes, record=None, now=time.perf_counter):
+    """Episodes on an explicit model: the world samples with ExplicitModel, the belief is exact.
+    ``now``: the clock each decision's time is read on (:data:`CLOCKS`)."""
     from pearl_pomdp.belief import BeliefFilter
     from pearl_pomdp.online.beliefs import sample_belief
     from pearl_pomdp.online.generative import ExplicitModel
@@ -169,9 +184,9 @@ def _simulate_explicit(model, decide, episodes, steps, seed, max_minutes, record
         b = filt.initial()
         total = 0.0
         for t in range(steps):
-            t0 = time.perf_counter()
+            t0 = now()
             a = decide(b)
-            times.append(time.perf_counter() - t0)
+            times.append(now() - t0)
             nxt, obs, rew = world_model.step(np.array([state]), a, world.random((1, 2)))
             total += model.discount ** t * float(rew[0])
             b = filt.update(b, a, int(obs[0]))
@@ -201,10 +216,11 @@ def absorbing_states(model) -> np.ndarray:
         done = closed
 
 
-def run_tag(budget, episodes, steps, seed, max_minutes, lower: str = "blind") -> dict:
+def run_tag(budget, episodes, steps, seed, max_minutes, lower: str = "blind", clock: str = "wall") -> dict:
     """Tag through OnlineDecider. ``lower``: ``"blind"`` (blind-policy vectors) or
     ``"pointbased:SECONDS"`` (the α-vectors of the project's point-based solver run that long offline:
-    the issue's "point-based lower" — online search on top of an offline policy)."""
+    the issue's "point-based lower" — online search on top of an offline policy). ``clock``: what the
+    budget and the decision times measure, as for RockSample."""
     from pearl_pomdp.online.decider import OnlineDecider
     from pearl_pomdp.online.generative import alpha_bounds
 
@@ -219,8 +235,8 @@ def run_tag(budget, episodes, steps, seed, max_minutes, lower: str = "blind") ->
         bounds = alpha_bounds(model, lower_alphas=offline.policy.alphas)
     else:
         raise SystemExit(f"bench/online.py: error: --tag-lower: {lower!r}: expected blind or pointbased:SECONDS")
-    decider = OnlineDecider(model, bounds=bounds, settings=DespotSettings(trials=None, time_limit=GUARD_SHARE * budget),
-                            seed=seed)
+    settings = DespotSettings(trials=None, time_limit=GUARD_SHARE * budget, clock=clock)
+    decider = OnlineDecider(model, bounds=bounds, settings=settings, seed=seed)
     bound_seconds = time.perf_counter() - t_bounds
     trials, gaps, nodes = [], [], []
 
@@ -232,10 +248,11 @@ def run_tag(budget, episodes, steps, seed, max_minutes, lower: str = "blind") ->
         nodes.append(d.search["nodes"])
         return d.action
 
-    returns, times, minutes = _simulate_explicit(model, decide, episodes, steps, seed, max_minutes)
+    returns, times, minutes = _simulate_explicit(model, decide, episodes, steps, seed, max_minutes,
+                                                 now=CLOCKS[clock])
     mean, half = _ci(returns)
     return {"states": model.num_states, "actions": model.num_actions, "bounds": decider.bounds.description,
-            "lower_bound_source": lower,
+            "lower_bound_source": lower, "clock": clock, "returns": returns,
             "bound_setup_seconds": round(bound_seconds, 2), "budget_s": budget, "episodes": len(returns),
             "mean": mean, "ci95": half, **_timing(times, budget), "mean_trials": float(np.mean(trials)),
             "mean_nodes": float(np.mean(nodes)), "mean_root_gap": float(np.mean(gaps)),
@@ -387,22 +404,28 @@ def run_despot_peer(binary: str, problem: str, budget: float, runs: int, steps: 
     return out
 
 
+def versus_published(problem: str, result: dict) -> dict:
+    """Our mean against every published DESPOT figure for ``problem``: within its interval or above
+    it (``mean >= figure - half``). ``within_or_above`` is ``None`` (not judged, never a pass) when no
+    figure is published, else whether all of them are met."""
+    figures = {v: PUBLISHED["figures"].get(problem, {}).get(v) for v in DESPOT_VARIANTS}
+    given = {v: f for v, f in figures.items() if f is not None}
+    per_variant = {v: bool(result["mean"] >= f[0] - f[1]) for v, f in given.items()}
+    return {"ours": [result["mean"], result["ci95"]], "episodes": result["episodes"], "published": figures,
+            "per_variant": per_variant, "within_or_above": all(per_variant.values()) if given else None}
+
+
 def acceptance(results: dict) -> dict:
     """Issue 24's criterion where this run has the numbers: RockSample(11,11) and (15,15) at 1 s
     within the published DESPOT figure's 95 % CI or above it, and every p99 within budget + 10 %.
-    A published figure that is ``null`` gives the verdict ``None`` (not judged), never a pass."""
+    A published figure that is ``null`` gives the verdict ``None`` (not judged), never a pass.
+    Tag at 1 s is compared the same way for information (not part of the criterion)."""
     out: dict = {"p99_within_budget_plus_10pct": {f"{p} {b}": r["p99_within_budget_plus_10pct"]
                                                   for p, rs in results.items() for b, r in rs.items()}}
-    for p in ("rs11_11", "rs15_15"):
+    for p in ("rs11_11", "rs15_15", "tag"):
         r = results.get(p, {}).get("1s")
-        if r is None:
-            continue
-        published = PUBLISHED["figures"][p]["DESPOT"]
-        verdict = None
-        if published is not None:
-            verdict = bool(r["mean"] >= published[0] - published[1])   # our mean in their CI or above
-        out[f"{p} 1s vs DESPOT"] = {"ours": [r["mean"], r["ci95"]], "published": published,
-                                    "within_or_above": verdict}
+        if r is not None:
+            out[f"{p} 1s vs DESPOT"] = versus_published(p, r)
     return out
 
 
@@ -432,8 +455,11 @@ def pooled(parts: Sequence[dict]) -> dict:
     total = float(n.sum())
     mean = float((n * means).sum() / total)
     ss = float(((n - 1) * sds ** 2).sum() + (n * (means - mean) ** 2).sum())
+    p99 = max(p["decision_s_p99"] for p in parts)
+    budgets = {p["budget_s"] for p in parts if "budget_s" in p}
+    within = bool(p99 <= 1.1 * budgets.pop()) if len(budgets) == 1 else None
     return {"episodes": int(total), "mean": mean, "ci95": 1.96 * math.sqrt(ss / (total - 1)) / math.sqrt(total),
-            "decision_s_p99_max": max(p["decision_s_p99"] for p in parts),
+            "decision_s_p99_max": p99, "p99_within_budget_plus_10pct": within,
             "parts": [{k: p.get(k) for k in ("first_episode", "episodes", "mean", "ci95", "decision_s_p99",
                                              "mean_trials")} for p in parts]}
 
@@ -446,8 +472,9 @@ def combine(paths: Sequence[str]) -> dict:
             for problem, by_budget in json.load(fh)["results"].items():
                 for budget, r in by_budget.items():
                     found.setdefault(problem, {}).setdefault(budget, []).append(r)
-    return {"combined": list(paths),
-            "results": {p: {b: pooled(rs) for b, rs in by_b.items()} for p, by_b in found.items()}}
+    results = {p: {b: pooled(rs) for b, rs in by_b.items()} for p, by_b in found.items()}
+    return {"combined": list(paths), "results": results, "acceptance": acceptance(results),
+            "published": PUBLISHED}
 
 
 def main(argv=None) -> int:
@@ -465,7 +492,7 @@ def main(argv=None) -> int:
     ap.add_argument("--tag-lower", default="blind",
                     help="Tag's lower bound: blind, or pointbased:SECONDS (offline α-vectors)")
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="wall",
-                    help="what a budget measures (RockSample): wall (a robot's wait) or process (CPU seconds, "
+                    help="what a budget measures: wall (a robot's wait) or process (CPU seconds, "
                          "as DESPOT's own code counts them: the same work per decision whatever the load)")
     ap.add_argument("--layouts", choices=["fixed", "random"], default="fixed",
                     help="RockSample rocks: the problem's fixed layout, or one drawn per episode as DESPOT's "
@@ -504,7 +531,8 @@ def main(argv=None) -> int:
         for budget in budgets:
             if not args.despot_only:
                 if p == "tag":
-                    r = run_tag(budget, args.episodes, args.steps, args.seed, args.max_minutes, args.tag_lower)
+                    r = run_tag(budget, args.episodes, args.steps, args.seed, args.max_minutes, args.tag_lower,
+                                args.clock)
                 else:
                     r = run_rocksample(p[2:], budget, args.episodes, args.steps, args.seed, args.max_minutes,
                                        args.clock, args.layouts, args.first_episode)

@@ -48,3 +48,40 @@ def test_combine_reads_the_outputs_and_pools_per_problem_and_budget(online_bench
     assert got["episodes"] == 40
     assert got["mean"] == pytest.approx(float(np.mean(returns)), rel=1e-12)
     assert [p["first_episode"] for p in got["parts"]] == [0, 25]
+
+
+def _result(mean, episodes=100, p99=0.99):
+    return {"mean": mean, "ci95": 1.3, "episodes": episodes, "decision_s_p99": p99, "budget_s": 1.0,
+            "p99_within_budget_plus_10pct": p99 <= 1.1}
+
+
+def test_verdict_against_the_published_despot_figures(online_bench):
+    ar, ab = (online_bench.PUBLISHED["figures"]["rs15_15"][v] for v in ("AR-DESPOT", "AB-DESPOT"))
+    assert ar[0] - ar[1] > ab[0] - ab[1]          # AR-DESPOT's interval is the one that binds
+    inside = online_bench.versus_published("rs15_15", _result(ar[0] - ar[1] + 0.01))
+    assert inside["within_or_above"] is True and inside["per_variant"] == {"AR-DESPOT": True, "AB-DESPOT": True}
+    # Between the two intervals: AB-DESPOT's met, AR-DESPOT's not — the verdict needs both.
+    between = online_bench.versus_published("rs15_15", _result(ar[0] - ar[1] - 0.01))
+    assert between["per_variant"] == {"AR-DESPOT": False, "AB-DESPOT": True}
+    assert between["within_or_above"] is False
+    # No figure found: not judged, never a pass.
+    none = online_bench.versus_published("rs11_11", _result(100.0))
+    assert none["within_or_above"] is None and none["per_variant"] == {}
+
+
+def test_combine_judges_the_pooled_result(online_bench, tmp_path):
+    paths = []
+    for i, (mean, first, n, p99) in enumerate([(20.0, 0, 50, 1.02), (17.0, 50, 50, 1.08)]):
+        part = dict(_result(mean, n, p99), first_episode=first, mean_trials=10.0)
+        path = tmp_path / f"part{i}.json"
+        path.write_text(json.dumps({"results": {"rs15_15": {"1s": part}}}))
+        paths.append(str(path))
+    out = online_bench.combine(paths)
+    verdict = out["acceptance"]["rs15_15 1s vs DESPOT"]
+    assert verdict["ours"][0] == pytest.approx(18.5) and verdict["episodes"] == 100
+    assert verdict["within_or_above"] is True            # 18.5 ≥ 18.57 − 0.30
+    assert out["acceptance"]["p99_within_budget_plus_10pct"] == {"rs15_15 1s": True}   # 1.08 ≤ 1.1
+    slow = dict(_result(18.5, 10, 1.2), first_episode=100, mean_trials=10.0)
+    (tmp_path / "slow.json").write_text(json.dumps({"results": {"rs15_15": {"1s": slow}}}))
+    out = online_bench.combine([*paths, str(tmp_path / "slow.json")])
+    assert out["acceptance"]["p99_within_budget_plus_10pct"] == {"rs15_15 1s": False}
