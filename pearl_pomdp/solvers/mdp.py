@@ -129,19 +129,31 @@ def _evaluate(P, r: np.ndarray, g: float, v0: np.ndarray, tol: float, max_iterat
     return v
 
 
+def _rounding_margin(v: np.ndarray, Tv: np.ndarray) -> float:
+    """Slack for the floating-point error of recomputing ``T v`` after the certificate's shift.
+
+    The shift ``δ/(1-γ)`` makes the worst state's inequality hold with equality in exact
+    arithmetic, so the rounding of ``R + γ T (v ± c)`` (a few ulps of the values' size) could
+    break it by ~1e-16; a margin of 16 ulps of that size, spread by ``1/(1-γ)`` like ``δ``, keeps
+    it exact at a cost of ~1e-13 of the values.
+    """
+    scale = max(float(np.max(np.abs(v))), float(np.max(np.abs(Tv))), 1.0)
+    return 16.0 * float(np.finfo(float).eps) * scale
+
+
 def _certify_upper(V: np.ndarray, HV: np.ndarray, g: float) -> np.ndarray:
     """``V`` raised so that ``H V <= V``, hence ``V >= V*`` (H monotone, a γ-contraction).
 
     With ``δ = max(HV - V)``, ``H(V + c) = HV + γc <= V + δ + γc <= V + c`` once ``c >= δ/(1-γ)``.
     """
     delta = float(np.max(HV - V))
-    return V + max(delta, 0.0) / (1.0 - g)
+    return V + (max(delta, 0.0) + _rounding_margin(V, HV)) / (1.0 - g)
 
 
 def _certify_lower(v: np.ndarray, Tv: np.ndarray, g: float) -> np.ndarray:
     """``v`` lowered so that ``T_π v >= v``, hence ``v <= v_π`` (the mirror of :func:`_certify_upper`)."""
     delta = float(np.max(v - Tv))
-    return v - max(delta, 0.0) / (1.0 - g)
+    return v - (max(delta, 0.0) + _rounding_margin(v, Tv)) / (1.0 - g)
 
 
 def _backup(mats: List, R: np.ndarray, g: float, V: np.ndarray, Q: np.ndarray) -> np.ndarray:
