@@ -49,6 +49,8 @@ def main() -> int:
     ap.add_argument("--trials", type=int, default=5, help="trials per decision of --policy online")
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--startup-timeout", type=float, default=900.0)
+    ap.add_argument("--fastdds-profile", type=Path, default=REPO / "config" / "fastdds_profile.xml",
+                    help="Fast DDS profile of every process (default: the one pearl launch gives its nodes)")
     args = ap.parse_args()
 
     import rclpy
@@ -62,7 +64,8 @@ def main() -> int:
     domain_id = 1 + (os.getpid() * 7) % 101
     log_dir = Path(tempfile.mkdtemp(prefix="pearl_ward_launch_"))
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_profile.xml"), ROS_LOG_DIR=str(log_dir))
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(args.fastdds_profile.resolve()), ROS_LOG_DIR=str(log_dir))
+    os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = env["FASTRTPS_DEFAULT_PROFILES_FILE"]   # this process's robot too
     env.pop("ROS_LOCALHOST_ONLY", None)
     err = open(log_dir / "launch.err", "wb")
     policy_arg = f"policy:=online:{args.trials}" if args.policy == "online" else "policy:="
