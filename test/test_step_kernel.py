@@ -95,7 +95,8 @@ def _random_case(seed, index_types, data_type, o_type):
         data = rng.random(int(lengths.sum())) * (rng.random(int(lengths.sum())) < 0.7)
         if rng.random() < 0.3:      # entries a little below zero, as a model within Pomdp's tolerance may hold
             data[rng.random(data.shape[0]) < 0.1] = -1e-7
-        scale = rng.choice([1.0, 3e-9, 7.0, 1e-320]) / max(data.max(initial=0), 1e-300)
+        # by the largest magnitude: a row of only the small negatives must not be blown up to ±inf
+        scale = rng.choice([1.0, 3e-9, 7.0, 1e-320]) / max(np.abs(data).max(initial=0), 1e-300)
         T.append((indptr, indices, (data * scale).astype(data_type)))
     O = (rng.random((A, S, Z)) * (rng.random((A, S, Z)) < 0.6)).astype(o_type)
     O[..., int(rng.integers(Z))] += o_type(0.01)          # every observation row has mass
