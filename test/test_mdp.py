@@ -156,6 +156,14 @@ def _value_iteration_reference(T, R, g, sweeps):
     return V
 
 
+def _assert_certificates_hold(T, R, g, V, alphas):
+    """``HV <= V`` and ``R_a + γ T_a α_a >= α_a``, as the floating-point comparisons a user would write:
+    then V is an upper bound and each α_a a lower bound whatever the solver did."""
+    assert (np.max(R + g * np.stack([Ta @ V for Ta in T], axis=1), axis=1) <= V).all()
+    for a, Ta in enumerate(T):
+        assert (R[:, a] + g * (Ta @ alphas[a]) >= alphas[a]).all()
+
+
 def test_mdp_values_on_a_sparse_model_match_plain_value_iteration_and_are_certified():
     model, T, R = random_sparse_model()
     g = model.discount
@@ -163,13 +171,10 @@ def test_mdp_values_on_a_sparse_model_match_plain_value_iteration_and_are_certif
     # 1500 sweeps at γ = 0.97 leave an error below 0.97**1500 · 1e3 ≈ 1e-17: exact to rounding.
     reference = _value_iteration_reference(T, R, g, 1500)
     assert np.abs(V - reference).max() < 1e-6
-    # The certificate: HV <= V holds exactly, so V is an upper bound whatever the solver did.
-    HV = np.max(R + g * np.stack([Ta @ V for Ta in T], axis=1), axis=1)
-    assert (HV <= V).all()
     assert (Q.max(axis=1) <= V).all()
     alphas = mdp.blind_lower_bound(model)
+    _assert_certificates_hold(T, R, g, V, alphas)
     for a, Ta in enumerate(T):
-        assert (R[:, a] + g * (Ta @ alphas[a]) >= alphas[a]).all()
         assert np.abs(alphas[a] - _value_iteration_reference([Ta], R[:, [a]], g, 1500)).max() < 1e-6
 
 
@@ -205,12 +210,8 @@ def test_stalled_krylov_falls_back_to_sweeps(monkeypatch):
 @pytest.mark.parametrize("seed", range(8))
 def test_certificates_hold_exactly_in_floating_point(seed):
     # The shift δ/(1-γ) leaves the worst state's inequality an equality in exact arithmetic; its
-    # recomputation can round ~1e-16 the wrong way (the sparse test model, seed 5 at S=3000, did under numpy 2.4.6 / scipy 1.17.1). The
-    # certificates must hold as the floating-point comparison a user would write.
+    # recomputation can round ~1e-16 the wrong way (the sparse test model, seed 5 at S=3000, did
+    # under numpy 2.4.6 / scipy 1.17.1).
     model, T, R = random_sparse_model(S=400, seed=seed)
-    g = model.discount
     V, _ = mdp.mdp_value_iteration(model)
-    assert (np.max(R + g * np.stack([Ta @ V for Ta in T], axis=1), axis=1) <= V).all()
-    alphas = mdp.blind_lower_bound(model)
-    for a, Ta in enumerate(T):
-        assert (R[:, a] + g * (Ta @ alphas[a]) >= alphas[a]).all()
+    _assert_certificates_hold(T, R, model.discount, V, mdp.blind_lower_bound(model))
