@@ -43,7 +43,7 @@ CLUSTER = ["distributed>=2024.1"]
 #: headers needed to build). Each is the only implementation of its loops, for every model size:
 #: the exact solver's prune (with its own warm-started simplex), the point-based solver's
 #: per-belief inner loops and its whole search (engine="c"), and the online planner's step of an
-#: explicit model's particles (ExplicitModel.step).
+#: explicit model's particles (ExplicitModel.step) and DESPOT's expansion (grouping, α-vector bounds).
 #: Every build shows any warning (test/test_kernel_build.py fails CI on one: -Werror there,
 #: not here, so a user's newer compiler with new warnings still installs).
 WARNINGS = ["-Wall", "-Wextra"]

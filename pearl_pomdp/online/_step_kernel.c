@@ -412,6 +412,244 @@ done:
     return ret;
 }
 
+/* ---------------------------------------------------------------- DESPOT's expansion
+ *
+ * group_outcomes: the children of one expanded DESPOT node. Its N particles were stepped under
+ * each of the A actions (next_states and observations, [A, N]); a child is an (action,
+ * observation) pair and holds the particles that produced it, in the node's order. The children
+ * come out in action order, then ascending observation, and their particles (next state and
+ * scenario) are written to consecutive slices of states_out and scenarios_out: child g holds
+ * positions group_start_out[g] .. group_start_out[g + 1] - 1. This is the stable sort of the
+ * particles by (action, observation) that the search did with numpy before (a counting sort per
+ * action when its observations span at most 65,536 values, a stable merge sort otherwise).
+ */
+
+/* Stable merge sort of idx[0..n) by key[idx[i]] (tmp: n scratch entries). */
+static void merge_sort_by_key(int64_t *idx, int64_t *tmp, Py_ssize_t n, const int64_t *key) {
+    for (Py_ssize_t width = 1; width < n; width *= 2) {
+        for (Py_ssize_t lo = 0; lo < n; lo += 2 * width) {
+            Py_ssize_t mid = lo + width < n ? lo + width : n, hi = lo + 2 * width < n ? lo + 2 * width : n;
+            Py_ssize_t i = lo, j = mid, k = lo;
+            while (i < mid && j < hi) tmp[k++] = key[idx[j]] < key[idx[i]] ? idx[j++] : idx[i++];
+            while (i < mid) tmp[k++] = idx[i++];
+            while (j < hi) tmp[k++] = idx[j++];
+        }
+        memcpy(idx, tmp, (size_t)n * sizeof *idx);
+    }
+}
+
+#define COUNTING_SPAN 65536
+
+static PyObject *group_outcomes(PyObject *Py_UNUSED(self), PyObject *args) {
+    PyObject *o_nx, *o_ob, *o_sc, *o_so, *o_co, *o_ga, *o_go, *o_gs;
+    if (!PyArg_ParseTuple(args, "OOOOOOOO:group_outcomes", &o_nx, &o_ob, &o_sc, &o_so, &o_co, &o_ga, &o_go, &o_gs))
+        return NULL;
+    Py_buffer nx = {0}, ob = {0}, sc = {0}, so = {0}, co = {0}, ga = {0}, go = {0}, gs = {0};
+    Py_buffer *all[] = {&nx, &ob, &sc, &so, &co, &ga, &go, &gs};
+    PyObject *ret = NULL;
+    const unsigned I64 = 1u << K_I64;
+    if (take("group_outcomes", o_nx, &nx, 0, 2, I64, "next_states") < 0
+        || take("group_outcomes", o_ob, &ob, 0, 2, I64, "observations") < 0
+        || take("group_outcomes", o_sc, &sc, 0, 1, I64, "scenarios") < 0
+        || take("group_outcomes", o_so, &so, 1, 1, I64, "states_out") < 0
+        || take("group_outcomes", o_co, &co, 1, 1, I64, "scenarios_out") < 0
+        || take("group_outcomes", o_ga, &ga, 1, 1, I64, "group_action_out") < 0
+        || take("group_outcomes", o_go, &go, 1, 1, I64, "group_obs_out") < 0
+        || take("group_outcomes", o_gs, &gs, 1, 1, I64, "group_start_out") < 0)
+        goto done;
+    Py_ssize_t A = nx.shape[0], N = nx.shape[1];
+    if (ob.shape[0] != A || ob.shape[1] != N) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.group_outcomes: observations have shape (%zd, %zd), next_states "
+                     "(%zd, %zd): expected the same [A, N]", ob.shape[0], ob.shape[1], A, N);
+        goto done;
+    }
+    if (A < 1 || N < 1) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.group_outcomes: next_states has shape (%zd, %zd): expected [A, N], "
+                     "neither empty", A, N);
+        goto done;
+    }
+    if (sc.shape[0] != N) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.group_outcomes: scenarios has %zd entries, expected N = %zd (the "
+                     "particles)", sc.shape[0], N);
+        goto done;
+    }
+    if (so.shape[0] != A * N || co.shape[0] != A * N || ga.shape[0] != A * N || go.shape[0] != A * N
+        || gs.shape[0] != A * N + 1) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.group_outcomes: states_out, scenarios_out, group_action_out, "
+                     "group_obs_out, group_start_out have %zd, %zd, %zd, %zd, %zd entries: expected A*N = %zd "
+                     "(group_start_out: A*N + 1)", so.shape[0], co.shape[0], ga.shape[0], go.shape[0], gs.shape[0],
+                     A * N);
+        goto done;
+    }
+    {
+        const int64_t *nxt = (const int64_t *)nx.buf, *obs = (const int64_t *)ob.buf, *scen = (const int64_t *)sc.buf;
+        int64_t *st_out = (int64_t *)so.buf, *sc_out = (int64_t *)co.buf, *g_act = (int64_t *)ga.buf;
+        int64_t *g_obs = (int64_t *)go.buf, *g_start = (int64_t *)gs.buf;
+        /* One sort for every action: counting over the observations' whole range when it spans at
+         * most COUNTING_SPAN values (the scratch is then its counts), else a stable merge sort of the
+         * indices (scratch: 2 N). The span is computed in unsigned: observations may be any int64. */
+        int64_t lo = obs[0], hi = obs[0];
+        for (Py_ssize_t i = 1; i < A * N; i++) {
+            if (obs[i] < lo) lo = obs[i];
+            if (obs[i] > hi) hi = obs[i];
+        }
+        uint64_t span = (uint64_t)hi - (uint64_t)lo;
+        int counting = span < COUNTING_SPAN;
+        Py_ssize_t V = counting ? (Py_ssize_t)span + 1 : 0;
+        int64_t *work = (int64_t *)PyMem_RawMalloc((size_t)(counting ? V + 1 : 2 * N) * sizeof(int64_t));
+        if (work == NULL) {
+            PyErr_NoMemory();
+            goto done;
+        }
+        Py_ssize_t G = 0, pos = 0;
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t a = 0; a < A; a++) {
+            const int64_t *row = obs + a * N, *nrow = nxt + a * N;
+            Py_ssize_t first = pos;
+            if (counting) {
+                int64_t *count = work;
+                memset(count, 0, (size_t)(V + 1) * sizeof *count);
+                for (Py_ssize_t i = 0; i < N; i++) count[row[i] - lo + 1]++;
+                for (Py_ssize_t v = 0; v < V; v++) {       /* count[v] becomes the start of value v */
+                    if (count[v + 1] > 0) {
+                        g_act[G] = a;
+                        g_obs[G] = lo + v;
+                        g_start[G] = first + count[v];
+                        G++;
+                    }
+                    count[v + 1] += count[v];
+                }
+                for (Py_ssize_t i = 0; i < N; i++) {
+                    int64_t at = first + count[row[i] - lo]++;
+                    st_out[at] = nrow[i];
+                    sc_out[at] = scen[i];
+                }
+            } else {
+                int64_t *idx = work, *tmp = work + N;
+                for (Py_ssize_t i = 0; i < N; i++) idx[i] = i;
+                merge_sort_by_key(idx, tmp, N, row);
+                for (Py_ssize_t i = 0; i < N; i++) {
+                    int64_t j = idx[i];
+                    if (i == 0 || row[j] != row[idx[i - 1]]) {
+                        g_act[G] = a;
+                        g_obs[G] = row[j];
+                        g_start[G] = first + i;
+                        G++;
+                    }
+                    st_out[first + i] = nrow[j];
+                    sc_out[first + i] = scen[j];
+                }
+            }
+            pos += N;
+        }
+        g_start[G] = pos;
+        Py_END_ALLOW_THREADS
+        PyMem_RawFree(work);
+        ret = PyLong_FromSsize_t(G);
+    }
+done:
+    for (size_t j = 0; j < sizeof all / sizeof all[0]; j++)
+        if (all[j]->obj != NULL) PyBuffer_Release(all[j]);
+    return ret;
+}
+
+/* group_max_means: the value of α-vector bounds at each of G particle sets. The sets are
+ * consecutive slices of states (set g: positions starts[g] .. starts[g + 1] - 1, none empty);
+ * table is [S, C] (a column per vector: an upper bound's Q or a lower bound's α-vectors); out[g] is
+ * the largest over the columns of the column's mean over the set's particles. Each column sum is
+ * numpy's np.add.reduceat(table[states], starts[:-1], axis=0) to the bit: the set's first row,
+ * then the rest added as numpy's pairwise summation adds (blocks of at most 128 with eight
+ * running sums), so the bounds are those the search computed with numpy before; then the sum over
+ * the set's size, and the first largest (NaN if any mean is NaN, as ndarray.max). */
+static double pairwise_gather(const double *table, Py_ssize_t C, Py_ssize_t c, const int64_t *s, Py_ssize_t n) {
+    if (n < 8) {
+        double res = 0.;
+        for (Py_ssize_t i = 0; i < n; i++) res += table[s[i] * C + c];
+        return res;
+    }
+    if (n <= 128) {
+        double r[8], res;
+        Py_ssize_t i;
+        for (int j = 0; j < 8; j++) r[j] = table[s[j] * C + c];
+        for (i = 8; i < n - (n % 8); i += 8)
+            for (int j = 0; j < 8; j++) r[j] += table[s[i + j] * C + c];
+        res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        for (; i < n; i++) res += table[s[i] * C + c];
+        return res;
+    }
+    Py_ssize_t n2 = n / 2;
+    n2 -= n2 % 8;
+    return pairwise_gather(table, C, c, s, n2) + pairwise_gather(table, C, c, s + n2, n - n2);
+}
+
+static PyObject *group_max_means(PyObject *Py_UNUSED(self), PyObject *args) {
+    PyObject *o_st, *o_gs, *o_tb, *o_out;
+    if (!PyArg_ParseTuple(args, "OOOO:group_max_means", &o_st, &o_gs, &o_tb, &o_out)) return NULL;
+    Py_buffer st = {0}, gs = {0}, tb = {0}, out = {0};
+    Py_buffer *all[] = {&st, &gs, &tb, &out};
+    PyObject *ret = NULL;
+    const unsigned I64 = 1u << K_I64, F64 = 1u << K_F64;
+    if (take("group_max_means", o_st, &st, 0, 1, I64, "states") < 0
+        || take("group_max_means", o_gs, &gs, 0, 1, I64, "starts") < 0
+        || take("group_max_means", o_tb, &tb, 0, 2, F64, "table") < 0
+        || take("group_max_means", o_out, &out, 1, 1, F64, "out") < 0)
+        goto done;
+    Py_ssize_t M = st.shape[0], G = gs.shape[0] - 1, S = tb.shape[0], C = tb.shape[1];
+    if (G < 0 || out.shape[0] != G) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.group_max_means: out has %zd entries, starts %zd: expected one fewer",
+                     out.shape[0], gs.shape[0]);
+        goto done;
+    }
+    if (C < 1) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.group_max_means: table has shape (%zd, %zd): expected [S, C] with "
+                     "C >= 1", S, C);
+        goto done;
+    }
+    {
+        const int64_t *s = (const int64_t *)st.buf, *g = (const int64_t *)gs.buf;
+        const double *t = (const double *)tb.buf;
+        double *o = (double *)out.buf;
+        Py_ssize_t bad_set = -1, bad_at = -1;
+        Py_BEGIN_ALLOW_THREADS
+        if (G > 0 && (g[0] != 0 || g[G] != M)) bad_set = G;
+        for (Py_ssize_t k = 0; bad_set < 0 && k < G; k++)
+            if (g[k + 1] <= g[k]) bad_set = k;
+        for (Py_ssize_t i = 0; bad_set < 0 && i < M; i++)
+            if (s[i] < 0 || s[i] >= S) { bad_at = i; break; }
+        for (Py_ssize_t k = 0; bad_set < 0 && bad_at < 0 && k < G; k++) {
+            const int64_t *p = s + g[k];
+            Py_ssize_t n = (Py_ssize_t)(g[k + 1] - g[k]);
+            double best = 0.0;
+            for (Py_ssize_t c = 0; c < C; c++) {
+                double sum = n > 1 ? t[p[0] * C + c] + pairwise_gather(t, C, c, p + 1, n - 1) : t[p[0] * C + c];
+                double mean = sum / (double)n;
+                if (c == 0 || mean > best || isnan(mean)) best = mean;
+                if (isnan(best)) break;
+            }
+            o[k] = best;
+        }
+        Py_END_ALLOW_THREADS
+        if (bad_set == G)
+            PyErr_Format(PyExc_ValueError, "_step_kernel.group_max_means: starts must run from 0 to len(states) = %zd, "
+                         "got %lld .. %lld", M, (long long)g[0], (long long)g[G]);
+        else if (bad_set >= 0)
+            PyErr_Format(PyExc_ValueError, "_step_kernel.group_max_means: set %zd is empty or reversed (starts[%zd] = %lld, "
+                         "starts[%zd] = %lld)", bad_set, bad_set, (long long)g[bad_set], bad_set + 1,
+                         (long long)g[bad_set + 1]);
+        else if (bad_at >= 0)
+            PyErr_Format(PyExc_ValueError, "_step_kernel.group_max_means: states[%zd] = %lld is not a row of table (0..%zd)",
+                         bad_at, (long long)s[bad_at], S - 1);
+        else {
+            ret = Py_None;
+            Py_INCREF(ret);
+        }
+    }
+done:
+    for (size_t j = 0; j < sizeof all / sizeof all[0]; j++)
+        if (all[j]->obj != NULL) PyBuffer_Release(all[j]);
+    return ret;
+}
+
 static PyMethodDef methods[] = {
     {"row_tables", row_tables, METH_VARARGS,
      "row_tables(indptr, data, mass, ends, peaks) -> None\n\n"
@@ -426,11 +664,25 @@ static PyMethodDef methods[] = {
      "ends, peaks), O [A, S, Z] float32 or\n"
      "float64, R [S, A] float64, states [N] int64, uniforms [N, >=2] float64 in [0, 1); writes next_out [N]\n"
      "int64, obs_out [N] int64, reward_out [N] float64. Raises ValueError on bad input."},
+    {"group_outcomes", group_outcomes, METH_VARARGS,
+     "group_outcomes(next_states, observations, scenarios, states_out, scenarios_out, group_action_out,\n"
+     "               group_obs_out, group_start_out) -> int\n\n"
+     "A DESPOT expansion's children (see the comment above the function): next_states, observations [A, N]\n"
+     "int64, scenarios [N] int64; writes the particles grouped by (action, observation), stable, to states_out\n"
+     "and scenarios_out [A*N], and per child its action, observation and first position to group_action_out,\n"
+     "group_obs_out [A*N] and group_start_out [A*N + 1] (the last start: A*N). Returns the number of children.\n"
+     "Raises ValueError on bad input."},
+    {"group_max_means", group_max_means, METH_VARARGS,
+     "group_max_means(states, starts, table, out) -> None\n\n"
+     "out[g] = max over the columns of table [S, C] float64 of the column's mean over states[starts[g]:starts[g+1]]\n"
+     "(states int64, starts [G+1] int64 from 0 to len(states), no set empty; sums as numpy's add.reduceat).\n"
+     "Raises ValueError on bad input."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_step_kernel",
-                                    "ExplicitModel.step of the online planner in C (inverse-CDF draws per row).", -1,
+                                    "The online planner's loops in C: ExplicitModel.step (inverse-CDF draws per row), DESPOT's grouping of an "
+                                    "expansion's outcomes and the alpha-vector bounds of the groups.", -1,
                                     methods, NULL, NULL, NULL, NULL};
 
 PyMODINIT_FUNC PyInit__step_kernel(void) {

@@ -1,4 +1,5 @@
-"""Type stub of the C kernel ``_step_kernel.c`` (:meth:`pearl_pomdp.online.generative.ExplicitModel.step`).
+"""Type stub of the C kernel ``_step_kernel.c``: :meth:`pearl_pomdp.online.generative.ExplicitModel.step`, and
+DESPOT's expansion (``group_outcomes``; ``group_max_means``, :meth:`~pearl_pomdp.online.generative.AlphaBounds.grouped`).
 
 Arrays are C-contiguous numpy arrays, read in place: ``indptr``/``indices`` of ``T[action]`` as CSR
 (int32 or int64), ``data`` and ``O[A, S, Z]`` float32 or float64, and T[action]'s tables from
@@ -18,3 +19,14 @@ def row_tables(indptr: np.ndarray, data: np.ndarray, mass: np.ndarray, ends: np.
 def step(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, mass: np.ndarray, ends: np.ndarray,
          peaks: np.ndarray, O: np.ndarray, R: np.ndarray, action: int, states: np.ndarray, uniforms: np.ndarray,
          next_out: np.ndarray, obs_out: np.ndarray, reward_out: np.ndarray) -> None: ...
+
+def group_outcomes(next_states: np.ndarray, observations: np.ndarray, scenarios: np.ndarray, states_out: np.ndarray,
+                   scenarios_out: np.ndarray, group_action_out: np.ndarray, group_obs_out: np.ndarray,
+                   group_start_out: np.ndarray) -> int:
+    """An expansion's children: ``[A, N]`` outcomes grouped by (action, observation), stable; returns their count G
+    (``group_start_out[:G + 1]`` bounds them in ``states_out``/``scenarios_out``). All int64."""
+    ...
+
+def group_max_means(states: np.ndarray, starts: np.ndarray, table: np.ndarray, out: np.ndarray) -> None:
+    """``out[g]`` = the largest column mean of ``table[S, C]`` (float64) over ``states[starts[g]:starts[g + 1]]``."""
+    ...

@@ -26,6 +26,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
+from pearl_pomdp.online import _step_kernel
 from pearl_pomdp.online.generative import Bounds, GenerativeModel
 
 __all__ = ["DespotSettings", "Despot", "SearchResult", "CLOCKS"]
@@ -85,22 +86,54 @@ class _Belief:
 
     __slots__ = ("states", "scenarios", "depth", "lower", "upper", "lower0", "upper0", "actions", "terminal")
 
-    def __init__(self, states, scenarios, depth):
+    def __init__(self, states, scenarios, depth, lower0=0.0, upper0=0.0, terminal=False):
         self.states = states
         self.scenarios = scenarios
         self.depth = depth
         self.actions: Optional[List["_Action"]] = None
-        self.lower = self.upper = self.lower0 = self.upper0 = 0.0
-        self.terminal = False
+        self.lower = self.lower0 = lower0
+        self.upper = self.upper0 = upper0
+        self.terminal = terminal
 
 
 class _Action:
-    __slots__ = ("reward", "children", "lower", "upper")
+    """An expanded node's action: its reward (a total over the root's scenarios / K) and its
+    observation children.
 
-    def __init__(self, reward: float, children: Dict[int, _Belief]):
+    The children are columns of lists, in ascending observation: their observation, current bounds,
+    scenario count, particles' slice of the expansion's grouped arrays and whether they are terminal.
+    A child becomes a :class:`_Belief` (``kids[index]``) only when a trial walks into it: most never
+    are (on the ward ~1 of an expansion's ~28 children), and creating each would cost more than the
+    search does with it. A created child's bounds are copied back into ``lowers``/``uppers`` as the
+    trial backs up, so the lists always hold every child's current bounds.
+    """
+
+    __slots__ = ("reward", "observations", "lowers", "uppers", "counts", "starts", "terminal", "states", "scenarios",
+                 "kids", "lower", "upper")
+
+    def __init__(self, reward: float, observations: List[int], lowers: List[float], uppers: List[float],
+                 counts: List[int], starts: List[int], terminal: List[bool], states: np.ndarray, scenarios: np.ndarray):
         self.reward = reward
-        self.children = children
+        self.observations = observations
+        self.lowers = lowers
+        self.uppers = uppers
+        self.counts = counts
+        self.starts = starts
+        self.terminal = terminal
+        self.states = states
+        self.scenarios = scenarios
+        self.kids: Dict[int, _Belief] = {}
         self.lower = self.upper = 0.0
+
+    def child(self, index: int, depth: int) -> _Belief:
+        """Child ``index`` as a node (created at its first visit with its initial bounds)."""
+        kid = self.kids.get(index)
+        if kid is None:
+            begin, end = self.starts[index], self.starts[index] + self.counts[index]
+            kid = _Belief(self.states[begin:end], self.scenarios[begin:end], depth, self.lowers[index],
+                          self.uppers[index], self.terminal[index])
+            self.kids[index] = kid
+        return kid
 
 
 @dataclass
@@ -187,7 +220,9 @@ class Despot:
         self._expansions = 0
         self._deadline = None if st.time_limit is None else t0 + st.time_limit
         self._slowest = 0.0      # the longest expansion of this search (the guard's look-ahead)
-        root = self._leaf(np.asarray(root_states, dtype=np.int64), np.arange(K), 0)
+        states = np.ascontiguousarray(root_states, dtype=np.int64)
+        lowers, uppers, terminal = self._initial_bounds(states, np.array([0, K], dtype=np.int64))
+        root = _Belief(states, np.arange(K, dtype=np.int64), 0, lowers[0], uppers[0], terminal[0])
         trials, stop = 0, "trials"
         while True:
             self._trial(root)
@@ -208,44 +243,45 @@ class Despot:
                             now() - t0, stop, [(an.lower, an.upper) for an in root.actions],
                             self.tree_top(root))
 
-    def _leaf(self, states, scenarios, depth) -> _Belief:
-        return self._leaves([(states, scenarios)], depth)[0]
+    def _initial_bounds(self, states: np.ndarray, starts: np.ndarray):
+        """The initial bounds of the particle sets ``states[starts[g]:starts[g + 1]]`` (``starts`` from 0
+        to ``len(states)``, no set empty): lists ``(lower0, upper0, terminal)``.
 
-    def _leaves(self, groups, depth) -> List[_Belief]:
-        """New belief nodes for ``groups`` (``(states, scenarios)`` each) with their initial bounds.
-
-        Bounds that offer ``many`` (one vectorised pass over every group's particles) get all the
-        groups at once: the search spends most of its time here, and a call per new node costs more
-        than its arithmetic. Otherwise ``both`` or ``lower``/``upper`` per group, in order.
+        A set's bounds are those of its live (non-terminal) particles, times their share of the root's
+        K scenarios (node values are totals over the root's scenarios / K); a set with none alive is
+        terminal, bounds 0. The bounds come in one call for every set when they offer it: ``grouped``
+        (the sets as one array), else ``many`` (a list of arrays), else ``both`` or ``lower``/``upper``
+        per set, in order. The search spends much of its time here: one call beats a call per node.
         """
-        nodes = [_Belief(states, scenarios, depth) for states, scenarios in groups]
-        sizes = [node.states.shape[0] for node in nodes]
-        terminal = self.model.is_terminal(np.concatenate([node.states for node in nodes]))
-        ends = np.cumsum(sizes)
-        live_counts = np.add.reduceat(~terminal, ends - sizes)
-        live_states = []
-        live_nodes = []
-        for node, n_live, end, size in zip(nodes, live_counts, ends, sizes):
-            if n_live == 0:
-                node.terminal = True   # all bounds 0
-                continue
-            live_states.append(node.states if n_live == size else node.states[~terminal[end - size:end]])
-            live_nodes.append(node)
-        if not live_nodes:
-            return nodes
-        many = getattr(self.bounds, "many", None)
-        if many is not None:
-            lowers, uppers = many(live_states, self._rng)
+        K = self._K
+        alive = ~np.asarray(self.model.is_terminal(states), dtype=bool)
+        if alive.all():
+            live_states, live = states, np.diff(starts)
         else:
-            both = getattr(self.bounds, "both", None)   # one pass for both bounds, when the bounds offer it
-            pairs = [both(s, self._rng) if both is not None else (self.bounds.lower(s, self._rng), self.bounds.upper(s))
-                     for s in live_states]
-            lowers, uppers = [lo for lo, _ in pairs], [up for _, up in pairs]
-        for node, s_live, lower, upper in zip(live_nodes, live_states, lowers, uppers):
-            share = s_live.shape[0] / self._K
-            node.lower0 = node.lower = share * float(lower)
-            node.upper0 = node.upper = max(share * float(upper), node.lower)
-        return nodes
+            live = np.add.reduceat(alive.astype(np.int64), starts[:-1])
+            live_states = states[alive]
+        nonempty = live > 0
+        live_starts = np.concatenate(([0], np.cumsum(live[nonempty]))).astype(np.int64)
+        lower = np.zeros(live.shape[0])
+        upper = np.zeros(live.shape[0])
+        if live_states.shape[0] > 0:
+            grouped = getattr(self.bounds, "grouped", None)
+            many = getattr(self.bounds, "many", None)
+            if grouped is not None:
+                lowers, uppers = grouped(live_states, live_starts, self._rng)
+            else:
+                sets = np.split(live_states, live_starts[1:-1])
+                if many is not None:
+                    lowers, uppers = many(sets, self._rng)
+                else:
+                    both = getattr(self.bounds, "both", None)   # one pass for both bounds, when the bounds offer it
+                    pairs = [both(p, self._rng) if both is not None else (self.bounds.lower(p, self._rng), self.bounds.upper(p))
+                             for p in sets]
+                    lowers, uppers = [lo for lo, _ in pairs], [up for _, up in pairs]
+            share = live[nonempty] / K
+            lower[nonempty] = share * np.asarray(lowers, dtype=float)
+            upper[nonempty] = np.maximum(share * np.asarray(uppers, dtype=float), lower[nonempty])
+        return lower.tolist(), upper.tolist(), (~nonempty).tolist()
 
     def _expand(self, node: _Belief) -> None:
         self._expansions += 1
@@ -258,29 +294,29 @@ class Despot:
         else:
             nxt, obs, rew = (np.stack(x) for x in zip(*(self.model.step(node.states, a, u) for a in range(A))))
         rewards = (rew.sum(axis=1) / K).tolist()   # (each row summed as rew[a].sum() sums it)
-        # Every child of every action at once: one stable sort of the particles by (action, observation)
-        # puts each child's particles together, in action order, then observation order, each child's
-        # particles in the node's order (as a stable sort per action did); the children's arrays are
-        # slices of the sorted arrays.
+        # Every child of every action at once (the C kernel): the particles grouped by (action,
+        # observation), in action order, then ascending observation, each child's particles in the
+        # node's order; the children's particles are slices of the grouped arrays.
         N = node.states.shape[0]
-        low = int(obs.min())
-        span = int(obs.max()) - low + 1
-        keys = ((obs - low) + span * np.arange(A)[:, None]).ravel()
-        order = np.argsort(keys, kind="stable")
-        sorted_keys = keys[order]
-        starts = np.flatnonzero(np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1])))
-        ends = np.append(starts[1:], keys.shape[0])
-        states = nxt.ravel()[order]
-        scenarios = node.scenarios[order % N]
-        groups = [(states[i:j], scenarios[i:j]) for i, j in zip(starts.tolist(), ends.tolist())]
-        children = self._leaves(groups, node.depth + 1)
-        self._nodes += len(children)
-        by_action: List[Dict[int, _Belief]] = [{} for _ in rewards]
-        for key, child in zip(sorted_keys[starts].tolist(), children):
-            by_action[key // span][key % span + low] = child
+        states = np.empty(A * N, dtype=np.int64)
+        scenarios = np.empty(A * N, dtype=np.int64)
+        g_action = np.empty(A * N, dtype=np.int64)
+        g_obs = np.empty(A * N, dtype=np.int64)
+        g_start = np.empty(A * N + 1, dtype=np.int64)
+        G = _step_kernel.group_outcomes(np.ascontiguousarray(nxt, dtype=np.int64), np.ascontiguousarray(obs, dtype=np.int64),
+                                        node.scenarios, states, scenarios, g_action, g_obs, g_start)
+        starts = g_start[:G + 1]
+        lowers, uppers, terminal = self._initial_bounds(states, starts)
+        self._nodes += G
+        counts = np.diff(starts).tolist()
+        firsts = starts[:-1].tolist()
+        observations = g_obs[:G].tolist()
+        cut = np.searchsorted(g_action[:G], np.arange(A + 1)).tolist()   # action a's children: cut[a]..cut[a+1]-1
         actions = []
-        for reward, kids in zip(rewards, by_action):
-            an = _Action(reward, kids)
+        for a, reward in enumerate(rewards):
+            i, j = cut[a], cut[a + 1]
+            an = _Action(reward, observations[i:j], lowers[i:j], uppers[i:j], counts[i:j], firsts[i:j], terminal[i:j],
+                         states, scenarios)
             self._backup_action(an, node.depth)
             actions.append(an)
         node.actions = actions
@@ -289,8 +325,8 @@ class Despot:
     def _backup_action(self, an: _Action, depth: int) -> None:
         g = self.model.discount
         penalty = self.settings.regularization / self._powers[min(depth, len(self._powers) - 1)]
-        an.lower = an.reward - penalty + g * sum(c.lower for c in an.children.values())
-        an.upper = an.reward - penalty + g * sum(c.upper for c in an.children.values())
+        an.lower = an.reward - penalty + g * sum(an.lowers)
+        an.upper = an.reward - penalty + g * sum(an.uppers)
 
     def _backup_belief(self, node: _Belief) -> None:
         assert node.actions is not None
@@ -301,9 +337,18 @@ class Despot:
         return (self._powers[node.depth] * (node.upper - node.lower)
                 - self.settings.xi * node.scenarios.shape[0] / self._K * root_gap)
 
+    def _best_child(self, an: _Action, depth: int, root_gap: float):
+        """``(index, excess)`` of the child of ``an`` (at ``depth``) with the largest excess uncertainty
+        (the first of equals), computed as :meth:`_excess` computes a node's."""
+        weight, xi, K = self._powers[depth], self.settings.xi, self._K
+        excess = [weight * (up - lo) - xi * n / K * root_gap for lo, up, n in zip(an.lowers, an.uppers, an.counts)]
+        best = max(range(len(excess)), key=excess.__getitem__)
+        return best, excess[best]
+
     def _trial(self, root: _Belief) -> None:
         path = [root]
         taken: List[Optional[_Action]] = []   # per node of the path: the action the trial went down
+        went: List[int] = []                  # ... and the child it went to
         node = root
         root_gap = root.upper - root.lower
         while node.depth < self.settings.depth and not node.terminal:
@@ -318,19 +363,24 @@ class Despot:
                 break
             assert node.actions is not None
             best = max(node.actions, key=lambda an: an.upper)
-            child = max(best.children.values(), key=lambda c: self._excess(c, root_gap))
-            if self._excess(child, root_gap) <= 0:
+            index, excess = self._best_child(best, node.depth + 1, root_gap)
+            if excess <= 0:
                 break
             taken.append(best)
-            node = child
+            went.append(index)
+            node = best.child(index, node.depth + 1)
             path.append(node)
         taken.append(None)
+        went.append(-1)
         # Only the nodes of the path changed, so at each only the action the trial took needs its
-        # bounds backed up again (the others' children are as they were at their last backup: the
-        # same sums); then the node's own bounds over all its actions.
-        for n, an in zip(reversed(path), reversed(taken)):
+        # bounds backed up again, after its child's new bounds are copied into its lists (the others'
+        # children are as they were at their last backup: the same sums); then the node's own bounds
+        # over all its actions.
+        for n, an, index in zip(reversed(path), reversed(taken), reversed(went)):
             if n.actions is not None:
                 if an is not None:
+                    kid = an.kids[index]
+                    an.lowers[index], an.uppers[index] = kid.lower, kid.upper
                     self._backup_action(an, n.depth)
                 self._backup_belief(n)
 
@@ -347,7 +397,7 @@ class Despot:
             an = root.actions[a]
             out["actions"].append({
                 "action": self.model.actions[a], "lower": an.lower, "upper": an.upper, "reward": an.reward,
-                "children": [{"observation": int(o), "share": c.scenarios.shape[0] / K, "lower": c.lower,
-                              "upper": c.upper, "expanded": c.actions is not None}
-                             for o, c in sorted(an.children.items())]})
+                "children": [{"observation": int(o), "share": n / K, "lower": lo, "upper": up,
+                              "expanded": i in an.kids and an.kids[i].actions is not None}
+                             for i, (o, n, lo, up) in enumerate(zip(an.observations, an.counts, an.lowers, an.uppers))]})
         return out
