@@ -1,5 +1,6 @@
 """``pearl launch`` process handling, with stand-in node executables (no ROS): output prefixing,
-SIGINT forwarding, and the SIGINT → SIGTERM → SIGKILL escalation for a node that will not stop."""
+SIGINT forwarding, the SIGINT → SIGTERM → SIGKILL escalation for a node that will not stop, and the
+shared memory a node stopped by a signal leaves, removed once the nodes have exited."""
 from __future__ import annotations
 
 import os
@@ -8,6 +9,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+import pytest
 
 PEARL = str(Path(sys.executable).parent / "pearl")
 
@@ -31,6 +34,20 @@ while True:
     time.sleep(0.05)
 """
 
+#: Makes a Fast DDS-like segment in /dev/shm (the file and its ``_el`` lock, held) and, stopped by
+#: SIGINT, ends without removing it: what a package node's participant leaves (run_node's os._exit).
+LEAKY = """#!{python} -S
+import fcntl, os, secrets, signal, sys, time
+name = "/dev/shm/fastrtps_" + secrets.token_hex(8)
+open(name, "wb").write(bytes(4096))
+lock = os.open(name + "_el", os.O_CREAT | os.O_RDONLY, 0o644)
+fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+signal.signal(signal.SIGINT, lambda *_: os._exit(0))
+print("args segment", name, flush=True)
+while True:
+    time.sleep(0.05)
+"""
+
 LAUNCH = """<launch>
   <node pkg="fake" exec="polite_node" name="polite" output="screen"><param name="rate" value="2.0"/></node>
   <node pkg="fake" exec="{second}" name="second" output="screen"/>
@@ -40,7 +57,7 @@ LAUNCH = """<launch>
 def _setup(tmp_path, second):
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
-    for name, body in (("polite_node", POLITE), ("stubborn_node", STUBBORN)):
+    for name, body in (("polite_node", POLITE), ("stubborn_node", STUBBORN), ("leaky_node", LEAKY)):
         path = bin_dir / name
         path.write_text(body.format(python=sys.executable))
         path.chmod(0o755)
@@ -114,3 +131,17 @@ def test_nodes_die_with_a_killed_launcher(tmp_path):
     while time.monotonic() < deadline and any(_alive(p) for p in pids):
         time.sleep(0.05)
     assert not any(_alive(p) for p in pids)
+
+
+@pytest.mark.skipif(not Path("/dev/shm").is_dir(), reason="no /dev/shm here")
+def test_the_launch_removes_the_shared_memory_its_stopped_nodes_left(tmp_path):
+    launch, env = _setup(tmp_path, "leaky_node")
+    proc, seen = _start_and_wait(launch, env)
+    assert len(seen) == 2, seen
+    segment = Path([line for line in seen if line.startswith("[second] ")][0].split("segment ", 1)[1].strip())
+    assert segment.exists() and Path(f"{segment}_el").exists()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    assert not segment.exists() and not Path(f"{segment}_el").exists()
+    assert "shared-memory file(s) of stopped participants" in err

@@ -11,6 +11,10 @@ gets SIGINT; after ``--shutdown-timeout`` seconds the ones left get SIGTERM, the
 to stop and every node exited cleanly; otherwise the first failing node's exit code
 (or 1), with one line naming it.
 
+Once its nodes have exited, the launcher removes the Fast DDS shared-memory files that belong to
+no living process (:mod:`pearl_pomdp.shared_memory`: a node stopped by a signal leaves its
+segment), with one line saying how much.
+
 Children get ``FASTRTPS_DEFAULT_PROFILES_FILE`` = the package's ``config/fastdds_profile.xml``
 (fast discovery) unless it is already set, and die with the launcher: on Linux each child
 has ``PR_SET_PDEATHSIG`` = SIGTERM, so when the launcher is killed (even SIGKILL) every node
@@ -41,6 +45,7 @@ from typing import IO, List, Optional
 
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.launch_xml import LaunchNode, package_share_dir, parse_cli_arguments, parse_launch_file
+from pearl_pomdp.shared_memory import DEFAULT_DIRECTORY, remove_dead_files
 
 COMMAND = "launch"
 HELP = "start the nodes of a ROS 2 XML launch file as processes (where `ros2 launch` is absent)"
@@ -250,6 +255,7 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(s, handler)
     for child in children:
         child.finish()
+    _remove_dead_shared_memory()
     bad = [(c.label, code) for c, code in zip(children, codes) if code != 0]
     if failed is not None and failed.proc.returncode != 0:
         code = failed.proc.returncode
@@ -258,6 +264,15 @@ def run(args: argparse.Namespace) -> int:
         _say("not clean: " + ", ".join(f"{label} exited with {code}" for label, code in bad))
         return 1
     return 0
+
+
+def _remove_dead_shared_memory() -> None:
+    """Remove the Fast DDS shared memory that stopped nodes left (a node stopped by a signal leaves its
+    participant's segment: :mod:`pearl_pomdp.shared_memory`), and say how much."""
+    cleanup = remove_dead_files()
+    if cleanup.removed:
+        _say(f"removed {len(cleanup.removed)} shared-memory file(s) of stopped participants "
+             f"({cleanup.removed_bytes / 2 ** 20:.1f} MB in {DEFAULT_DIRECTORY})")
 
 
 def _stop_all(children: List[_Child], timeout: float) -> List[int]:
