@@ -13,6 +13,7 @@ with ``policy:=`` empty instead, so the policy node plans ``config/ward.hierarch
 
     python bench/ward_launch.py [--trials 5] [--steps 100]
     python bench/ward_launch.py --policy hierarchical --steps 100
+    python bench/ward_launch.py --trials 20 --shm-segment 8388608     # the belief over shared memory
 """
 from __future__ import annotations
 
@@ -42,6 +43,26 @@ def _stats(values):
             "max": round(float(v.max()), 1), "n": int(v.size)}
 
 
+def _with_shared_memory(profile: Path, segment: int, out: Path) -> Path:
+    """``profile`` with a shared-memory transport of ``segment`` bytes and UDPv4 as its participant's only
+    transports (Fast DDS: ``userTransports``, ``useBuiltinTransports`` false), written to ``out``."""
+    text = profile.read_text()
+    opening = '<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">'
+    if opening not in text or "<rtps>" not in text:
+        raise SystemExit(f"--shm-segment: {profile} has no <profiles> element or no <rtps> to add transports to")
+    text = text.replace(opening, opening + f"""
+  <transport_descriptors>
+    <transport_descriptor><transport_id>bench_shm</transport_id><type>SHM</type>
+      <segment_size>{int(segment)}</segment_size></transport_descriptor>
+    <transport_descriptor><transport_id>bench_udp</transport_id><type>UDPv4</type></transport_descriptor>
+  </transport_descriptors>""", 1)
+    text = text.replace("<rtps>", """<rtps>
+      <userTransports><transport_id>bench_shm</transport_id><transport_id>bench_udp</transport_id></userTransports>
+      <useBuiltinTransports>false</useBuiltinTransports>""", 1)
+    out.write_text(text)
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--policy", choices=("online", "hierarchical"), default="online",
@@ -51,6 +72,10 @@ def main() -> int:
     ap.add_argument("--startup-timeout", type=float, default=900.0)
     ap.add_argument("--fastdds-profile", type=Path, default=REPO / "config" / "fastdds_profile.xml",
                     help="Fast DDS profile of every process (default: the one pearl launch gives its nodes)")
+    ap.add_argument("--shm-segment", type=int, default=None, metavar="BYTES",
+                    help="run under --fastdds-profile with a shared-memory transport of this segment size added "
+                         "(and UDP), written to the run's log directory: big enough for the 1.87 MB belief, the belief "
+                         "goes through shared memory instead of UDP")
     args = ap.parse_args()
 
     import rclpy
@@ -63,6 +88,8 @@ def main() -> int:
 
     domain_id = 1 + (os.getpid() * 7) % 101
     log_dir = Path(tempfile.mkdtemp(prefix="pearl_ward_launch_"))
+    if args.shm_segment is not None:
+        args.fastdds_profile = _with_shared_memory(args.fastdds_profile, args.shm_segment, log_dir / "fastdds_shm.xml")
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                FASTRTPS_DEFAULT_PROFILES_FILE=str(args.fastdds_profile.resolve()), ROS_LOG_DIR=str(log_dir))
     os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = env["FASTRTPS_DEFAULT_PROFILES_FILE"]   # this process's robot too
@@ -132,7 +159,8 @@ def main() -> int:
                   "policy_node_decision_ms": _stats([x for x in node_latency if x is not None]),
                   "publish_to_marginals_ms": _stats(tracker) if tracker else None,
                   "marginals_to_action_ms": _stats(rest) if rest else None,
-                  "target_p99_ms": 100.0, "load_avg_1min": os.getloadavg()[0], "cpus": os.cpu_count()}
+                  "target_p99_ms": 100.0, "load_avg_1min": os.getloadavg()[0], "cpus": os.cpu_count(),
+                  "fastdds_profile": str(args.fastdds_profile), "shm_segment_bytes": args.shm_segment}
         report["meets_target"] = report["observation_to_action_ms"]["p99"] <= 100.0
     finally:
         launch.send_signal(signal.SIGINT)
