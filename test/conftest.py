@@ -43,3 +43,11 @@ def benchmarks_dir(tmp_path_factory) -> Path:
 # ROS fixtures (ros_context, pearl_policy) live in test/ros_helpers.py; registered here once so
 # the session-scoped planned Pearl policy is shared by every test module.
 from ros_helpers import pearl_policy, ros_context  # noqa: E402,F401
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Leave no Fast DDS shared memory behind: the tests stop node processes by signal, and each such
+    stop leaves its participant's segment in /dev/shm (pearl_pomdp.shared_memory; ~150 MB a run)."""
+    from pearl_pomdp.shared_memory import remove_dead_files
+
+    remove_dead_files()
