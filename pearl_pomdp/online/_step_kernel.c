@@ -103,6 +103,12 @@ static int take(const char *fn, PyObject *obj, Py_buffer *b, int writable, int n
     return kind;
 }
 
+/* Releases the buffers of `all` that take() filled (the others have obj NULL). */
+static void release_all(Py_buffer **all, size_t n) {
+    for (size_t j = 0; j < n; j++)
+        if (all[j]->obj != NULL) PyBuffer_Release(all[j]);
+}
+
 static inline int64_t ix_at(const void *p, int kind, Py_ssize_t k) {
     return kind == K_I64 ? ((const int64_t *)p)[k] : (int64_t)((const int32_t *)p)[k];
 }
@@ -343,8 +349,7 @@ static PyObject *step(PyObject *Py_UNUSED(self), PyObject *args) {
         }
     }
 done:
-    for (size_t j = 0; j < sizeof all / sizeof all[0]; j++)
-        if (all[j]->obj != NULL) PyBuffer_Release(all[j]);
+    release_all(all, sizeof all / sizeof all[0]);
     return ret;
 }
 
@@ -407,8 +412,7 @@ static PyObject *row_tables(PyObject *Py_UNUSED(self), PyObject *args) {
         }
     }
 done:
-    for (size_t j = 0; j < sizeof all / sizeof all[0]; j++)
-        if (all[j]->obj != NULL) PyBuffer_Release(all[j]);
+    release_all(all, sizeof all / sizeof all[0]);
     return ret;
 }
 
@@ -548,8 +552,7 @@ static PyObject *group_outcomes(PyObject *Py_UNUSED(self), PyObject *args) {
         ret = PyLong_FromSsize_t(G);
     }
 done:
-    for (size_t j = 0; j < sizeof all / sizeof all[0]; j++)
-        if (all[j]->obj != NULL) PyBuffer_Release(all[j]);
+    release_all(all, sizeof all / sizeof all[0]);
     return ret;
 }
 
@@ -645,8 +648,7 @@ static PyObject *group_max_means(PyObject *Py_UNUSED(self), PyObject *args) {
         }
     }
 done:
-    for (size_t j = 0; j < sizeof all / sizeof all[0]; j++)
-        if (all[j]->obj != NULL) PyBuffer_Release(all[j]);
+    release_all(all, sizeof all / sizeof all[0]);
     return ret;
 }
 
