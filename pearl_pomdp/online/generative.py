@@ -64,7 +64,13 @@ class GenerativeModel(Protocol):
 
 
 class Bounds(Protocol):
-    """Value bounds of a particle set (equal weights; none of them terminal)."""
+    """Value bounds of a particle set (equal weights; none of them terminal).
+
+    Optional, for speed (the search uses the first one offered, in this order, and builds the same
+    tree): ``grouped(states, starts, rng)`` — ``(lowers, uppers)`` of the sets
+    ``states[starts[g]:starts[g + 1]]`` in one call; ``many(groups, rng)`` — the same for a list of
+    arrays; ``both(states, rng)`` — ``(lower, upper)`` of one set in one pass.
+    """
 
     #: One line saying which bounds these are (reports and ``--explain`` show it).
     description: str
