@@ -82,38 +82,44 @@ class DespotSettings:
 
 
 class _Belief:
-    """A DESPOT belief node: the scenarios that reach it and their states."""
+    """A DESPOT belief node: the scenarios that reach it and their states; ``expansion`` once expanded."""
 
-    __slots__ = ("states", "scenarios", "depth", "lower", "upper", "lower0", "upper0", "actions", "terminal")
+    __slots__ = ("states", "scenarios", "depth", "lower", "upper", "lower0", "upper0", "expansion", "terminal")
 
     def __init__(self, states, scenarios, depth, lower0=0.0, upper0=0.0, terminal=False):
         self.states = states
         self.scenarios = scenarios
         self.depth = depth
-        self.actions: Optional[List["_Action"]] = None
+        self.expansion: Optional["_Expansion"] = None
         self.lower = self.lower0 = lower0
         self.upper = self.upper0 = upper0
         self.terminal = terminal
 
 
-class _Action:
-    """An expanded node's action: its reward (a total over the root's scenarios / K) and its
-    observation children.
+class _Expansion:
+    """An expanded node's actions and their observation children, as columns of lists.
 
-    The children are columns of lists, in ascending observation: their observation, current bounds,
-    scenario count, particles' slice of the expansion's grouped arrays and whether they are terminal.
-    A child becomes a :class:`_Belief` (``kids[index]``) only when a trial walks into it: most never
-    are (on the ward ~1 of an expansion's ~28 children), and creating each would cost more than the
-    search does with it. A created child's bounds are copied back into ``lowers``/``uppers`` as the
-    trial backs up, so the lists always hold every child's current bounds.
+    Per action ``a``: ``rewards[a]`` (a total over the root's scenarios / K) and its current bounds
+    ``lower[a]``, ``upper[a]``; its children are positions ``cut[a] .. cut[a + 1] - 1`` of the child
+    columns, in ascending observation: ``observations``, current bounds ``lowers``/``uppers``,
+    scenario ``counts``, first position ``starts`` of their particles in the grouped arrays
+    ``states``/``scenarios``, and ``terminal``. A child becomes a :class:`_Belief` (``kids[position]``)
+    only when a trial walks into it: most never do (on the ward ~1 of an expansion's ~28 children),
+    and an object per child, or per action, would cost more than the search does with them. A
+    created child's bounds are copied back into ``lowers``/``uppers`` as the trial backs up, so the
+    columns always hold every child's current bounds.
     """
 
-    __slots__ = ("reward", "observations", "lowers", "uppers", "counts", "starts", "terminal", "states", "scenarios",
-                 "kids", "lower", "upper")
+    __slots__ = ("rewards", "lower", "upper", "cut", "observations", "lowers", "uppers", "counts", "starts", "terminal",
+                 "states", "scenarios", "kids")
 
-    def __init__(self, reward: float, observations: List[int], lowers: List[float], uppers: List[float],
-                 counts: List[int], starts: List[int], terminal: List[bool], states: np.ndarray, scenarios: np.ndarray):
-        self.reward = reward
+    def __init__(self, rewards: List[float], cut: List[int], observations: List[int], lowers: List[float],
+                 uppers: List[float], counts: List[int], starts: List[int], terminal: List[bool], states: np.ndarray,
+                 scenarios: np.ndarray):
+        self.rewards = rewards
+        self.lower: List[float] = [0.0] * len(rewards)
+        self.upper: List[float] = [0.0] * len(rewards)
+        self.cut = cut
         self.observations = observations
         self.lowers = lowers
         self.uppers = uppers
@@ -123,16 +129,15 @@ class _Action:
         self.states = states
         self.scenarios = scenarios
         self.kids: Dict[int, _Belief] = {}
-        self.lower = self.upper = 0.0
 
-    def child(self, index: int, depth: int) -> _Belief:
-        """Child ``index`` as a node (created at its first visit with its initial bounds)."""
-        kid = self.kids.get(index)
+    def child(self, position: int, depth: int) -> _Belief:
+        """Child ``position`` as a node (created at its first visit with its initial bounds)."""
+        kid = self.kids.get(position)
         if kid is None:
-            begin, end = self.starts[index], self.starts[index] + self.counts[index]
-            kid = _Belief(self.states[begin:end], self.scenarios[begin:end], depth, self.lowers[index],
-                          self.uppers[index], self.terminal[index])
-            self.kids[index] = kid
+            begin, end = self.starts[position], self.starts[position] + self.counts[position]
+            kid = _Belief(self.states[begin:end], self.scenarios[begin:end], depth, self.lowers[position],
+                          self.uppers[position], self.terminal[position])
+            self.kids[position] = kid
         return kid
 
 
@@ -236,12 +241,11 @@ class Despot:
             if self._deadline is not None and now() + self._slowest >= self._deadline:
                 stop = "time_limit"
                 break
-        assert root.actions is not None   # the first trial expands the root
-        lows = [an.lower for an in root.actions]
-        action = int(np.argmax(lows))
+        top = root.expansion
+        assert top is not None   # the first trial expands the root
+        action = int(np.argmax(top.lower))
         return SearchResult(action, root.lower, root.upper, trials, self._nodes, self._expansions,
-                            now() - t0, stop, [(an.lower, an.upper) for an in root.actions],
-                            self.tree_top(root))
+                            now() - t0, stop, list(zip(top.lower, top.upper)), self.tree_top(root))
 
     def _initial_bounds(self, states: np.ndarray, starts: np.ndarray):
         """The initial bounds of the particle sets ``states[starts[g]:starts[g + 1]]`` (``starts`` from 0
@@ -312,47 +316,47 @@ class Despot:
         firsts = starts[:-1].tolist()
         observations = g_obs[:G].tolist()
         cut = np.searchsorted(g_action[:G], np.arange(A + 1)).tolist()   # action a's children: cut[a]..cut[a+1]-1
-        actions = []
-        for a, reward in enumerate(rewards):
-            i, j = cut[a], cut[a + 1]
-            an = _Action(reward, observations[i:j], lowers[i:j], uppers[i:j], counts[i:j], firsts[i:j], terminal[i:j],
-                         states, scenarios)
-            self._backup_action(an, node.depth)
-            actions.append(an)
-        node.actions = actions
+        ex = node.expansion = _Expansion(rewards, cut, observations, lowers, uppers, counts, firsts, terminal, states,
+                                         scenarios)
+        for a in range(A):
+            self._backup_action(ex, a, node.depth)
         self._backup_belief(node)
 
-    def _backup_action(self, an: _Action, depth: int) -> None:
+    def _backup_action(self, ex: _Expansion, a: int, depth: int) -> None:
         g = self.model.discount
         penalty = self.settings.regularization / self._powers[min(depth, len(self._powers) - 1)]
-        an.lower = an.reward - penalty + g * sum(an.lowers)
-        an.upper = an.reward - penalty + g * sum(an.uppers)
+        i, j = ex.cut[a], ex.cut[a + 1]
+        ex.lower[a] = ex.rewards[a] - penalty + g * sum(ex.lowers[i:j])
+        ex.upper[a] = ex.rewards[a] - penalty + g * sum(ex.uppers[i:j])
 
     def _backup_belief(self, node: _Belief) -> None:
-        assert node.actions is not None
-        node.lower = max(node.lower0, max(an.lower for an in node.actions))
-        node.upper = max(min(node.upper0, max(an.upper for an in node.actions)), node.lower)
+        ex = node.expansion
+        assert ex is not None
+        node.lower = max(node.lower0, max(ex.lower))
+        node.upper = max(min(node.upper0, max(ex.upper)), node.lower)
 
     def _excess(self, node: _Belief, root_gap: float) -> float:
         return (self._powers[node.depth] * (node.upper - node.lower)
                 - self.settings.xi * node.scenarios.shape[0] / self._K * root_gap)
 
-    def _best_child(self, an: _Action, depth: int, root_gap: float):
-        """``(index, excess)`` of the child of ``an`` (at ``depth``) with the largest excess uncertainty
-        (the first of equals), computed as :meth:`_excess` computes a node's."""
+    def _best_child(self, ex: _Expansion, a: int, depth: int, root_gap: float):
+        """``(position, excess)`` of the child of action ``a`` of ``ex`` (at ``depth``) with the largest
+        excess uncertainty (the first of equals), computed as :meth:`_excess` computes a node's."""
         weight, xi, K = self._powers[depth], self.settings.xi, self._K
-        excess = [weight * (up - lo) - xi * n / K * root_gap for lo, up, n in zip(an.lowers, an.uppers, an.counts)]
-        best = max(range(len(excess)), key=excess.__getitem__)
-        return best, excess[best]
+        i, j = ex.cut[a], ex.cut[a + 1]
+        lowers, uppers, counts = ex.lowers, ex.uppers, ex.counts
+        excess = [weight * (uppers[c] - lowers[c]) - xi * counts[c] / K * root_gap for c in range(i, j)]
+        best = max(range(j - i), key=excess.__getitem__)
+        return i + best, excess[best]
 
     def _trial(self, root: _Belief) -> None:
         path = [root]
-        taken: List[Optional[_Action]] = []   # per node of the path: the action the trial went down
-        went: List[int] = []                  # ... and the child it went to
+        taken: List[int] = []   # per node of the path: the action the trial went down (-1: none)
+        went: List[int] = []    # ... and the child it went to
         node = root
         root_gap = root.upper - root.lower
         while node.depth < self.settings.depth and not node.terminal:
-            if node.actions is None:
+            if node.expansion is None:
                 if (node is not root and self._deadline is not None
                         and self._now() + self._slowest >= self._deadline):
                     break   # the wall-clock guard: back up what this trial found, then stop
@@ -361,27 +365,29 @@ class Despot:
                 self._slowest = max(self._slowest, self._now() - started)
             elif node is not root and self._excess(node, root_gap) <= 0:
                 break
-            assert node.actions is not None
-            best = max(node.actions, key=lambda an: an.upper)
-            index, excess = self._best_child(best, node.depth + 1, root_gap)
+            ex = node.expansion
+            assert ex is not None
+            best = max(range(len(ex.upper)), key=ex.upper.__getitem__)     # the first of equals
+            position, excess = self._best_child(ex, best, node.depth + 1, root_gap)
             if excess <= 0:
                 break
             taken.append(best)
-            went.append(index)
-            node = best.child(index, node.depth + 1)
+            went.append(position)
+            node = ex.child(position, node.depth + 1)
             path.append(node)
-        taken.append(None)
+        taken.append(-1)
         went.append(-1)
         # Only the nodes of the path changed, so at each only the action the trial took needs its
-        # bounds backed up again, after its child's new bounds are copied into its lists (the others'
+        # bounds backed up again, after its child's new bounds are copied into the columns (the other
         # children are as they were at their last backup: the same sums); then the node's own bounds
         # over all its actions.
-        for n, an, index in zip(reversed(path), reversed(taken), reversed(went)):
-            if n.actions is not None:
-                if an is not None:
-                    kid = an.kids[index]
-                    an.lowers[index], an.uppers[index] = kid.lower, kid.upper
-                    self._backup_action(an, n.depth)
+        for n, a, position in zip(reversed(path), reversed(taken), reversed(went)):
+            ex = n.expansion
+            if ex is not None:
+                if a >= 0:
+                    kid = ex.kids[position]
+                    ex.lowers[position], ex.uppers[position] = kid.lower, kid.upper
+                    self._backup_action(ex, a, n.depth)
                 self._backup_belief(n)
 
     # ------------------------------------------------------------------ report
@@ -390,14 +396,14 @@ class Despot:
         K = self._K
         out: dict = {"lower": root.lower, "upper": root.upper, "scenarios": int(root.scenarios.shape[0]),
                      "actions": []}
-        if root.actions is None:
+        ex = root.expansion
+        if ex is None:
             return out
-        ranked = sorted(range(len(root.actions)), key=lambda a: -root.actions[a].lower)  # type: ignore[index]
+        ranked = sorted(range(len(ex.lower)), key=lambda a: -ex.lower[a])
         for a in ranked[:width]:
-            an = root.actions[a]
             out["actions"].append({
-                "action": self.model.actions[a], "lower": an.lower, "upper": an.upper, "reward": an.reward,
-                "children": [{"observation": int(o), "share": n / K, "lower": lo, "upper": up,
-                              "expanded": i in an.kids and an.kids[i].actions is not None}
-                             for i, (o, n, lo, up) in enumerate(zip(an.observations, an.counts, an.lowers, an.uppers))]})
+                "action": self.model.actions[a], "lower": ex.lower[a], "upper": ex.upper[a], "reward": ex.rewards[a],
+                "children": [{"observation": int(ex.observations[c]), "share": ex.counts[c] / K, "lower": ex.lowers[c],
+                              "upper": ex.uppers[c], "expanded": c in ex.kids and ex.kids[c].expansion is not None}
+                             for c in range(ex.cut[a], ex.cut[a + 1])]})
         return out
