@@ -20,6 +20,7 @@ from __future__ import annotations
 import fcntl
 import os
 import re
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import List
@@ -57,11 +58,13 @@ def _held_by_a_living_process(lock_file: Path) -> bool:
     return False
 
 
-def remove_dead_files(directory: Path = DEFAULT_DIRECTORY) -> Cleanup:
+def remove_dead_files(directory: Path = DEFAULT_DIRECTORY, min_age: float = 1.0) -> Cleanup:
     """Remove the Fast DDS segment and port files of ``directory`` whose owners have all ended.
 
-    Only files of this user are touched; a lock file that some process holds keeps its files; a
-    file that cannot be removed is left (no error). Returns what was removed.
+    Only files of this user are touched; a lock file that some process holds keeps its files, and so
+    does one younger than ``min_age`` seconds (a participant starting now creates its lock file and
+    then locks it: in between it is unlocked, not dead); a file that cannot be removed is left (no
+    error). Returns what was removed.
     """
     result = Cleanup()
     try:
@@ -76,9 +79,10 @@ def remove_dead_files(directory: Path = DEFAULT_DIRECTORY) -> Cleanup:
             continue
         lock = Path(directory) / name
         try:
-            if lock.stat().st_uid != uid:
-                continue
+            info = lock.stat()
         except OSError:
+            continue
+        if info.st_uid != uid or time.time() - info.st_mtime < min_age:
             continue
         if _held_by_a_living_process(lock):
             result.in_use += 1

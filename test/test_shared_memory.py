@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -30,8 +31,10 @@ HOLD_LOCK = textwrap.dedent("""
 """)
 
 
-def _write(path: Path, size: int) -> None:
+def _write(path: Path, size: int, age: float = 60.0) -> None:
     path.write_bytes(b"\0" * size)
+    past = path.stat().st_mtime - age
+    os.utime(path, (past, past))
 
 
 def test_dead_files_go_living_ones_stay_by_hand(tmp_path):
@@ -58,9 +61,25 @@ def test_dead_files_go_living_ones_stay_by_hand(tmp_path):
     assert sorted(second.removed) == [live, f"{live}_el"] and second.removed_bytes == 700 and second.in_use == 0
 
 
+def test_a_lock_file_younger_than_min_age_is_left(tmp_path):
+    # A participant starting now creates its lock file, then locks it: unlocked in between, not dead.
+    young = "fastrtps_00000000000000aa"
+    _write(tmp_path / young, 100, age=0.0)
+    _write(tmp_path / f"{young}_el", 0, age=0.0)
+    assert remove_dead_files(tmp_path).removed == []
+    assert sorted(remove_dead_files(tmp_path, min_age=0.0).removed) == [young, f"{young}_el"]
+
+
 def test_a_missing_directory_is_nothing_to_clean(tmp_path):
     result = remove_dead_files(tmp_path / "absent")
     assert result.removed == [] and result.in_use == 0
+
+
+def _age(name: str) -> float:
+    try:
+        return time.time() - (DEFAULT_DIRECTORY / name).stat().st_mtime
+    except OSError:
+        return float("inf")
 
 
 def _segments() -> set:
@@ -86,6 +105,9 @@ def test_a_node_stopped_by_sigint_leaves_its_segment_and_the_clean_up_removes_on
             assert wait_for(lambda: "action_executor" in probe.get_node_names(), timeout=60), node.stderr()
             left_by_node = _segments() - before
             assert left_by_node, "the node's participant has no shared-memory segment"
+            # The clean-up leaves lock files younger than a second (a participant between creating
+            # its lock file and locking it): let the node's get that old.
+            assert wait_for(lambda: min(_age(n) for n in left_by_node) > 1.0, timeout=10)
             node.popen.send_signal(signal.SIGINT)
             assert node.wait(10) == 0, node.stderr()
         finally:
