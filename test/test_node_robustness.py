@@ -94,17 +94,21 @@ FLOOD = textwrap.dedent("""
     sent["rate"] = sent["total"] / sent["seconds"]
     print(json.dumps(sent), flush=True)
     # A loss is seen when a later message on the topic arrives: after the flood, one end
-    # marker per topic every 0.1 s (one "end" line each round) until stopped.
+    # marker per topic every 0.1 s (one "end" line each round) until stopped. A stop signal ends
+    # the loop between rounds, never inside one: a round cut after one or two of its markers
+    # would leave the test counting markers it does not know were sent.
+    import signal
+    stopped = []
+    signal.signal(signal.SIGINT, lambda *_: stopped.append(True))
     rounds = 0
-    try:
-        while True:
-            time.sleep(0.1)
-            for p in pubs.values():
-                p.publish(String(data="__end__"))
-            rounds += 1
-            print("end", rounds, flush=True)
-    except KeyboardInterrupt:
-        pass
+    while not stopped:
+        time.sleep(0.1)
+        if stopped:
+            break
+        for p in pubs.values():
+            p.publish(String(data="__end__"))
+        rounds += 1
+        print("end", rounds, flush=True)
 """)
 
 
