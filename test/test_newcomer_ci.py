@@ -1,7 +1,7 @@
 """`.ci/run` tests a fresh clone that nothing beside it can reach, and fails when the install fails.
 
 In a scratch git repository with a ``shared/`` folder beside it (as on the project's machine): a
-tiny package whose one test asserts that ``../shared`` is out of reach passes under `.ci/run`
+tiny package whose one test asserts that that sibling ``shared`` folder is out of reach passes under `.ci/run`
 (the script clones the checkout into an empty temporary folder and runs there). Then its setup.py
 is broken on purpose and committed: the old script (`pip … | grep … || true`) went on and ran pytest in a
 stale venv, printing "1 passed" and exiting 0; the script must stop with pip's error.
