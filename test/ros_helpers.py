@@ -9,6 +9,7 @@
   timeouts (Fast DDS can hang at exit: eProsima/Fast-DDS#6502), its output kept in files.
 * :class:`Probe` — a node in the test process that publishes inputs and records outputs;
   :func:`wait_for` spins until a condition holds. No fixed sleeps anywhere: wait for matching.
+* :func:`call_service` / :func:`answer_within` — a service call that survives a lost answer.
 * fixture ``ros_context`` — an rclpy ``Context`` on its own domain (yields ``(context, domain_id)``).
 """
 from __future__ import annotations
@@ -122,6 +123,42 @@ def wait_for(predicate: Callable[[], bool], timeout: float, executor=None, poll:
             executor.spin_once(timeout_sec=min(poll, remaining))
         else:
             time.sleep(min(poll, remaining))
+
+
+#: How long a service request waits for its answer before the caller looks again (see :func:`call_service`).
+ANSWER_WAIT = 2.0
+
+
+def answer_within(client, request, wait: float, executor=None):
+    """Send ``request`` on ``client``; its answer, or ``None`` if none came within ``wait`` s
+    (the pending request is then forgotten, so a late answer cannot complete it)."""
+    future = client.call_async(request)
+    if wait_for(future.done, wait, executor):
+        return future.result()
+    client.remove_pending_request(future)
+    return None
+
+
+def call_service(client, request, executor=None, timeout: float = DISCOVERY_TIMEOUT):
+    """The answer to ``request``, a request that can safely be made twice; fails after ``timeout`` s.
+
+    Why not one ``call_async`` and a wait: ``client.service_is_ready()`` says the client's request
+    writer has matched the server's reader, not that the server's response writer has matched the
+    client's reader. A Fast DDS server waits for that match only for its writer's
+    ``max_blocking_time`` (100 ms) and then drops the answer ("client will not receive response",
+    rmw_fastrtps' ``__rmw_send_response``); rclpy only warns. On a loaded machine a new client's
+    first answer can be lost that way while its request arrived, and the future would never complete
+    (a CI run here: ``/action_executor/get_state did not answer`` in 20 s). So the request is sent
+    again every :data:`ANSWER_WAIT` s until one is answered. For a request that must not be repeated
+    (a lifecycle transition), use :func:`answer_within` and find out what happened another way.
+    """
+    assert wait_for(client.service_is_ready, timeout, executor), f"{client.srv_name} never came up"
+    deadline = time.monotonic() + timeout
+    while (remaining := deadline - time.monotonic()) > 0:
+        answer = answer_within(client, request, min(ANSWER_WAIT, remaining), executor)
+        if answer is not None:
+            return answer
+    raise AssertionError(f"{client.srv_name} did not answer in {timeout} s")
 
 
 class Probe:

@@ -5,13 +5,15 @@ lifecycle_msgs/ChangeState; no action while inactive; the belief survives deacti
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from ros_helpers import (DISCOVERY_TIMEOUT, DOMAIN, Probe, Proc, allocate_domain_id, configure_test_process,
-                         ros_env, wait_for)
+import ros_helpers
+from ros_helpers import (DISCOVERY_TIMEOUT, DOMAIN, Probe, Proc, allocate_domain_id, answer_within,
+                         call_service, configure_test_process, ros_env, wait_for)
 
 pytestmark = [pytest.mark.ros]
 
@@ -28,27 +30,49 @@ from pearl_pomdp.nodes.common import INPUT_QOS, LATCHED_QOS  # noqa: E402
 BIN = Path(sys.executable).parent
 
 
-def call(node, executor, client, request, timeout=DISCOVERY_TIMEOUT):
-    assert wait_for(client.service_is_ready, timeout, executor), f"{client.srv_name} never came up"
-    future = client.call_async(request)
-    assert wait_for(future.done, timeout, executor), f"{client.srv_name} did not answer"
-    return future.result()
+#: The transitions these tests make: (the state they start from, the state they lead to).
+TRANSITIONS = {
+    Transition.TRANSITION_CONFIGURE: ("unconfigured", "inactive"),
+    Transition.TRANSITION_ACTIVATE: ("inactive", "active"),
+    Transition.TRANSITION_DEACTIVATE: ("active", "inactive"),
+    Transition.TRANSITION_ACTIVE_SHUTDOWN: ("active", "finalized"),
+}
+#: A node's states while it runs a transition's callback.
+IN_TRANSITION = {"configuring", "cleaningup", "shuttingdown", "activating", "deactivating", "errorprocessing"}
 
 
 def transition(node, executor, name, transition_id):
+    """Ask ``name`` to make a transition; whether it succeeded.
+
+    A transition must not be requested twice (the second would fail from the new state), so a lost
+    answer (see ``call_service``) is not re-sent: the request arrived (its writer had matched), and
+    the node's state, once out of the transition, says whether the transition happened."""
+    start, goal = TRANSITIONS[transition_id]
     client = node.create_client(ChangeState, f"/{name}/change_state")
-    req = ChangeState.Request()
-    req.transition.id = transition_id
-    ok = call(node, executor, client, req).success
-    node.destroy_client(client)
-    return ok
+    try:
+        assert wait_for(client.service_is_ready, DISCOVERY_TIMEOUT, executor), f"{client.srv_name} never came up"
+        req = ChangeState.Request()
+        req.transition.id = transition_id
+        answer = answer_within(client, req, ros_helpers.ANSWER_WAIT, executor)
+        if answer is not None:
+            return answer.success
+        deadline = time.monotonic() + DISCOVERY_TIMEOUT
+        while True:
+            label = state(node, executor, name)
+            if label != start and label not in IN_TRANSITION:
+                return label == goal
+            assert time.monotonic() < deadline, f"{client.srv_name} did not answer and {name} stayed {label!r}"
+            wait_for(lambda: False, 0.1, executor)
+    finally:
+        node.destroy_client(client)
 
 
 def state(node, executor, name):
     client = node.create_client(GetState, f"/{name}/get_state")
-    label = call(node, executor, client, GetState.Request()).current_state.label
-    node.destroy_client(client)
-    return label
+    try:
+        return call_service(client, GetState.Request(), executor).current_state.label
+    finally:
+        node.destroy_client(client)
 
 
 def test_lifecycle_over_dds(tmp_path, pearl_policy):
@@ -107,7 +131,7 @@ def test_lifecycle_over_dds(tmp_path, pearl_policy):
         np.testing.assert_allclose(cv.msg_to_belief(beliefs[-1]), stepped, atol=1e-12)
         # /pearl/reset: back to b0.
         reset = node.create_client(Trigger, "/pearl/reset")
-        answer = call(node, executor, reset, Trigger.Request())
+        answer = call_service(reset, Trigger.Request(), executor)   # resetting twice is harmless
         assert answer.success and "b0" in answer.message
         assert wait_for(lambda: np.allclose(cv.msg_to_belief(beliefs[-1]), model.b0), DISCOVERY_TIMEOUT, executor)
         for name in ("belief_tracker", "hierarchical_policy"):
@@ -118,6 +142,7 @@ def test_lifecycle_over_dds(tmp_path, pearl_policy):
         node.destroy_node()
         rclpy.try_shutdown(context=context)
         codes = [tracker.stop(5.0), policy.stop(5.0)]
+        print(tracker.stderr()[-3000:], policy.stderr()[-3000:])   # pytest shows it if the test failed
     assert codes == [0, 0], tracker.stderr()[-2000:] + policy.stderr()[-2000:]
 
 
@@ -185,4 +210,5 @@ def test_action_executor_lifecycle_over_dds(tmp_path):
         node.destroy_node()
         rclpy.try_shutdown(context=context)
         code = executor_proc.stop(5.0)
+        print(executor_proc.stderr()[-3000:])   # pytest shows it if the test failed
     assert code == 0, executor_proc.stderr()[-2000:]
