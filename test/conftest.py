@@ -40,6 +40,16 @@ def benchmarks_dir(tmp_path_factory) -> Path:
     return unpacked_models(tmp_path_factory.mktemp("pomdp"))
 
 
+@pytest.fixture(scope="session")
+def ward_domain():
+    """``config/ward.domain.yaml`` loaded once for the session. Its ``compile()`` is cached on it, so the
+    tests that need the flat ward (233,280 states: ~7 s and ~0.5 GB to compile) share one compilation.
+    Nothing may change it: the tests read the model and build their own objects from it."""
+    from pearl_pomdp.model.factored import load_domain
+
+    return load_domain(Path(__file__).resolve().parents[1] / "config" / "ward.domain.yaml")
+
+
 # ROS fixtures (ros_context, pearl_policy) live in test/ros_helpers.py; registered here once so
 # the session-scoped planned Pearl policy is shared by every test module.
 from ros_helpers import pearl_policy, ros_context  # noqa: E402,F401

@@ -8,8 +8,8 @@ against the core's Bayes filter and every action against the core's decider on i
 with the same trials, or the hierarchy planned here from the same files (a decision depends on the
 belief alone). The test's reference is built while the nodes start, on the other core. Decision
 times through the nodes are measured by ``bench/ward_launch.py``; start-up (compile 6 s, QMDP and blind
-bounds by policy iteration ~2 s, in the node and again here) makes it the suite's slowest setup, so
-the test is marked slow."""
+bounds by policy iteration ~2 s, in the node and again here; the test's compilation is the session's
+``ward_domain``, shared by both launches) makes it the suite's slowest setup, so the test is marked slow."""
 from __future__ import annotations
 
 import json
@@ -27,7 +27,6 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 import rclpy  # noqa: E402
 
 from pearl_pomdp.belief import BeliefFilter  # noqa: E402
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.common import EVENT_QOS, INPUT_QOS, LATCHED_QOS  # noqa: E402
 
@@ -38,7 +37,7 @@ STARTUP = 600.0      # s: compile (6 s) and the online bounds (~2 s idle): a gua
 
 
 @pytest.fixture(scope="module", params=["online:5", "hierarchical"])
-def launched(request, tmp_path_factory):
+def launched(request, tmp_path_factory, ward_domain):
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
@@ -47,7 +46,7 @@ def launched(request, tmp_path_factory):
     from pearl_pomdp.online.despot import DespotSettings
 
     tmp = tmp_path_factory.mktemp("ward_launch")
-    domain = load_domain(DOMAIN)
+    domain = ward_domain                 # compiled once for the session (conftest.py)
     configure_test_process(tmp)
     domain_id = allocate_domain_id()
     context = Context()
