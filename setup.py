@@ -86,7 +86,7 @@ setup(
             "mcap-ros2-support>=0.5",
             "matplotlib>=3.6",
             "foxglove-sdk>=0.30",  # pearl_pomdp/live_view.py: the Foxglove WebSocket server, schemas included
-            "py_trees>=2.2",   # the behaviour-tree baseline (pearl_sim/behaviour_tree.py, bt_node)
+            "py_trees>=2.2",   # the behaviour-tree baseline (pearl_sim/nursing_home/behaviour_tree.py, bt_node)
         ]
         + SPEECH,
         "speech": SPEECH,

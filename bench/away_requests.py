@@ -43,7 +43,7 @@ def mean_ci(xs):
 def main() -> int:
     from pearl_pomdp.model.factored import load_domain
     from pearl_sim.experiment import build_agents, run_episode
-    from pearl_sim.scenario import load_scenarios
+    from pearl_sim.nursing_home.scenario import load_scenarios
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--domain", default=str(REPO / "config/pearl.domain.yaml"))

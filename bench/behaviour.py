@@ -25,7 +25,7 @@ def main() -> int:
     from pearl_pomdp.model.factored import load_domain
     from pearl_sim.agents import Controller
     from pearl_sim.experiment import run_episode
-    from pearl_sim.scenario import load_scenarios
+    from pearl_sim.nursing_home.scenario import load_scenarios
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenarios", nargs="+")

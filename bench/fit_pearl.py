@@ -39,9 +39,9 @@ def main() -> int:
     from pearl_pomdp.hierarchy import load_hierarchy, plan
     from pearl_pomdp.model.factored import load_domain
     from pearl_sim.agents import Controller
-    from pearl_sim.behaviour_tree import PearlBehaviourTree
+    from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree
     from pearl_sim.episodes import record_episodes
-    from pearl_sim.residents import (TASKS, effective_word_error_rate, generate_residents, resident_scenarios,
+    from pearl_sim.nursing_home.residents import (TASKS, effective_word_error_rate, generate_residents, resident_scenarios,
                                      study_template)
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -34,7 +34,7 @@ def main() -> int:
 
     from pearl_pomdp.hierarchy import load_hierarchy, plan
     from pearl_pomdp.model.factored import load_domain
-    from pearl_sim.scenario import load_scenarios
+    from pearl_sim.nursing_home.scenario import load_scenarios
 
     domain = load_domain(DOMAIN)
     model = domain.compile()

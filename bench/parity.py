@@ -33,11 +33,16 @@ from pearl_pomdp.hierarchy import load_hierarchical_policy
 from pearl_pomdp.model.factored import load_domain
 from pearl_pomdp.solvers.registry import solve
 from pearl_sim.agents import Controller
-from pearl_sim.behaviour_tree import PearlBehaviourTree
 from pearl_sim.experiment import episode_executive
 from pearl_sim.loop import ExecutiveBackend, run_episode
-from pearl_sim.scenario import load_scenarios
-from pearl_sim.world import World
+try:
+    from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree
+    from pearl_sim.nursing_home.scenario import load_scenarios
+    from pearl_sim.nursing_home.world import World
+except ImportError:  # a tree from before the nursing home had its own package
+    from pearl_sim.behaviour_tree import PearlBehaviourTree
+    from pearl_sim.scenario import load_scenarios
+    from pearl_sim.world import World
 domain = load_domain(policy_dir.parent / "domain.yaml")
 model = domain.compile()
 agents = [Controller("hierarchical", load_hierarchical_policy(policy_dir, domain)),

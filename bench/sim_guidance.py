@@ -38,7 +38,7 @@ def main() -> int:
     from pearl_pomdp.model.factored import load_domain
     from pearl_sim.agents import Controller
     from pearl_sim.experiment import run_episode
-    from pearl_sim.scenario import load_scenarios
+    from pearl_sim.nursing_home.scenario import load_scenarios
 
     t0 = time.monotonic()
     domain = load_domain(REPO / "config" / "pearl.domain.yaml")
@@ -58,7 +58,7 @@ def main() -> int:
             started = completed = gave_up = lost_reports = episodes_done = 0
             speeds = []
             for k in range(args.seeds):
-                from pearl_sim.world import World
+                from pearl_sim.nursing_home.world import World
 
                 captured = {}
 

@@ -31,8 +31,8 @@ def main() -> int:
     logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
     from pearl_sim import study
     from pearl_sim.experiment import build_agents
-    from pearl_sim.residents import paper_residents, resident_scenarios, study_template
-    from pearl_sim.scenario import default_domain
+    from pearl_sim.nursing_home.residents import paper_residents, resident_scenarios, study_template
+    from pearl_sim.nursing_home.scenario import default_domain
 
     path = REPO / "config" / "scenarios" / "study.yaml"
     domain = default_domain()

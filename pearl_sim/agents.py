@@ -9,7 +9,7 @@ queueing, drives, low-confidence speech) for all of them, as on the robot:
 * :class:`ScriptedAgent`, a hand-written state machine (kept by name: ``scripted``), is an
   :class:`~pearl_pomdp.interfaces.ObservingDecider`: it ignores the belief and reacts to
   the last observation the tracker closed a step with. The study's main non-POMDP baseline
-  is the py_trees behaviour tree, :class:`pearl_sim.behaviour_tree.PearlBehaviourTree`.
+  is the py_trees behaviour tree, :class:`pearl_sim.nursing_home.behaviour_tree.PearlBehaviourTree`.
 
 :class:`Controller` pairs a name with a decider; the experiment builds a fresh executive
 for it per episode (the scenario sets the step timeout).
@@ -50,7 +50,7 @@ class ScriptedAgent:
         self.name = name
         self.decider = self  # a Controller of its own
         if actions is None:
-            from pearl_sim.scenario import default_domain
+            from pearl_sim.nursing_home.scenario import default_domain
 
             actions = default_domain().actions
         self._index = {a: i for i, a in enumerate(actions)}

@@ -1,6 +1,6 @@
 """The behaviour-tree baseline as a ROS 2 node, in place of the POMDP policy node.
 
-``pearl_bt`` (console script) runs :class:`~pearl_sim.behaviour_tree.PearlBehaviourTree`
+``pearl_bt`` (console script) runs :class:`~pearl_sim.nursing_home.behaviour_tree.PearlBehaviourTree`
 in the Pearl graph: it listens to the belief tracker's ``/pearl/belief_marginals`` (JSON
 ``std_msgs/String`` with the ``step``, the ``action`` that opened the closed step and the
 ``observation`` that closed it; :func:`pearl_pomdp.nodes.conversions.marginals_to_msg`) and
@@ -58,7 +58,7 @@ class BehaviourTreeNode(PearlNode):
             from pearl_pomdp.model.factored import load_domain
 
             actions = list(load_domain(resolve_path(p["domain"], "domain")).actions)
-        from pearl_sim.behaviour_tree import PearlBehaviourTree
+        from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree
 
         self.tree = PearlBehaviourTree("behaviour_tree", actions)
         self.last_step: Optional[int] = None

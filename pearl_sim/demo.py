@@ -18,8 +18,8 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional
 
 from pearl_pomdp.errors import PearlError
-from pearl_sim.scenario import Scenario, load_scenarios
-from pearl_sim.world import StepResult, World
+from pearl_sim.nursing_home.scenario import Scenario, load_scenarios
+from pearl_sim.nursing_home.world import StepResult, World
 
 #: Features shown in the transcript (the ones a reader of Figure 4 follows).
 SHOWN_FEATURES = ("ReminderGoal", "UserPresent", "UserMotionGoal", "UserInfoGoal", "UserLocation")
@@ -161,7 +161,7 @@ def plot_belief(steps: List[DemoStep], path: Path, title: str, scenario: Optiona
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from pearl_sim.scenario import default_domain
+    from pearl_sim.nursing_home.scenario import default_domain
 
     categories = default_domain().categories
     colours = {"Move": "tab:blue", "Communicate": "tab:green", "Clarify": "tab:red", "Other": "tab:grey"}

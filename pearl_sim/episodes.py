@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Iterable, List, Sequence, Union
 
 from pearl_sim.loop import ExecutiveBackend, run_episode
-from pearl_sim.scenario import Scenario
-from pearl_sim.world import World
+from pearl_sim.nursing_home.scenario import Scenario
+from pearl_sim.nursing_home.world import World
 
 __all__ = ["record_episodes"]
 

@@ -17,8 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Callable, List, Optional, Sequence
 
-from pearl_sim.scenario import Scenario
-from pearl_sim.world import World
+from pearl_sim.nursing_home.scenario import Scenario
+from pearl_sim.nursing_home.world import World
 
 
 @dataclass
@@ -54,7 +54,7 @@ class EpisodeResult:
 def episode_executive(controller, domain, scenario: Scenario, model=None):
     """The robot's loop for one episode: the controller's decider in an Executive with the
     belief tracker's parameters from ``config/pearl_nodes.yaml`` and the scenario's step timeout
-    and map (:meth:`~pearl_sim.scenario.Scenario.tracker_parameters`: drive deadlines)."""
+    and map (:meth:`~pearl_sim.nursing_home.scenario.Scenario.tracker_parameters`: drive deadlines)."""
     from pearl_pomdp.executive import Executive
     from pearl_pomdp.params import step_settings
 
@@ -152,7 +152,7 @@ def build_agents(domain, hierarchy_path, flat_time_limit: Optional[float] = None
     timings = agents.timings
     for name in policies:
         if name == "behaviour_tree":
-            from pearl_sim.behaviour_tree import PearlBehaviourTree
+            from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree
 
             agents[name] = PearlBehaviourTree(name, list(model.actions))
             timings[name] = 0.0

@@ -1,10 +1,10 @@
 """The episode loop: the simulated world against the robot's step loop, on the world's clock.
 
 One loop for the fast study and for the demo through the ROS graph. The world carries out
-each action and produces timestamped messages (:meth:`~pearl_sim.world.World.act`); the
+each action and produces timestamped messages (:meth:`~pearl_sim.nursing_home.world.World.act`); the
 *backend* — the robot's loop — takes each message at its time and answers with the next
 action when the message closed a step. When an action produced no message the world idles
-(:meth:`~pearl_sim.world.World.wait`) until the scheduler speaks or until the backend's
+(:meth:`~pearl_sim.nursing_home.world.World.wait`) until the scheduler speaks or until the backend's
 step deadline, and the backend is then told the time (the tracker's timeout closes the step).
 The world never decides when a step closes.
 
@@ -59,7 +59,7 @@ class EpisodeSpec(Protocol):
 
 
 class World(Protocol):
-    """The simulated world's side of the loop (:class:`pearl_sim.world.World`, the nursing home;
+    """The simulated world's side of the loop (:class:`pearl_sim.nursing_home.world.World`, the nursing home;
     :class:`pearl_sim.reception.world.ReceptionWorld`, the reception hall). The loop knows
     nothing else of a world: no domain names, no places."""
 
@@ -137,13 +137,15 @@ class EpisodeTrace:
 
 def run_episode(world: World, backend: Backend, max_steps: Optional[int] = None,
                 on_action: Optional[Callable[[StepResult, List[StepResult]], None]] = None,
-                before_action: Optional[Callable[[str], None]] = None) -> EpisodeTrace:
-    """Run ``world`` against ``backend`` until ``max_steps`` actions (default: the scenario's).
+                before_action: Optional[Callable[[str], None]] = None,
+                stop_when: Optional[Callable[[], bool]] = None) -> EpisodeTrace:
+    """Run ``world`` against ``backend`` until ``max_steps`` actions (default: the scenario's)
+    or, when given, until ``stop_when()`` is true before an action (a working day ends at 20:00).
 
     Args:
         before_action: called with each action before the world carries it out (the
             world's state is still the one the action starts in: for scoring).
-        on_action: called after each action with its :class:`~pearl_sim.world.StepResult`
+        on_action: called after each action with its :class:`~pearl_sim.nursing_home.world.StepResult`
             and the waits that followed it (before the next action).
 
     Raises:
@@ -153,7 +155,7 @@ def run_episode(world: World, backend: Backend, max_steps: Optional[int] = None,
     budget = world.scenario.max_steps if max_steps is None else int(max_steps)
     trace = EpisodeTrace()
     queue: Deque[str] = deque(backend.start())
-    while queue and len(trace.actions) < budget:
+    while queue and len(trace.actions) < budget and not (stop_when is not None and stop_when()):
         action = queue.popleft()
         if before_action is not None:
             before_action(action)

@@ -1,5 +1,5 @@
 """What a simulated world answers the robot's loop with: timestamped input messages, and per action a
-:class:`StepResult` (shared by every world: :mod:`pearl_sim.world`, :mod:`pearl_sim.reception.world`)."""
+:class:`StepResult` (shared by every world: :mod:`pearl_sim.nursing_home.world`, :mod:`pearl_sim.reception.world`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field

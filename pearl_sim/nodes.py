@@ -1,6 +1,6 @@
 """rclpy nodes that stand in for Pearl's hardware and residents (docs/design.md §7).
 
-The physics of the nursing home is one :class:`~pearl_sim.world.World` (one
+The physics of the nursing home is one :class:`~pearl_sim.nursing_home.world.World` (one
 resident, one robot, one scheduler); each piece of hardware is a thin node that
 publishes its own modality, as a simulator's sensor plugins would:
 
@@ -37,7 +37,7 @@ from std_msgs.msg import String
 from pearl_sim.messages import StepResult
 
 if TYPE_CHECKING:   # the nursing home's world; GraphBackend serves any world's hardware
-    from pearl_sim.world import World
+    from pearl_sim.nursing_home.world import World
 
 RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 

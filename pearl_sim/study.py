@@ -1,7 +1,7 @@
 """The guidance study: policies × residents × tasks × noise × seeds, with paired statistics.
 
 Protocol (``docs/study.md``): every policy meets every *cell* — a resident
-(:mod:`pearl_sim.residents`) on a task, at a noise level (the recogniser's word error
+(:mod:`pearl_sim.nursing_home.residents`) on a task, at a noise level (the recogniser's word error
 rate, combined with the resident's articulation), with a seed — and the same cell gives the
 same world (same seed, same resident, same noise) to every policy, so the per-episode
 differences against the behaviour tree are **paired**. Each episode runs through
@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from typing import Dict, List, Optional, Sequence
 
 from pearl_sim.experiment import EpisodeResult, mean_ci, proportion_ci, run_episode
-from pearl_sim.residents import StudyCase, effective_word_error_rate
+from pearl_sim.nursing_home.residents import StudyCase, effective_word_error_rate
 
 __all__ = ["Cell", "StudyEpisode", "cells", "run_cells", "per_policy", "paired", "acceptance", "write_csv",
            "plot_study", "BASELINE", "PAIRED_METRICS"]

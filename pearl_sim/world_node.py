@@ -1,6 +1,6 @@
 """The simulated nursing home as one ROS node, for ``launch/pearl_sim.launch.xml``.
 
-``pearl_sim_world`` runs a scenario's :class:`~pearl_sim.world.World` (the resident, the
+``pearl_sim_world`` runs a scenario's :class:`~pearl_sim.nursing_home.world.World` (the resident, the
 scheduler, the robot base) against the Pearl nodes running as *separate processes*, the way
 a simulator runs against a robot's stack: it owns the clock (``/clock``, the manager nodes
 run with ``use_sim_time:=true``), carries out every action the policy publishes on
@@ -54,8 +54,8 @@ def _make_node_class():
 
             from pearl_pomdp.nodes.common import resolve_path
             from pearl_sim.nodes import MODALITY_TOPICS, RELIABLE
-            from pearl_sim.scenario import load_scenarios
-            from pearl_sim.world import World
+            from pearl_sim.nursing_home.scenario import load_scenarios
+            from pearl_sim.nursing_home.world import World
 
             declare = self.declare_parameter
             scenario_path = declare("scenario", "config/scenarios/figure4.yaml").value

@@ -4,7 +4,7 @@ Both worlds' files have the same frame — ``world:``, shared top-level fields, 
 overrides merged key by key, a ``map`` of named places, ``seed`` and ``max_steps`` — and the same
 checks, each error naming the file and the field path. The people in them (visitors, residents)
 and each world's fields and ranges stay in ``pearl_sim/reception/scenario.py`` and
-``pearl_sim/ward/scenario.py``. (The nursing home's ``pearl_sim/scenario.py`` has its own format.)
+``pearl_sim/ward/scenario.py``. (The nursing home's ``pearl_sim/nursing_home/scenario.py`` has its own format.)
 """
 from __future__ import annotations
 

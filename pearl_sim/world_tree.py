@@ -6,7 +6,7 @@ blackboard, then an :class:`Act` writing the step's action — and both run as a
 world's ``observe`` writes what was heard onto the blackboard, and :meth:`TreeDecider.execute`
 ticks the tree and returns the action its chosen leaf names. What each tree checks, in what order,
 and how each reads an observation stay in ``pearl_sim/reception/behaviour_tree.py`` and
-``pearl_sim/ward/behaviour_tree.py``. (The nursing home's tree, ``pearl_sim/behaviour_tree.py``,
+``pearl_sim/ward/behaviour_tree.py``. (The nursing home's tree, ``pearl_sim/nursing_home/behaviour_tree.py``,
 has leaves of its own: effects, judges, memory.)
 """
 from __future__ import annotations

@@ -26,7 +26,7 @@ from pearl_pomdp.hierarchy import load_hierarchical_policy
 from pearl_pomdp.model.factored import load_domain
 from pearl_sim.agents import Controller
 from pearl_sim.experiment import run_episode
-from pearl_sim.scenario import load_scenarios
+from pearl_sim.nursing_home.scenario import load_scenarios
 
 REPO = Path(__file__).resolve().parents[1]
 #: Seeds per scenario: the bounds below were set over 50 seeds (issue 11); fewer seeds would

@@ -5,8 +5,8 @@ import pytest
 from py_trees.common import Status
 
 from pearl_pomdp.interfaces import ObservingDecider
-from pearl_sim import behaviour_tree as bt_module
-from pearl_sim.behaviour_tree import PearlBehaviourTree, TickTimeout
+from pearl_sim.nursing_home import behaviour_tree as bt_module
+from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree, TickTimeout
 
 
 @pytest.fixture()
@@ -133,7 +133,7 @@ def test_tick_timeout_counts_ticks():
 
 def test_figure4_completes_at_zero_noise():
     from pearl_sim.experiment import run_episode, with_word_error_rate
-    from pearl_sim.scenario import default_domain, load_scenarios
+    from pearl_sim.nursing_home.scenario import default_domain, load_scenarios
     from pearl_pomdp.launch_xml import package_share_dir
 
     domain = default_domain()

@@ -19,7 +19,7 @@ import rclpy
 from pearl_pomdp.model.factored import load_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.common import INPUT_QOS, LATCHED_QOS  # noqa: E402
-from pearl_sim.behaviour_tree import PearlBehaviourTree  # noqa: E402
+from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree  # noqa: E402
 
 BIN = Path(sys.executable).parent
 #: What the resident / hardware answer to each action: (topic, text, symbol the tracker makes of it).

@@ -9,8 +9,8 @@ import pytest
 from pearl_sim import study
 from pearl_sim.cluster import ClusterError, run_on_cluster
 from pearl_sim.experiment import build_agents
-from pearl_sim.residents import paper_residents, resident_scenarios, study_template
-from pearl_sim.scenario import default_domain
+from pearl_sim.nursing_home.residents import paper_residents, resident_scenarios, study_template
+from pearl_sim.nursing_home.scenario import default_domain
 
 distributed = pytest.importorskip("distributed")  # installed by the test extra; absent only by hand
 

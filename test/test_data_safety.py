@@ -51,8 +51,11 @@ def _writer_child(bag: Path, wfd: int, chunk_size=None) -> None:
         os._exit(3)
 
 
-def sigkill_trial(tmp: Path, delay: float, chunk_size=None) -> dict:
+def sigkill_trial(tmp: Path, delay: float, chunk_size=None, after_first: bool = False) -> dict:
     """Fork a writer, SIGKILL it after ``delay`` s, read the bag back; returns the figures.
+
+    ``after_first``: the delay starts once the writer has reported its first message (on a loaded
+    machine a fixed delay can end before the child has created the file at all).
 
     Raises AssertionError if a reported message is missing, altered, out of order or invented.
     """
@@ -66,10 +69,16 @@ def sigkill_trial(tmp: Path, delay: float, chunk_size=None) -> dict:
         os.close(r)
         _writer_child(bag, w, chunk_size)
     os.close(w)
+    reported = b""
+    if after_first:
+        import select
+
+        ready, _, _ = select.select([r], [], [], 60.0)
+        assert ready, "the writer reported no message within 60 s"
+        reported += os.read(r, 4)
     time.sleep(delay)
     os.kill(pid, signal.SIGKILL)
     os.waitpid(pid, 0)
-    reported = b""
     while True:
         chunk = os.read(r, 65536)
         if not chunk:
@@ -108,7 +117,7 @@ def test_bag_info_reads_a_killed_bag(tmp_path, capsys):
     """`pearl bag-info` on a SIGKILLed bag: exit 0, every message counted, says it salvaged."""
     from pearl_pomdp.cli import main
 
-    res = sigkill_trial(tmp_path, 0.2)
+    res = sigkill_trial(tmp_path, 0.2, after_first=True)
     capsys.readouterr()
     assert main(["bag-info", str(tmp_path / "bag"), "--json"]) == 0
     import json

@@ -69,7 +69,7 @@ def test_plotted_features_follow_the_scenario():
     """The belief plot draws what the scenario involves (issue 16): table4's checklist reminder and
     both questions, no walk; figure4's physio reminder, the walk and arrival, the weather."""
     from pearl_sim.demo import plotted_features
-    from pearl_sim.scenario import load_scenarios
+    from pearl_sim.nursing_home.scenario import load_scenarios
 
     (table4,) = load_scenarios(REPO / "config/scenarios/table4_dialog.yaml")
     (figure4,) = load_scenarios(REPO / "config/scenarios/figure4.yaml")

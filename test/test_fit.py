@@ -155,7 +155,7 @@ def test_world_episodes_round_trip_into_the_fit(tmp_path):
     """pearl_sim.episodes records the study loop's steps with the world's truth; the fit reads them."""
     from pearl_sim.agents import ScriptedAgent
     from pearl_sim.episodes import record_episodes
-    from pearl_sim.scenario import load_scenarios
+    from pearl_sim.nursing_home.scenario import load_scenarios
 
     designer = load_domain(PEARL)
     (figure4,) = load_scenarios(REPO / "config" / "scenarios" / "figure4.yaml")

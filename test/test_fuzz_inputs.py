@@ -156,7 +156,7 @@ def _parse_hierarchy(text, source, domain):
 
 
 def _parse_scenarios(text, source):
-    from pearl_sim.scenario import parse_scenarios
+    from pearl_sim.nursing_home.scenario import parse_scenarios
 
     return parse_scenarios(text, source=source)
 

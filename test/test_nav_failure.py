@@ -18,8 +18,8 @@ from pearl_pomdp.model.factored import load_domain  # noqa: E402
 from pearl_pomdp.navigation import DriveDeadline, DriveTimer, Place  # noqa: E402
 from pearl_pomdp.params import step_settings  # noqa: E402
 from pearl_pomdp.tracking import BeliefTracker, StepSettings  # noqa: E402
-from pearl_sim.scenario import load_scenarios, parse_scenarios  # noqa: E402
-from pearl_sim.world import World  # noqa: E402
+from pearl_sim.nursing_home.scenario import load_scenarios, parse_scenarios  # noqa: E402
+from pearl_sim.nursing_home.world import World  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 NAV_BLOCKED = REPO / "config" / "scenarios" / "nav_blocked.yaml"

@@ -23,8 +23,8 @@ from pearl_pomdp.model.factored import load_domain  # noqa: E402
 from pearl_sim.agents import Controller  # noqa: E402
 from pearl_sim.experiment import episode_executive  # noqa: E402
 from pearl_sim.loop import ExecutiveBackend, run_episode  # noqa: E402
-from pearl_sim.scenario import load_scenarios  # noqa: E402
-from pearl_sim.world import World  # noqa: E402
+from pearl_sim.nursing_home.scenario import load_scenarios  # noqa: E402
+from pearl_sim.nursing_home.world import World  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = ("figure4", "table4_dialog", "info_request")

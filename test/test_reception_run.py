@@ -25,7 +25,7 @@ SCENARIO = REPO / "config" / "scenarios" / "reception" / "one_visitor.yaml"
 #: Words of Pearl's domain that are ordinary English, or the reception domain's own as well.
 GENERIC = {"home", "room", "time", "weather", "go", "unknown", "yes", "no", "none", "ok", "low", "Battery"}
 #: The nursing home's modules: a reception run must not need them.
-PEARL_MODULES = ("pearl_sim.world", "pearl_sim.scenario", "pearl_sim.residents", "pearl_sim.behaviour_tree",
+PEARL_MODULES = ("pearl_sim.nursing_home.world", "pearl_sim.nursing_home.scenario", "pearl_sim.nursing_home.residents", "pearl_sim.nursing_home.behaviour_tree",
                  "pearl_sim.agents", "pearl_sim.experiment", "pearl_sim.study", "pearl_sim.demo")
 PEARL_FILES = ("pearl.domain.yaml", "pearl.hierarchy.yaml", "pearl_nodes.yaml", "scenarios/study.yaml",
                "scenarios/figure4.yaml")

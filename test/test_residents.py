@@ -3,10 +3,10 @@ world effects of the new resident fields."""
 import pytest
 
 from pearl_pomdp.errors import SpecError
-from pearl_sim.residents import (RANGES, effective_word_error_rate, generate_residents, paper_residents,
+from pearl_sim.nursing_home.residents import (RANGES, effective_word_error_rate, generate_residents, paper_residents,
                                  parse_population, resident_scenarios, study_template)
-from pearl_sim.scenario import parse_scenarios
-from pearl_sim.world import World
+from pearl_sim.nursing_home.scenario import parse_scenarios
+from pearl_sim.nursing_home.world import World
 
 STUDY = "config/scenarios/study.yaml"
 

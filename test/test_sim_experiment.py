@@ -7,8 +7,8 @@ from pearl_pomdp.model.factored import load_domain
 from pearl_pomdp.speech import KeywordFilter
 from pearl_sim.agents import ScriptedAgent
 from pearl_sim.experiment import mean_ci, proportion_ci, run_episode, with_word_error_rate
-from pearl_sim.scenario import load_scenarios, parse_scenarios
-from pearl_sim.world import Message
+from pearl_sim.nursing_home.scenario import load_scenarios, parse_scenarios
+from pearl_sim.nursing_home.world import Message
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -12,8 +12,8 @@ from ros_helpers import DOMAIN  # noqa: E402
 
 from pearl_pomdp.guide_pace import GuidePaceConfig  # noqa: E402
 from pearl_pomdp.model.factored import load_domain  # noqa: E402
-from pearl_sim.scenario import load_scenarios, parse_scenarios  # noqa: E402
-from pearl_sim.world import World, default_guide_pace  # noqa: E402
+from pearl_sim.nursing_home.scenario import load_scenarios, parse_scenarios  # noqa: E402
+from pearl_sim.nursing_home.world import World, default_guide_pace  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 GUIDE = ["GotoPatientRoom", "RingDoorBell", "RemindPhysioAppt", "GuideToPhysio"]

@@ -6,8 +6,8 @@ import pytest
 
 from pearl_pomdp.errors import SpecError
 from pearl_sim.asr import SpeechRecogniser
-from pearl_sim.scenario import load_scenarios, parse_scenarios
-from pearl_sim.world import World
+from pearl_sim.nursing_home.scenario import load_scenarios, parse_scenarios
+from pearl_sim.nursing_home.world import World
 
 REPO = Path(__file__).resolve().parents[1]
 GUIDE = ["GotoPatientRoom", "RingDoorBell", "RemindPhysioAppt", "GuideToPhysio"]

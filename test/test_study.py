@@ -3,8 +3,8 @@ import pytest
 
 from pearl_sim import study
 from pearl_sim.experiment import EpisodeResult, build_agents
-from pearl_sim.residents import paper_residents, resident_scenarios, study_template
-from pearl_sim.scenario import default_domain
+from pearl_sim.nursing_home.residents import paper_residents, resident_scenarios, study_template
+from pearl_sim.nursing_home.scenario import default_domain
 
 STUDY = "config/scenarios/study.yaml"
 

@@ -71,8 +71,8 @@ def _parse_snrs(text: str):
 
 
 def resident_utterances(unknown_symbol: str = "unknown"):
-    """What the simulated residents say per meaning (pearl_sim.world.UTTERANCES)."""
-    from pearl_sim.world import UTTERANCES
+    """What the simulated residents say per meaning (pearl_sim.nursing_home.world.UTTERANCES)."""
+    from pearl_sim.nursing_home.world import UTTERANCES
 
     return {(unknown_symbol if k == "chatter" else k): list(v) for k, v in UTTERANCES.items()}
 

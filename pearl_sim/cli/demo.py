@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     world = world_for(args.domain)
     if world.demo is not None:
         return int(runner(world.demo)(args))
-    from pearl_sim.scenario import load_scenarios
+    from pearl_sim.nursing_home.scenario import load_scenarios
 
     args.scenario = args.scenario or _share(world.demo_scenario)
     args.hierarchy = args.hierarchy or _share("config/pearl.hierarchy.yaml")

@@ -3,7 +3,7 @@
 Every policy — hierarchical POMDP, flat point-based POMDP, QMDP, most-likely-state and
 the py_trees behaviour tree (the main non-POMDP baseline; ``scripted`` by name) — meets
 the same residents (``--residents``: the paper's six and/or seeded generated profiles,
-``pearl_sim/residents.py``) on the same three tasks, at each noise level (recogniser word
+``pearl_sim/nursing_home/residents.py``) on the same three tasks, at each noise level (recogniser word
 error rate) and seed. Reported per policy and noise level: guidance success, time to goal,
 clarifications per goal, unprompted questions, wrong actions and return with 95 % CIs, and
 the PAIRED per-episode differences against the behaviour tree; the issue's acceptance goal
@@ -94,7 +94,7 @@ def _validate(args):
     """Every input checked before any planning or episode (one clear error)."""
     from pearl_pomdp.errors import SpecError
     from pearl_sim.policies import POLICY_NAMES
-    from pearl_sim.residents import parse_population, resident_scenarios, study_template
+    from pearl_sim.nursing_home.residents import parse_population, resident_scenarios, study_template
 
     if args.episodes < 1:
         raise SpecError("<command line>", "--episodes", f"{args.episodes}: at least 1 seed per cell is needed")

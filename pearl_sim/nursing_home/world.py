@@ -41,7 +41,8 @@ import numpy as np
 
 from pearl_sim.asr import SpeechRecogniser
 from pearl_sim.messages import Message, StepResult  # noqa: F401  (re-exported: the world's message types)
-from pearl_sim.scenario import Scenario
+from pearl_sim.nursing_home.scenario import Scenario
+from pearl_sim.world_base import StudyWorld
 
 #: Seconds between the simulated people tracker's reports and GuidePace's control steps
 #: during a guidance (the guide_pace node runs at 20 Hz; 0.5 s keeps the study fast).
@@ -130,7 +131,7 @@ class Metrics:
     wrong: List[str] = field(default_factory=list)
 
 
-class World:
+class World(StudyWorld):
     """Ground-truth simulation of one scenario episode.
 
     Args:
@@ -143,16 +144,15 @@ class World:
 
     def __init__(self, scenario: Scenario, seed: Optional[int] = None, pace_adaptation: Optional[bool] = None,
                  domain=None, guide_pace=None):
-        self.scenario = scenario
         if domain is None:
-            from pearl_sim.scenario import default_domain
+            from pearl_sim.nursing_home.scenario import default_domain
 
             domain = default_domain()
         roles = action_roles(domain)
         self.moves: Dict[str, str] = roles["moves"]
         self.clarifications = frozenset(roles["clarifications"])
-        self.seed = scenario.seed if seed is None else int(seed)
-        self.rng = np.random.default_rng(self.seed)
+        # The frame's seeding, clock and place (the word-error rate is the scenario's or hers, below).
+        super().__init__(scenario, seed, None, home="home")
         self.pace_adaptation = scenario.pace_adaptation if pace_adaptation is None else bool(pace_adaptation)
         # The manager's pace filter settings (GuidePaceConfig), the guide_pace node's own.
         self.guide_pace_config, self.lost_symbol = guide_pace if guide_pace is not None else default_guide_pace()
@@ -169,8 +169,6 @@ class World:
             self.speech_channel = make_speech_channel(scenario.speech, domain.keywords, source=scenario.source,
                                                       seed=self.seed + 7919)
             self.speech_rng = np.random.default_rng(self.seed + 104729)
-        self.time = 0.0
-        self.robot_at = "home"
         self.battery = 1.0
         self.resident_at = "room"        # room | physio | corridor
         self.engaged = False             # UserPresent: with the robot and attending to it
@@ -207,18 +205,6 @@ class World:
             "UserInfoGoal": {"time": "wantTime", "weather": "wantWeather"}.get(self.info_goal or "", "none"),
             "Battery": "low" if self.battery < LOW_BATTERY else "ok",
         }
-
-    def truth_record(self, phase: str, action: str = "", result: Optional["StepResult"] = None) -> dict:
-        """The JSON body of ``/pearl/sim/truth``: the true state now, in the domain's feature terms.
-
-        ``phase`` ``"start"``: the state an action starts in (``pearl fit`` counts transitions
-        between consecutive starts; one more follows the last action); ``"end"``: after the
-        action, with its events and whether it was wrong.
-        """
-        body = {"time": self.time, "phase": phase, "action": action, "state": self.truth()}
-        if result is not None:
-            body.update(events=result.events, wrong=result.wrong)
-        return body
 
     # ------------------------------------------------------------------ stepping
     def act(self, action: str) -> StepResult:
@@ -541,14 +527,23 @@ class World:
             if dt <= 1e-12:
                 break
             self.time += dt
-            if moving:
-                self.battery = max(0.0, self.battery - dt / self.scenario.battery_seconds)
+            self._power(dt, moving, events)
             if self._follower is not None:
                 self._walk_follower(dt, robot_pos, events)
             if self._return_at is not None and self.time >= self._return_at:
                 self.resident_at, self._return_at = "room", None
                 events.append(f"{self.scenario.resident.name} is back in her room")
+            self._live(dt, moving, events)
         self._raise_due(events)
+
+    def _power(self, dt: float, moving: bool, events: List[str]) -> None:
+        """The battery over ``dt`` seconds: an episode drains it while driving only (``battery_seconds``)."""
+        if moving:
+            self.battery = max(0.0, self.battery - dt / self.scenario.battery_seconds)
+
+    def _live(self, dt: float, moving: bool, events: List[str]) -> None:
+        """What else happens in each second (nothing in an episode; the working day's routine:
+        :class:`pearl_sim.nursing_home.day.DayWorld`)."""
 
     def _raise_due(self, events: List[str]) -> None:
         while self._appointments and self._appointments[0].at <= self.time:

@@ -51,7 +51,7 @@ Thresholds, each with its reason (also in ``docs/study.md``):
   speaks when the robot waits), short enough not to hover.
 * **Ignore a reminder announcement for 5 ticks after delivering it**
   (:data:`REANNOUNCE_IGNORE_TICKS`): the scheduler re-announces an outstanding reminder
-  every 60 s (``pearl_sim.world.REANNOUNCE_SECONDS``) and an announcement queued before
+  every 60 s (``pearl_sim.nursing_home.world.REANNOUNCE_SECONDS``) and an announcement queued before
   the delivery can arrive just after it; 5 steps ≈ 40 s covers that without hiding a
   genuinely new reminder for long.
 
@@ -109,7 +109,7 @@ MOVES = ("GotoPatientRoom", "GuideToPhysio", "GoHome")
 
 #: Every blackboard key the tree uses (relative to the tree's own namespace).
 KEYS = ("heard", "last_action", "action", "location", "contact", "pending", "question", "walk_requested",
-        "walk_offer", "guiding", "quiet", "backoff", "ignore_reminder")
+        "walk_offer", "guiding", "quiet", "backoff", "ignore_reminder", "docked")
 
 _instances = itertools.count()
 
@@ -281,8 +281,20 @@ def _nothing_to_do(bb) -> bool:
     return not (bb.pending or bb.question or bb.walk_requested or bb.walk_offer or bb.guiding)
 
 
-def build_tree(namespace: str) -> py_trees.behaviour.Behaviour:
-    """The Pearl tree (see the module docstring), its blackboard keys under ``namespace``."""
+def _docked_judge(bb):
+    bb.docked = bb.location == "home"
+    return Status.SUCCESS
+
+
+def build_tree(namespace: str, day_rules: bool = False) -> py_trees.behaviour.Behaviour:
+    """The Pearl tree (see the module docstring), its blackboard keys under ``namespace``.
+
+    ``day_rules`` adds the working day's rule (docs/day.md, fixed before any POMDP ran on days):
+    **Dock** — at the station and not docked → ``RechargeBattery``, just above Idle, so the robot is
+    on its charger whenever it is home with nothing to do. With the existing *Go home* (nothing to do
+    for :data:`QUIET_TICKS_BEFORE_HOME` quiet ticks) it covers "dock when low" without a battery
+    reading, which neither controller has (the domain's Battery is hidden).
+    """
     ns = namespace
     seq = py_trees.composites.Sequence
     sel = py_trees.composites.Selector
@@ -338,14 +350,18 @@ def build_tree(namespace: str) -> py_trees.behaviour.Behaviour:
         Act("GoHome", ns, "GoHome", _arrived("home")),
     ])
     idle = Act("Idle", ns, "DoNothing", _idle_judge)
+    dock = seq("Dock", memory=True, children=[
+        Guard("Home, not docked?", ns, lambda bb: bb.location == "home" and not bb.docked),
+        Act("RechargeBattery", ns, "RechargeBattery", _docked_judge),
+    ])
     # "Offer walk" only runs when offered (its give-up Effect fails it otherwise, so the
     # selector falls through to Go home / Idle).
     offer_guarded = seq("Offer walk?", memory=True, children=[
         Guard("Offer pending?", ns, lambda bb: bb.walk_offer), offer])
     remind_guarded = seq("Remind?", memory=True, children=[
         Guard("Any reminder?", ns, lambda bb: bool(bb.pending) and bb.backoff == 0), remind])
-    return sel("Pearl", memory=False, children=[end_guidance, inform, guide, remind_guarded, offer_guarded,
-                                                go_home, idle])
+    branches = [end_guidance, inform, guide, remind_guarded, offer_guarded, go_home] + ([dock] if day_rules else [])
+    return sel("Pearl", memory=False, children=branches + [idle])
 
 
 class PearlBehaviourTree:
@@ -355,18 +371,20 @@ class PearlBehaviourTree:
     Args:
         name: the controller's name in the study (``behaviour_tree``).
         actions: the model's action names (a decision carries the index into them).
+        day_rules: add the working day's *Dock* rule (:func:`build_tree`; the day study's ``day_tree``).
     """
 
-    def __init__(self, name: str = "behaviour_tree", actions: Optional[List[str]] = None):
+    def __init__(self, name: str = "behaviour_tree", actions: Optional[List[str]] = None, day_rules: bool = False):
         self.name = name
+        self.day_rules = bool(day_rules)
         self.decider = self
         if actions is None:
-            from pearl_sim.scenario import default_domain
+            from pearl_sim.nursing_home.scenario import default_domain
 
             actions = default_domain().actions
         self._index = {a: i for i, a in enumerate(actions)}
         self.namespace = f"/pearl_bt_{next(_instances)}"
-        self.root = build_tree(self.namespace)
+        self.root = build_tree(self.namespace, day_rules=self.day_rules)
         self.tree = py_trees.trees.BehaviourTree(self.root)
         self.blackboard = py_trees.blackboard.Client(name=f"{name} executive", namespace=self.namespace)
         for key in KEYS:
@@ -377,7 +395,7 @@ class PearlBehaviourTree:
         # py_trees nodes hold generators (a tick in progress) and cannot be pickled: a copy sent
         # to another process (pearl experiment --cluster) is a fresh tree, as every episode
         # starts from one (reset()).
-        return (type(self), (self.name, sorted(self._index, key=self._index.__getitem__)))
+        return (type(self), (self.name, sorted(self._index, key=self._index.__getitem__), self.day_rules))
 
     # ---------------------------------------------------------------- ObservingDecider
     def reset(self) -> None:
@@ -390,6 +408,7 @@ class PearlBehaviourTree:
         bb.pending, bb.question, bb.ignore_reminder = [], None, {}
         bb.walk_requested, bb.walk_offer = False, False
         bb.quiet, bb.backoff = 0, 0
+        bb.docked = True            # the day starts on the charger
 
     def observe(self, action: str, observation: str) -> None:
         """A step closed: ``action`` opened it, ``observation`` closed it → the blackboard."""
@@ -400,6 +419,7 @@ class PearlBehaviourTree:
         if action in MOVES:
             # The robot left: only a guided resident is still with it.
             bb.contact = bool(bb.contact and action == "GuideToPhysio" and bb.walk_requested)
+            bb.docked = False       # any drive leaves the charger
         if observation in LANDMARKS:
             bb.location = LANDMARKS[observation]
         elif observation.startswith("g_") and observation != "g_none":

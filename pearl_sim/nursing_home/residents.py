@@ -28,7 +28,7 @@ import numpy as np
 from pearl_pomdp.errors import SpecError
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
-    from pearl_sim.scenario import Scenario
+    from pearl_sim.nursing_home.scenario import Scenario
 
 __all__ = ["Profile", "paper_residents", "generate_residents", "effective_word_error_rate", "resident_scenarios",
            "parse_population", "study_template", "StudyCase", "TASKS", "RANGES", "MAX_GENERATED"]
@@ -61,7 +61,7 @@ class Profile:
 
 def paper_residents(study_path) -> List[Profile]:
     """The six residents of ``study.yaml`` (one profile per distinct resident name, file order)."""
-    from pearl_sim.scenario import load_scenarios
+    from pearl_sim.nursing_home.scenario import load_scenarios
 
     seen: Dict[str, Profile] = {}
     for sc in load_scenarios(study_path):
@@ -149,7 +149,7 @@ def resident_scenarios(template: dict, profiles: Sequence[Profile], tasks: Seque
     it and each profile's fields are its ``resident:``. Values go through the scenario
     loader's range checks (an error names the resident and the field).
     """
-    from pearl_sim.scenario import _build, _merge
+    from pearl_sim.nursing_home.scenario import _build, _merge
 
     out = []
     for p_index, profile in enumerate(profiles):
