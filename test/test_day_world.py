@@ -4,7 +4,7 @@ import pytest
 
 from pearl_sim.nursing_home.day import (APPOINTMENT_SLOTS, CHARGE_RATE, CHECKLIST_WINDOW, DAY_SECONDS, DAY_START,
                                         DRIVE_DRAIN, IDLE_DRAIN, SCORE_WEIGHTS, SESSION_SECONDS, SETTLE_SECONDS,
-                                        STAFF_TAKE_AFTER, VITAMIN_WINDOW, DayPlan, DayWorld, clock, day_scenario,
+                                        STAFF_TAKE_AFTER, VITAMIN_WINDOW, VITAMIN_WINDOW_AFTERNOON, DayPlan, DayWorld, clock, day_scenario,
                                         day_score, plan_day)
 
 
@@ -32,15 +32,20 @@ def test_plan_day_keeps_the_specified_windows_and_never_overlaps(seed):
     plan = plan_day(seed)
     assert plan == plan_day(seed)                                  # the seed decides the day
     assert plan.appointment + DAY_START in APPOINTMENT_SLOTS
-    assert VITAMIN_WINDOW[0] <= plan.vitamin_due + DAY_START <= VITAMIN_WINDOW[1]
+    window = VITAMIN_WINDOW_AFTERNOON if plan.appointment + DAY_START < 12 * 3600 else VITAMIN_WINDOW
+    assert window[0] <= plan.vitamin_due + DAY_START <= window[1]
     assert CHECKLIST_WINDOW[0] <= plan.checklist_due + DAY_START <= CHECKLIST_WINDOW[1]
     names = [a[2] for a in plan.activities]
     assert {"breakfast", "lunch", "nap", "supper"} <= set(names)
     for (s0, e0, _), (s1, e1, _) in zip(plan.activities, plan.activities[1:]):
         assert s0 <= e0 <= s1 <= e1
-    # Every reminder falls due when she is free in her room (the schedule is a care plan's).
+    # Every reminder falls due when she is free in her room (the schedule is a care plan's): not at a
+    # fixed point, and the others not in her session or on the slowest walker's way back from it.
     for due in (plan.vitamin_due, plan.physio_due, plan.checklist_due):
         assert plan.activity(due) in (None, "visit"), (clock(due), plan.activity(due))
+    back = plan.appointment + SESSION_SECONDS + 30 / 0.05
+    for due in (plan.vitamin_due, plan.checklist_due):
+        assert not plan.physio_due <= due <= back, (clock(due), clock(plan.appointment))
 
 
 def test_clock_reads_the_day():

@@ -46,7 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "domain)")
     parser.add_argument("--residents", default="paper,generated:6",
                         help="'paper' (the six of the study file), 'generated:N' (seeded profiles), or both, comma-separated")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the resident generator (default 0)")
+    parser.add_argument("--seed", type=int, default=None,
+                        help="seed of the resident generator (default 0; --day: 29, the day protocol's reported population)")
     parser.add_argument("--episodes", type=int, default=None,
                         help="seeds per resident, task and noise level (default 2; reception: 20 per episode)")
     parser.add_argument("--noise", "--wer", dest="noise", default=None,
@@ -78,6 +79,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--flat-time-limit", type=float, default=None, metavar="S",
                         help="instead of --flat-trials, S seconds of wall clock (the policy then depends on the "
                              "machine's speed and load)")
+    parser.add_argument("--day", action="store_true",
+                        help="the study on working days (docs/day.md): controllers × generated residents × --days "
+                             "× --noise on DayWorld, scored by the nurse's checklist; default domain "
+                             "config/pearl_day.domain.yaml (fitted on training days), --residents generated:6, "
+                             "--seed 29, --noise 0.25,0.5, policies hierarchical,flat_pointbased,qmdp,day_tree")
+    parser.add_argument("--days", type=int, default=None, metavar="N",
+                        help="with --day: days per resident (default 4; bench/study_power.py --days decides it)")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes for the episodes (default 1)")
     parser.add_argument("--cluster", default=None, metavar="ADDRESS",
                         help="run the episodes on the Dask scheduler at ADDRESS (e.g. tcp://host:8786) instead of "
@@ -183,8 +191,13 @@ def _pearl_defaults(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     from pearl_sim.worlds import runner, world_for
 
+    if args.day:
+        from pearl_sim.nursing_home.day_study import run_cli as run_day_study
+
+        return int(run_day_study(args))
     require_file(args.domain, "domain file (--domain)")
     world = world_for(args.domain)
+    args.seed = 0 if args.seed is None else args.seed
     if world.experiment is not None:
         return int(runner(world.experiment)(args))
     _pearl_defaults(args)

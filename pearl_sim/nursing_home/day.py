@@ -49,8 +49,11 @@ REMINDER_LEAD = 900.0            # the physio reminder falls due 15 min before t
 ARRIVAL_QUESTION = 0.5           # half of the paper's guidances were followed by a question
 #: The appointment slots (morning list after breakfast, afternoon list after the activity hour).
 APPOINTMENT_SLOTS = (10 * 3600, 10.5 * 3600, 11 * 3600, 16.5 * 3600)
-#: Windows (clock seconds) the vitamin and checklist reminders fall due in.
+#: Windows (clock seconds) the vitamin and checklist reminders fall due in: the vitamin after breakfast
+#: on a day with an afternoon appointment, with the afternoon medication round on a day with a morning
+#: one (her morning is then the session's).
 VITAMIN_WINDOW = (9.75 * 3600, 10.25 * 3600)
+VITAMIN_WINDOW_AFTERNOON = (16.25 * 3600, 16.75 * 3600)
 CHECKLIST_WINDOW = (18.25 * 3600, 18.75 * 3600)
 #: Her fixed points: (start, end, activity), clock seconds; each moves by ±JITTER a day.
 ROUTINE: Tuple[Tuple[float, float, str], ...] = (
@@ -123,7 +126,8 @@ def plan_day(seed: int) -> DayPlan:
         if start < prev_end:
             activities[i] = (prev_end, max(end, prev_end), name)
     appointment = float(APPOINTMENT_SLOTS[int(rng.integers(len(APPOINTMENT_SLOTS)))]) - DAY_START
-    vitamin = float(rng.uniform(*VITAMIN_WINDOW)) - DAY_START
+    morning = appointment + DAY_START < 12 * 3600
+    vitamin = float(rng.uniform(*(VITAMIN_WINDOW_AFTERNOON if morning else VITAMIN_WINDOW))) - DAY_START
     checklist = float(rng.uniform(*CHECKLIST_WINDOW)) - DAY_START
     question = str(rng.choice(["time", "weather"])) if rng.random() < ARRIVAL_QUESTION else None
     return DayPlan(int(seed), tuple(activities), appointment, vitamin, checklist, question)

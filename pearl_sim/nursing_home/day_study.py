@@ -1,0 +1,397 @@
+"""The study on days (docs/day.md, Part 2): controllers × residents × days × noise, paired by day.
+
+:func:`run_day` runs one controller through one :class:`~pearl_sim.nursing_home.day.DayWorld` day
+in the core executive (the step loop every world shares) and returns the day's checklist and score,
+optionally the episode as ``pearl fit`` reads it (actions, observations, true states) and the
+timeline a picture of the day is drawn from. :func:`run_days` runs a grid of them (``jobs``
+processes); :func:`summarize` gives per controller and noise level the mean of every checklist row
+with a 95 % t interval, and the per-day paired difference against the day tree.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, List, Optional, Sequence
+
+from pearl_sim.nursing_home.day import DayWorld, day_scenario, day_score, plan_day
+
+__all__ = ["DayCase", "day_cases", "run_day", "run_days", "summarize", "BASELINE", "SCORED_ROWS", "day_agents"]
+
+#: The day study's non-POMDP baseline: the episode tree with the day's Dock rule.
+BASELINE = "day_tree"
+#: The checklist rows summarised per controller (scalars; the score besides).
+SCORED_ROWS = ("reminders_on_time_share", "walks_completed_share", "questions_answered_share", "unprompted_per_hour",
+               "wrong_actions", "battery_empty", "docked_at_end", "station_share", "metres_driven", "battery_low_s")
+
+
+@dataclass(frozen=True)
+class DayCase:
+    """One resident's day: her profile, her articulation and the day's seed."""
+
+    resident: str
+    fields: Dict[str, Any]
+    articulation_wer: float
+    day: int
+    seed: int
+
+
+def day_cases(profiles, days: int, first_day: int = 0) -> List[DayCase]:
+    """Every profile × ``days`` days; resident *i*'s day *k* has seed ``1000·i + k`` (the protocol's rule)."""
+    return [DayCase(p.name, dict(p.fields), float(p.articulation_wer), k, 1000 * i + k)
+            for i, p in enumerate(profiles) for k in range(first_day, first_day + int(days))]
+
+
+def day_agents(domain, hierarchy_path, policies: Sequence[str], flat_trials: int = 100,
+               log: Optional[Callable[[str], None]] = None):
+    """name → controller for the day study: the POMDPs planned on ``domain`` and the day tree."""
+    from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree
+    from pearl_sim.planning import plan_controller, plan_each
+
+    model = domain.compile()
+
+    def build(name: str):
+        if name == BASELINE:
+            return PearlBehaviourTree(BASELINE, list(model.actions), day_rules=True)
+        return plan_controller(name, domain, model, hierarchy_path, flat_trials=flat_trials)
+
+    return plan_each(policies, build, log=log)
+
+
+def run_day(controller, domain, case: DayCase, noise: float, model=None, record: bool = False,
+            timeline: bool = False) -> Dict[str, Any]:
+    """One day of ``controller`` for ``case`` at recogniser word error rate ``noise``.
+
+    Returns ``policy, resident, day, seed, noise, score, checklist, seconds`` and, with ``record``,
+    ``episode`` (``pearl fit``'s ``.jsonl`` fields; the day then ends early if the battery runs
+    empty) and, with ``timeline``, one row per action:
+    ``t, action, robot, resident, battery``.
+    """
+    from pearl_sim.experiment import episode_executive
+    from pearl_sim.loop import ExecutiveBackend, run_episode
+    from pearl_sim.nursing_home.residents import effective_word_error_rate
+
+    t0 = time.perf_counter()
+    plan = plan_day(case.seed)
+    fields = dict(case.fields)
+    scenario = day_scenario(fields, effective_word_error_rate(noise, case.articulation_wer), case.seed,
+                            name=f"{case.resident}-day{case.day}", plan=plan)
+    world = DayWorld(scenario, plan, domain=domain)
+    executive = episode_executive(controller, domain, scenario, model)
+    states: List[Dict[str, str]] = []
+    rows: List[Dict[str, Any]] = []
+
+    def before(action: str) -> None:
+        if record:
+            states.append(world.truth())
+        if timeline:
+            rows.append({"t": round(world.time, 1), "action": action, "robot": world.robot_at,
+                         "resident": world.resident_state(), "battery": round(world.battery, 4)})
+
+    # A day recorded for `pearl fit` ends when the battery does: the model has no state for a robot
+    # that has stopped (its drives never arrive whatever the tables say), so those steps are not
+    # Pearl's dynamics. The checklist of such a day is the truncated day's.
+    stop = (lambda: world.done or world.dead) if record else (lambda: world.done)
+    run_episode(world, ExecutiveBackend(executive), before_action=before, stop_when=stop)
+    checklist = world.checklist()
+    out: Dict[str, Any] = {"policy": controller.name, "resident": case.resident, "day": case.day, "seed": case.seed,
+                           "noise": float(noise), "score": day_score(checklist), "checklist": checklist,
+                           "seconds": round(time.perf_counter() - t0, 2)}
+    if record:
+        states.append(world.truth())
+        steps = executive.steps
+        out["episode"] = {"scenario": scenario.name, "seed": case.seed, "actions": [s.action for s in steps],
+                          "observations": [s.observation for s in steps], "states": states[:len(steps) + 1]}
+    if timeline:
+        out["timeline"] = rows
+    return out
+
+
+@dataclass
+class _Job:
+    policy: str
+    case: DayCase
+    noise: float
+    record: bool = False
+
+
+_WORKER: Dict[str, Any] = {}
+
+
+def _init_worker(domain, agents) -> None:
+    _WORKER.update(domain=domain, agents=agents, model=domain.compile())
+
+
+def _run_job(job: _Job) -> Dict[str, Any]:
+    import logging
+
+    logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
+    return run_day(_WORKER["agents"][job.policy], _WORKER["domain"], job.case, job.noise, model=_WORKER["model"],
+                   record=job.record)
+
+
+def run_days(domain, agents, cases: Sequence[DayCase], noise_levels: Sequence[float], jobs: int = 1,
+             record: bool = False, progress: bool = False) -> List[Dict[str, Any]]:
+    """Every controller × case × noise level; the results in a fixed order whatever ``jobs`` is."""
+    work = [_Job(name, case, float(level), record) for level in noise_levels for case in cases for name in agents]
+    iterator: Any
+    if jobs <= 1:
+        _init_worker(domain, agents)
+        iterator = map(_run_job, work)
+        results = _progress(iterator, len(work), progress)
+    else:
+        import multiprocessing
+
+        with multiprocessing.get_context("fork").Pool(jobs, initializer=_init_worker, initargs=(domain, agents)) as pool:
+            results = _progress(pool.imap(_run_job, work, chunksize=1), len(work), progress)
+    return results
+
+
+def _progress(iterator, total: int, show: bool) -> List[Dict[str, Any]]:
+    if not show:
+        return list(iterator)
+    from tqdm import tqdm
+
+    return list(tqdm(iterator, total=total, desc="days", unit="day"))
+
+
+def _shares(c: Dict[str, Any]) -> Dict[str, float]:
+    def share(part: str, whole: str) -> float:
+        return c[part] / c[whole] if c[whole] else 1.0
+
+    return {"reminders_on_time_share": share("reminders_on_time", "reminders_due"),
+            "walks_completed_share": min(1.0, share("walks_completed", "walks_wanted")),
+            "questions_answered_share": share("questions_answered", "questions_raised"),
+            "unprompted_per_hour": float(c["unprompted_per_hour"]), "wrong_actions": float(c["wrong_actions"]),
+            "battery_empty": float(bool(c["battery_empty"])), "docked_at_end": float(bool(c["docked_at_end"])),
+            "station_share": float(c["station_share"]), "metres_driven": float(c["metres_driven"]),
+            "battery_low_s": float(c["battery_low_s"])}
+
+
+def _ratio(part: float, whole: float) -> Optional[float]:
+    """``part / whole``, or ``None`` when nothing was due (a share of nothing)."""
+    return part / whole if whole else None
+
+
+def _at_least(share: Optional[float], bound: float) -> bool:
+    return share is None or share >= bound
+
+
+def _fmt(share: Optional[float], width: int) -> str:
+    return f"{'-':>{width}}" if share is None else f"{share:>{width}.2f}"
+
+
+def summarize(days: Sequence[Dict[str, Any]], baseline: str = BASELINE) -> Dict[str, Any]:
+    """Per controller and noise level: every row's mean with a 95 % t interval, pooled totals
+    (reminders on time of all due, …), and the paired per-day difference against ``baseline``."""
+    from pearl_sim.stats import t_ci
+
+    by: Dict[str, Dict[float, List[Dict[str, Any]]]] = {}
+    for d in days:
+        by.setdefault(d["policy"], {}).setdefault(d["noise"], []).append(d)
+    per_policy: Dict[str, Any] = {}
+    for policy, levels in by.items():
+        per_policy[policy] = {}
+        for level, rows in sorted(levels.items()):
+            shares = [_shares(r["checklist"]) for r in rows]
+            total = {k: sum(r["checklist"][k] for r in rows) for k in
+                     ("reminders_due", "reminders_on_time", "walks_wanted", "walks_completed", "questions_raised",
+                      "questions_answered", "unprompted", "wrong_actions")}
+            hours = sum(r["checklist"]["hours"] for r in rows)
+            per_policy[policy][str(level)] = {
+                "days": len(rows), "score": t_ci([r["score"] for r in rows]),
+                "rows": {k: t_ci([s[k] for s in shares]) for k in SCORED_ROWS},
+                "pooled": {"reminders_on_time_share": _ratio(total["reminders_on_time"], total["reminders_due"]),
+                           "walks_completed_share": _ratio(total["walks_completed"], total["walks_wanted"]),
+                           "questions_answered_share": _ratio(total["questions_answered"], total["questions_raised"]),
+                           "unprompted_per_hour": total["unprompted"] / max(1e-9, hours),
+                           "days_battery_empty": sum(bool(r["checklist"]["battery_empty"]) for r in rows),
+                           "days_docked_at_end": sum(bool(r["checklist"]["docked_at_end"]) for r in rows),
+                           **total},
+            }
+    paired: Dict[str, Any] = {}
+    base = {(d["resident"], d["seed"], d["noise"]): d for d in days if d["policy"] == baseline}
+    for policy, levels in by.items():
+        if policy == baseline:
+            continue
+        paired[policy] = {}
+        for level, rows in sorted(levels.items()):
+            pairs = [(r, base[(r["resident"], r["seed"], r["noise"])]) for r in rows
+                     if (r["resident"], r["seed"], r["noise"]) in base]
+            if not pairs:
+                continue
+            diffs = {"score": t_ci([a["score"] - b["score"] for a, b in pairs])}
+            for k in SCORED_ROWS:
+                diffs[k] = t_ci([_shares(a["checklist"])[k] - _shares(b["checklist"])[k] for a, b in pairs])
+            paired[policy][str(level)] = diffs
+    return {"per_policy": per_policy, "paired_vs_baseline": paired}
+
+
+@dataclass
+class Acceptance:
+    """The day issue's acceptance for one controller at one noise level (docs/day.md)."""
+
+    checks: Dict[str, bool] = field(default_factory=dict)
+
+    @property
+    def met(self) -> bool:
+        return all(self.checks.values())
+
+
+def acceptance(summary: Dict[str, Any], policy: str = "hierarchical") -> Dict[str, Any]:
+    """The acceptance rows for ``policy`` at each noise level, each true or false as measured."""
+    out: Dict[str, Any] = {}
+    table = summary["per_policy"]
+    for level, s in table.get(policy, {}).items():
+        p = s["pooled"]
+        best = max(v[level]["score"]["mean"] for v in table.values() if level in v)
+        d = summary["paired_vs_baseline"].get(policy, {}).get(level)
+        a = Acceptance({
+            "reminders_on_time_95": _at_least(p["reminders_on_time_share"], 0.95),
+            "walks_completed_95": _at_least(p["walks_completed_share"], 0.95),
+            "questions_answered_90": _at_least(p["questions_answered_share"], 0.90),
+            "unprompted_per_hour_0.2": p["unprompted_per_hour"] <= 0.2,
+            "battery_never_empty": p["days_battery_empty"] == 0,
+            "docked_at_end_95": p["days_docked_at_end"] >= 0.95 * s["days"],
+            "station_share_80": s["rows"]["station_share"]["mean"] >= 0.80,
+            "best_score_within_1pct": s["score"]["mean"] >= best - 0.01 * abs(best),
+            "paired_score_vs_tree_ci_above_0": bool(d is not None and d["score"]["low"] is not None
+                                                    and d["score"]["low"] > 0),
+        })
+        out[level] = {"checks": a.checks, "met": a.met}
+    return out
+
+
+#: The day study's controllers by default, and those it accepts.
+DAY_POLICIES = ("hierarchical", "flat_pointbased", "qmdp", BASELINE)
+DAY_POLICY_NAMES = ("hierarchical", "flat_pointbased", "qmdp", "most_likely_state", BASELINE)
+
+
+def run_cli(args) -> int:
+    """``pearl experiment --day``: the study on days, printed as a table or one JSON object."""
+    import json
+    import logging
+    import sys
+    from pathlib import Path
+
+    from pearl_pomdp.cli import print_json
+    from pearl_pomdp.cli._inputs import require_file
+    from pearl_pomdp.cli._progress import show_progress
+    from pearl_pomdp.errors import SpecError
+    from pearl_pomdp.model.factored import load_domain
+    from pearl_sim.cli.demo import _share
+    from pearl_sim.nursing_home.residents import parse_population
+
+    started = time.perf_counter()
+    if args.domain == _share("config/pearl.domain.yaml"):
+        args.domain = _share("config/pearl_day.domain.yaml")
+    hierarchy = args.hierarchy or _share("config/pearl.hierarchy.yaml")
+    days = 4 if args.days is None else int(args.days)
+    if days < 1:
+        raise SpecError("<command line>", "--days", f"{days}: at least 1 day per resident")
+    if args.jobs < 1:
+        raise SpecError("<command line>", "--jobs", f"{args.jobs}: at least 1 process")
+    if args.snr is not None or args.noise_kind is not None or args.speech_rows is not None or args.cluster is not None:
+        raise SpecError("<command line>", "--day", "runs on --noise word error rates with --jobs (the SNR arm, "
+                                                  "--speech-rows and --cluster are the episode study's)")
+    text = "0.25,0.5" if args.noise is None else args.noise
+    try:
+        noise = sorted({float(x) for x in text.split(",") if x.strip()})
+    except ValueError:
+        raise SpecError("<command line>", "--noise", f"{text!r}: expected comma-separated numbers") from None
+    if not noise or any(not 0.0 <= x <= 1.0 for x in noise):
+        raise SpecError("<command line>", "--noise", f"{text!r}: word error rates in [0, 1]")
+    policies = [p.strip() for p in (args.policies or ",".join(DAY_POLICIES)).split(",") if p.strip()]
+    bad = [p for p in policies if p not in DAY_POLICY_NAMES]
+    if bad or not policies:
+        raise SpecError("<command line>", "--policies",
+                        f"{bad[0] if bad else 'none'!r}: the day study runs {', '.join(DAY_POLICY_NAMES)}")
+    require_file(args.domain, "domain file (--domain)")
+    require_file(hierarchy, "hierarchy file (--hierarchy)")
+    spec = "generated:6" if args.residents == "paper,generated:6" else args.residents
+    if "paper" in spec.split(","):
+        raise SpecError("<command line>", "--residents", "the day study takes generated:N residents (the paper's "
+                                                         "six have no profile for hearing, memory and articulation)")
+    seed = 29 if args.seed is None else int(args.seed)
+    profiles = parse_population(spec, None, seed=seed)
+    cases = day_cases(profiles, days)
+    terminal = show_progress(args)
+    log = (lambda line: print(line, file=sys.stderr, flush=True)) if terminal else None
+    domain = load_domain(args.domain)
+    agents = day_agents(domain, hierarchy, policies, log=log)
+    logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
+    t0 = time.perf_counter()
+    results = run_days(domain, agents, cases, noise, jobs=args.jobs, progress=terminal)
+    day_seconds = time.perf_counter() - t0
+    summary = summarize(results)
+    out = Path(args.out) if args.out else Path("out") / f"day-study-{time.strftime('%Y%m%d-%H%M%S')}"
+    out.mkdir(parents=True, exist_ok=True)
+    png = plot_study(summary, out / "day-study.png")
+    report = {
+        "protocol": {"domain": str(args.domain), "hierarchy": str(hierarchy), "residents": [p.name for p in profiles],
+                     "resident_spec": spec, "resident_seed": seed, "days_per_resident": days, "noise_levels": noise,
+                     "policies": policies, "baseline": BASELINE, "jobs": args.jobs, "days": len(results)},
+        "plan_seconds": {k: round(v, 1) for k, v in agents.timings.items()},
+        **summary,
+        "acceptance": acceptance(summary) if "hierarchical" in policies and BASELINE in policies else None,
+        "files": {"json": str(out / "day-study.json"), "png": str(png)},
+        "day_seconds": round(day_seconds, 1), "seconds": round(time.perf_counter() - started, 1),
+        "days": results,
+    }
+    (out / "day-study.json").write_text(json.dumps(report, indent=1), encoding="utf-8")
+    if args.json:
+        print_json(report)
+        return 0
+    print_table(summary)
+    print(f"{len(results)} days in {day_seconds:.1f} s ({args.jobs} job(s)); wrote {png}, {out / 'day-study.json'}")
+    return 0
+
+
+def print_table(summary: Dict[str, Any]) -> None:
+    """One line per controller and noise level: the day score and the checklist's pooled rows."""
+    print(f"{'policy':<16} {'noise':>5} {'days':>4} {'score':>13} {'Δscore vs tree':>22} {'rem.ontime':>10} "
+          f"{'walks':>6} {'questions':>9} {'unpr/h':>6} {'wrong/d':>7} {'empty':>5} {'docked':>6} {'station':>7}")
+    for policy, levels in summary["per_policy"].items():
+        for level, s in levels.items():
+            p, sc = s["pooled"], s["score"]
+            d = summary["paired_vs_baseline"].get(policy, {}).get(level)
+            delta = f"{d['score']['mean']:+.1f} [{d['score']['low']:+.1f},{d['score']['high']:+.1f}]" if d else "-"
+            print(f"{policy:<16} {level:>5} {s['days']:>4} {sc['mean']:>7.1f}±{sc['ci95']:<5.1f} {delta:>22} "
+                  f"{_fmt(p['reminders_on_time_share'], 10)} {_fmt(p['walks_completed_share'], 6)} "
+                  f"{_fmt(p['questions_answered_share'], 9)} "
+                  f"{p['unprompted_per_hour']:>6.2f} {s['rows']['wrong_actions']['mean']:>7.2f} "
+                  f"{p['days_battery_empty']:>5} {p['days_docked_at_end']:>6} {s['rows']['station_share']['mean']:>7.2f}")
+
+
+def plot_study(summary: Dict[str, Any], path) -> Any:
+    """Day score per controller and noise level with 95 % intervals, and the paired difference to the tree."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    table = summary["per_policy"]
+    levels = sorted({lvl for v in table.values() for lvl in v}, key=float)
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4))
+    width = 0.8 / max(1, len(table))
+    for i, (policy, by) in enumerate(table.items()):
+        xs = [j + i * width for j, lvl in enumerate(levels) if lvl in by]
+        ys = [by[lvl]["score"]["mean"] for lvl in levels if lvl in by]
+        es = [by[lvl]["score"]["ci95"] for lvl in levels if lvl in by]
+        ax.bar(xs, ys, width, yerr=es, capsize=3, label=policy)
+    ax.set_xticks([j + 0.4 - width / 2 for j in range(len(levels))], [f"noise {lvl}" for lvl in levels])
+    ax.set_ylabel("day score (100 = perfect day)")
+    ax.set_title("Day score, mean ± 95 % CI")
+    ax.legend(fontsize=8)
+    for i, (policy, by) in enumerate(summary["paired_vs_baseline"].items()):
+        pts = [(j, by[lvl]["score"]) for j, lvl in enumerate(levels) if lvl in by]
+        bx.errorbar([j + 0.1 * i for j, _ in pts], [d["mean"] for _, d in pts],
+                    yerr=[[d["mean"] - d["low"] for _, d in pts], [d["high"] - d["mean"] for _, d in pts]],
+                    fmt="o", capsize=3, label=policy)
+    bx.axhline(0, color="k", lw=0.8)
+    bx.set_xticks(range(len(levels)), [f"noise {lvl}" for lvl in levels])
+    bx.set_title(f"Paired day score − {BASELINE} (95 % CI)")
+    bx.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
