@@ -109,7 +109,7 @@ setup(
         # The simulated nursing home as one node (launch/pearl_sim.launch.xml).
         + ["pearl_sim_world = pearl_sim.world_node:main"],
         # Subcommands other packages add to `pearl` (the core never imports the simulator).
-        "pearl.commands": ["demo = pearl_sim.cli.demo", "experiment = pearl_sim.cli.experiment",
+        "pearl.commands": ["demo = pearl_sim.cli.demo", "experiment = pearl_sim.cli.experiment", "day = pearl_sim.cli.day",
                            "calibrate-speech = pearl_sim.cli.calibrate_speech"],
     },
 )

@@ -20,6 +20,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 TRAINING_NOISE = 0.25
+#: What the fitted file says of itself, above the designer's text (which write_fitted keeps as it is).
+HEADER = ("# Pearl's domain fitted on WORKING DAYS (docs/day.md): written by bench/fit_day.py from the protocol's\n"
+          "# training days (resident generator seed {seed}, {residents} residents x {days} days, noise {noise}, the day\n"
+          "# tree and the designer's hierarchical policy). The designer's rows and rewards below are unchanged; the\n"
+          "# fitted: section at the end holds what the days taught. Re-create: python bench/fit_day.py --jobs 2\n#\n")
 
 
 def main() -> int:
@@ -59,6 +64,9 @@ def main() -> int:
     episodes = load_episodes([path])
     result = fit_domain(domain, episodes, prior_strength=args.prior_strength)
     write_fitted(args.domain, result, args.out, prior_strength=args.prior_strength)
+    out_path = Path(args.out)
+    out_path.write_text(HEADER.format(seed=args.seed, residents=args.residents, days=args.days, noise=TRAINING_NOISE)
+                        + out_path.read_text(encoding="utf-8"), encoding="utf-8")
     rows = sorted(result.rows, key=lambda r: -r.change)
     print(json.dumps({
         "training": {"resident_seed": args.seed, "residents": args.residents, "days": args.days,

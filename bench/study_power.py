@@ -13,6 +13,7 @@ matched cells to detect a true mean ``δ``; with ``cases`` resident-task cases p
 ``--delta-wrong``), chosen before the pilot was read (docs/study.md).
 
     .venv/bin/python bench/study_power.py out/pilot/study.json [--worse white:10 --better white:30]
+    .venv/bin/python bench/study_power.py out/day-pilot/day-study.json --days [--delta-score 5]
 
 Prints one JSON object.
 """
@@ -41,9 +42,17 @@ def main(argv=None) -> int:
     parser.add_argument("--delta-return", type=float, default=5.0)
     parser.add_argument("--delta-wrong", type=float, default=0.1)
     parser.add_argument("--power", type=float, default=0.8)
+    parser.add_argument("--days", action="store_true",
+                        help="the pilot is a day study (pearl experiment --day --out): days per resident to resolve "
+                             "--delta-score points of the paired day score (docs/day.md, Part 2)")
+    parser.add_argument("--delta-score", type=float, default=5.0, help="with --days: the paired difference to resolve "
+                                                                       "(5 points: 5 %% of the day score's scale)")
     args = parser.parse_args(argv)
 
     report = json.loads(Path(args.study).read_text(encoding="utf-8"))
+    if args.days:
+        print(json.dumps(day_power(report, args.study, args.delta_score, args.power)))
+        return 0
     episodes = []
     for row in report["episodes"]:
         r = EpisodeResult(scenario="", agent=row["policy"], seed=row["seed"], discounted_return=row["discounted_return"],
@@ -81,6 +90,37 @@ def main(argv=None) -> int:
                                                  contrast=f"{args.worse} vs {args.better}")
     print(json.dumps(out))
     return 0
+
+
+def day_power(report: dict, pilot: str, delta: float, power: float) -> dict:
+    """Days per resident each controller's paired day score against the day tree needs, per noise
+    level, from the pilot's per-day differences: ``n = ((z.975 + z_power)·s/δ)²`` days, over the
+    pilot's residents. The study's number is the largest over every controller and level."""
+    import numpy as np
+    from scipy import stats
+
+    days = report["days"]
+    baseline = report["protocol"]["baseline"]
+    residents = len({d["resident"] for d in days})
+    z = stats.norm.ppf(0.975) + stats.norm.ppf(power)
+    base = {(d["resident"], d["seed"], d["noise"]): d["score"] for d in days if d["policy"] == baseline}
+    out: dict = {"bench": "study_power", "pilot": pilot, "kind": "days", "residents": residents,
+                 "pilot_days_per_resident": report["protocol"]["days_per_resident"], "alpha": 0.05,
+                 "power": power, "delta_score": delta, "paired": {}}
+    worst = 1
+    for policy in sorted({d["policy"] for d in days} - {baseline}):
+        out["paired"][policy] = {}
+        for level in sorted({d["noise"] for d in days}):
+            diffs = [d["score"] - base[(d["resident"], d["seed"], d["noise"])] for d in days
+                     if d["policy"] == policy and d["noise"] == level and (d["resident"], d["seed"], d["noise"]) in base]
+            sd = float(np.std(diffs, ddof=1)) if len(diffs) > 1 else 0.0
+            n = math.ceil((z * sd / delta) ** 2)
+            per_resident = max(1, math.ceil(n / residents))
+            worst = max(worst, per_resident)
+            out["paired"][policy][str(level)] = {"sd": round(sd, 3), "mean": round(float(np.mean(diffs)), 3),
+                                                 "pilot_days": len(diffs), "days": n, "days_per_resident": per_resident}
+    out["days_per_resident"] = worst
+    return out
 
 
 if __name__ == "__main__":

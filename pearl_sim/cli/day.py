@@ -1,0 +1,96 @@
+"""One working day of Pearl, 08:00-20:00, with the nurse's checklist and a picture of the day.
+
+A resident from the study's generator (`--resident-seed`, `--resident`) lives one day (`--seed`):
+meals, a nap, the lounge, a visitor, her physiotherapy appointment and session, three reminders,
+questions, and the robot's battery over hours (docs/day.md). The controller is the hierarchical
+POMDP planned on the day domain (config/pearl_day.domain.yaml, fitted on training days), or
+`--policy day_tree|qmdp|flat_pointbased`. The day runs on the core executive, the step loop the
+nodes run (about a second of CPU a day for the tree, several for the hierarchy). Prints the
+checklist (or, with --json, one JSON object holding every row) and writes day.png (where she is,
+where the robot is, its battery, every action), checklist.json and timeline.json into --out.
+
+Examples:
+  pearl day --policy day_tree --seed 3 --out out/day-tree
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+COMMAND = "day"
+HELP = "run one working day (08:00-20:00) and print the nurse's checklist and a picture of the day"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pearl_sim.cli.demo import _share
+
+    parser.add_argument("--seed", type=int, default=0, help="the day's seed: her routine, the appointment, every draw")
+    parser.add_argument("--resident-seed", type=int, default=29,
+                        help="the resident generator's seed (default 29, the day protocol's reported population)")
+    parser.add_argument("--resident", type=int, default=1, help="which generated resident (1-based, default 1)")
+    parser.add_argument("--noise", type=float, default=0.25, help="recogniser word error rate (default 0.25)")
+    parser.add_argument("--policy", default="hierarchical",
+                        help="hierarchical (default), flat_pointbased, qmdp or day_tree")
+    parser.add_argument("--domain", default=_share("config/pearl_day.domain.yaml"))
+    parser.add_argument("--hierarchy", default=_share("config/pearl.hierarchy.yaml"))
+    parser.add_argument("--out", default=None, help="folder for day.png, checklist.json, timeline.json "
+                                                    "(default out/day-<time>)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object with every checklist row")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pearl_pomdp.cli import print_json
+    from pearl_pomdp.cli._inputs import require_file
+    from pearl_pomdp.errors import SpecError
+    from pearl_pomdp.model.factored import load_domain
+    from pearl_sim.nursing_home.day import clock
+    from pearl_sim.nursing_home.day_plot import plot_day
+    from pearl_sim.nursing_home.day_study import DAY_POLICY_NAMES, DayCase, day_agents, run_day
+    from pearl_sim.nursing_home.residents import MAX_GENERATED, generate_residents
+
+    started = time.perf_counter()
+    if args.policy not in DAY_POLICY_NAMES:
+        raise SpecError("<command line>", "--policy", f"{args.policy!r} is not one of {', '.join(DAY_POLICY_NAMES)}")
+    if not 1 <= args.resident <= MAX_GENERATED:
+        raise SpecError("<command line>", "--resident", f"{args.resident}: a resident number in [1, {MAX_GENERATED}]")
+    if not 0.0 <= args.noise <= 1.0:
+        raise SpecError("<command line>", "--noise", f"{args.noise} is not a word error rate in [0, 1]")
+    require_file(args.domain, "domain file (--domain)")
+    require_file(args.hierarchy, "hierarchy file (--hierarchy)")
+    domain = load_domain(args.domain)
+    profile = generate_residents(args.resident, seed=args.resident_seed)[-1]
+    case = DayCase(profile.name, dict(profile.fields), float(profile.articulation_wer), args.seed, args.seed)
+    controller = day_agents(domain, args.hierarchy, [args.policy])[args.policy]
+    day = run_day(controller, domain, case, args.noise, timeline=True)
+    out = Path(args.out) if args.out else Path("out") / f"day-{time.strftime('%Y%m%d-%H%M%S')}"
+    out.mkdir(parents=True, exist_ok=True)
+    title = (f"{args.policy} · resident {profile.name} (generator seed {args.resident_seed}) · day seed {args.seed} · "
+             f"noise {args.noise}")
+    png = plot_day(day["timeline"], day["checklist"], out / "day.png", title)
+    (out / "checklist.json").write_text(json.dumps({**{k: v for k, v in day.items() if k != "timeline"}},
+                                                   indent=1), encoding="utf-8")
+    (out / "timeline.json").write_text(json.dumps(day["timeline"]), encoding="utf-8")
+    report = {"policy": args.policy, "resident": profile.name, "resident_seed": args.resident_seed, "seed": args.seed,
+              "noise": args.noise, "score": day["score"], "checklist": day["checklist"],
+              "files": {"png": str(png), "checklist": str(out / "checklist.json"), "timeline": str(out / "timeline.json")},
+              "day_seconds": day["seconds"], "seconds": round(time.perf_counter() - started, 1)}
+    if args.json:
+        print_json(report)
+        return 0
+    c = day["checklist"]
+    print(f"{title}: day score {day['score']:.1f} / 100")
+    print(f"  reminders: {c['reminders_on_time']} of {c['reminders_due']} on time (≤ 10 min), "
+          f"{c['reminders_delivered']} delivered; delays {c['reminder_delay_s']} s")
+    print(f"  walks: {c['walks_completed']} of {c['walks_wanted']} wanted completed ({c['staff_walks']} by the staff); "
+          f"durations {c['walk_s']} s")
+    print(f"  questions: {c['questions_answered']} of {c['questions_raised']} answered; delays {c['answer_delay_s']} s")
+    print(f"  unprompted acts: {c['unprompted']} ({c['unprompted_per_hour']:.2f} an hour); wrong actions "
+          f"{c['wrong_actions']}; clarification questions {c['clarifications']}")
+    print(f"  battery: {c['battery_low_s'] / 60:.0f} min below 20 %, {'ran EMPTY' if c['battery_empty'] else 'never empty'}, "
+          f"{c['battery_at_end']:.0%} at {clock(12 * 3600)}; {'docked' if c['docked_at_end'] else 'NOT docked'} at the end")
+    print(f"  at the station {c['station_share']:.0%} of the time nothing was wanted; {c['metres_driven']:.0f} m driven; "
+          f"{c['steps']} steps")
+    print(f"wrote {png}, {out / 'checklist.json'}, {out / 'timeline.json'} ({report['seconds']} s)")
+    return 0
