@@ -7,7 +7,7 @@ the seeding, :meth:`StudyWorld.truth_record`, :meth:`StudyWorld.wait`'s idle loo
 action (a wrong action scored, the messages in time order) and a person's speech through one
 recogniser per error rate. What happens in the world (its actions, people and time flow) is each
 world's own. The nursing home (``pearl_sim/nursing_home/world.py``) stands on this frame too, with
-its own scheduler wait and speech path (the Speech modality, the real recogniser channel).
+its own scheduler wait and speech path (through the real recogniser channel).
 """
 from __future__ import annotations
 
