@@ -362,3 +362,56 @@ def test_recorded_scenarios_read_by_rosbags_and_mcap_ros2():
         with open(next(bag.glob("*.mcap")), "rb") as f:
             decoded = sum(1 for _ in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages())
         assert decoded == ours.message_count
+
+
+HOUR = 3_600_000_000_000
+
+
+def _write_day(path: Path, max_duration_ns=HOUR) -> list:
+    """Strings every 10 minutes for 3 h 30 min, in a bag split by the hour."""
+    written = []
+    with BagWriter(path, max_duration_ns=max_duration_ns) as bag:
+        bag.add_topic("/pearl/speech", "std_msgs/msg/String", qos=[QosProfile()])
+        for i in range(22):
+            data = rclpy_serialization.serialize_message(String(data=f"minute {10 * i}"))
+            bag.write("/pearl/speech", data, i * 600_000_000_000)
+            written.append(("/pearl/speech", i * 600_000_000_000, data))
+    return written
+
+
+def test_a_bag_split_by_the_hour_is_whole_in_every_file_and_reads_back_in_order(tmp_path):
+    from mcap.reader import make_reader
+    from rosbags.rosbag2 import Reader
+
+    written = _write_day(tmp_path / "day")
+    files = sorted((tmp_path / "day").glob("*.mcap"), key=lambda p: int(p.stem.rsplit("_", 1)[1]))
+    assert [f.name for f in files] == [f"day_{k}.mcap" for k in range(4)]
+    # Each file is a finished MCAP file on its own (summary + footer) with its own schema and channel.
+    per_file = []
+    for f in files:
+        with open(f, "rb") as fh:
+            reader = make_reader(fh)
+            summary = reader.get_summary()
+            assert summary is not None and [c.topic for c in summary.channels.values()] == ["/pearl/speech"]
+            per_file.append([m.log_time for _s, _c, m in reader.iter_messages()])
+    assert [len(t) for t in per_file] == [6, 6, 6, 4]
+    assert all(t[-1] - t[0] < HOUR for t in per_file)
+    meta = yaml.safe_load((tmp_path / "day" / wk.METADATA_FILENAME).read_text())["rosbag2_bagfile_information"]
+    assert meta["relative_file_paths"] == [f.name for f in files] and meta["message_count"] == 22
+    assert [f["message_count"] for f in meta["files"]] == [6, 6, 6, 4]
+    got = [(m.topic, m.log_time, m.data) for m in BagReader(tmp_path / "day").messages]
+    assert got == written
+    with Reader(tmp_path / "day") as r:                       # an independent reader agrees
+        assert r.message_count == 22 and [t for _c, t, _d in r.messages()] == [w[1] for w in written]
+
+
+def test_a_split_bag_without_its_metadata_reads_its_files_in_the_order_written(tmp_path):
+    written = _write_day(tmp_path / "day", max_duration_ns=HOUR // 4)    # 11 files: day_10 after day_9
+    (tmp_path / "day" / wk.METADATA_FILENAME).unlink()                     # as a killed recorder leaves it
+    assert len(list((tmp_path / "day").glob("*.mcap"))) == 11
+    assert [(m.topic, m.log_time, m.data) for m in BagReader(tmp_path / "day").messages] == written
+
+
+def test_a_split_bag_refuses_a_duration_that_is_not_positive(tmp_path):
+    with pytest.raises(PearlError, match="max_duration_ns 0"):
+        BagWriter(tmp_path / "b", max_duration_ns=0)

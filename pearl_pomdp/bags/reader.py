@@ -181,7 +181,7 @@ class BagReader:
                     candidate = candidate2
                 files.append(candidate)
             return files
-        files = sorted(p.glob(f"*{wk.MCAP_SUFFIX}"))
+        files = sorted(p.glob(f"*{wk.MCAP_SUFFIX}"), key=_file_order)
         if not files:
             raise BagError(f"{p}: not a bag: no {wk.METADATA_FILENAME} and no *.mcap file")
         return files
@@ -388,6 +388,12 @@ def _chunk_records(chunk) -> Sequence[Any]:
     from mcap.stream_reader import breakup_chunk
 
     return breakup_chunk(chunk, validate_crc=True)
+
+
+def _file_order(path: Path):
+    """A split bag's files in the order written (``NAME_2.mcap`` before ``NAME_10.mcap``), then by name."""
+    stem, _, index = path.stem.rpartition("_")
+    return (stem, int(index), path.name) if index.isdigit() else (path.stem, -1, path.name)
 
 
 def open_bag(path: PathLike, *, salvage: bool = True) -> BagReader:

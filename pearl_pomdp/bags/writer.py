@@ -1,7 +1,10 @@
 """Write rosbag2 bags: MCAP with the 'ros2' profile, plus ``metadata.yaml`` (version 9).
 
 A bag is a directory ``NAME/`` holding ``NAME_0.mcap`` and, once closed, ``metadata.yaml``
-— the layout of ``ros2 bag record -s mcap``. Inside the MCAP file, as rosbag2_storage_mcap
+— the layout of ``ros2 bag record -s mcap``. With ``max_duration_ns`` (rosbag2's
+``--max-bag-duration``) the bag is split: a message logged that long after its file's first one
+starts ``NAME_1.mcap``, and so on; every file is a whole MCAP file with every schema and channel,
+and ``metadata.yaml`` lists them in order. Inside the MCAP file, as rosbag2_storage_mcap
 writes them: header profile ``ros2``; one ``ros2msg`` schema per type with rosbag2's full
 definition text (:mod:`pearl_pomdp.bags.msgdefs`); one ``cdr`` channel per topic with
 metadata ``offered_qos_profiles`` and ``topic_type_hash``; messages with log (receive) and
@@ -73,13 +76,16 @@ class BagWriter:
         flush_each: flush each record to the OS at once (default ``True``).
         custom_data: ``custom_data`` of ``metadata.yaml`` (string → string).
         ros_distro: written to ``metadata.yaml`` (``jazzy``).
+        max_duration_ns: split the bag into files of at most this much log time each (``None``: one file).
     """
 
     def __init__(self, path: PathLike, *, chunk_size: Optional[int] = None, compression: str = "none",
                  flush_each: bool = True, custom_data: Optional[Mapping[str, str]] = None,
-                 ros_distro: str = wk.ROS_DISTRO):
-        from mcap.writer import CompressionType, Writer
+                 ros_distro: str = wk.ROS_DISTRO, max_duration_ns: Optional[int] = None):
+        from mcap.writer import CompressionType
 
+        if max_duration_ns is not None and int(max_duration_ns) <= 0:
+            raise PearlError(f"max_duration_ns {max_duration_ns}: a bag file's duration must be positive")
         self.path = Path(path)
         if self.path.suffix == wk.MCAP_SUFFIX:
             raise PearlError(f"{self.path}: a bag is a directory (rosbag2 layout); give a name without .mcap")
@@ -91,16 +97,16 @@ class BagWriter:
         if compression != "none" and chunk_size is None:
             raise PearlError("compression needs chunk_size (MCAP compresses chunks)")
         self.path.mkdir(parents=True, exist_ok=True)
-        self.mcap_path = self.path / f"{self.path.name}_0{wk.MCAP_SUFFIX}"
-        self._file = open(self.mcap_path, "wb")
-        self._writer = Writer(
-            self._file,
-            chunk_size=chunk_size or 1024 * 1024,
-            compression=compressions[compression],
-            use_chunking=chunk_size is not None,
-            enable_crcs=True,
-        )
-        self._writer.start(profile=wk.PROFILE, library=_library())
+        self._chunk_size = chunk_size
+        self._compression = compressions[compression]
+        self._max_duration = None if max_duration_ns is None else int(max_duration_ns)
+        #: Closed files: (name, first log time, duration, messages), in order.
+        self._done_files: list = []
+        self._file_start: Optional[int] = None
+        self._file_end: Optional[int] = None
+        self._file_count = 0
+        self._definitions: Dict[str, str] = {}
+        self._open_file(0)
         self._flush_each = flush_each
         self._custom_data = dict(custom_data or {})
         self._ros_distro = ros_distro
@@ -114,6 +120,45 @@ class BagWriter:
         # An early ``rosbag2`` metadata record: a bag whose recorder is killed keeps its
         # custom_data and distro (rosbag2 readers take the last such record, i.e. the one
         # written at close when there is one).
+        self._writer.add_metadata(wk.METADATA_RECORD_NAME, {wk.METADATA_RECORD_KEY: md.dump_yaml(self.metadata())})
+        self._flush()
+
+    def _open_file(self, index: int) -> None:
+        from mcap.writer import Writer
+
+        self.mcap_path = self.path / f"{self.path.name}_{index}{wk.MCAP_SUFFIX}"
+        self._file = open(self.mcap_path, "wb")
+        self._writer = Writer(self._file, chunk_size=self._chunk_size or 1024 * 1024, compression=self._compression,
+                              use_chunking=self._chunk_size is not None, enable_crcs=True)
+        self._writer.start(profile=wk.PROFILE, library=_library())
+
+    def _finish_file(self) -> None:
+        """The current file's metadata record, summary and footer; synced and closed."""
+        self._writer.add_metadata(wk.METADATA_RECORD_NAME, {wk.METADATA_RECORD_KEY: md.dump_yaml(self.metadata())})
+        self._writer.finish()
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self._file.close()
+
+    def _roll(self) -> None:
+        """Close the current file and open the next, every schema and channel registered again."""
+        start = self._file_start or 0
+        self._done_files.append((self.mcap_path.name, start, (self._file_end or start) - start, self._file_count))
+        self._finish_file()
+        self._open_file(len(self._done_files))
+        self._file_start = self._file_end = None
+        self._file_count = 0
+        schemas: Dict[str, int] = {}
+        for type_name, definition in self._definitions.items():
+            schemas[type_name] = self._writer.register_schema(name=type_name, encoding=wk.SCHEMA_ENCODING,
+                                                              data=definition.encode("utf-8"))
+        self._schemas = schemas
+        for t in self._topics.values():
+            t.channel_id = self._writer.register_channel(
+                topic=t.meta.name, message_encoding=t.meta.serialization_format, schema_id=schemas[t.meta.type],
+                metadata={wk.CHANNEL_QOS_KEY: md.qos_list_yaml(t.meta.offered_qos_profiles),
+                          wk.CHANNEL_TYPE_HASH_KEY: t.meta.type_description_hash})
+        # As at the start: a file whose recorder is killed still carries the bag's metadata.
         self._writer.add_metadata(wk.METADATA_RECORD_NAME, {wk.METADATA_RECORD_KEY: md.dump_yaml(self.metadata())})
         self._flush()
 
@@ -146,6 +191,7 @@ class BagWriter:
                 schema_id = self._writer.register_schema(
                     name=type_name, encoding=wk.SCHEMA_ENCODING, data=definition.encode("utf-8"))
                 self._schemas[type_name] = schema_id
+                self._definitions[type_name] = definition
             meta = TopicMetadata(name=name, type=type_name, serialization_format=serialization_format,
                                  offered_qos_profiles=list(qos), type_description_hash=type_hash)
             channel_id = self._writer.register_channel(
@@ -184,12 +230,18 @@ class BagWriter:
             t = self._topics.get(topic)
             if t is None:
                 raise PearlError(f"{self.path}: topic {topic} was not added (add_topic first)")
+            if (self._max_duration is not None and self._file_start is not None
+                    and log_time - self._file_start >= self._max_duration):
+                self._roll()
             t.sequence += 1
             seq = t.sequence if sequence is None else int(sequence)
             self._writer.add_message(channel_id=t.channel_id, log_time=log_time, data=bytes(data),
                                      publish_time=publish_time, sequence=seq & 0xFFFFFFFF)
             t.count += 1
             self.message_count += 1
+            self._file_count += 1
+            self._file_start = log_time if self._file_start is None else min(self._file_start, log_time)
+            self._file_end = log_time if self._file_end is None else max(self._file_end, log_time)
             self._start = log_time if self._start is None else min(self._start, log_time)
             self._end = log_time if self._end is None else max(self._end, log_time)
             self._flush()
@@ -209,8 +261,11 @@ class BagWriter:
         """The ``rosbag2_bagfile_information`` mapping for what has been written so far."""
         start = self._start or 0
         duration = (self._end - self._start) if (self._start is not None and self._end is not None) else 0
+        current_start = self._file_start or 0
+        current = (self.mcap_path.name, current_start, (self._file_end or current_start) - current_start,
+                   self._file_count)
         return md.bag_metadata(
-            files=[(self.mcap_path.name, start, duration, self.message_count)],
+            files=self._done_files + [current],
             topics=[(t.meta, t.count) for t in self._topics.values()],
             start_ns=start, duration_ns=duration, message_count=self.message_count,
             custom_data=self._custom_data, ros_distro=self._ros_distro)
@@ -224,12 +279,7 @@ class BagWriter:
             if self.closed:
                 return self.path
             info = self.metadata()
-            self._writer.add_metadata(wk.METADATA_RECORD_NAME,
-                                      {wk.METADATA_RECORD_KEY: md.dump_yaml(info)})
-            self._writer.finish()
-            self._file.flush()
-            os.fsync(self._file.fileno())
-            self._file.close()
+            self._finish_file()
             self.closed = True
         atomic_write(self.path / wk.METADATA_FILENAME, md.metadata_yaml(info))
         return self.path
