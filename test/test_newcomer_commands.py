@@ -76,6 +76,21 @@ def test_plan_flat_on_purpose_or_with_the_sibling_hierarchy_does_not_warn(probe,
     assert short_flat_plans == ["flat", "probe.hierarchy"]
 
 
+def test_a_refit_domain_plans_with_the_hierarchy_of_the_name_it_declares(probe, capsys, short_flat_plans):
+    """``probe_day.domain.yaml`` (a refit that declares ``name: probe``) finds ``probe.hierarchy.yaml``."""
+    import re
+
+    (probe / "probe.hierarchy.yaml").write_text(PROBE_HIERARCHY)
+    declared = re.search(r"^name:\s*(\S+)", PROBE_DOMAIN, re.M).group(1)
+    assert declared == "probe"
+    (probe / "probe_day.domain.yaml").write_text(PROBE_DOMAIN)
+    assert main(["plan", "probe_day.domain.yaml", "--json", "--no-save"]) == 0
+    captured = capsys.readouterr()
+    assert "planning flat" not in captured.err
+    assert json.loads(captured.out)["hierarchy_file"] == "probe.hierarchy.yaml"
+    assert short_flat_plans == ["probe.hierarchy"]
+
+
 def test_plan_rejects_a_missing_hierarchy_file_before_planning(probe, capsys):
     assert main(["plan", "probe.domain.yaml", "--hierarchy", "nope.yaml"]) == 2
     assert capsys.readouterr().err == "pearl plan: error: nope.yaml: no such hierarchy file (--hierarchy)\n"

@@ -77,10 +77,36 @@ def hierarchy_candidate(domain_path: Path) -> Path:
     return Path(domain_path).with_name(domain_name(domain_path) + ".hierarchy.yaml")
 
 
+def declared_name(domain_path: Path):
+    """The ``name:`` a YAML domain declares at its top level (read line by line, no parsing), or ``None``."""
+    import re
+
+    if Path(domain_path).suffix.lower() not in (".yaml", ".yml"):
+        return None
+    try:
+        with open(domain_path, encoding="utf-8") as fh:
+            for line in fh:
+                found = re.match(r"name:\s*['\"]?([A-Za-z0-9_.-]+)", line)
+                if found:
+                    return found.group(1)
+    except OSError:
+        return None
+    return None
+
+
 def default_hierarchy(domain_path: Path):
-    """``NAME.hierarchy.yaml`` beside ``NAME.domain.yaml`` / ``NAME.yaml``, or ``None``."""
+    """``NAME.hierarchy.yaml`` beside ``NAME.domain.yaml`` / ``NAME.yaml``; else the hierarchy of the
+    domain's declared ``name:`` beside it (``pearl_day.domain.yaml``, a refit of ``name: pearl``,
+    plans with ``pearl.hierarchy.yaml``); else ``None``."""
     candidate = hierarchy_candidate(domain_path)
-    return candidate if candidate.is_file() else None
+    if candidate.is_file():
+        return candidate
+    declared = declared_name(Path(domain_path))
+    if declared and declared != domain_name(Path(domain_path)):
+        by_name = Path(domain_path).with_name(declared + ".hierarchy.yaml")
+        if by_name.is_file():
+            return by_name
+    return None
 
 
 def default_policy_dir(domain_path) -> Path:
