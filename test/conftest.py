@@ -52,7 +52,7 @@ def ward_domain():
 
 # ROS fixtures (ros_context, pearl_policy) live in test/ros_helpers.py; registered here once so
 # the session-scoped planned Pearl policy is shared by every test module.
-from ros_helpers import pearl_policy, ros_context  # noqa: E402,F401
+from ros_helpers import day_policy, pearl_policy, ros_context  # noqa: E402,F401
 
 
 def pytest_sessionfinish(session, exitstatus):

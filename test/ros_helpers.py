@@ -252,17 +252,31 @@ def pearl_policy(request, tmp_path_factory) -> Path:
     and kept in pytest's cache under a key of the domain, hierarchy and planner sources (so
     only the first run after a change pays for PLAN).
     """
+    env_dir = os.environ.get("PEARL_POLICY_DIR")
+    return _planned_policy(request, tmp_path_factory, DOMAIN, ([Path(env_dir)] if env_dir else [])
+                           + list(POLICY_CANDIDATES))
+
+
+@pytest.fixture(scope="session")
+def day_policy(request, tmp_path_factory) -> Path:
+    """A planned policy of the working day's domain (``config/pearl_day.domain.yaml``):
+    ``$PEARL_DAY_POLICY_DIR`` when it fits, else planned once and cached as :func:`pearl_policy` is."""
+    env_dir = os.environ.get("PEARL_DAY_POLICY_DIR")
+    return _planned_policy(request, tmp_path_factory, REPO / "config" / "pearl_day.domain.yaml",
+                           [Path(env_dir)] if env_dir else [])
+
+
+def _planned_policy(request, tmp_path_factory, domain_path: Path, candidates) -> Path:
     import hashlib
 
     from pearl_pomdp.model.factored import load_domain
 
-    domain = load_domain(DOMAIN)
-    env_dir = os.environ.get("PEARL_POLICY_DIR")
-    for candidate in ([Path(env_dir)] if env_dir else []) + list(POLICY_CANDIDATES):
+    domain = load_domain(domain_path)
+    for candidate in candidates:
         if (candidate / "hierarchy.json").is_file() and _policy_fits(candidate, domain):
             return candidate
     h = hashlib.sha256()
-    sources = [DOMAIN, HIERARCHY] + sorted((REPO / "pearl_pomdp" / "hierarchy").glob("*.py")) \
+    sources = [domain_path, HIERARCHY] + sorted((REPO / "pearl_pomdp" / "hierarchy").glob("*.py")) \
         + sorted((REPO / "pearl_pomdp" / "solvers").glob("*.py"))
     for path in sources:
         h.update(path.name.encode() + path.read_bytes())

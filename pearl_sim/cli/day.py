@@ -5,9 +5,12 @@ meals, a nap, the lounge, a visitor, her physiotherapy appointment and session, 
 questions, and the robot's battery over hours (docs/day.md). The controller is the hierarchical
 POMDP planned on the day domain (config/pearl_day.domain.yaml, fitted on training days), or
 `--policy day_tree|qmdp|flat_pointbased`. The day runs on the core executive, the step loop the
-nodes run (about a second of CPU a day for the tree, several for the hierarchy). Prints the
-checklist (or, with --json, one JSON object holding every row) and writes day.png (where she is,
-where the robot is, its battery, every action), checklist.json and timeline.json into --out.
+nodes run (about a second of CPU a day for the tree, several for the hierarchy); with --nodes it
+runs through the real ROS 2 nodes over DDS under /clock (the hierarchical policy; minutes for a
+whole day) and records a rosbag2 bag split by the hour that `pearl replay` and `pearl bag-info`
+read, with the answer time per hour and the process's memory. Prints the checklist (or, with
+--json, one JSON object holding every row) and writes day.png (where she is, where the robot is,
+its battery, every action), checklist.json and timeline.json into --out.
 
 Examples:
   pearl day --policy day_tree --seed 3 --out out/day-tree
@@ -35,6 +38,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="hierarchical (default), flat_pointbased, qmdp or day_tree")
     parser.add_argument("--domain", default=_share("config/pearl_day.domain.yaml"))
     parser.add_argument("--hierarchy", default=_share("config/pearl.hierarchy.yaml"))
+    parser.add_argument("--nodes", action="store_true",
+                        help="run through the ROS 2 nodes over DDS (hierarchical policy), recording a bag split by "
+                             "the hour into OUT/bag")
+    parser.add_argument("--until", default="20:00", metavar="HH:MM",
+                        help="end the day early at this clock time (default 20:00)")
+    parser.add_argument("--policy-dir", default="", metavar="DIR",
+                        help="with --nodes: a hierarchical policy `pearl plan` saved for the domain (default: plan now)")
+    parser.add_argument("--domain-id", type=int, default=None, help="with --nodes: ROS_DOMAIN_ID of the graph")
     parser.add_argument("--out", default=None, help="folder for day.png, checklist.json, timeline.json "
                                                     "(default out/day-<time>)")
     parser.add_argument("--json", action="store_true", help="print one JSON object with every checklist row")
@@ -57,15 +68,21 @@ def run(args: argparse.Namespace) -> int:
         raise SpecError("<command line>", "--resident", f"{args.resident}: a resident number in [1, {MAX_GENERATED}]")
     if not 0.0 <= args.noise <= 1.0:
         raise SpecError("<command line>", "--noise", f"{args.noise} is not a word error rate in [0, 1]")
+    until = _clock_seconds(args.until)
+    if args.nodes and args.policy != "hierarchical":
+        raise SpecError("<command line>", "--nodes", f"runs the hierarchical policy node, not {args.policy!r}")
     require_file(args.domain, "domain file (--domain)")
     require_file(args.hierarchy, "hierarchy file (--hierarchy)")
     domain = load_domain(args.domain)
     profile = generate_residents(args.resident, seed=args.resident_seed)[-1]
     case = DayCase(profile.name, dict(profile.fields), float(profile.articulation_wer), args.seed, args.seed)
-    controller = day_agents(domain, args.hierarchy, [args.policy])[args.policy]
-    day = run_day(controller, domain, case, args.noise, timeline=True)
     out = Path(args.out) if args.out else Path("out") / f"day-{time.strftime('%Y%m%d-%H%M%S')}"
     out.mkdir(parents=True, exist_ok=True)
+    if args.nodes:
+        day = _run_nodes(args, domain, profile, case, until, out)
+    else:
+        controller = day_agents(domain, args.hierarchy, [args.policy])[args.policy]
+        day = run_day(controller, domain, case, args.noise, timeline=True, until=until)
     title = (f"{args.policy} · resident {profile.name} (generator seed {args.resident_seed}) · day seed {args.seed} · "
              f"noise {args.noise}")
     png = plot_day(day["timeline"], day["checklist"], out / "day.png", title)
@@ -75,7 +92,11 @@ def run(args: argparse.Namespace) -> int:
     report = {"policy": args.policy, "resident": profile.name, "resident_seed": args.resident_seed, "seed": args.seed,
               "noise": args.noise, "score": day["score"], "checklist": day["checklist"],
               "files": {"png": str(png), "checklist": str(out / "checklist.json"), "timeline": str(out / "timeline.json")},
-              "day_seconds": day["seconds"], "seconds": round(time.perf_counter() - started, 1)}
+              "day_seconds": day.get("seconds", day.get("wall_seconds")),
+              "seconds": round(time.perf_counter() - started, 1)}
+    if args.nodes:
+        report["nodes"] = {k: day[k] for k in ("bag", "bag_files", "bag_messages", "answer_ms_per_hour", "rss_mb",
+                                               "tracker_counters", "final_belief_valid", "wall_seconds")}
     if args.json:
         print_json(report)
         return 0
@@ -92,5 +113,44 @@ def run(args: argparse.Namespace) -> int:
           f"{c['battery_at_end']:.0%} at {clock(12 * 3600)}; {'docked' if c['docked_at_end'] else 'NOT docked'} at the end")
     print(f"  at the station {c['station_share']:.0%} of the time nothing was wanted; {c['metres_driven']:.0f} m driven; "
           f"{c['steps']} steps")
+    if args.nodes:
+        n = report["nodes"]
+        hours = [h for h in n["answer_ms_per_hour"] if h["steps"]]
+        print(f"  through the nodes: {n['wall_seconds']} s wall; bag {n['bag']} ({len(n['bag_files'])} file(s), "
+              f"{n['bag_messages']} messages); answer p99 per hour (ms): "
+              + ", ".join(f"{h['p99_ms']:.0f}" for h in hours)
+              + "; memory (MB): " + ", ".join(f"{m['rss_mb']:.0f}" for m in n["rss_mb"]))
     print(f"wrote {png}, {out / 'checklist.json'}, {out / 'timeline.json'} ({report['seconds']} s)")
     return 0
+
+
+def _clock_seconds(text: str) -> float:
+    """``HH:MM`` of the day as world seconds after 08:00 (08:00 < time ≤ 20:00)."""
+    from pearl_pomdp.errors import SpecError
+    from pearl_sim.nursing_home.day import DAY_SECONDS, DAY_START
+
+    try:
+        hours, minutes = (int(x) for x in text.split(":"))
+    except ValueError:
+        raise SpecError("<command line>", "--until", f"{text!r}: expected HH:MM") from None
+    t = hours * 3600.0 + minutes * 60.0 - DAY_START
+    if not 0 < t <= DAY_SECONDS or not 0 <= minutes < 60:
+        raise SpecError("<command line>", "--until", f"{text!r}: a time after 08:00, at most 20:00")
+    return t
+
+
+def _run_nodes(args, domain, profile, case, until: float, out: Path) -> dict:
+    """The day through the ROS 2 graph: a policy planned now (or --policy-dir), then run_day_graph."""
+    from pearl_pomdp.cli._inputs import require_dir
+    from pearl_pomdp.hierarchy import load_hierarchy, plan
+    from pearl_sim.nursing_home.day_graph import run_day_graph
+
+    if args.policy_dir:
+        require_dir(args.policy_dir, "policy directory (--policy-dir, from `pearl plan`)")
+        policy_dir = Path(args.policy_dir)
+    else:
+        if not args.json:
+            print("pearl day: planning the hierarchical policy…", flush=True)
+        policy_dir = plan(domain, load_hierarchy(args.hierarchy, domain)).save(out / "policy")
+    return run_day_graph(args.domain, policy_dir, case.fields, case.articulation_wer, args.noise, case.seed, out,
+                         until=until, domain_id=args.domain_id, name=f"{profile.name}-day{case.seed}")

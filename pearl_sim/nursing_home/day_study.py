@@ -13,7 +13,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
-from pearl_sim.nursing_home.day import DayWorld, day_scenario, day_score, plan_day
+from pearl_sim.nursing_home.day import DAY_SECONDS, DayPlan, DayWorld, day_scenario, day_score, plan_day
 
 __all__ = ["DayCase", "day_cases", "run_day", "run_days", "summarize", "BASELINE", "SCORED_ROWS", "day_agents"]
 
@@ -58,7 +58,7 @@ def day_agents(domain, hierarchy_path, policies: Sequence[str], flat_trials: int
 
 
 def run_day(controller, domain, case: DayCase, noise: float, model=None, record: bool = False,
-            timeline: bool = False) -> Dict[str, Any]:
+            timeline: bool = False, until: Optional[float] = None, plan: Optional[DayPlan] = None) -> Dict[str, Any]:
     """One day of ``controller`` for ``case`` at recogniser word error rate ``noise``.
 
     Returns ``policy, resident, day, seed, noise, score, checklist, seconds`` and, with ``record``,
@@ -71,7 +71,7 @@ def run_day(controller, domain, case: DayCase, noise: float, model=None, record:
     from pearl_sim.nursing_home.residents import effective_word_error_rate
 
     t0 = time.perf_counter()
-    plan = plan_day(case.seed)
+    plan = plan if plan is not None else plan_day(case.seed)
     fields = dict(case.fields)
     scenario = day_scenario(fields, effective_word_error_rate(noise, case.articulation_wer), case.seed,
                             name=f"{case.resident}-day{case.day}", plan=plan)
@@ -90,7 +90,8 @@ def run_day(controller, domain, case: DayCase, noise: float, model=None, record:
     # A day recorded for `pearl fit` ends when the battery does: the model has no state for a robot
     # that has stopped (its drives never arrive whatever the tables say), so those steps are not
     # Pearl's dynamics. The checklist of such a day is the truncated day's.
-    stop = (lambda: world.done or world.dead) if record else (lambda: world.done)
+    end = DAY_SECONDS if until is None else float(until)
+    stop = (lambda: world.time >= end or world.dead) if record else (lambda: world.time >= end)
     run_episode(world, ExecutiveBackend(executive), before_action=before, stop_when=stop)
     checklist = world.checklist()
     out: Dict[str, Any] = {"policy": controller.name, "resident": case.resident, "day": case.day, "seed": case.seed,
