@@ -36,8 +36,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise", type=float, default=0.25, help="recogniser word error rate (default 0.25)")
     parser.add_argument("--policy", default="hierarchical",
                         help="hierarchical (default), flat_pointbased, qmdp or day_tree")
-    parser.add_argument("--domain", default=_share("config/pearl_day.domain.yaml"))
-    parser.add_argument("--hierarchy", default=_share("config/pearl.hierarchy.yaml"))
+    parser.add_argument("--domain", default=_share("config/pearl_day.domain.yaml"),
+                        help="the domain the POMDPs are planned on (default: Pearl's domain fitted on training days)")
+    parser.add_argument("--hierarchy", default=_share("config/pearl.hierarchy.yaml"),
+                        help="the action hierarchy of the hierarchical policy (default: Pearl's)")
     parser.add_argument("--nodes", action="store_true",
                         help="run through the ROS 2 nodes over DDS (hierarchical policy), recording a bag split by "
                              "the hour into OUT/bag")
