@@ -40,7 +40,7 @@ import numpy as np
 from pearl_pomdp.errors import BeliefError, PolicyError
 from pearl_pomdp.interfaces import Decider, Decision, ObservingDecider, Policy, TraceStep, forbidden_indices
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.solution import AlphaVectorPolicy
 from pearl_pomdp.tracking import BeliefTracker, StepResult, StepSettings
 
 __all__ = ["Executive", "FlatPolicyDecider", "Decision", "TraceStep"]
@@ -52,7 +52,7 @@ class FlatPolicyDecider:
     """A flat policy as a decider: ``execute(b)`` → :class:`Decision` with a one-step trace.
 
     Args:
-        policy: an :class:`~pearl_pomdp.solvers.base.AlphaVectorPolicy` (the trace value is
+        policy: an :class:`~pearl_pomdp.solution.AlphaVectorPolicy` (the trace value is
             ``max_k α_k·b``) or any :class:`~pearl_pomdp.interfaces.Policy` such as
             :class:`~pearl_pomdp.solvers.mdp.MostLikelyStatePolicy` (value NaN: it has none).
         model: the model whose action names the decisions carry.

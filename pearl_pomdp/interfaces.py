@@ -1,7 +1,7 @@
 """The interfaces the parts of Pearl POMDP meet at, declared once (after POMDPs.jl's verbs).
 
 * :class:`Policy` — a flat policy over beliefs: ``action(belief) -> int``
-  (:class:`~pearl_pomdp.solvers.base.AlphaVectorPolicy`,
+  (:class:`~pearl_pomdp.solution.AlphaVectorPolicy`,
   :class:`~pearl_pomdp.solvers.mdp.MostLikelyStatePolicy`).
 * :class:`Decider` — what the executive and the policy node run: ``execute(belief) ->``
   :class:`Decision` with an EXECUTE trace
@@ -26,7 +26,7 @@ import numpy as np
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from pearl_pomdp.model.pomdp import Pomdp
-    from pearl_pomdp.solvers.base import SolveResult
+    from pearl_pomdp.solution import SolveResult
 
 __all__ = ["TraceStep", "Decision", "Policy", "BatchPolicy", "Decider", "MaskingDecider", "ObservingDecider",
            "Solver", "forbidden_indices"]

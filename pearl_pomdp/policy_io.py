@@ -5,7 +5,7 @@ A saved policy is two files:
 * ``PATH`` — a NumPy ``.npz`` archive holding only numeric arrays (read with
   ``allow_pickle=False``):
 
-  - α-vector policy (:class:`~pearl_pomdp.solvers.base.AlphaVectorPolicy`):
+  - α-vector policy (:class:`~pearl_pomdp.solution.AlphaVectorPolicy`):
     ``alphas [K, S]`` float, ``actions [K]`` int (action index of each vector);
   - most-likely-state policy (``MostLikelyStatePolicy``): ``state_actions [S]`` int.
 
@@ -42,7 +42,7 @@ from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.jsonable import numpy_to_json
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.solution import AlphaVectorPolicy
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from pearl_pomdp.solvers.mdp import MostLikelyStatePolicy

@@ -12,7 +12,7 @@ from test_parameterize import ACTIONS, HIERARCHY, meds_domain  # noqa: E402
 from pearl_pomdp.errors import BeliefError
 from pearl_pomdp.executive import Executive, FlatPolicyDecider
 from pearl_pomdp.hierarchy import parse_hierarchy, plan
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.solution import AlphaVectorPolicy
 from pearl_pomdp.speech import KeywordFilter
 from pearl_pomdp.tracking import StepSettings
 

@@ -7,7 +7,7 @@ import pytest
 
 from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.policy_io import header_path, load_policy, read_policy_header, save_policy
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.solution import AlphaVectorPolicy
 from test_belief import three_state, tiger
 
 

@@ -5,7 +5,7 @@ import pytest
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.simulate import default_steps, simulate
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.solution import AlphaVectorPolicy
 from test_belief import tiger
 
 # Listen at the uniform belief; once a door is favoured (0.85 after one "hear"), open the other one.

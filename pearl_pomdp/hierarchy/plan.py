@@ -39,7 +39,7 @@ from pearl_pomdp.hierarchy.abstraction import (AbstractionTooLarge, AbstractSubt
 from pearl_pomdp.hierarchy.execute import HierarchicalPolicy, Lookahead, SubtaskPolicy
 from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
 from pearl_pomdp.hierarchy.spec import Hierarchy, SubtaskSpec
-from pearl_pomdp.solvers.base import SolveResult
+from pearl_pomdp.solution import SolveResult
 from pearl_pomdp.model.factored import FactoredDomain
 
 __all__ = ["plan", "solve_subtask", "horizon_text", "entry_beliefs", "CORNER_LIMIT"]
@@ -261,7 +261,7 @@ def entry_beliefs(model, seed: int = 0, episodes: int = ENTRY_EPISODES, steps: i
     iteration, not run twice on the ward's 233,280 states)."""
     from pearl_pomdp.belief import BeliefFilter
     from pearl_pomdp.simulate import _RowSampler
-    from pearl_pomdp.solvers.base import AlphaVectorPolicy
+    from pearl_pomdp.solution import AlphaVectorPolicy
     from pearl_pomdp.solvers.mdp import solve_qmdp
 
     policy = solve_qmdp(model).policy if qmdp is None else AlphaVectorPolicy(

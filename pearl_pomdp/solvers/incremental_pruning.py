@@ -90,7 +90,7 @@ from typing import Deque, List, Optional, Tuple, Union
 
 import numpy as np
 
-from .base import AlphaVectorPolicy, SolveResult
+from ..solution import AlphaVectorPolicy, SolveResult
 from .prune import DEFAULT_TOL, PruneStats, PruneTimeout, _WitnessLP, prune
 
 __all__ = ["solve_incremental_pruning", "dp_backup", "weak_bound", "bellman_residual", "STAGE_TOL",

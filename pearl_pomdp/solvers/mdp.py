@@ -27,7 +27,7 @@ from typing import List, Tuple
 import numpy as np
 
 from ..model.pomdp import Pomdp
-from .base import AlphaVectorPolicy, SolveResult
+from ..solution import AlphaVectorPolicy, SolveResult
 
 __all__ = [
     "mdp_value_iteration",
