@@ -122,7 +122,8 @@ def main() -> int:
     if not 0.0 <= args.refine_share < 1.0:
         raise SystemExit(f"bench/flat_gap.py: --refine-share must be in [0, 1), got {args.refine_share}")
 
-    from pearl_pomdp.evaluation import LookaheadPolicy, evaluate_policies
+    from pearl_pomdp.evaluation import evaluate_policies
+    from pearl_pomdp.policies import LookaheadPolicy
     from pearl_pomdp.hierarchy import load_hierarchy, plan
     from pearl_pomdp.model.factored import load_domain
     from pearl_pomdp.solution import AlphaVectorPolicy

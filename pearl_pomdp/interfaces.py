@@ -2,11 +2,11 @@
 
 * :class:`Policy` — a flat policy over beliefs: ``action(belief) -> int``
   (:class:`~pearl_pomdp.solution.AlphaVectorPolicy`,
-  :class:`~pearl_pomdp.solvers.mdp.MostLikelyStatePolicy`).
+  :class:`~pearl_pomdp.policies.most_likely_state.MostLikelyStatePolicy`).
 * :class:`Decider` — what the executive and the policy node run: ``execute(belief) ->``
   :class:`Decision` with an EXECUTE trace
   (:class:`~pearl_pomdp.hierarchy.execute.HierarchicalPolicy`,
-  :class:`~pearl_pomdp.executive.FlatPolicyDecider`).
+  :class:`~pearl_pomdp.policies.flat.FlatPolicyDecider`).
 * :class:`MaskingDecider` — a decider that can also decide with some actions forbidden
   (``execute_without(belief, forbidden)``): what an operator's veto needs.
 * :class:`ObservingDecider` — a decider that also keeps its own memory of what was heard

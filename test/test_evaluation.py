@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from pearl_pomdp.evaluation import LookaheadPolicy, evaluate_policies, feature_controls, steps_for_truncation
-from pearl_pomdp.executive import FlatPolicyDecider
+from pearl_pomdp.evaluation import evaluate_policies, feature_controls, steps_for_truncation
+from pearl_pomdp.policies import FlatPolicyDecider, LookaheadPolicy
 from pearl_pomdp.simulate import simulate
 from pearl_pomdp.solution import AlphaVectorPolicy
 from test_belief import tiger
