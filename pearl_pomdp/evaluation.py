@@ -38,7 +38,7 @@ import numpy as np
 from pearl_pomdp.belief import BeliefFilter
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.simulate import _batched_actions, _RowSampler
+from pearl_pomdp.simulate import RowSampler, batched_actions
 
 __all__ = ["evaluate_policies", "steps_for_truncation", "feature_controls"]
 
@@ -85,9 +85,9 @@ def _run(model: Pomdp, policy, N: int, steps: int, seed: int, controls: np.ndarr
     rng = np.random.default_rng(seed)
     S, A, Z = model.num_states, model.num_actions, model.num_observations
     filt = BeliefFilter(model)
-    trans = [_RowSampler(Ta) for Ta in model.T]
+    trans = [RowSampler(Ta) for Ta in model.T]
     obs_cum = np.cumsum(model.O, axis=2)
-    choose = _batched_actions(policy)
+    choose = batched_actions(policy)
     b0 = np.asarray(model.b0, dtype=float)
     states = np.clip(np.searchsorted(np.cumsum(b0), rng.random(N) * b0.sum(), side="right"), 0, S - 1).astype(np.int64)
     beliefs = np.tile(b0, (N, 1))
