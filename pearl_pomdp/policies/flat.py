@@ -7,7 +7,7 @@ from typing import Collection, Optional
 import numpy as np
 
 from pearl_pomdp.errors import PolicyError
-from pearl_pomdp.interfaces import Decision, Policy, TraceStep, forbidden_indices
+from pearl_pomdp.interfaces import BatchPolicy, Decision, Policy, TraceStep, forbidden_indices
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.policies.lookahead import Lookahead
 from pearl_pomdp.solution import AlphaVectorPolicy
@@ -107,3 +107,11 @@ class FlatPolicyDecider:
 
     def action(self, belief) -> int:
         return self.execute(belief).action
+
+    def actions_batch(self, beliefs: np.ndarray) -> np.ndarray:
+        """:meth:`action` for every row of ``beliefs [N, S]``: the policy's own batch when it decides
+        alone (a simulation then runs exactly as on the bare policy), else row by row."""
+        if self._search is None and isinstance(self.policy, BatchPolicy):
+            return np.asarray(self.policy.actions_batch(beliefs), dtype=np.int64)
+        B = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        return np.fromiter((self.execute(b).action for b in B), dtype=np.int64, count=B.shape[0])
