@@ -66,7 +66,7 @@ def flat_bounds(model, path_policies, time_limit: float = 120.0, refine_share: f
     refine summary or None, setup seconds, solve seconds)``; the solver is pruned."""
     import numpy as np
 
-    from pearl_pomdp.solvers.base import AlphaVectorPolicy
+    from pearl_pomdp.solution import AlphaVectorPolicy
     from pearl_pomdp.solvers.point_based import PointBasedSolver
     from pearl_pomdp.solvers.refine import policy_paths, refine_along_paths
 
@@ -122,10 +122,11 @@ def main() -> int:
     if not 0.0 <= args.refine_share < 1.0:
         raise SystemExit(f"bench/flat_gap.py: --refine-share must be in [0, 1), got {args.refine_share}")
 
-    from pearl_pomdp.evaluation import LookaheadPolicy, evaluate_policies
+    from pearl_pomdp.evaluation import evaluate_policies
+    from pearl_pomdp.policies import LookaheadPolicy
     from pearl_pomdp.hierarchy import load_hierarchy, plan
     from pearl_pomdp.model.factored import load_domain
-    from pearl_pomdp.solvers.base import AlphaVectorPolicy
+    from pearl_pomdp.solution import AlphaVectorPolicy
     from pearl_pomdp.solvers.mdp import solve_fib, solve_qmdp
 
     def note(msg: str) -> None:

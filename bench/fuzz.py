@@ -38,7 +38,7 @@ def _targets(tmp: Path):
     from pearl_pomdp.model.pomdp_format import parse_pomdp
     from pearl_pomdp.model.pomdpx import format_pomdpx, parse_pomdpx
     from pearl_pomdp.policy_io import load_policy, save_policy
-    from pearl_pomdp.solvers.base import AlphaVectorPolicy
+    from pearl_pomdp.solution import AlphaVectorPolicy
     from pearl_sim.nursing_home.scenario import parse_scenarios
 
     domain = load_domain(CONFIG / "pearl.domain.yaml")

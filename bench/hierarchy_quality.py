@@ -36,7 +36,7 @@ def main() -> int:
     from pearl_pomdp.evaluation import evaluate_policies
     from pearl_pomdp.hierarchy import load_hierarchy, plan
     from pearl_pomdp.model.factored import load_domain
-    from pearl_pomdp.solvers.base import AlphaVectorPolicy
+    from pearl_pomdp.solution import AlphaVectorPolicy
     from pearl_pomdp.solvers.mdp import solve_qmdp
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -28,7 +28,10 @@ from pathlib import Path
 tree, policy_dir, seeds, out = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
 import pearl_pomdp
 assert Path(pearl_pomdp.__file__).resolve().is_relative_to(tree.resolve()), pearl_pomdp.__file__
-from pearl_pomdp.executive import FlatPolicyDecider
+try:
+    from pearl_pomdp.policies import FlatPolicyDecider
+except ImportError:  # a tree from before the policies package
+    from pearl_pomdp.executive import FlatPolicyDecider
 from pearl_pomdp.hierarchy import load_hierarchical_policy
 from pearl_pomdp.model.factored import load_domain
 from pearl_pomdp.solvers.registry import solve

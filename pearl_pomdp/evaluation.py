@@ -38,9 +38,9 @@ import numpy as np
 from pearl_pomdp.belief import BeliefFilter
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.simulate import _batched_actions, _RowSampler
+from pearl_pomdp.simulate import RowSampler, batched_actions
 
-__all__ = ["evaluate_policies", "steps_for_truncation", "feature_controls", "LookaheadPolicy"]
+__all__ = ["evaluate_policies", "steps_for_truncation", "feature_controls"]
 
 
 def steps_for_truncation(model: Pomdp, tolerance: float) -> int:
@@ -79,40 +79,15 @@ def feature_controls(model: Pomdp, values: Optional[np.ndarray] = None) -> np.nd
     return np.stack(cols, axis=1) if cols else np.zeros((S, 0))
 
 
-class LookaheadPolicy:
-    """An α-vector policy executed with one step of exact forward search over the model, batched:
-    ``argmax_a [b·R_a + γ Σ_o max_k α_k·(b T_a diag O_{a,o})]`` — the choice of
-    :class:`~pearl_pomdp.executive.FlatPolicyDecider` with ``lookahead=1``, through the same
-    :class:`~pearl_pomdp.hierarchy.execute.Lookahead`, over every episode's belief at once
-    (its loop skips the observations an action never produces, which is what makes thousands
-    of episodes on Pearl's flat model affordable)."""
-
-    def __init__(self, policy, model: Pomdp):
-        from pearl_pomdp.hierarchy.execute import Lookahead
-
-        self._search = Lookahead(model.T, model.O, model.R, model.discount, policy.alphas, 1)
-
-    def q_values(self, B: np.ndarray) -> np.ndarray:
-        """``[N, A]`` one-step look-ahead Q-values at the rows of ``B`` ``[N, S]``."""
-        return self._search.q_values(B)
-
-    def actions_batch(self, beliefs: np.ndarray) -> np.ndarray:
-        """The look-ahead action per row of ``beliefs`` ``[N, S]``."""
-        return np.argmax(self.q_values(beliefs), axis=1).astype(np.int64)
-
-    def action(self, belief: np.ndarray) -> int:
-        return int(self.actions_batch(np.asarray(belief, dtype=float)[None, :])[0])
-
-
 def _run(model: Pomdp, policy, N: int, steps: int, seed: int, controls: np.ndarray, TV: np.ndarray):
     """One policy over ``N`` episodes: the returns ``[N]`` and control sums ``[N, k]``.
     The random draws are :func:`~pearl_pomdp.simulate.simulate`'s, in the same order."""
     rng = np.random.default_rng(seed)
     S, A, Z = model.num_states, model.num_actions, model.num_observations
     filt = BeliefFilter(model)
-    trans = [_RowSampler(Ta) for Ta in model.T]
+    trans = [RowSampler(Ta) for Ta in model.T]
     obs_cum = np.cumsum(model.O, axis=2)
-    choose = _batched_actions(policy)
+    choose = batched_actions(policy)
     b0 = np.asarray(model.b0, dtype=float)
     states = np.clip(np.searchsorted(np.cumsum(b0), rng.random(N) * b0.sum(), side="right"), 0, S - 1).astype(np.int64)
     beliefs = np.tile(b0, (N, 1))

@@ -1,12 +1,12 @@
 """The interfaces the parts of Pearl POMDP meet at, declared once (after POMDPs.jl's verbs).
 
 * :class:`Policy` — a flat policy over beliefs: ``action(belief) -> int``
-  (:class:`~pearl_pomdp.solvers.base.AlphaVectorPolicy`,
-  :class:`~pearl_pomdp.solvers.mdp.MostLikelyStatePolicy`).
+  (:class:`~pearl_pomdp.solution.AlphaVectorPolicy`,
+  :class:`~pearl_pomdp.policies.most_likely_state.MostLikelyStatePolicy`).
 * :class:`Decider` — what the executive and the policy node run: ``execute(belief) ->``
   :class:`Decision` with an EXECUTE trace
   (:class:`~pearl_pomdp.hierarchy.execute.HierarchicalPolicy`,
-  :class:`~pearl_pomdp.executive.FlatPolicyDecider`).
+  :class:`~pearl_pomdp.policies.flat.FlatPolicyDecider`).
 * :class:`MaskingDecider` — a decider that can also decide with some actions forbidden
   (``execute_without(belief, forbidden)``): what an operator's veto needs.
 * :class:`ObservingDecider` — a decider that also keeps its own memory of what was heard
@@ -26,7 +26,7 @@ import numpy as np
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from pearl_pomdp.model.pomdp import Pomdp
-    from pearl_pomdp.solvers.base import SolveResult
+    from pearl_pomdp.solution import SolveResult
 
 __all__ = ["TraceStep", "Decision", "Policy", "BatchPolicy", "Decider", "MaskingDecider", "ObservingDecider",
            "Solver", "forbidden_indices"]

@@ -5,7 +5,7 @@ A saved policy is two files:
 * ``PATH`` — a NumPy ``.npz`` archive holding only numeric arrays (read with
   ``allow_pickle=False``):
 
-  - α-vector policy (:class:`~pearl_pomdp.solvers.base.AlphaVectorPolicy`):
+  - α-vector policy (:class:`~pearl_pomdp.solution.AlphaVectorPolicy`):
     ``alphas [K, S]`` float, ``actions [K]`` int (action index of each vector);
   - most-likely-state policy (``MostLikelyStatePolicy``): ``state_actions [S]`` int.
 
@@ -34,7 +34,7 @@ import io
 import json
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Dict, Optional, Union
+from typing import Any, Dict, Optional, Union
 
 import numpy as np
 
@@ -42,10 +42,8 @@ from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.jsonable import numpy_to_json
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
-
-if TYPE_CHECKING:  # pragma: no cover - typing only
-    from pearl_pomdp.solvers.mdp import MostLikelyStatePolicy
+from pearl_pomdp.policies.most_likely_state import MostLikelyStatePolicy
+from pearl_pomdp.solution import AlphaVectorPolicy
 
 __all__ = ["save_policy", "load_policy", "read_policy_header", "header_path", "FORMAT", "FORMAT_VERSION"]
 
@@ -70,8 +68,6 @@ def header_path(path: PathLike) -> Path:
 
 
 def _kind_of(policy) -> str:
-    from pearl_pomdp.solvers.mdp import MostLikelyStatePolicy
-
     if isinstance(policy, AlphaVectorPolicy):
         return KIND_ALPHA
     if isinstance(policy, MostLikelyStatePolicy):
@@ -265,16 +261,12 @@ def load_policy(path: PathLike, model: Optional[Pomdp] = None):
         if not np.isfinite(alphas).all():
             raise PolicyError(f"{path}: alphas has a non-finite entry")
         check_actions("actions", actions)
-        policy: Union[AlphaVectorPolicy, "MostLikelyStatePolicy"] = AlphaVectorPolicy(alphas, actions)
+        policy: Union[AlphaVectorPolicy, MostLikelyStatePolicy] = AlphaVectorPolicy(alphas, actions)
     else:
         state_actions = need("state_actions", 1, "iu")
         if state_actions.shape != (S,):
             raise PolicyError(f"{path}: state_actions has shape {state_actions.shape}, expected ({S},)")
         check_actions("state_actions", state_actions)
-        try:
-            from pearl_pomdp.solvers.mdp import MostLikelyStatePolicy
-        except ImportError as err:  # pragma: no cover - the solvers package is part of the project
-            raise PolicyError(f"{path}: most-likely-state policies need pearl_pomdp.solvers.mdp ({err})") from None
         policy = MostLikelyStatePolicy(state_actions.astype(np.int64))
     try:
         setattr(policy, "header", {k: v for k, v in header.items() if not k.startswith("_")})

@@ -25,7 +25,7 @@ from pearl_pomdp.belief import BeliefFilter
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.model.pomdp import Pomdp
 
-__all__ = ["simulate", "default_steps"]
+__all__ = ["simulate", "default_steps", "RowSampler", "batched_actions"]
 
 #: Default truncation: stop when γ^T falls below this (the rest of the return is then at
 #: most this fraction of max|R| / (1 − γ)).
@@ -39,7 +39,7 @@ def default_steps(discount: float) -> int:
     return int(min(10_000, max(1, math.ceil(math.log(TRUNCATION) / math.log(discount)))))
 
 
-class _RowSampler:
+class RowSampler:
     """Draws a column index from rows of a non-negative CSR matrix (rows sum to 1), vectorised."""
 
     def __init__(self, matrix):
@@ -61,7 +61,7 @@ class _RowSampler:
         return self.indices[k]
 
 
-def _batched_actions(policy):
+def batched_actions(policy):
     """A function ``B [N, S] -> actions [N]`` for ``policy``."""
     from pearl_pomdp.interfaces import BatchPolicy
 
@@ -104,10 +104,10 @@ def simulate(model: Pomdp, policy, episodes: int = 1000, steps: Optional[int] = 
     S, A = model.num_states, model.num_actions
     N = int(episodes)
     filt = BeliefFilter(model)
-    trans = [_RowSampler(Ta) for Ta in model.T]
+    trans = [RowSampler(Ta) for Ta in model.T]
     obs_cum = np.cumsum(model.O, axis=2)  # [A, S, Z]
     Z = model.num_observations
-    choose = _batched_actions(policy)
+    choose = batched_actions(policy)
 
     b0 = np.asarray(model.b0, dtype=float)
     start = np.clip(np.searchsorted(np.cumsum(b0), rng.random(N) * b0.sum(), side="right"), 0, S - 1)

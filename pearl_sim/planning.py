@@ -65,7 +65,7 @@ def plan_controller(name: str, domain, model, hierarchy_path, seed: int = 0, fla
     one point-based solve of the whole model with ``flat_trials`` trials (or ``flat_time_limit``
     seconds), executed with one step of look-ahead (:data:`pearl_sim.policies.FLAT_LOOKAHEAD`).
     """
-    from pearl_pomdp.executive import FlatPolicyDecider
+    from pearl_pomdp.policies import FlatPolicyDecider
     from pearl_pomdp.solvers.registry import solve
     from pearl_sim.policies import FLAT_LOOKAHEAD
 

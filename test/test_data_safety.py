@@ -162,7 +162,7 @@ def tiger():
 
 
 def _policy(v: float):
-    from pearl_pomdp.solvers.base import AlphaVectorPolicy
+    from pearl_pomdp.solution import AlphaVectorPolicy
 
     return AlphaVectorPolicy(np.array([[v, -v], [-v, v]]), np.array([0, 1]))
 

@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from pearl_pomdp.evaluation import LookaheadPolicy, evaluate_policies, feature_controls, steps_for_truncation
-from pearl_pomdp.executive import FlatPolicyDecider
+from pearl_pomdp.evaluation import evaluate_policies, feature_controls, steps_for_truncation
+from pearl_pomdp.policies import FlatPolicyDecider, LookaheadPolicy
 from pearl_pomdp.simulate import simulate
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.solution import AlphaVectorPolicy
 from test_belief import tiger
 
 LISTEN, OPEN_LEFT, OPEN_RIGHT = 0, 1, 2

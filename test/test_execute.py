@@ -11,7 +11,7 @@ from test_parameterize import ACTIONS, HIERARCHY, meds_domain  # noqa: E402
 
 from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.hierarchy import load_hierarchical_policy, parse_hierarchy, plan
-from pearl_pomdp.hierarchy.execute import Lookahead
+from pearl_pomdp.policies import Lookahead
 
 
 def expectimax(model, b, horizon):

@@ -10,9 +10,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_parameterize import ACTIONS, HIERARCHY, meds_domain  # noqa: E402
 
 from pearl_pomdp.errors import BeliefError
-from pearl_pomdp.executive import Executive, FlatPolicyDecider
+from pearl_pomdp.executive import Executive
 from pearl_pomdp.hierarchy import parse_hierarchy, plan
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.policies import FlatPolicyDecider
+from pearl_pomdp.solution import AlphaVectorPolicy
 from pearl_pomdp.speech import KeywordFilter
 from pearl_pomdp.tracking import StepSettings
 
@@ -79,7 +80,7 @@ def test_zero_likelihood_is_counted_not_nan():
 
 
 def test_flat_decider_value_and_mls():
-    from pearl_pomdp.solvers.mdp import MostLikelyStatePolicy
+    from pearl_pomdp.policies import MostLikelyStatePolicy
 
     model = meds_domain()
     alphas = np.array([[10.0, -5.0, -3.0], [-5.0, 10.0, -5.0]])
@@ -96,7 +97,6 @@ def test_flat_decider_lookahead_is_one_bellman_step_over_the_vectors(benchmarks_
     computed here by hand on tiger with horizon-2 vectors."""
     import numpy as np
 
-    from pearl_pomdp.executive import FlatPolicyDecider
     from pearl_pomdp.model import load_model
     from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
 

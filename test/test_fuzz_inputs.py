@@ -225,7 +225,7 @@ def test_yaml_python_tags_never_construct(pearl_domain, tag, tmp_path):
 @pytest.fixture(scope="module")
 def saved_policy(tmp_path_factory):
     from pearl_pomdp.policy_io import save_policy
-    from pearl_pomdp.solvers.base import AlphaVectorPolicy
+    from pearl_pomdp.solution import AlphaVectorPolicy
 
     from pearl_pomdp.model.pomdp_format import read_pomdp
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.solution import AlphaVectorPolicy
 from pearl_pomdp.solvers.incremental_pruning import dp_backup, solve_incremental_pruning, weak_bound
 
 

@@ -321,7 +321,7 @@ def test_nodes_exit_zero_within_2s_on_sigint_and_sigterm(graph, flat_policy):
 
 
 def test_policy_restart_resumes_from_last_belief(graph, flat_policy):
-    from pearl_pomdp.executive import FlatPolicyDecider
+    from pearl_pomdp.policies import FlatPolicyDecider
     from pearl_pomdp.policy_io import load_policy
 
     model = load_domain(DOMAIN).compile()

@@ -8,8 +8,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_veto import tiger  # noqa: E402
 
-from pearl_pomdp.executive import FlatPolicyDecider
 from pearl_pomdp.operator import OperatorGate
+from pearl_pomdp.policies import FlatPolicyDecider
 from pearl_pomdp.solvers.registry import solve
 
 #: Tiger's actions tagged as a domain would: opening a door is the dangerous kind.

@@ -7,7 +7,7 @@ import pytest
 
 from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.policy_io import header_path, load_policy, read_policy_header, save_policy
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.solution import AlphaVectorPolicy
 from test_belief import three_state, tiger
 
 
@@ -144,12 +144,12 @@ def test_header_beside_path_without_npz_suffix(tmp_path):
 
 
 def test_most_likely_state_policy_round_trip(tmp_path):
-    from pearl_pomdp.solvers import mdp
-    policy = mdp.MostLikelyStatePolicy(np.array([2, 1]))
+    from pearl_pomdp.policies import MostLikelyStatePolicy
+    policy = MostLikelyStatePolicy(np.array([2, 1]))
     save_policy(tmp_path / "mls.npz", policy, tiger(), {"method": "mls"})
     with np.load(tmp_path / "mls.npz", allow_pickle=False) as npz:
         assert npz.files == ["state_actions"]
     loaded = load_policy(tmp_path / "mls.npz", tiger())
-    assert isinstance(loaded, mdp.MostLikelyStatePolicy)
+    assert isinstance(loaded, MostLikelyStatePolicy)
     np.testing.assert_array_equal(loaded.state_actions, [2, 1])
     assert loaded.action(np.array([0.7, 0.3])) == 2 and loaded.action(np.array([0.2, 0.8])) == 1

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from pearl_pomdp.solvers.prune import DEFAULT_TOL, PruneStats, _WitnessLP, pointwise_dominated, prune
+from pearl_pomdp.solvers.prune import DEFAULT_TOL, PruneStats, WitnessLP, pointwise_dominated, prune
 
 
 def envelope(alphas, beliefs):
@@ -63,7 +63,7 @@ def test_prune_keeps_the_value_function_and_is_minimal(S, K, seed):
     # ... and every kept vector has a region of its own: removing it lowers V somewhere.
     for j in range(kept.size):
         others = np.delete(kept, j)
-        lp = _WitnessLP(S)
+        lp = WitnessLP(S)
         for i in others:
             lp.add(alphas[i])
         delta, _ = lp.solve(alphas[kept[j]])
@@ -97,7 +97,7 @@ LP_CASES = [
 
 @pytest.mark.parametrize("kept,c,delta,b", LP_CASES)
 def test_kernel_lp_hand_cases(kept, c, delta, b):
-    lp = _WitnessLP(len(c))
+    lp = WitnessLP(len(c))
     for k in kept:
         lp.add(np.array(k))
     d, where = lp.solve(np.array(c))
@@ -110,7 +110,7 @@ def test_kernel_lp_warm_starts_agree_with_linprog():
     optimum stays HiGHS's, and the returned b attains it."""
     rng = np.random.default_rng(5)
     for S in (2, 3, 5, 9):
-        lp = _WitnessLP(S)
+        lp = WitnessLP(S)
         kept = [rng.normal(size=S)]
         lp.add(kept[0])
         for step in range(40):
@@ -132,7 +132,7 @@ def test_kernel_lp_degenerate_ties_do_not_cycle():
     u = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0)
     v = np.array([1.0, 1.0, -2.0]) / np.sqrt(6.0)
     spokes = np.array([1 / 3 + 0.2 * (np.cos(t) * u + np.sin(t) * v) for t in angles])  # d·1 = 0: through (1/3)·1
-    lp = _WitnessLP(S)
+    lp = WitnessLP(S)
     for k in np.vstack([spokes, spokes[:4], np.full((3, S), 1 / 3)]):  # duplicates and the centre, thrice
         lp.add(k)
     d, _ = lp.solve(np.full(S, 1 / 3))  # the centre: touches the envelope at one point only
@@ -158,9 +158,9 @@ def test_kernel_lp_degenerate_ties_do_not_cycle():
     (lambda: prune(np.eye(3), points=np.ones((2, 2)) / 2), "points must be \\[P, 3\\]"),
     (lambda: prune(np.eye(3), points=np.array([[np.nan, 0.5, 0.5]])), "points has a non-finite entry"),
     (lambda: prune(np.eye(3), points=np.ones(3) / 3), "points must be a 2-D array"),
-    (lambda: _WitnessLP(3).add(np.ones(2)), "alpha must be 3 finite values"),
-    (lambda: _WitnessLP(2).solve(np.ones(2)), "needs at least one added vector"),
-    (lambda: _WitnessLP(0), "num_states must be >= 1"),
+    (lambda: WitnessLP(3).add(np.ones(2)), "alpha must be 3 finite values"),
+    (lambda: WitnessLP(2).solve(np.ones(2)), "needs at least one added vector"),
+    (lambda: WitnessLP(0), "num_states must be >= 1"),
 ])
 def test_kernel_bad_input_is_a_clear_value_error(call, msg):
     with pytest.raises(ValueError, match=msg):

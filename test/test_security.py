@@ -197,7 +197,7 @@ def test_policy_header_cannot_point_elsewhere(tmp_path):
     from pearl_pomdp.errors import PolicyError
     from pearl_pomdp.model.pomdp_format import parse_pomdp
     from pearl_pomdp.policy_io import load_policy, save_policy
-    from pearl_pomdp.solvers.base import AlphaVectorPolicy
+    from pearl_pomdp.solution import AlphaVectorPolicy
 
     model = parse_pomdp("discount: 0.9\nvalues: reward\nstates: 2\nactions: 2\nobservations: 2\n"
                         "T: * identity\nO: * uniform\nR: 0 : * : * : * 1\n", source="m.pomdp")

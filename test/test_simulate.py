@@ -5,7 +5,7 @@ import pytest
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.simulate import default_steps, simulate
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.solution import AlphaVectorPolicy
 from test_belief import tiger
 
 # Listen at the uniform belief; once a door is favoured (0.85 after one "hear"), open the other one.
@@ -77,10 +77,10 @@ def test_default_steps_and_errors():
 
 
 def test_most_likely_state_policy_batched_like_its_action():
-    from pearl_pomdp.solvers import mdp
+    from pearl_pomdp.policies import MostLikelyStatePolicy
     # Open the door opposite to the likelier tiger; at the uniform belief the tie goes to
     # state 0 (tiger-left), so the first action is open-right: +10 or −100, −45 on average.
-    policy = mdp.MostLikelyStatePolicy([2, 1])
+    policy = MostLikelyStatePolicy([2, 1])
     fast = simulate(tiger(), policy, episodes=4000, steps=1, seed=5)
     slow = simulate(tiger(), ActionOnly(policy), episodes=4000, steps=1, seed=5)
     np.testing.assert_array_equal(fast["returns"], slow["returns"])

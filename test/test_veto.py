@@ -11,12 +11,12 @@ from test_contingent import HIERARCHY as PROBE_HIERARCHY, PROBE_DOMAIN  # noqa: 
 from test_parameterize import ACTIONS, HIERARCHY, meds_domain  # noqa: E402
 
 from pearl_pomdp.errors import PolicyError
-from pearl_pomdp.executive import FlatPolicyDecider
 from pearl_pomdp.hierarchy import parse_hierarchy, plan
 from pearl_pomdp.interfaces import MaskingDecider
 from pearl_pomdp.model.factored import parse_domain
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.solvers.base import AlphaVectorPolicy
+from pearl_pomdp.policies import FlatPolicyDecider
+from pearl_pomdp.solution import AlphaVectorPolicy
 from pearl_pomdp.solvers.registry import solve
 
 #: Beliefs over (wantMeds, wantMove, done) for the meds domain (corner, the paper's eq. 15-17) and

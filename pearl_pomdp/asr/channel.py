@@ -376,7 +376,7 @@ def fit_observation_rows(domain_path: Union[str, Path], table: ChannelTable, snr
     Raises:
         ChannelError: the channel's symbols are not the domain's Speech symbols.
     """
-    from pearl_pomdp.model.factored import _number, load_domain
+    from pearl_pomdp.model.factored import as_number, load_domain
     from pearl_pomdp.yaml_lines import parse_yaml
 
     domain = load_domain(domain_path)
@@ -390,7 +390,7 @@ def fit_observation_rows(domain_path: Union[str, Path], table: ChannelTable, snr
     changed = 0
 
     def probability(value) -> float:
-        number = _number(value)
+        number = as_number(value)
         if number is None:   # (load_domain has checked every row: not reached for a domain it loaded)
             raise SpecError(domain_path, "observations", f"{value!r} is not a probability")
         return number

@@ -3,7 +3,8 @@
     pearl simulate MODEL POLICY [--episodes N] [--steps T] [--seed K] [--json]
 
 MODEL is the model the policy was solved for (``.pomdp`` or domain ``.yaml``); POLICY is a
-file written by ``pearl solve --out`` (its header must carry MODEL's fingerprint), or
+policy spec (:func:`pearl_pomdp.deciders.load_decider`): a file written by ``pearl solve --out``
+(its header must carry MODEL's fingerprint), a directory written by ``pearl plan --out``, or
 ``online`` / ``online:TRIALS``: DESPOT at every step (docs/online.md).
 Episodes start from b0, track the belief with eq. 5 and sum ``γ^t R[s_t, a_t]``.
 
@@ -34,8 +35,8 @@ def _positive_int(text: str) -> int:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", metavar="MODEL", help="the .pomdp file or domain .yaml the policy was solved for")
-    parser.add_argument("policy", metavar="POLICY", help="policy .npz written by `pearl solve --out`, "
-                                                         "or online[:TRIALS] to plan online (DESPOT)")
+    parser.add_argument("policy", metavar="POLICY", help="policy .npz written by `pearl solve --out`, a "
+                        "directory from `pearl plan --out`, or online[:TRIALS] to plan online (DESPOT)")
     parser.add_argument("--episodes", type=_positive_int, default=1000, help="number of episodes (default 1000)")
     parser.add_argument("--steps", type=_positive_int, default=None,
                         help="steps per episode (default: until γ^T < 1e-3)")
@@ -46,23 +47,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.cli import print_json
+    from pearl_pomdp.cli._inputs import require_file
+    from pearl_pomdp.deciders import load_decider
     from pearl_pomdp.model import load_model
-    from pearl_pomdp.policy_io import load_policy
     from pearl_pomdp.simulate import simulate
 
-    from pearl_pomdp.cli._inputs import require_file
-
     model = load_model(require_file(args.model, "model file (.pomdp, .pomdpx or domain .yaml)"))
-    from pearl_pomdp.online.decider import online_trials
-
-    trials = online_trials(args.policy, "POLICY")
-    if trials is not None:
-        from pearl_pomdp.online.decider import OnlineDecider
-        from pearl_pomdp.online.despot import DespotSettings
-
-        policy = OnlineDecider(model, settings=DespotSettings(trials=trials), seed=args.seed)
-    else:
-        policy = load_policy(require_file(args.policy, "policy file (.npz from `pearl solve --out`)"), model)
+    policy = load_decider(args.policy, model, seed=args.seed, where="POLICY")
     result = simulate(model, policy, episodes=args.episodes, steps=args.steps, seed=args.seed,
                       progress=show_progress(args))
     result.pop("returns")

@@ -115,7 +115,7 @@ def stop_reason(result, trials=None) -> str:
 
 
 def summary(model, result, trials=None) -> dict:
-    """The --json object for a :class:`~pearl_pomdp.solvers.base.SolveResult`."""
+    """The --json object for a :class:`~pearl_pomdp.solution.SolveResult`."""
     out = {
         "model": model.name,
         "states": model.num_states,

@@ -18,7 +18,7 @@ actions — the search's root values are those of the hierarchy's actions wherev
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Dict, FrozenSet, List, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Dict, FrozenSet, List, Mapping, Optional, Protocol, Tuple
 
 import numpy as np
 
@@ -29,10 +29,35 @@ from pearl_pomdp.online.despot import Despot, DespotSettings, SearchResult
 from pearl_pomdp.online.generative import Bounds, ExplicitModel
 
 if TYPE_CHECKING:  # pragma: no cover
-    from pearl_pomdp.hierarchy.execute import HierarchicalPolicy
     from pearl_pomdp.model.pomdp import Pomdp
 
-__all__ = ["RootModel", "OnlineRoot", "online_settings"]
+__all__ = ["Children", "RootModel", "OnlineRoot", "online_settings"]
+
+
+class Children(Protocol):
+    """What the root's search asks of the offline policies below it: a
+    :class:`~pearl_pomdp.hierarchy.execute.HierarchicalPolicy` (which builds the root, so this
+    module does not import it back)."""
+
+    @property
+    def root(self) -> str: ...
+
+    @property
+    def subtasks(self) -> Mapping[str, Any]: ...
+
+    @property
+    def action_names(self) -> List[str]: ...
+
+    @property
+    def num_states(self) -> int: ...
+
+    def action_index(self, name: str) -> int: ...
+
+    def is_group(self, name: str) -> bool: ...
+
+    def pick(self, name: str, b: np.ndarray, memo: Dict[str, Any], banned: FrozenSet[int] = frozenset()) -> Any: ...
+
+    def pick_projected(self, name: str, bh: np.ndarray, banned: FrozenSet[int] = frozenset()) -> Any: ...
 
 
 def online_settings(record: dict) -> DespotSettings:
@@ -54,7 +79,7 @@ class RootModel:
 
     uniforms_per_step = ExplicitModel.uniforms_per_step
 
-    def __init__(self, policy: "HierarchicalPolicy", explicit: ExplicitModel):
+    def __init__(self, policy: Children, explicit: ExplicitModel):
         self.policy = policy
         self.explicit = explicit
         root = policy.subtasks[policy.root]
@@ -72,7 +97,7 @@ class RootModel:
         states = np.asarray(states, dtype=np.int64)
         out: List[Tuple[int, float]] = []
         full: Optional[np.ndarray] = None
-        memo: Dict[str, object] = {}
+        memo: Dict[str, Any] = {}
         for k, child in enumerate(self.actions):
             if not self.abstract[k]:
                 out.append((self._fixed[k], float("nan")))
@@ -110,7 +135,7 @@ class OnlineRoot:
         bounds: the heuristics; default :func:`~pearl_pomdp.online.decider.default_bounds` of ``model``.
     """
 
-    def __init__(self, policy: "HierarchicalPolicy", model: "Pomdp", settings: DespotSettings, seed: int = 0,
+    def __init__(self, policy: Children, model: "Pomdp", settings: DespotSettings, seed: int = 0,
                  bounds: Optional[Bounds] = None):
         from pearl_pomdp.online.decider import default_bounds
 

@@ -36,11 +36,12 @@ import numpy as np
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.hierarchy.abstraction import (AbstractionTooLarge, AbstractSubtask, KernelBuilder, SeparableTerms,
                                                abstract_subtask, separable_reward_terms)
-from pearl_pomdp.hierarchy.execute import HierarchicalPolicy, Lookahead, SubtaskPolicy
+from pearl_pomdp.hierarchy.execute import HierarchicalPolicy, SubtaskPolicy
 from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
 from pearl_pomdp.hierarchy.spec import Hierarchy, SubtaskSpec
-from pearl_pomdp.solvers.base import SolveResult
 from pearl_pomdp.model.factored import FactoredDomain
+from pearl_pomdp.policies.lookahead import Lookahead
+from pearl_pomdp.solution import SolveResult
 
 __all__ = ["plan", "solve_subtask", "horizon_text", "entry_beliefs", "CORNER_LIMIT"]
 
@@ -260,8 +261,8 @@ def entry_beliefs(model, seed: int = 0, episodes: int = ENTRY_EPISODES, steps: i
     it is already computed (an online root's upper bound past ``FIB_LIMIT``: the same value
     iteration, not run twice on the ward's 233,280 states)."""
     from pearl_pomdp.belief import BeliefFilter
-    from pearl_pomdp.simulate import _RowSampler
-    from pearl_pomdp.solvers.base import AlphaVectorPolicy
+    from pearl_pomdp.simulate import RowSampler
+    from pearl_pomdp.solution import AlphaVectorPolicy
     from pearl_pomdp.solvers.mdp import solve_qmdp
 
     policy = solve_qmdp(model).policy if qmdp is None else AlphaVectorPolicy(
@@ -269,7 +270,7 @@ def entry_beliefs(model, seed: int = 0, episodes: int = ENTRY_EPISODES, steps: i
     rng = np.random.default_rng(seed)
     S, Z = model.num_states, model.num_observations
     filt = BeliefFilter(model)
-    trans = [_RowSampler(t) for t in model.T]
+    trans = [RowSampler(t) for t in model.T]
     ocum = np.cumsum(model.O, axis=2)
     b0 = np.asarray(model.b0, dtype=float)
     states = np.clip(np.searchsorted(np.cumsum(b0), rng.random(episodes) * b0.sum(), side="right"), 0, S - 1)

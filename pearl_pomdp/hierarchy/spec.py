@@ -47,7 +47,7 @@ primitive its child picks at the belief concentrated on each state; the subtask 
 to ``horizon`` by incremental pruning (or point-based), and ``lookahead: d`` makes EXECUTE
 choose the subtask's action by exact forward search over its abstract model, ``d`` steps
 deep, with the solved horizon-``h`` α-vectors at the leaves (see
-:class:`~pearl_pomdp.hierarchy.execute.Lookahead`).
+:class:`~pearl_pomdp.policies.lookahead.Lookahead`).
 
 A name in ``actions`` is abstract when it is a key of ``subtasks``, otherwise it must
 be a primitive action of the domain. Each subtask is used once (the structure is a

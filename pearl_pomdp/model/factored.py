@@ -49,6 +49,7 @@ __all__ = [
     "RewardRule",
     "load_domain",
     "parse_domain",
+    "as_number",
     "KEEP",
     "ROW_TOLERANCE",
 ]
@@ -490,7 +491,7 @@ class _Builder:
         return value
 
     def prob(self, value: Any, where: str, container: Any, key: Any) -> float:
-        p = _number(value)
+        p = as_number(value)
         if p is None:
             raise self.fail(where, f"probability {value!r} is not a number (write 0.25 or 1/4)", container, key)
         if not (0.0 <= p <= 1.0 + ROW_TOLERANCE) or math.isnan(p):
@@ -511,7 +512,7 @@ class _Builder:
         name = d.get("name", self.default_name)
         if not isinstance(name, str) or not name:
             raise self.fail("name", "expected a non-empty string", d, "name")
-        discount = _number(d["discount"])
+        discount = as_number(d["discount"])
         if discount is None or not 0.0 < discount <= 1.0:
             raise self.fail("discount", f"{d['discount']!r} is not a number in (0, 1]", d, "discount")
         horizon = d.get("horizon")
@@ -1025,7 +1026,7 @@ class _Builder:
                 acts = list(names)
             if "reward" not in rule:
                 raise self.fail(where, "missing 'reward'", node, i)
-            r = _number(rule["reward"])
+            r = as_number(rule["reward"])
             if r is None or not math.isfinite(r):
                 raise self.fail(f"{where}.reward", f"{rule['reward']!r} is not a finite number", rule, "reward")
             why = rule.get("why")
@@ -1156,7 +1157,7 @@ def _kind(value: Any) -> str:
     return f"{type(value).__name__} {value!r}"
 
 
-def _number(value: Any) -> Optional[float]:
+def as_number(value: Any) -> Optional[float]:
     """A float from a number or a string such as ``"0.25"`` / ``"1/3"`` (None if not a number)."""
     if isinstance(value, bool) or value is None:
         return None

@@ -81,6 +81,8 @@ __all__ = [
     "parse_pomdp",
     "format_pomdp",
     "write_pomdp",
+    "real_text",
+    "probability_text",
     "SUM_TOLERANCE",
     "RENORMALISE_ABOVE",
     "RESERVED_WORDS",
@@ -1070,7 +1072,7 @@ def _file_names(names: Sequence[str], prefix: str) -> Tuple[Optional[List[str]],
     return out, True
 
 
-def _r(x: float) -> str:
+def real_text(x: float) -> str:
     """Lossless float text (shortest repr; ``-0`` keeps the sign of a negative zero)."""
     x = float(x)
     if x == 0.0:
@@ -1080,10 +1082,10 @@ def _r(x: float) -> str:
     return repr(x)
 
 
-def _p(x: float) -> str:
-    """A probability: as :func:`_r`, but any zero is ``0`` (a probability has no sign)."""
+def probability_text(x: float) -> str:
+    """A probability: as :func:`real_text`, but any zero is ``0`` (a probability has no sign)."""
     x = float(x)
-    return "0" if x == 0.0 else _r(x)
+    return "0" if x == 0.0 else real_text(x)
 
 
 def format_pomdp(model: Pomdp) -> str:
@@ -1126,7 +1128,7 @@ def format_pomdp(model: Pomdp) -> str:
     elif k and np.array_equal(b0, support.astype(float) / float(k)):
         w("start include: " + " ".join(st[j] for j in np.flatnonzero(support)))
     else:
-        w("start: " + " ".join(_p(x) for x in b0))
+        w("start: " + " ".join(probability_text(x) for x in b0))
     w("")
 
     for a in range(A):
@@ -1154,7 +1156,7 @@ def format_pomdp(model: Pomdp) -> str:
             continue
         if dense is not None and S <= 100 and nnz >= 0.25 * S * S:
             for s in range(S):
-                w(f"T: {ac[a]} : {st[s]} " + " ".join(_p(x) for x in dense[s]))
+                w(f"T: {ac[a]} : {st[s]} " + " ".join(probability_text(x) for x in dense[s]))
             continue
         if Tc is None:
             import scipy.sparse as sp
@@ -1166,7 +1168,7 @@ def format_pomdp(model: Pomdp) -> str:
             lo, hi = indptr[s], indptr[s + 1]
             pre = f"T: {ac[a]} : {st[s]} : "
             for j in range(lo, hi):
-                w(f"{pre}{st[indices[j]]} {_p(data[j])}")
+                w(f"{pre}{st[indices[j]]} {probability_text(data[j])}")
     w("")
 
     O = np.asarray(model.O, dtype=float)
@@ -1176,15 +1178,15 @@ def format_pomdp(model: Pomdp) -> str:
             if (Oa[0] == 1.0 / Z).all():
                 w(f"O: {ac[a]} uniform")
             else:
-                w(f"O: {ac[a]} : * " + " ".join(_p(x) for x in Oa[0]))
+                w(f"O: {ac[a]} : * " + " ".join(probability_text(x) for x in Oa[0]))
             continue
         dense_rows = Z <= 16 or np.count_nonzero(Oa) >= 0.25 * S * Z
         for s in range(S):
             if dense_rows:
-                w(f"O: {ac[a]} : {st[s]} " + " ".join(_p(x) for x in Oa[s]))
+                w(f"O: {ac[a]} : {st[s]} " + " ".join(probability_text(x) for x in Oa[s]))
             else:
                 for o in np.flatnonzero(Oa[s]):
-                    w(f"O: {ac[a]} : {st[s]} : {ob[o]} {_p(Oa[s, o])}")
+                    w(f"O: {ac[a]} : {st[s]} : {ob[o]} {probability_text(Oa[s, o])}")
     w("")
 
     R = np.asarray(model.R, dtype=float)
@@ -1197,10 +1199,10 @@ def format_pomdp(model: Pomdp) -> str:
         if counts.max() * 2 <= S or c == 0.0:
             c = 0.0  # (+0: a file's unset cells are +0; negative zeros are written explicitly)
         if c != 0.0:
-            w(f"R: {ac[a]} : * : * : * {_r(c)}")
+            w(f"R: {ac[a]} : * : * : * {real_text(c)}")
         # a cell differs from the default if its value or the sign of a zero differs
         for cell in np.flatnonzero((col != c) | (np.signbit(col) != np.signbit(c))):
-            w(f"R: {ac[a]} : {st[cell]} : * : * {_r(col[cell])}")
+            w(f"R: {ac[a]} : {st[cell]} : * : * {real_text(col[cell])}")
     w("")
     return "\n".join(out)
 
@@ -1208,9 +1210,5 @@ def format_pomdp(model: Pomdp) -> str:
 def write_pomdp(model: Pomdp, path: PathLike) -> Path:
     """Write ``model`` as a ``.pomdp`` file atomically (temporary file + rename); returns the path."""
     path = Path(path)
-    _atomic_write(path, format_pomdp(model))
+    atomic_write(path, format_pomdp(model), encoding="ascii")
     return path
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    atomic_write(path, text, encoding="ascii")

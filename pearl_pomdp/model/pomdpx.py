@@ -37,9 +37,10 @@ from typing import List, NoReturn, Optional, Sequence, Tuple, Union
 import numpy as np
 import scipy.sparse as sp
 
+from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import ModelFormatError
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.model.pomdp_format import RENORMALISE_ABOVE, SUM_TOLERANCE, _atomic_write, _p, _r
+from pearl_pomdp.model.pomdp_format import RENORMALISE_ABOVE, SUM_TOLERANCE, probability_text, real_text
 
 __all__ = ["write_pomdpx", "format_pomdpx", "read_pomdpx", "parse_pomdpx"]
 
@@ -102,7 +103,7 @@ def format_pomdpx(model: Pomdp) -> str:
 
     w("<InitialStateBelief>")
     w(f"<CondProb><Var>{STATE_PREV}</Var><Parent>null</Parent><Parameter type=\"TBL\">")
-    entry("-", " ".join(_p(x) for x in model.b0))
+    entry("-", " ".join(probability_text(x) for x in model.b0))
     w("</Parameter></CondProb>")
     w("</InitialStateBelief>")
 
@@ -120,11 +121,11 @@ def format_pomdpx(model: Pomdp) -> str:
         if S <= 100 and Tc.nnz >= 0.25 * S * S:
             dense = Tc.toarray()
             for s in range(S):
-                entry(f"{ac[a]} {st[s]} -", " ".join(_p(x) for x in dense[s]))
+                entry(f"{ac[a]} {st[s]} -", " ".join(probability_text(x) for x in dense[s]))
             continue
         for s in range(S):
             for j in range(Tc.indptr[s], Tc.indptr[s + 1]):
-                entry(f"{ac[a]} {st[s]} {st[Tc.indices[j]]}", _p(Tc.data[j]))
+                entry(f"{ac[a]} {st[s]} {st[Tc.indices[j]]}", probability_text(Tc.data[j]))
     w("</Parameter></CondProb>")
     w("</StateTransitionFunction>")
 
@@ -134,15 +135,15 @@ def format_pomdpx(model: Pomdp) -> str:
     for a in range(A):
         Oa = O[a]
         if (Oa == Oa[0]).all():
-            entry(f"{ac[a]} * -", " ".join(_p(x) for x in Oa[0]))
+            entry(f"{ac[a]} * -", " ".join(probability_text(x) for x in Oa[0]))
             continue
         rows = Z <= 16 or np.count_nonzero(Oa) >= 0.25 * S * Z
         for s in range(S):
             if rows:
-                entry(f"{ac[a]} {st[s]} -", " ".join(_p(x) for x in Oa[s]))
+                entry(f"{ac[a]} {st[s]} -", " ".join(probability_text(x) for x in Oa[s]))
             else:
                 for o in np.flatnonzero(Oa[s]):
-                    entry(f"{ac[a]} {st[s]} {ob[o]}", _p(Oa[s, o]))
+                    entry(f"{ac[a]} {st[s]} {ob[o]}", probability_text(Oa[s, o]))
     w("</Parameter></CondProb>")
     w("</ObsFunction>")
 
@@ -152,7 +153,7 @@ def format_pomdpx(model: Pomdp) -> str:
     written = 0
     for a in range(A):
         for cell in np.flatnonzero((R[:, a] != 0) | np.signbit(R[:, a])):
-            entry(f"{ac[a]} {st[cell]}", _r(R[cell, a]), "ValueTable")
+            entry(f"{ac[a]} {st[cell]}", real_text(R[cell, a]), "ValueTable")
             written += 1
     if not written:
         entry("* *", "0", "ValueTable")
@@ -166,7 +167,7 @@ def format_pomdpx(model: Pomdp) -> str:
 def write_pomdpx(model: Pomdp, path: PathLike) -> Path:
     """Write ``model`` as flat PomdpX (SARSOP-readable), atomically; returns the path."""
     path = Path(path)
-    _atomic_write(path, format_pomdpx(model))
+    atomic_write(path, format_pomdpx(model), encoding="ascii")
     return path
 
 

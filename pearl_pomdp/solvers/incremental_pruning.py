@@ -90,8 +90,8 @@ from typing import Deque, List, Optional, Tuple, Union
 
 import numpy as np
 
-from .base import AlphaVectorPolicy, SolveResult
-from .prune import DEFAULT_TOL, PruneStats, PruneTimeout, _WitnessLP, prune
+from ..solution import AlphaVectorPolicy, SolveResult
+from .prune import DEFAULT_TOL, PruneStats, PruneTimeout, WitnessLP, prune
 
 __all__ = ["solve_incremental_pruning", "dp_backup", "weak_bound", "bellman_residual", "STAGE_TOL",
            "MAX_CANDIDATE_BYTES", "VectorCapExceeded"]
@@ -222,7 +222,7 @@ def _residual_one_way(new: np.ndarray, old: np.ndarray, max_lps: Optional[int],
     if dist is None:
         dist = _nearest_distances(new, old)
     order = np.argsort(-dist, kind="stable")
-    lp: Optional[_WitnessLP] = None
+    lp: Optional[WitnessLP] = None
     best = 0.0
     for n, i in enumerate(order):
         if dist[i] <= best:
@@ -230,7 +230,7 @@ def _residual_one_way(new: np.ndarray, old: np.ndarray, max_lps: Optional[int],
         if max_lps is not None and n >= max_lps:
             return max(best, float(dist[i])), False  # out of LPs: the distance bound stands
         if lp is None:
-            lp = _WitnessLP(old.shape[1])
+            lp = WitnessLP(old.shape[1])
             for alpha in old:
                 lp.add(alpha)
         delta, _ = lp.solve(new[i])

@@ -27,7 +27,8 @@ from typing import List, Tuple
 import numpy as np
 
 from ..model.pomdp import Pomdp
-from .base import AlphaVectorPolicy, SolveResult
+from ..policies.most_likely_state import MostLikelyStatePolicy
+from ..solution import AlphaVectorPolicy, SolveResult
 
 __all__ = [
     "mdp_value_iteration",
@@ -35,7 +36,6 @@ __all__ = [
     "solve_fib",
     "fib_q",
     "blind_lower_bound",
-    "MostLikelyStatePolicy",
     "most_likely_state_policy",
 ]
 
@@ -322,29 +322,6 @@ def blind_lower_bound(model: Pomdp, epsilon: float = 1e-6, max_iterations: int =
         v = _evaluate(Ta, R[:, a], g, np.full(S, R[:, a].min() / (1.0 - g)), tol, max_iterations)
         alphas[a] = _certify_lower(v, R[:, a] + g * (Ta @ v), g)
     return alphas
-
-
-class MostLikelyStatePolicy:
-    """Act as if the most probable state were the true one.
-
-    Attributes:
-        state_actions: ``[S]`` int array, the action for each state (usually the
-            MDP-optimal one).
-    """
-
-    def __init__(self, state_actions) -> None:
-        self.state_actions = np.asarray(state_actions, dtype=np.int64).ravel()
-
-    def action(self, belief: np.ndarray) -> int:
-        """``state_actions[argmax_s belief[s]]`` (ties: the lowest state index)."""
-        b = np.asarray(belief, dtype=float).ravel()
-        if b.shape[0] != self.state_actions.shape[0]:
-            raise ValueError(f"belief has {b.shape[0]} entries, the policy has {self.state_actions.shape[0]} states")
-        return int(self.state_actions[int(np.argmax(b))])
-
-    def actions_batch(self, beliefs: np.ndarray) -> np.ndarray:
-        """:meth:`action` for every row of ``beliefs`` ``[N, S]`` (ties: the lowest state index)."""
-        return self.state_actions[np.argmax(np.asarray(beliefs, dtype=float), axis=1)]
 
 
 def most_likely_state_policy(model: Pomdp) -> MostLikelyStatePolicy:

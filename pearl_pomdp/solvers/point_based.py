@@ -76,7 +76,7 @@ import numpy as np
 
 from ..model.pomdp import Pomdp
 from . import _pointbased_kernel as _kernel
-from .base import AlphaVectorPolicy, SolveResult
+from ..solution import AlphaVectorPolicy, SolveResult
 from .mdp import blind_lower_bound, fib_q
 
 __all__ = ["solve_point_based", "PointBasedSolver", "PointBasedSettings", "transition_block", "ENGINES"]

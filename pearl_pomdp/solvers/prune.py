@@ -63,7 +63,7 @@ from . import _prune
 #: A vector must win by at least this much somewhere (pomdp-solve's effective threshold, see above).
 DEFAULT_TOL = 5.01e-7
 
-__all__ = ["prune", "PruneStats", "PruneTimeout", "pointwise_dominated", "DEFAULT_TOL"]
+__all__ = ["prune", "PruneStats", "PruneTimeout", "pointwise_dominated", "WitnessLP", "DEFAULT_TOL"]
 
 
 class PruneTimeout(Exception):
@@ -87,7 +87,7 @@ class PruneStats:
                 "lp_resolves": self.lp_resolves, "lp_failures": self.lp_failures}
 
 
-class _WitnessLP:
+class WitnessLP:
     """``δ* = max_b c·b − max_{k∈K} α_k·b`` over the belief simplex, for many ``c`` and a growing ``K``:
     the kernel's LP on its own (the one :func:`prune` uses), for tests and checks."""
 

@@ -31,16 +31,16 @@ def policy_paths(model: Pomdp, policy, episodes: int, depth: int, seed: int = 0)
     """``[episodes, depth]`` flat ``a·|Z| + o`` sequences of ``policy``'s episodes in ``model``
     (start state from ``b0``, next state from ``T``, observation from ``O``, belief by eq. 5)."""
     from pearl_pomdp.belief import BeliefFilter
-    from pearl_pomdp.simulate import _batched_actions, _RowSampler
+    from pearl_pomdp.simulate import RowSampler, batched_actions
 
     if episodes < 1 or depth < 1:
         raise ValueError(f"policy_paths: episodes and depth must be >= 1, got {episodes}, {depth}")
     rng = np.random.default_rng(seed)
     S, Z = model.num_states, model.num_observations
     filt = BeliefFilter(model)
-    trans = [_RowSampler(t) for t in model.T]
+    trans = [RowSampler(t) for t in model.T]
     ocum = np.cumsum(model.O, axis=2)
-    choose = _batched_actions(policy)
+    choose = batched_actions(policy)
     b0 = np.asarray(model.b0, dtype=float)
     states = np.clip(np.searchsorted(np.cumsum(b0), rng.random(episodes) * b0.sum(), side="right"), 0, S - 1)
     B = np.tile(b0, (episodes, 1))

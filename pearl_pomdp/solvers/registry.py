@@ -24,7 +24,7 @@ from pearl_pomdp.errors import PearlError
 if TYPE_CHECKING:  # pragma: no cover - typing only (interfaces imports numpy: `pearl --help` must not)
     from pearl_pomdp.interfaces import Solver
     from pearl_pomdp.model.pomdp import Pomdp
-    from pearl_pomdp.solvers.base import SolveResult
+    from pearl_pomdp.solution import SolveResult
 
 __all__ = ["SOLVERS", "solve", "solver_names"]
 

@@ -1,5 +1,9 @@
 """What every solver returns: an α-vector policy and a result record.
 
+At the bottom of the import order with :mod:`pearl_pomdp.errors` and :mod:`pearl_pomdp.model`
+(it imports nothing of the package), so :mod:`pearl_pomdp.interfaces` can name
+:class:`SolveResult` and the solvers, the policies and the hierarchy all stand above both.
+
 A value function is a set Γ of α-vectors, each labelled with an action
 (docs/design.md §2): ``V(b) = max_k Γ[k]·b`` and the policy takes the action of the
 maximising vector, a single matrix-vector product.
