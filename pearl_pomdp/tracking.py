@@ -83,6 +83,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
+import secrets
 from dataclasses import dataclass, field
 from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple, Union
 
@@ -342,6 +343,8 @@ class InputOutcome:
             * ``"opened"``: an action opened a step and nothing closed it yet;
             * ``"unknown"``: the action is not one of the model's (counted, ignored);
             * ``"abandoned"``: :meth:`~BeliefTracker.abandon_step` left the open step without an update;
+            * ``"resumed"``: the action a step resumed from a journal was opened with, heard again
+              (the policy's latched copy): the step goes on, nothing is reopened;
             * ``"idle"``: nothing happened (a tick before any deadline, nothing to abandon, a
               number input's reading that kept its symbol).
         closed: the step closed by this call, or ``None``.
@@ -749,6 +752,8 @@ class BeliefTracker:
         self._mapper = _ObservationMapper(model, channels, domain.keywords if domain is not None else {},
                                           keyword_filter, settings.confidence_floor)
         self.history: Optional[Deque[StepResult]] = None
+        self._run = secrets.randbits(31)
+        self._resumed_action: Optional[str] = None
 
     # ------------------------------------------------------------ read-only
     @property
@@ -873,6 +878,71 @@ class BeliefTracker:
         marginal = self.marginals().get(self.settings.place_feature, {})
         return max(marginal, key=lambda v: marginal[v]) if marginal else None
 
+    @property
+    def run(self) -> int:
+        """This run's identity: a random number drawn at construction, at every :meth:`reset` and
+        :meth:`abandon_step` (the policy decides afresh) and kept by :meth:`resume`, so ``(run, step)`` names one belief of one run (the policy node
+        answers each once: docs/reliability.md, "Crashes")."""
+        return self._run
+
+    def journal_state(self) -> Dict[str, Any]:
+        """What a restarted tracker needs to carry on (JSON-serialisable; :meth:`resume` reads it):
+        the belief, run and step, the open step (action, opening time, drive limit), the queued
+        observations and the counters."""
+        from pearl_pomdp.journal import encode_array
+
+        proto = self._protocol
+        return {"num_states": int(self.model.num_states), "belief": encode_array(proto.belief),
+                "run": self._run, "step": proto.step, "open_action": proto.current_action,
+                "opened_at": proto.opened_at, "drive_limit": proto.drive_limit,
+                "pending": [dataclasses.asdict(item) for item in proto.pending],
+                "counters": dict(proto.counters), "last_nav_failure": proto.last_nav_failure}
+
+    def resume(self, state: Mapping[str, Any]) -> None:
+        """Carry on from a :meth:`journal_state` (the open step keeps its opening time, so its
+        deadline too). Everything is checked before anything changes.
+
+        Raises:
+            ValueError: a field is missing or does not fit this model (names the field).
+        """
+        from pearl_pomdp.journal import decode_array
+
+        try:
+            belief = decode_array(state["belief"])
+            run, step = int(state["run"]), int(state["step"])
+            action = state.get("open_action")
+            opened_at = None if state.get("opened_at") is None else float(state["opened_at"])
+            limit = None if state.get("drive_limit") is None else float(state["drive_limit"])
+            pending = [_Pending(str(p["symbol"]), str(p["source"]), float(p["stamp"]), str(p.get("text", "")),
+                                float(p.get("confidence", 1.0))) for p in state.get("pending", [])]
+            counters = {k: int(v) for k, v in dict(state.get("counters", {})).items() if k in COUNTERS}
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f"journal state: missing or malformed field ({type(err).__name__}: {err})") from None
+        if belief.size != self.model.num_states:
+            raise ValueError(f"journal state: belief has {belief.size} states, {self.model.name} has "
+                             f"{self.model.num_states}")
+        if not np.isfinite(belief).all() or (belief < 0).any() or abs(belief.sum() - 1.0) > 1e-6:
+            raise ValueError(f"journal state: belief is not a distribution (sum {belief.sum():.9g})")
+        if step < 0:
+            raise ValueError(f"journal state: step {step} < 0")
+        if action is not None and (action not in self.model.actions or opened_at is None):
+            raise ValueError(f"journal state: open_action {action!r} is not an action of {self.model.name} "
+                             "or has no opened_at")
+        unknown = sorted({p.symbol for p in pending} - set(self.model.observations))
+        if unknown:
+            raise ValueError(f"journal state: queued observation {unknown[0]!r} is not an observation of "
+                             f"{self.model.name}")
+        proto = self._protocol
+        proto.belief, proto.step, self._run = belief, step, run
+        proto.current_action, proto.opened_at = action, (opened_at if action is not None else None)
+        proto.drive_limit = limit if action is not None else None
+        proto.pending = collections.deque(pending)
+        proto.counters.update(counters)
+        proto.last_nav_failure = str(state.get("last_nav_failure", ""))
+        #: The open step's action as resumed; the same action heard again (the policy's latched
+        #: copy) is that step, not a new one (see :meth:`on_action`).
+        self._resumed_action = action
+
     def keep_history(self, maxlen: int = 10_000) -> None:
         """Remember the last ``maxlen`` closed steps in :attr:`history` (off by default: a robot runs for days)."""
         self.history = collections.deque(maxlen=maxlen)
@@ -882,12 +952,19 @@ class BeliefTracker:
         """Back to ``b0``: no open step, nothing queued, every counter zeroed (history kept)."""
         self._protocol.reset()
         self._mapper.reset()
+        self._run = secrets.randbits(31)
+        self._resumed_action = None
 
     def on_action(self, name: str, now: float) -> InputOutcome:
         """An action was taken at ``now``: opens a step (a queued input may close it at once).
 
         A drive gets its deadline here, from the place the robot most likely is now.
         """
+        if self._resumed_action is not None:
+            resumed, self._resumed_action = self._resumed_action, None
+            if name == resumed and self._protocol.current_action == name:
+                # The policy's latched copy of the action this resumed step was opened with.
+                return self._outcome("resumed", None)
         limit = None
         if self._drive_timer is not None and name in self._drive_timer.goals:
             limit = self._drive_timer.seconds(name, self.likely_place())
@@ -932,7 +1009,10 @@ class BeliefTracker:
 
     def abandon_step(self) -> InputOutcome:
         """Leave the open step without an update (a deactivated node: the robot stops what it was
-        doing, and on activation the policy decides afresh). The belief and the queue are kept."""
+        doing, and on activation the policy decides afresh). The belief and the queue are kept; a new
+        :attr:`run` begins, so the policy answers the kept belief again."""
+        self._run = secrets.randbits(31)
+        self._resumed_action = None
         return self._outcome("abandoned" if self._protocol.abandon() else "idle", None)
 
     def set_live(self, *, step_timeout: Optional[float] = None, stale_after: Optional[float] = None,

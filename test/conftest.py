@@ -2,6 +2,7 @@
 import lzma
 import os
 import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,9 @@ import pytest
 # setting is kept.
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+# Node journals (journal:=auto, under $ROS_HOME) go to a folder of this session, never ~/.ros:
+# no test resumes from another run's journal (test/ros_helpers.py gives each ROS test its own).
+_ROS_HOME = os.environ["ROS_HOME"] = tempfile.mkdtemp(prefix="pearl-test-ros-home-")
 
 REPO = Path(__file__).resolve().parents[1]
 #: The benchmark .pomdp files with their provenance (test/data/pomdp/README.md).
@@ -61,3 +65,4 @@ def pytest_sessionfinish(session, exitstatus):
     from pearl_pomdp.shared_memory import remove_dead_files
 
     remove_dead_files()
+    shutil.rmtree(_ROS_HOME, ignore_errors=True)

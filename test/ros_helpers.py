@@ -4,7 +4,8 @@
   Linux's ephemeral range), spread by process id, pytest-xdist worker and a counter, so parallel
   runs and tests do not see each other.
 * :func:`ros_env` — the environment for a node process: the domain, discovery on localhost only,
-  the fast-discovery Fast DDS profile (``config/fastdds_profile.xml``), logs in a temporary dir.
+  the fast-discovery Fast DDS profile (``config/fastdds_profile.xml``), logs and node journals
+  (``ROS_HOME``) in a temporary dir.
 * :class:`Proc` — a started process, stopped with SIGINT, then SIGTERM, then SIGKILL after
   timeouts (Fast DDS can hang at exit: eProsima/Fast-DDS#6502), its output kept in files.
 * :class:`Probe` — a node in the test process that publishes inputs and records outputs;
@@ -47,6 +48,8 @@ def configure_test_process(log_dir: Path) -> None:
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(PROFILE))
     os.environ.setdefault("ROS_LOG_DIR", str(log_dir))
+    # Node journals (auto: under $ROS_HOME) stay with the test: no test resumes another's.
+    os.environ["ROS_HOME"] = str(log_dir)
     os.environ.pop("ROS_LOCALHOST_ONLY", None)
 
 
@@ -55,7 +58,7 @@ def ros_env(domain_id: int, log_dir: Path) -> Dict[str, str]:
     env = dict(os.environ)
     env.pop("ROS_LOCALHOST_ONLY", None)
     env.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               FASTRTPS_DEFAULT_PROFILES_FILE=str(PROFILE), ROS_LOG_DIR=str(log_dir),
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(PROFILE), ROS_LOG_DIR=str(log_dir), ROS_HOME=str(log_dir),
                PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
     return env
 

@@ -233,6 +233,7 @@ def test_over_dds_the_drive_closes_at_its_deadline_diagnostics_say_why_and_actio
     from ros_helpers import allocate_domain_id, configure_test_process
     from pearl_pomdp.hierarchy import load_hierarchical_policy
     from pearl_pomdp.nodes.graph import PearlGraph
+    from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.sim_clock import SimClockDriver
     from pearl_sim.loop import run_episode
     from pearl_sim.nodes import GraphBackend, SimulatedHardware
@@ -262,7 +263,7 @@ def test_over_dds_the_drive_closes_at_its_deadline_diagnostics_say_why_and_actio
         every = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
         listener.create_subscription(Float64MultiArray, "/pearl/belief",
-                                     lambda m: beliefs.append(np.array(m.data, dtype=float)), every)
+                                     lambda m: beliefs.append(cv.msg_to_belief(m)), every)
         listener.create_subscription(DiagnosticArray, "/diagnostics",
                                      lambda m: statuses.extend(s for s in m.status if "belief_tracker" in s.name), 50)
         assert graph.spin_until(lambda: beliefs and graph.tracker.diag_pub.get_subscription_count() >= 1,

@@ -320,7 +320,11 @@ def test_nodes_exit_zero_within_2s_on_sigint_and_sigterm(graph, flat_policy):
         assert "Traceback" not in procs[key].stderr()
 
 
-def test_policy_restart_resumes_from_last_belief(graph, flat_policy):
+def test_policy_restart_does_not_repeat_its_action_and_without_journal_answers_the_last_belief(graph,
+                                                                                               flat_policy):
+    """A restarted policy gets the tracker's latched belief. With its journal (the default) it
+    knows it acted on that belief's step and publishes nothing (no repeated action); with
+    journal:='' it answers the belief again (docs/reliability.md, "Crashes")."""
     from pearl_pomdp.policies import FlatPolicyDecider
     from pearl_pomdp.policy_io import load_policy
 
@@ -342,8 +346,13 @@ def test_policy_restart_resumes_from_last_belief(graph, flat_policy):
     assert not np.allclose(last, model.b0)
     assert policy.stop(5.0) == 0
     n = len(graph.actions)
-    graph.start("policy2", cmd)
+    again = graph.start("policy2", cmd)
+    assert graph.wait(lambda: "was answered already" in again.stderr(), 3 * DISCOVERY_TIMEOUT), again.stderr()[-2000:]
+    assert "resuming from journal" in again.stderr()
+    assert not graph.wait(lambda: len(graph.actions) > n, 1.0)
+    assert again.stop(5.0) == 0
+    graph.start("policy3", cmd + ["-p", "journal:=''"])
     assert graph.wait(lambda: len(graph.actions) > n, 3 * DISCOVERY_TIMEOUT)
-    # The restarted node got the latched belief: its first answer is EXECUTE(last belief).
+    # Without a journal the restarted node answers the latched belief: EXECUTE(last belief).
     assert cv.msg_to_action(graph.actions[n]) == decider.execute(last).action_name
     np.testing.assert_allclose(cv.msg_to_belief(graph.beliefs[-1]), last)

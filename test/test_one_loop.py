@@ -59,6 +59,7 @@ def on_graph(domain, model, decider, scenario, seed, tmp_path):
 
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from pearl_pomdp.nodes.graph import PearlGraph
+    from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.sim_clock import SimClockDriver
     from pearl_sim.nodes import GraphBackend, SimulatedHardware
 
@@ -84,7 +85,7 @@ def on_graph(domain, model, decider, scenario, seed, tmp_path):
         every = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
         listener.create_subscription(Float64MultiArray, "/pearl/belief",
-                                     lambda m: beliefs.append(np.array(m.data, dtype=float)), every)
+                                     lambda m: beliefs.append(cv.msg_to_belief(m)), every)
         assert graph.spin_until(lambda: graph.tracker.belief_pub.get_subscription_count() >= 2 and beliefs,
                                 timeout_sec=20.0), "the listener never got b0"
         driver = SimClockDriver(graph, wait_s=20.0)

@@ -161,8 +161,14 @@ def recorded_beliefs(reader: BagReader) -> List[List[float]]:
     from rclpy.serialization import deserialize_message
     from std_msgs.msg import Float64MultiArray
 
-    return [list(deserialize_message(m.data, Float64MultiArray).data) for m in reader.messages
+    return [_belief_values(deserialize_message(m.data, Float64MultiArray)) for m in reader.messages
             if m.topic == BELIEF_TOPIC]
+
+
+def _belief_values(msg) -> List[float]:
+    """A belief message's ``b(s)``, without its padding (the tracker's run and step, which differ
+    between a recording and its replay: pearl_pomdp.nodes.conversions)."""
+    return list(msg.data)[msg.layout.data_offset:]
 
 
 def expected_actions(reader: BagReader) -> List[str]:
@@ -389,7 +395,7 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
         # Transient-local: b0, published when the tracker activated, arrives on matching.
         keep_all = QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        belief_sub = node.create_subscription(Float64MultiArray, BELIEF_TOPIC, lambda m: beliefs.append(list(m.data)),
+        belief_sub = node.create_subscription(Float64MultiArray, BELIEF_TOPIC, lambda m: beliefs.append(_belief_values(m)),
                                               keep_all)
         core = graph.tracker.core
         assert core is not None  # the graph's tracker is configured (autostart)

@@ -26,6 +26,7 @@ from pearl_pomdp.nodes.channel_messages import qos_profile, reader_for
 from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Param, load_domain_and_model,
                                       resolve_path, run_node)
 from pearl_pomdp.nodes.defaults import FileDefaults
+from pearl_pomdp.nodes.journaling import JOURNAL_PARAMETERS, NodeJournal
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
 from pearl_pomdp.tracking import BeliefTracker, InputOutcome, StepSettings
 
@@ -83,6 +84,10 @@ class BeliefTrackerNode(ManagedPearlNode):
           configure with the domain's declaration as default — a remap of an input's topic or QoS.
         * ``action_topic``, ``belief_topic``, ``marginals_topic`` (str): topic names.
         * ``use_sim_time`` (bool): follow /clock (rclpy's own parameter).
+        * ``journal`` (str, ``auto``), ``journal_max_age`` (double, s): the journal this node writes
+          after every change and resumes from when restarted (:mod:`pearl_pomdp.nodes.journaling`:
+          ``auto`` is ``$ROS_HOME/pearl/journal/domain<ID>/<node>.json``, ``''`` none); a journal older
+          than ``journal_max_age`` or of another domain file is refused with one line.
 
     Subscribers:
         * One per input the domain declares, on its topic with its message type and QoS
@@ -94,7 +99,8 @@ class BeliefTrackerNode(ManagedPearlNode):
 
     Publishers:
         * ``/pearl/belief`` (std_msgs/Float64MultiArray, TRANSIENT_LOCAL depth 1): ``b`` after each
-          step; ``b0`` once at start so a late policy still gets it.
+          step, after its run and step (:func:`~pearl_pomdp.nodes.conversions.belief_to_msg`); ``b0``
+          (or the journal's belief) once at start so a late policy still gets it.
         * ``/pearl/belief_marginals`` (std_msgs/String JSON, TRANSIENT_LOCAL depth 1): step, action,
           observation and per-feature marginals (see :mod:`pearl_pomdp.nodes.conversions`).
         * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): counters (updates, timeouts,
@@ -129,6 +135,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         Param("belief_topic", "/pearl/belief", "Belief output (std_msgs/Float64MultiArray)"),
         Param("marginals_topic", "/pearl/belief_marginals", "Per-feature marginals output (JSON String)"),
         Param("reset_service", "/pearl/reset", "std_srvs/Trigger service that returns the belief to b0"),
+        *JOURNAL_PARAMETERS,
         AUTOSTART,
     )
 
@@ -143,6 +150,8 @@ class BeliefTrackerNode(ManagedPearlNode):
         self._preloaded_channels = channels
         #: The core tracker (:class:`~pearl_pomdp.tracking.BeliefTracker`) once configured, else ``None``.
         self.core: Optional[BeliefTracker] = None
+        #: The journal (docs/reliability.md, "Crashes"), once configured.
+        self.journal: Optional[NodeJournal] = None
         self._reported_warnings = 0
         self._event_logged: Dict[str, float] = {}   # kind → node-clock second it was last logged
         self.actions_received = 0  # /pearl/action messages taken (the sim-clock driver waits on it)
@@ -179,6 +188,8 @@ class BeliefTrackerNode(ManagedPearlNode):
         inputs = self._input_subscriptions(core.channels, domain.source if domain is not None else p["domain"])
         for event in core.startup_events:
             self._log(event.level, event.text)
+        self.journal = NodeJournal(self, "belief_tracker", p, model, domain.source if domain is not None else p["domain"])
+        self.journal.resume(self._resume)
 
         self.belief_pub = self.lifecycle_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
         self.marginals_pub = self.lifecycle_publisher(cv.TextMsg, p["marginals_topic"], LATCHED_QOS)
@@ -243,8 +254,10 @@ class BeliefTrackerNode(ManagedPearlNode):
         return out
 
     def activate_node(self) -> None:
-        """Publish the current belief (b0 at first): the policy answers it and the loop runs."""
+        """Publish the current belief (b0 at first, or the journal's): the policy answers it (once:
+        it knows the run and step it answered) and the loop runs; a resumed step's deadline is armed."""
         self._publish_belief()
+        self._arm_deadline()
 
     def deactivate_node(self) -> None:
         """Stop tracking; keep the belief. An open step is abandoned (no update): the robot
@@ -267,6 +280,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         self.core.reset()
         self._arm_deadline()
         self._publish_belief()
+        self._journal()
         response.success = True
         response.message = f"belief reset to b0 of {self.model.name}" + ("" if self.active else " (inactive)")
         self.get_logger().info(response.message)
@@ -393,6 +407,21 @@ class BeliefTrackerNode(ManagedPearlNode):
                 self._log(event.level, event.text)
         if self._warning_total() > self._reported_warnings:
             self._diagnostics_soon()
+        self._journal()
+
+    def _resume(self, state) -> str:
+        """Carry on from a journal's state (the core checks it); what was resumed, for the log."""
+        assert self.core is not None
+        self.core.resume(state)
+        return (f"step {self.core.step}, open step {self.core.open_action or 'none'}, "
+                f"{self.core.pending} observation(s) queued")
+
+    def _journal(self) -> None:
+        """Journal the core's state when it changed (after the belief went out)."""
+        core = self.core
+        if self.journal is not None and core is not None:
+            key = (core.run, core.step, core.open_action, core.opened_at, core.pending, core.counters()["queued"])
+            self.journal.write(key, core.journal_state)
 
     def _log(self, level: str, text: str) -> None:
         if level == "warn":
@@ -434,7 +463,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         """The current belief and its marginals (with the step's action and observation, if one closed)."""
         assert self.core is not None
         belief = self.core.belief
-        self.belief_pub.publish(cv.belief_to_msg(belief))
+        self.belief_pub.publish(cv.belief_to_msg(belief, (self.core.run, self.core.step)))
         self.marginals_pub.publish(cv.marginals_to_msg(self.core.marginals(belief), self.core.step, action,
                                                        observation))
 
@@ -459,6 +488,8 @@ class BeliefTrackerNode(ManagedPearlNode):
         values = {"step": step, "open_action": open_action or "", "pending": pending, **self.counters()}
         if self.core.last_nav_failure:
             values["last_nav_failure"] = self.core.last_nav_failure
+        if self.journal is not None:
+            values.update(self.journal.diagnostics())
         level = cv.DIAG_WARN if warnings else cv.DIAG_OK
         text = f"{warnings} input(s) dropped, invalid or recovered" if warnings else "tracking"
         nav = values.get("nav_failures", 0)

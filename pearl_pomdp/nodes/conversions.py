@@ -8,9 +8,13 @@ nodes create publishers and subscriptions with are exported here too.
 Wire formats (all message types come from common_interfaces):
 
 * **belief** — ``std_msgs/Float64MultiArray``, one dimension: ``layout.dim[0].label`` is
-  :data:`BELIEF_LABEL` (``"state"``), ``size = stride = S``, ``data_offset = 0``; ``data[s]``
+  :data:`BELIEF_LABEL` (``"state"``), ``size = stride = S``; ``data[data_offset + s]``
   is ``b(s)`` in the model's state order (for a factored domain: mixed radix, first
-  feature most significant).
+  feature most significant). The tracker's beliefs have ``data_offset = 2``: the padding
+  ``data[0], data[1]`` is the tracker's run and step (whole numbers), so the policy answers
+  each belief once even when a restarted tracker publishes it again (docs/reliability.md,
+  "Crashes"); ``data_offset = 0`` carries no step (any reader that honours ``data_offset``
+  reads both).
 * **belief marginals** — ``std_msgs/String`` holding one JSON object
   ``{"step": int, "action": str|null, "observation": str|null,
   "marginals": {feature: {value: probability}}}``. JSON (not a Float64MultiArray) because
@@ -35,7 +39,7 @@ from __future__ import annotations
 import array
 import json
 import math
-from typing import Dict, Mapping, Optional, Sequence
+from typing import Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 from builtin_interfaces.msg import Time as TimeMsg
@@ -50,7 +54,7 @@ from pearl_pomdp.errors import BeliefError
 
 __all__ = [
     "BELIEF_LABEL", "BeliefMsg", "TextMsg", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
-    "belief_to_msg", "msg_to_belief", "marginals_to_msg", "msg_to_marginals",
+    "belief_to_msg", "msg_to_belief", "msg_to_belief_key", "marginals_to_msg", "msg_to_marginals",
     "text_to_msg", "msg_to_text", "action_to_msg", "msg_to_action",
     "decision_to_msg", "msg_to_decision", "pose_to_msg", "msg_to_pose",
     "diagnostics_to_msg", "msg_to_diagnostics", "seconds_to_time", "time_to_seconds",
@@ -91,17 +95,30 @@ def clock_to_msg(seconds: float) -> Clock:
 
 
 # ---------------------------------------------------------------------- belief
-def belief_to_msg(belief: np.ndarray) -> Float64MultiArray:
-    """A ``[S]`` belief as a one-dimensional Float64MultiArray labelled :data:`BELIEF_LABEL`."""
+def belief_to_msg(belief: np.ndarray, key: Optional[Tuple[int, int]] = None) -> Float64MultiArray:
+    """A ``[S]`` belief as a one-dimensional Float64MultiArray labelled :data:`BELIEF_LABEL`;
+    ``key`` ``(run, step)``, when given, goes in the two padding values before it (module doc)."""
     b = np.asarray(belief, dtype=float)
     if b.ndim != 1:
         raise BeliefError(f"belief must be one-dimensional [S], got shape {b.shape}")
     msg = Float64MultiArray()
     msg.layout.dim = [MultiArrayDimension(label=BELIEF_LABEL, size=b.size, stride=b.size)]
-    msg.layout.data_offset = 0
+    msg.layout.data_offset = 0 if key is None else 2
+    if key is not None:
+        b = np.concatenate([np.asarray(key, dtype=float), b])
     # array('d') is taken as is by the generated setter (a list is checked element by element).
     msg.data = array.array("d", np.ascontiguousarray(b).tobytes())
     return msg
+
+
+def msg_to_belief_key(msg: Float64MultiArray) -> Optional[Tuple[int, int]]:
+    """The ``(run, step)`` a tracker's belief message carries, or ``None`` (no padding of two)."""
+    if msg.layout.data_offset != 2 or len(msg.data) < 2:
+        return None
+    run, step = msg.data[0], msg.data[1]
+    if not (math.isfinite(run) and math.isfinite(step)):
+        return None
+    return int(run), int(step)
 
 
 def msg_to_belief(msg: Float64MultiArray, num_states: Optional[int] = None) -> np.ndarray:

@@ -95,7 +95,10 @@ class PearlGraph:
                 base["defaults_file"] = str(params_file)
 
             def params(name: str) -> Dict[str, Any]:
-                return {**base, **shared, **dict(overrides.get(name, {}))}
+                # No journal (docs/reliability.md, "Crashes"): a graph in one process that dies
+                # dies whole, and a replay or a test starts from b0; overrides may ask for one.
+                journal = {"journal": ""} if name in ("belief_tracker", "hierarchical_policy") else {}
+                return {**base, **journal, **shared, **dict(overrides.get(name, {}))}
 
             common = {"context": context, "start_parameter_services": parameter_services}
             managed = {**common, "lifecycle_services": parameter_services}

@@ -15,7 +15,7 @@ import collections
 import json
 import sys
 import time
-from typing import Any, Deque, List, Optional
+from typing import Any, Deque, List, Optional, Tuple
 
 import numpy as np
 from rclpy.parameter import Parameter
@@ -26,6 +26,7 @@ from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Param,
                                       load_domain_and_model, resolve_path, run_node)
 from pearl_pomdp.nodes.defaults import FileDefaults
+from pearl_pomdp.nodes.journaling import JOURNAL_PARAMETERS, NodeJournal
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
 from pearl_pomdp.operator import AUTONOMY_LEVELS, GateOutput, OperatorGate
 
@@ -101,6 +102,9 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         * ``defaults_file`` (str, ``config/pearl_nodes.yaml``): params file giving the defaults
           (:mod:`pearl_pomdp.nodes.defaults`; ``''``: none).
         * ``use_sim_time`` (bool): follow /clock.
+        * ``journal`` (str, ``auto``), ``journal_max_age`` (double, s): the journal of the step last
+          acted and the operator's level (:mod:`pearl_pomdp.nodes.journaling`); a restarted node
+          does not answer that step's belief again and keeps the level the operator set.
 
     Parameters (changeable at run time, the operator's):
         * ``autonomy`` (str): ``full`` (act), ``confirm`` (wait for a yes) or ``off`` (propose only).
@@ -168,6 +172,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                                                             "(std_srvs/SetBool)"),
         Param("proposal_topic", "/pearl/proposal", "The step's action and its status (JSON std_msgs/String)"),
         Param("operator_events_topic", "/pearl/operator/events", "Every operator event (JSON std_msgs/String)"),
+        *JOURNAL_PARAMETERS,
         AUTOSTART,
     )
 
@@ -191,6 +196,10 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self.inactive_operator = 0      # operator inputs while not active (not acted)
         self._confirm_srv: Optional[Any] = None
         self._confirm_timer: Optional[Any] = None
+        self.repeated_beliefs = 0       # beliefs of a (run, step) already answered (a restarted tracker's)
+        self._belief_key: Optional[Tuple[int, int]] = None   # (run, step) of the belief being answered
+        self._acted_key: Optional[Tuple[int, int]] = None    # … of the last one an action was published for
+        self.journal: Optional[NodeJournal] = None
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.start(p["autostart"])
@@ -212,6 +221,9 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                                      confirm_timeout=p["confirm_timeout"])
         except ValueError as err:
             raise NodeSetupError(f"parameter {err}") from None
+        self.journal = NodeJournal(self, "hierarchical_policy", p, model,
+                                   domain.source if domain is not None else p["domain"])
+        self.journal.resume(self._resume)
         self.action_pub = self.lifecycle_publisher(cv.TextMsg, p["action_topic"], LATCHED_QOS)
         self.decision_pub = self.lifecycle_publisher(cv.TextMsg, p["decision_topic"], EVENT_QOS)
         self.proposal_pub = self.lifecycle_publisher(cv.TextMsg, p["proposal_topic"], LATCHED_QOS)
@@ -252,6 +264,13 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             self.publish_diagnostics()
             return
         assert self.gate is not None   # configured with the decider
+        key = cv.msg_to_belief_key(msg)
+        if key is not None and key in (self._belief_key, self._acted_key):
+            # A restarted tracker publishes the belief it resumed; this step has its answer already.
+            self.repeated_beliefs += 1
+            self.get_logger().info(f"belief of run {key[0]} step {key[1]} was answered already: not again")
+            return
+        self._belief_key = key
         self.beliefs_answered += 1
         self._apply(self.gate.on_belief(belief, self.now_s()), start)
 
@@ -262,6 +281,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         for action in out.publish:
             self.action_pub.publish(cv.action_to_msg(action))
             self.actions_published += 1
+            self._acted_key = self._belief_key
         latency = time.perf_counter() - start
         for decision in out.decisions:
             self.latencies.append(latency)
@@ -279,6 +299,31 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                 self.get_logger().info(f"operator: {event.kind} {event.action}"
                                        + (f" ({event.detail})" if event.detail else ""))
         self._arm_confirm_deadline()
+        if self.journal is not None:
+            gate = self.gate
+            settings = (gate.autonomy, tuple(gate.confirm_categories), gate.confirm_timeout)
+            self.journal.write((self._acted_key, settings), lambda: {
+                "acted": list(self._acted_key) if self._acted_key is not None else None,
+                "autonomy": settings[0], "confirm_categories": list(settings[1]), "confirm_timeout": settings[2]})
+
+    def _resume(self, state) -> str:
+        """Carry on from a journal: the step last acted (its belief is not answered again) and the
+        operator's level (set as the parameters too). Raises ``ValueError`` when it does not fit."""
+        assert self.gate is not None
+        try:
+            acted = state.get("acted")
+            key = None if acted is None else (int(acted[0]), int(acted[1]))
+            autonomy, categories = str(state["autonomy"]), _categories(state["confirm_categories"])
+            timeout = float(state["confirm_timeout"])
+        except (KeyError, TypeError, ValueError, IndexError) as err:
+            raise ValueError(f"journal state: missing or malformed field ({type(err).__name__}: {err})") from None
+        self.gate.set_level(self.now_s(), autonomy, categories, timeout)   # checked: ValueError names the setting
+        self._acted_key = key
+        self.set_parameters([Parameter("autonomy", Parameter.Type.STRING, autonomy),
+                             Parameter("confirm_categories", Parameter.Type.STRING_ARRAY, categories or [""]),
+                             Parameter("confirm_timeout", Parameter.Type.DOUBLE, timeout)])
+        step = "none" if key is None else f"run {key[0]} step {key[1]}"
+        return f"last acted {step}; autonomy {autonomy}"
 
     def _operator_input(self, what: str):
         topic = self.params[f"{what}_topic"]
@@ -367,6 +412,9 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                   "latency_p99_ms": f"{np.percentile(lat, 99) * 1e3:.3f}",
                   "latency_max_ms": f"{lat.max() * 1e3:.3f}"}
         values["inactive_beliefs"] = self.inactive_beliefs
+        values["repeated_beliefs"] = self.repeated_beliefs
+        if self.journal is not None:
+            values.update(self.journal.diagnostics())
         if self.gate is not None:
             values.update(autonomy=self.gate.autonomy, operator_rejected=self.operator_rejected,
                           inactive_operator=self.inactive_operator,
