@@ -202,3 +202,34 @@ def test_without_a_journal_the_killed_tracker_starts_again_at_b0(graph_factory):
     assert cv.msg_to_belief_key(g.beliefs[seen])[1] == 0
     # A new run: the policy answers b0 again (DoNothing), as at the start of the day.
     assert g.wait(lambda: cv.msg_to_action(g.actions[-1]) == "DoNothing", 10.0)
+
+
+def test_a_restarted_policy_keeps_the_operators_level_from_its_journal(ros_context, pearl_policy, tmp_path):
+    """The operator set autonomy off at run time; the policy node dies and comes back with the
+    launch file's full: its journal restores off (the parameter reads off too)."""
+    from rclpy.parameter import Parameter
+
+    from pearl_pomdp.nodes.hierarchical_policy import HierarchicalPolicyNode
+
+    context, _ = ros_context
+    params = {"domain": str(DOMAIN), "policy": str(pearl_policy), "journal": str(tmp_path / "policy.json"),
+              "autonomy": "full"}
+    first = HierarchicalPolicyNode(context=context, parameter_overrides=params)
+    try:
+        assert first.set_parameters([Parameter("autonomy", value="off")])[0].successful
+        assert json.loads((tmp_path / "policy.json").read_text())["state"]["autonomy"] == "off"
+    finally:
+        first.destroy_node()
+    second = HierarchicalPolicyNode(context=context, parameter_overrides=params)
+    try:
+        assert second.gate is not None and second.gate.autonomy == "off"
+        assert second.get_parameter("autonomy").value == "off"
+        assert second.journal is not None and second.journal.status.startswith("resuming from journal")
+    finally:
+        second.destroy_node()
+    third = HierarchicalPolicyNode(context=context, parameter_overrides={**params, "journal_max_age": 0.001})
+    try:
+        assert third.gate is not None and third.gate.autonomy == "full"    # too old: the parameter's level
+        assert third.journal is not None and "more than journal_max_age" in third.journal.status
+    finally:
+        third.destroy_node()
