@@ -26,6 +26,7 @@ NODES = {
     "action_executor": "pearl_pomdp.nodes.action_executor:main",
     "landmark_detector": "pearl_pomdp.nodes.landmark_detector:main",
     "guide_pace": "pearl_pomdp.nodes.guide_pace:main",
+    "lifecycle_supervisor": "pearl_pomdp.nodes.supervisor:main",
     "speech_recognizer": "pearl_pomdp.nodes.speech_recognizer:main",
     "speech_synthesizer": "pearl_pomdp.nodes.speech_synthesizer:main",
 }

@@ -10,7 +10,7 @@ is exactly what ``ros2 launch`` understands for these elements, so one file serv
 * ``<let name value/>`` — sets a variable for the following elements.
 * ``<group [scoped="true"]>`` with ``<push-ros-namespace namespace="…"/>`` — a scope
   (``let``/``arg`` inside a scoped group do not leak out), optionally namespaced.
-* ``<node pkg exec [name] [namespace] [output] [args] [ros_args]>`` with children
+* ``<node pkg exec [name] [namespace] [output] [args] [ros_args] [respawn] [respawn_delay]>`` with children
   ``<param name value/>`` (nested ``<param name>`` groups make dotted names),
   ``<param from="params.yaml"/>`` and ``<remap from to/>``.
 * ``if="…"`` / ``unless="…"`` on any element (``true``/``false``/``1``/``0``).
@@ -92,6 +92,8 @@ class LaunchNode:
         remappings: ``(from, to)`` pairs.
         arguments: extra command-line arguments (``args`` attribute), before ``--ros-args``.
         extra_ros_args: the ``ros_args`` attribute, split.
+        respawn, respawn_delay: start the node again when it dies, after that many seconds
+            (``pearl launch`` bounds the restarts: ``--respawn-max-retries``).
         line: the ``<node>`` element's line in the file.
     """
 
@@ -104,6 +106,8 @@ class LaunchNode:
     remappings: List[Tuple[str, str]] = field(default_factory=list)
     arguments: List[str] = field(default_factory=list)
     extra_ros_args: List[str] = field(default_factory=list)
+    respawn: bool = False
+    respawn_delay: float = 0.0
     line: int = 0
 
     @property
@@ -401,6 +405,19 @@ def _node(el: _Element, scope: _Scope, namespace: Optional[str]) -> LaunchNode:
     elif own_ns or namespace:
         parts = [p.strip("/") for p in (namespace, own_ns) if p]
         node.namespace = "/" + "/".join(p for p in parts if p)
+    if "respawn" in el.attrib:
+        value = scope.need(el, "respawn").strip().lower()
+        if value not in _TRUE | _FALSE:
+            raise scope.error(el, "respawn", f"must be true/false/1/0, got {value!r}")
+        node.respawn = value in _TRUE
+    if "respawn_delay" in el.attrib:
+        text = scope.need(el, "respawn_delay")
+        try:
+            node.respawn_delay = float(text)
+        except ValueError:
+            raise scope.error(el, "respawn_delay", f"must be seconds, got {text!r}") from None
+        if not node.respawn_delay >= 0:
+            raise scope.error(el, "respawn_delay", f"must be >= 0 s, got {text!r}")
     if "args" in el.attrib:
         node.arguments = shlex.split(scope.attr(el, "args"))
     if "ros_args" in el.attrib:

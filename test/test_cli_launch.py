@@ -147,3 +147,60 @@ def test_the_launch_removes_the_shared_memory_its_stopped_nodes_left(tmp_path):
     assert proc.returncode == 0, err
     assert not segment.exists() and not Path(f"{segment}_el").exists()
     assert "shared-memory file(s) of stopped participants" in err
+
+
+#: Dies with exit code 1 at once, every time (a node that crashes at start); counts its starts.
+CRASHING = """#!{python} -S
+import os, sys
+with open(os.environ["CRASH_COUNT"], "a") as f:
+    f.write("start\\n")
+print("crashing", flush=True)
+sys.exit(int(os.environ.get("CRASH_CODE", "1")))
+"""
+
+RESPAWN_LAUNCH = """<launch>
+  <node pkg="fake" exec="polite_node" name="polite" output="screen"/>
+  <node pkg="fake" exec="crashing_node" name="crasher" output="screen" respawn="true" respawn_delay="0.1"/>
+</launch>"""
+
+
+def _respawn_setup(tmp_path, code: str = "1"):
+    launch, env = _setup(tmp_path, "polite_node")
+    crasher = tmp_path / "bin" / "crashing_node"
+    crasher.write_text(CRASHING.format(python=sys.executable))
+    crasher.chmod(0o755)
+    launch.write_text(RESPAWN_LAUNCH)
+    env.update(CRASH_COUNT=str(tmp_path / "starts"), CRASH_CODE=code)
+    return launch, env
+
+
+def test_a_node_that_keeps_dying_is_respawned_a_bounded_number_of_times_then_left_down(tmp_path):
+    launch, env = _respawn_setup(tmp_path)
+    proc = subprocess.Popen([PEARL, "launch", str(launch), "--respawn-max-retries", "2"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and not any("left down" in line for line in lines):
+        lines.append(proc.stderr.readline())
+    # The others keep running: polite is still there when the crasher is left down.
+    time.sleep(0.5)
+    assert proc.poll() is None, "".join(lines)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    text = "".join(lines) + err
+    assert proc.returncode == 1, text
+    assert (tmp_path / "starts").read_text().count("start") == 3      # the first start and 2 respawns
+    assert text.count("[launch] crasher exited with code 1; respawning in 0.1 s") == 2
+    assert "(restart 2 of at most 2 within 60 s)" in text
+    assert ("[launch] crasher exited with code 1: death 3 within 60 s (--respawn-max-retries 2): "
+            "left down, not respawned again") in text
+    assert "[polite] stopping on SIGINT" in out
+
+
+def test_a_start_up_error_is_not_respawned_and_stops_the_launch(tmp_path):
+    """Exit code 2 (a node's start-up error: a bad parameter) would only repeat: the launch stops."""
+    launch, env = _respawn_setup(tmp_path, code="2")
+    done = subprocess.run([PEARL, "launch", str(launch)], env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stderr
+    assert (tmp_path / "starts").read_text().count("start") == 1
+    assert "[launch] crasher exited with code 2; stopping the others" in done.stderr

@@ -24,9 +24,14 @@ def test_pearl_launch_file_graph():
         ("pearl_pomdp", "belief_tracker", "belief_tracker", "screen"),
         ("pearl_pomdp", "hierarchical_policy", "hierarchical_policy", "screen"),
         ("pearl_pomdp", "action_executor", "action_executor", "screen"),
+        ("pearl_pomdp", "lifecycle_supervisor", "lifecycle_supervisor", "screen"),
         ("pearl_pomdp", "landmark_detector", "landmark_detector", "screen"),
         ("pearl_pomdp", "guide_pace", "guide_pace", "screen")]
     assert [n.executable for n in parse_launch_file(LAUNCH, {"navigation": "false"}).nodes] == [
+        "belief_tracker", "hierarchical_policy", "action_executor", "lifecycle_supervisor"]
+    # Every node is respawned when it dies; the managed ones wait for the supervisor (autostart false).
+    assert all(n.respawn and n.respawn_delay == 1.0 for n in d.nodes)
+    assert [n.name for n in d.nodes if ("value", "autostart", "false") in n.parameters] == [
         "belief_tracker", "hierarchical_policy", "action_executor"]
     assert package_share_dir("pearl_pomdp") == REPO  # editable install: the source tree
     params = str(REPO / "config" / "pearl_nodes.yaml")
@@ -36,7 +41,8 @@ def test_pearl_launch_file_graph():
     assert d.nodes[1].parameters == [
         ("file", params), ("value", "defaults_file", params), ("value", "domain", str(REPO / "config" / "pearl.domain.yaml")),
         ("value", "hierarchy", str(REPO / "config" / "pearl.hierarchy.yaml")),
-        ("value", "policy", "/plans/pearl"), ("value", "autonomy", "full"), ("value", "use_sim_time", "false")]
+        ("value", "policy", "/plans/pearl"), ("value", "autonomy", "full"), ("value", "use_sim_time", "false"),
+        ("value", "autostart", "false")]
     assert set(d.arguments) == {"params_file", "domain", "hierarchy", "policy", "step_timeout", "use_sim_time",
                                 "autonomy", "navigation", "speech", "audio_source", "audio_output"}
 
@@ -50,7 +56,7 @@ def test_params_are_written_like_launch_ros(tmp_path):
     written = yaml.safe_load(Path(files[1]).read_text())
     assert written == {"/belief_tracker": {"ros__parameters": {
         "defaults_file": files[0], "domain": str(REPO / "config" / "pearl.domain.yaml"), "step_timeout": 2.5,
-        "use_sim_time": True}}}
+        "use_sim_time": True, "autostart": False}}}
 
 
 PRECEDENCE_NODE = """
@@ -128,6 +134,10 @@ def test_empty_value_is_the_empty_string():
     ('<launch><node pkg="p" exec="x" if="maybe"/></launch>', {}, r"condition must be true/false/1/0"),
     ('<launch><node pkg="p" exec="x" on_exit="restart"/></launch>', {},
      r"<node>\.on_exit: only 'shutdown' is supported, got 'restart'"),
+    ('<launch><node pkg="p" exec="x" respawn="yes"/></launch>', {}, r"<node>\.respawn: must be true/false/1/0"),
+    ('<launch><node pkg="p" exec="x" respawn_delay="soon"/></launch>', {},
+     r"<node>\.respawn_delay: must be seconds, got 'soon'"),
+    ('<launch><node pkg="p" exec="x" respawn_delay="-1"/></launch>', {}, r"<node>\.respawn_delay: must be >= 0 s"),
 ])
 def test_errors_name_file_line_and_problem(text, arguments, message):
     with pytest.raises(SpecError, match=message):
@@ -148,6 +158,7 @@ def test_pearl_launch_print_shows_the_commands():
     assert [n["command"][1:3] for n in nodes] == [["-m", "pearl_pomdp.nodes.belief_tracker"],
                                                   ["-m", "pearl_pomdp.nodes.hierarchical_policy"],
                                                   ["-m", "pearl_pomdp.nodes.action_executor"],
+                                                  ["-m", "pearl_pomdp.nodes.supervisor"],
                                                   ["-m", "pearl_pomdp.nodes.landmark_detector"],
                                                   ["-m", "pearl_pomdp.nodes.guide_pace"]]
     bad = subprocess.run([str(Path(sys.executable).parent / "pearl"), "launch", str(LAUNCH), "--print", "polcy:=/p"],

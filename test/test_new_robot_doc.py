@@ -85,8 +85,9 @@ def test_pearl_plan_and_pearl_launch_take_the_files_as_written(files):
                              "--print"], cwd=files, capture_output=True, text=True, timeout=60)
     assert launch.returncode == 0, launch.stderr
     nodes = json.loads(launch.stdout)["nodes"]
-    assert [n["name"] for n in nodes] == ["belief_tracker", "hierarchical_policy", "action_executor"]
-    for node in nodes:
+    assert [n["name"] for n in nodes] == ["belief_tracker", "hierarchical_policy", "action_executor",
+                                          "lifecycle_supervisor"]
+    for node in nodes[:3]:   # the supervisor takes no robot's values: only the node names it brings up
         files_given = [node["command"][i + 1] for i, a in enumerate(node["command"]) if a == "--params-file"]
         params = str(files / "reception_nodes.yaml")
         assert files_given[0] == params

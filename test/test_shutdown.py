@@ -339,9 +339,9 @@ def test_nodes_of_a_sigkilled_pearl_launch_exit(tmp_path, pearl_policy, when):
                             env=env, stdout=out, stderr=subprocess.STDOUT, cwd=str(REPO))
     pids: Dict[str, int] = {}
     try:
-        pids = _launch_pids(log, 5, START_TIMEOUT)
-        assert set(pids) == {"belief_tracker", "hierarchical_policy", "action_executor", "landmark_detector",
-                             "guide_pace"}, (pids, log.read_text())
+        pids = _launch_pids(log, 6, START_TIMEOUT)
+        assert set(pids) == {"belief_tracker", "hierarchical_policy", "action_executor", "lifecycle_supervisor",
+                             "landmark_detector", "guide_pace"}, (pids, log.read_text())
         ready = "policy ready" if when == "running" else "planning"
         deadline = time.monotonic() + START_TIMEOUT
         while ready not in log.read_text() and time.monotonic() < deadline:

@@ -5,7 +5,15 @@ starts every node in file order as its own process with the same ``--ros-args`` 
 ``ros2 launch`` would give it (node name, namespace, ``<param>``, ``<param from>``,
 ``<remap>``), prefixes each output line with ``[node]`` and waits.
 
-Shutdown: on SIGINT or SIGTERM, or when a node exits by itself, every node still running
+Respawn: a node with ``respawn="true"`` that dies (killed by a signal, or an exit code other than
+0 — it finished — and 2 — its start-up error, which a restart would repeat) is started again
+after its ``respawn_delay``, with one line; a node that dies more than ``--respawn-max-retries``
+times within ``--respawn-window`` seconds is left down, with one line, and the others keep
+running (never a restart loop; ``ros2 launch`` has no such bound in its XML). The launch then
+ends with exit code 1. The lifecycle supervisor (``lifecycle_supervisor``) configures and
+activates a respawned managed node again.
+
+Shutdown: on SIGINT or SIGTERM, or when a node without respawn exits by itself, every node still running
 gets SIGINT; after ``--shutdown-timeout`` seconds the ones left get SIGTERM, then SIGKILL
 (Fast DDS can hang at exit, eProsima/Fast-DDS#6502). Exit code 0 when the launch was asked
 to stop and every node exited cleanly; otherwise the first failing node's exit code
@@ -57,6 +65,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("arguments", nargs=argparse.REMAINDER, metavar="name:=value", help="launch arguments")
     parser.add_argument("--shutdown-timeout", type=float, default=10.0, metavar="S",
                         help="seconds to wait after SIGINT (then SIGTERM, then SIGKILL); default 10")
+    parser.add_argument("--respawn-max-retries", type=int, default=3, metavar="N",
+                        help="restarts of a respawn=\"true\" node allowed within --respawn-window; one more "
+                             "death and it is left down; default 3")
+    parser.add_argument("--respawn-window", type=float, default=60.0, metavar="S",
+                        help="seconds over which --respawn-max-retries counts; default 60")
     parser.add_argument("--print", action="store_true", dest="print_only",
                         help="print the node commands as JSON and exit")
 
@@ -137,11 +150,15 @@ def _die_with(launcher_pid: int):
 
 
 class _Child:
-    def __init__(self, node: LaunchNode, cmd: List[str], env: dict, log_dir: Path):
-        self.node, self.label = node, node.label
+    def __init__(self, node: LaunchNode, cmd: List[str], env: dict, log_dir: Path, deaths: Optional[list] = None):
+        self.node, self.label, self.cmd = node, node.label, cmd
         self.log_path = log_dir / f"{node.label}.log"
-        self.log = open(self.log_path, "w", encoding="utf-8")
+        self.log = open(self.log_path, "a" if deaths else "w", encoding="utf-8")
         self.last_err = ""
+        #: When this node died before (launcher clock), for --respawn-max-retries.
+        self.deaths: list = list(deaths or [])
+        self.left_down = False
+        self.respawn_at: Optional[float] = None
         self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      stdin=subprocess.DEVNULL, start_new_session=True,
                                      preexec_fn=_die_with(os.getpid()))
@@ -182,22 +199,34 @@ def _say(text: str) -> None:
     print(f"[launch] {text}", file=sys.stderr, flush=True)
 
 
+#: The options with a value that may stand anywhere among the launch arguments: option → (attribute, type, what).
+_VALUED = {"--shutdown-timeout": ("shutdown_timeout", float, "seconds"),
+           "--respawn-max-retries": ("respawn_max_retries", int, "a whole number"),
+           "--respawn-window": ("respawn_window", float, "seconds")}
+
+
 def _split(args: argparse.Namespace) -> None:
-    """Take ``--print`` / ``--shutdown-timeout S`` out of the launch arguments, wherever they are."""
+    """Take ``--print`` and the valued options (:data:`_VALUED`) out of the launch arguments,
+    wherever they are."""
     rest, items = [], list(args.arguments)
     while items:
         item = items.pop(0)
+        option = item.partition("=")[0]
         if item == "--print":
             args.print_only = True
-        elif item == "--shutdown-timeout" or item.startswith("--shutdown-timeout="):
+        elif option in _VALUED:
+            attribute, kind, what = _VALUED[option]
             value = item.partition("=")[2] or (items.pop(0) if items else "")
             try:
-                args.shutdown_timeout = float(value)
+                setattr(args, attribute, kind(value))
             except ValueError:
-                raise PearlError(f"--shutdown-timeout needs seconds, got {value!r}") from None
+                raise PearlError(f"{option} needs {what}, got {value!r}") from None
         else:
             rest.append(item)
     args.arguments = rest
+    if args.respawn_max_retries < 0 or not args.respawn_window > 0:
+        raise PearlError(f"--respawn-max-retries must be >= 0 and --respawn-window > 0 s, got "
+                         f"{args.respawn_max_retries} and {args.respawn_window}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -240,14 +269,14 @@ def run(args: argparse.Namespace) -> int:
         _say(f"{len(children)} node(s) running; logs in {log_dir}")
         failed: Optional[_Child] = None
         while not stop.wait(0.1):
-            for child in children:
-                if child.proc.poll() is not None:
-                    failed = child
-                    break
+            failed = _watch(children, args, env, log_dir)
             if failed is not None:
                 code = failed.proc.returncode
                 why = f": {failed.last_err}" if failed.last_err else ""
                 _say(f"{failed.label} exited with code {code}{why}; stopping the others")
+                break
+            if all(c.left_down for c in children):
+                _say("every node is left down; stopping")
                 break
         codes = _stop_all(children, args.shutdown_timeout)
     finally:
@@ -264,6 +293,36 @@ def run(args: argparse.Namespace) -> int:
         _say("not clean: " + ", ".join(f"{label} exited with {code}" for label, code in bad))
         return 1
     return 0
+
+
+def _watch(children: List[_Child], args: argparse.Namespace, env: dict, log_dir: Path) -> Optional[_Child]:
+    """One look at the children: respawn the dead ``respawn`` nodes (bounded, see the module doc),
+    leave down the ones that died too often; the first other child that exited, or ``None``."""
+    now = time.monotonic()
+    for i, child in enumerate(children):
+        code = child.proc.poll()
+        if code is None or child.left_down:
+            continue
+        if child.respawn_at is not None:
+            if now >= child.respawn_at:
+                child.finish()
+                children[i] = _Child(child.node, child.cmd, env, log_dir, deaths=child.deaths)
+                _say(f"respawned {child.label} (pid {children[i].proc.pid})")
+            continue
+        if not child.node.respawn or code in (0, 2):
+            return child
+        why = f" ({child.last_err})" if child.last_err and code > 0 else ""
+        child.deaths = [t for t in child.deaths if now - t <= args.respawn_window] + [now]
+        if len(child.deaths) > args.respawn_max_retries:
+            child.left_down = True
+            _say(f"{child.label} exited with code {code}{why}: death {len(child.deaths)} within "
+                 f"{args.respawn_window:g} s (--respawn-max-retries {args.respawn_max_retries}): left down, "
+                 "not respawned again")
+            continue
+        child.respawn_at = now + child.node.respawn_delay
+        _say(f"{child.label} exited with code {code}{why}; respawning in {child.node.respawn_delay:g} s "
+             f"(restart {len(child.deaths)} of at most {args.respawn_max_retries} within {args.respawn_window:g} s)")
+    return None
 
 
 def _remove_dead_shared_memory() -> None:

@@ -14,7 +14,8 @@ import argparse
 import importlib
 
 COMMAND = "run"
-HELP = "run one node (belief_tracker, hierarchical_policy, action_executor, landmark_detector, guide_pace) with --ros-args"
+HELP = ("run one node (belief_tracker, hierarchical_policy, action_executor, landmark_detector, guide_pace, "
+        "lifecycle_supervisor) with --ros-args")
 
 #: Node executables of this package → module holding their ``main``.
 NODES = {
@@ -23,6 +24,7 @@ NODES = {
     "action_executor": "pearl_pomdp.nodes.action_executor",
     "landmark_detector": "pearl_pomdp.nodes.landmark_detector",
     "guide_pace": "pearl_pomdp.nodes.guide_pace",
+    "lifecycle_supervisor": "pearl_pomdp.nodes.supervisor",
 }
 
 

@@ -81,7 +81,10 @@ class NodeJournal:
         logger = self._node.get_logger()
         if found.state is None:
             self.status = found.reason
-            (logger.info if found.reason.startswith("no journal") else logger.warning)(found.reason)
+            if found.reason.startswith("no journal"):
+                logger.info(found.reason)
+            else:
+                logger.warning(found.reason)
             return False
         try:
             what = apply(found.state)
