@@ -1,14 +1,19 @@
-"""A belief that survives a crash (docs/reliability.md, "Crashes"): the tracker, the policy
-node and the executor run as separate processes over Fast DDS; the tracker is SIGKILLed in
-the middle of guiding the resident to physiotherapy and started again. It resumes from its
-journal with the belief it journaled (to 1e-12, in fact bit for bit), the policy does not
-answer that step again, the executor says nothing twice, and the guidance completes without
-a new reminder. Without a journal the same crash starts the tracker again at b0.
+"""A belief that survives a crash and a graph that heals (docs/reliability.md, "Crashes"):
+``pearl launch launch/pearl.launch.xml`` runs the tracker, the policy node, the executor and the
+lifecycle supervisor as processes over Fast DDS; each managed node is SIGKILLed in the middle of
+guiding the resident to physiotherapy. The launcher respawns it, the supervisor brings it up
+again, the tracker resumes from its journal with the belief it journaled (to 1e-12, in fact bit
+for bit), nothing is done or said twice, and the guidance completes without a new reminder.
+What is lost without a journal: bench/fault_injection.py.
 """
 from __future__ import annotations
 
 import json
+import os
+import re
+import signal
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +27,6 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 import rclpy  # noqa: E402
 
 from pearl_pomdp.journal import Journal, decode_array, domain_hash  # noqa: E402
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.common import EVENT_QOS, INPUT_QOS, LATCHED_QOS  # noqa: E402
 
@@ -38,57 +42,62 @@ RESIDENT = {
     "ConfirmGuideToPhysio": ("speech", "yes please"),
     "GuideToPhysio": ("laser", "atPhysio"),
 }
-#: Drives keep no deadline and silence closes no step: the test's inputs alone close steps.
-STEP_RULES = ["-p", "step_timeout:=0.0", "-p", "drive_speed:=0.0"]
 
 
-class Graph:
-    """The three nodes as processes, and a probe in this process."""
+class LaunchedGraph:
+    """``pearl launch launch/pearl.launch.xml`` (tracker, policy, executor, lifecycle_supervisor), and a
+    probe in this process."""
 
-    def __init__(self, tmp: Path, policy_dir: Path, journal: bool):
+    def __init__(self, tmp: Path, policy_dir: Path):
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
 
         configure_test_process(tmp)
-        self.tmp, self.policy_dir = tmp, policy_dir
-        self.journal_path = tmp / "tracker.journal.json" if journal else None
+        self.tmp = tmp
         self.domain_id = allocate_domain_id()
-        self.env = ros_env(self.domain_id, tmp)
+        env = ros_env(self.domain_id, tmp)
         self.context = Context()
         rclpy.init(context=self.context, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("crash_probe", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         probe = Probe(self.node)
-        self.probe = probe
         self.actions = probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
         self.beliefs = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
         self.says = probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
         self.diagnostics = probe.listen("/diagnostics", cv.DiagnosticsMsg, EVENT_QOS)
         self.inputs = {t: probe.publisher(f"/pearl/{t}", cv.TextMsg, INPUT_QOS) for t in ("speech", "laser", "reminder")}
-        self.procs = []
-        self.trackers = 0
-        self.tracker = self.start_tracker()
-        self.policy = self.start(BIN / "hierarchical_policy", "policy", "-p", f"policy:={policy_dir}",
-                                 "-p", f"journal:={tmp / 'policy.journal.json'}")
-        self.executor_proc = self.start(BIN / "action_executor", "executor")
+        # Silence closes no step and drives keep their deadlines (GuideToPhysio: ~25 min at her pace).
+        self.launch = Proc([str(BIN / "pearl"), "launch", "launch/pearl.launch.xml", f"policy:={policy_dir}",
+                            f"domain:={DOMAIN}", "step_timeout:=0.0", "navigation:=false"], env, tmp, "launch")
+        #: The journal the tracker writes (journal:=auto under this test's ROS_HOME).
+        self.journal_path = tmp / "pearl" / "journal" / f"domain{self.domain_id}" / "belief_tracker.json"
 
-    def start(self, exe: Path, name: str, *params: str) -> Proc:
-        proc = Proc([str(exe), "--ros-args", "-p", f"domain:={DOMAIN}", *params], self.env, self.tmp, name)
-        self.procs.append(proc)
-        return proc
+    def log(self) -> str:
+        return self.launch.stderr() + self.launch.stdout()
 
-    def start_tracker(self) -> Proc:
-        self.trackers += 1
-        journal = str(self.journal_path) if self.journal_path is not None else "''"
-        return self.start(BIN / "belief_tracker", f"tracker{self.trackers}", *STEP_RULES, "-p", f"journal:={journal}")
+    def pid(self, name: str) -> int:
+        """The pid of ``name``'s latest process (started or respawned), from the launcher's lines."""
+        found = re.findall(rf"\[launch\] (?:started|respawned) {name} \(pid (\d+)\)", self.launch.stderr())
+        assert found, self.launch.stderr()[-2000:]
+        return int(found[-1])
+
+    def kill(self, name: str) -> float:
+        """SIGKILL ``name`` and wait until the launcher respawned it; when it was killed (monotonic)."""
+        pid = self.pid(name)
+        respawned = self.launch.stderr().count(f"respawned {name} ")
+        os.kill(pid, signal.SIGKILL)
+        killed = time.monotonic()
+        assert self.wait(lambda: self.launch.stderr().count(f"respawned {name} ") > respawned, DISCOVERY_TIMEOUT), \
+            self.launch.stderr()[-3000:]
+        return killed
 
     def wait(self, predicate, timeout=DISCOVERY_TIMEOUT) -> bool:
         return wait_for(predicate, timeout, self.executor)
 
     def ready(self) -> bool:
-        """The tracker listens to every input and the policy's answer to its latest belief is out."""
+        """The tracker listens to every input and the policy's answer to its first belief is out."""
         return (all(p.get_subscription_count() >= 1 for p in self.inputs.values()) and len(self.actions) >= 1
                 and len(self.beliefs) >= 1 and self.node.count_publishers("/pearl/say") >= 1)
 
@@ -97,7 +106,7 @@ class Graph:
         n_actions, n_beliefs = len(self.actions), len(self.beliefs)
         self.inputs[topic].publish(cv.text_to_msg(text))
         assert self.wait(lambda: len(self.actions) > n_actions and len(self.beliefs) > n_beliefs), \
-            f"no answer to {text!r}: {self.tracker.stderr()[-2000:]}"
+            f"no answer to {text!r}: {self.log()[-3000:]}"
         return cv.msg_to_action(self.actions[-1])
 
     def guide_until(self, last: str, first_input=("reminder", "g_physio"), max_steps: int = 10) -> list:
@@ -111,53 +120,40 @@ class Graph:
             topic, text = RESIDENT.get(taken[-1], ("speech", "let's go"))
         raise AssertionError(f"the robot never took {last}: {taken}")
 
-    def tracker_diagnostics(self) -> list:
-        out = []
+    def supervisor_states(self) -> dict:
+        """The lifecycle supervisor's latest state of each managed node (its /diagnostics)."""
+        out = {}
         for msg in self.diagnostics:
             for name, status in cv.msg_to_diagnostics(msg).items():
-                if name.endswith("belief_tracker"):
-                    out.append(status["values"])
+                if name.startswith("pearl: supervisor: "):
+                    out[name.rsplit(": ", 1)[1]] = status["values"]["state"]
         return out
 
-    def stop(self) -> None:
-        for proc in self.procs:
-            proc.stop(timeout=10.0)
+    def stop(self) -> int:
+        code = self.launch.stop(timeout=15.0)
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+        return code
 
 
 @pytest.fixture
-def graph_factory(tmp_path, pearl_policy):
-    made = []
-
-    def make(journal: bool) -> Graph:
-        g = Graph(tmp_path / f"journal_{journal}", pearl_policy, journal)
-        made.append(g)
-        assert g.wait(g.ready, 3 * DISCOVERY_TIMEOUT), f"graph not ready: {g.tracker.stderr()[-3000:]}"
+def launched(tmp_path, pearl_policy):
+    g = LaunchedGraph(tmp_path, pearl_policy)
+    try:
+        assert g.wait(g.ready, 3 * DISCOVERY_TIMEOUT), f"graph not ready: {g.log()[-3000:]}"
         assert cv.msg_to_action(g.actions[-1]) == "DoNothing"   # b0: nothing to do yet
-        return g
-
-    yield make
-    for g in made:
+        yield g
+    finally:
         g.stop()
 
 
-def kill_and_restart_tracker(g: Graph) -> int:
-    """SIGKILL the tracker and start it again at once (DDS forgets the dead one only after its
-    lease); how many beliefs were seen before: the later ones are the new tracker's."""
-    g.tracker.popen.kill()
-    assert g.tracker.wait(10.0) == -9
-    g.wait(lambda: False, 0.2)   # anything the dead tracker sent is in
-    seen = len(g.beliefs)
-    g.tracker = g.start_tracker()
-    assert g.wait(lambda: len(g.beliefs) > seen, 3 * DISCOVERY_TIMEOUT), \
-        f"the restarted tracker published no belief: {g.tracker.stderr()[-3000:]}"
-    return seen
-
-
-def test_a_tracker_killed_mid_guidance_resumes_with_its_journaled_belief(graph_factory):
-    g = graph_factory(journal=True)
+def test_a_launched_graph_heals_mid_guidance_and_the_tracker_resumes_its_journaled_belief(launched):
+    """The tracker, then the policy, then the executor SIGKILLed while the robot guides the resident:
+    the launcher respawns each, the supervisor configures and activates it again, the tracker resumes
+    with its journaled belief (to 1e-12: bit for bit), nothing is done or said twice, and the
+    guidance completes without a new reminder."""
+    g = launched
     taken = g.guide_until("GuideToPhysio")
     assert "RemindPhysioAppt" in taken, taken
     before = g.beliefs[-1]
@@ -166,22 +162,37 @@ def test_a_tracker_killed_mid_guidance_resumes_with_its_journaled_belief(graph_f
     assert g.wait(lambda: g.says and g.says[-1].data == "Please follow me.", 10.0)   # the executor did it
     actions_before, says_before = len(g.actions), len(g.says)
     # The tracker has GuideToPhysio open (the policy's answer to the last belief) when it dies.
-    assert g.wait(lambda: json.loads(g.journal_path.read_text())["state"]["open_action"] == "GuideToPhysio", 10.0)
+    assert g.wait(lambda: g.journal_path.is_file() and
+                  json.loads(g.journal_path.read_text())["state"]["open_action"] == "GuideToPhysio", 10.0)
     journaled = Journal(g.journal_path, "belief_tracker", str(DOMAIN), domain_hash(DOMAIN)).load()
     assert journaled.state is not None, journaled.reason
     journaled_belief = decode_array(journaled.state["belief"])
 
-    seen = kill_and_restart_tracker(g)
+    seen = len(g.beliefs)
+    g.kill("belief_tracker")
+    assert g.wait(lambda: len(g.beliefs) > seen, 3 * DISCOVERY_TIMEOUT), f"no belief after the restart: {g.log()[-3000:]}"
     resumed = g.beliefs[seen]
     assert cv.msg_to_belief_key(resumed) == key
     assert np.max(np.abs(cv.msg_to_belief(resumed) - journaled_belief)) <= 1e-12
     assert np.array_equal(cv.msg_to_belief(resumed), cv.msg_to_belief(before))
-    assert "resuming from journal" in g.tracker.stderr() and "open step GuideToPhysio" in g.tracker.stderr()
-    assert g.wait(lambda: any(str(v.get("journal_status", "")).startswith(f"resuming from journal {g.journal_path}")
-                              for v in g.tracker_diagnostics()), 10.0)
-    # The policy saw that belief's step answered already: no action again, nothing said again.
-    assert g.wait(lambda: "was answered already" in g.policy.stderr(), 10.0), g.policy.stderr()[-2000:]
-    assert not g.wait(lambda: len(g.actions) > actions_before or len(g.says) > says_before, 1.5), \
+    log = g.log()
+    assert "belief_tracker exited with code -9; respawning in 1 s" in log
+    assert "belief_tracker is back (unconfigured): bringing it up again" in log
+    assert "resuming from journal" in log and "open step GuideToPhysio" in log
+    # The policy saw that belief's step answered already: no action again.
+    assert g.wait(lambda: "was answered already" in g.log(), 10.0), g.log()[-2000:]
+
+    # The policy dies: respawned, it knows from its journal that it acted on this step.
+    answered = g.log().count("was answered already")
+    g.kill("hierarchical_policy")
+    assert g.wait(lambda: g.log().count("was answered already") > answered, 3 * DISCOVERY_TIMEOUT), g.log()[-3000:]
+    # The executor dies: respawned (its action subscription is volatile: nothing old comes back).
+    activated = g.log().count("action_executor is active")
+    g.kill("action_executor")
+    assert g.wait(lambda: g.log().count("action_executor is active") > activated, 3 * DISCOVERY_TIMEOUT), \
+        g.log()[-3000:]
+    assert g.wait(lambda: set(g.supervisor_states().values()) == {"active"}, 10.0), g.supervisor_states()
+    assert not g.wait(lambda: len(g.actions) > actions_before or len(g.says) > says_before, 1.0), \
         ([cv.msg_to_action(a) for a in g.actions[actions_before:]], [m.data for m in g.says[says_before:]])
     # The guidance completes from where it was: no new reminder, no new question.
     assert g.answer("laser", "atPhysio") == "TerminateGuidance"
@@ -189,19 +200,7 @@ def test_a_tracker_killed_mid_guidance_resumes_with_its_journaled_belief(graph_f
     assert after == ["TerminateGuidance"], after
     assert g.wait(lambda: any(m.data == "We have arrived. Have a good session." for m in g.says[says_before:]), 10.0)
     assert [m.data for m in g.says[says_before:]] == ["We have arrived. Have a good session."]
-    assert "replaces" not in g.tracker.stderr()   # the policy's latched GuideToPhysio did not reopen the step
-
-
-def test_without_a_journal_the_killed_tracker_starts_again_at_b0(graph_factory):
-    """What the journal is for: the same crash with journal:='' forgets the reminder and the walk."""
-    g = graph_factory(journal=False)
-    g.guide_until("GuideToPhysio")
-    seen = kill_and_restart_tracker(g)
-    model = load_domain(DOMAIN).compile()
-    np.testing.assert_allclose(cv.msg_to_belief(g.beliefs[seen]), model.b0, atol=1e-12)
-    assert cv.msg_to_belief_key(g.beliefs[seen])[1] == 0
-    # A new run: the policy answers b0 again (DoNothing), as at the start of the day.
-    assert g.wait(lambda: cv.msg_to_action(g.actions[-1]) == "DoNothing", 10.0)
+    assert "replaces" not in g.log()   # the policy's latched GuideToPhysio did not reopen the step
 
 
 def test_a_restarted_policy_keeps_the_operators_level_from_its_journal(ros_context, pearl_policy, tmp_path):
