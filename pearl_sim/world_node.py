@@ -201,6 +201,7 @@ def _make_node_class():
                     "sim_seconds": round(self.now, 3), "guidances_started": m.guidances_started,
                     "guidances_completed": m.guidances_completed, "residents_lost": m.residents_lost,
                     "blocked_drives": m.blocked_drives, "reminders_delivered": m.reminders_delivered,
+                    "questions_answered": m.questions_answered,
                     "wrong_actions": m.wrong_actions, "first_actions": self.taken[:12]}
 
     return SimWorldNode

@@ -44,7 +44,7 @@ def test_pearl_launch_file_graph():
         ("value", "policy", "/plans/pearl"), ("value", "autonomy", "full"), ("value", "use_sim_time", "false"),
         ("value", "autostart", "false")]
     assert set(d.arguments) == {"params_file", "domain", "hierarchy", "policy", "step_timeout", "use_sim_time",
-                                "autonomy", "navigation", "speech", "audio_source", "audio_output"}
+                                "autonomy", "navigation", "speech", "audio_source", "audio_output", "journal"}
 
 
 def test_params_are_written_like_launch_ros(tmp_path):
@@ -166,7 +166,7 @@ def test_pearl_launch_print_shows_the_commands():
     assert bad.returncode == 2
     assert bad.stderr.strip().splitlines() == [
         f"pearl launch: error: {LAUNCH}: unknown launch argument(s) polcy (declared: audio_output, audio_source, "
-        f"autonomy, domain, hierarchy, navigation, params_file, policy, speech, step_timeout, use_sim_time)"]
+        f"autonomy, domain, hierarchy, journal, navigation, params_file, policy, speech, step_timeout, use_sim_time)"]
 
 
 def test_speech_nodes_are_off_unless_asked():
