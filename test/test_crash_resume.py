@@ -12,25 +12,21 @@ import json
 import os
 import re
 import signal
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from ros_helpers import (DISCOVERY_TIMEOUT, DOMAIN, Probe, Proc, allocate_domain_id, configure_test_process,
-                         ros_env, wait_for)
+from ros_helpers import DISCOVERY_TIMEOUT, DOMAIN
+from test_nodes_multiprocess import LaunchedGraph
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-import rclpy  # noqa: E402
-
 from pearl_pomdp.journal import Journal, decode_array, domain_hash  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
-from pearl_pomdp.nodes.common import EVENT_QOS, INPUT_QOS, LATCHED_QOS  # noqa: E402
+from pearl_pomdp.nodes.common import EVENT_QOS  # noqa: E402
 
-BIN = Path(sys.executable).parent
 #: The resident of the guidance: what she (or the robot's laser) answers each action with.
 #: The reminder comes from the scheduler first; the policy then fetches her, reminds and guides.
 RESIDENT = {
@@ -44,33 +40,16 @@ RESIDENT = {
 }
 
 
-class LaunchedGraph:
+class HealingGraph(LaunchedGraph):
     """``pearl launch launch/pearl.launch.xml`` (tracker, policy, executor, lifecycle_supervisor), and a
-    probe in this process."""
+    probe in this process (test_nodes_multiprocess.LaunchedGraph, with the reminder input and
+    /diagnostics; silence closes no step, and drives keep their deadlines: GuideToPhysio's is
+    ~25 min at her pace)."""
 
     def __init__(self, tmp: Path, policy_dir: Path):
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
-
-        configure_test_process(tmp)
-        self.tmp = tmp
-        self.domain_id = allocate_domain_id()
-        env = ros_env(self.domain_id, tmp)
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node("crash_probe", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        probe = Probe(self.node)
-        self.actions = probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
-        self.beliefs = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
-        self.says = probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
-        self.diagnostics = probe.listen("/diagnostics", cv.DiagnosticsMsg, EVENT_QOS)
-        self.inputs = {t: probe.publisher(f"/pearl/{t}", cv.TextMsg, INPUT_QOS) for t in ("speech", "laser", "reminder")}
-        # Silence closes no step and drives keep their deadlines (GuideToPhysio: ~25 min at her pace).
-        self.launch = Proc([str(BIN / "pearl"), "launch", "launch/pearl.launch.xml", f"policy:={policy_dir}",
-                            f"domain:={DOMAIN}", "step_timeout:=0.0", "navigation:=false"], env, tmp, "launch")
+        super().__init__(tmp, policy_dir, extra_args=(f"domain:={DOMAIN}", "navigation:=false"),
+                         inputs=("speech", "laser", "reminder"))
+        self.diagnostics = self.probe.listen("/diagnostics", cv.DiagnosticsMsg, EVENT_QOS)
         #: The journal the tracker writes (journal:=auto under this test's ROS_HOME).
         self.journal_path = tmp / "pearl" / "journal" / f"domain{self.domain_id}" / "belief_tracker.json"
 
@@ -93,9 +72,6 @@ class LaunchedGraph:
             self.launch.stderr()[-3000:]
         return killed
 
-    def wait(self, predicate, timeout=DISCOVERY_TIMEOUT) -> bool:
-        return wait_for(predicate, timeout, self.executor)
-
     def ready(self) -> bool:
         """The tracker listens to every input and the policy's answer to its first belief is out."""
         return (all(p.get_subscription_count() >= 1 for p in self.inputs.values()) and len(self.actions) >= 1
@@ -103,11 +79,7 @@ class LaunchedGraph:
 
     def answer(self, topic: str, text: str) -> str:
         """Publish an input; the policy's next action (after the tracker's next belief)."""
-        n_actions, n_beliefs = len(self.actions), len(self.beliefs)
-        self.inputs[topic].publish(cv.text_to_msg(text))
-        assert self.wait(lambda: len(self.actions) > n_actions and len(self.beliefs) > n_beliefs), \
-            f"no answer to {text!r}: {self.log()[-3000:]}"
-        return cv.msg_to_action(self.actions[-1])
+        return self.say(text, "", topic)
 
     def guide_until(self, last: str, first_input=("reminder", "g_physio"), max_steps: int = 10) -> list:
         """Answer the robot as the resident does until it takes ``last``; the actions taken."""
@@ -129,17 +101,10 @@ class LaunchedGraph:
                     out[name.rsplit(": ", 1)[1]] = status["values"]["state"]
         return out
 
-    def stop(self) -> int:
-        code = self.launch.stop(timeout=15.0)
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-        return code
-
 
 @pytest.fixture
 def launched(tmp_path, pearl_policy):
-    g = LaunchedGraph(tmp_path, pearl_policy)
+    g = HealingGraph(tmp_path, pearl_policy)
     try:
         assert g.wait(g.ready, 3 * DISCOVERY_TIMEOUT), f"graph not ready: {g.log()[-3000:]}"
         assert cv.msg_to_action(g.actions[-1]) == "DoNothing"   # b0: nothing to do yet

@@ -47,7 +47,7 @@ MAX_TURNS = 6
 class LaunchedGraph:
     """``pearl launch`` running the Pearl graph, plus a probe node in this process."""
 
-    def __init__(self, tmp: Path, policy_dir: Path):
+    def __init__(self, tmp: Path, policy_dir: Path, extra_args=(), inputs=("speech", "laser")):
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
@@ -63,16 +63,16 @@ class LaunchedGraph:
         self.node = rclpy.create_node("pearl_test_probe", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        probe = Probe(self.node)
+        self.probe = probe = Probe(self.node)
         self.actions = probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
         self.beliefs = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
         self.says = probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
         self.marginals = probe.listen("/pearl/belief_marginals", cv.TextMsg, LATCHED_QOS)
-        self.inputs = {t: probe.publisher(f"/pearl/{t}", cv.TextMsg, INPUT_QOS) for t in ("speech", "laser")}
+        self.inputs = {t: probe.publisher(f"/pearl/{t}", cv.TextMsg, INPUT_QOS) for t in inputs}
         self.speech = self.inputs["speech"]
         # step_timeout:=0.0 so that no silence step can slip between the test's utterances.
-        self.launch = Proc([PEARL, "launch", "launch/pearl.launch.xml", f"policy:={policy_dir}", "step_timeout:=0.0"],
-                           ros_env(self.domain_id, tmp), tmp, "launch")
+        self.launch = Proc([PEARL, "launch", "launch/pearl.launch.xml", f"policy:={policy_dir}", "step_timeout:=0.0",
+                            *extra_args], ros_env(self.domain_id, tmp), tmp, "launch")
         self.exit_code = None
         self.dialogue = []  # (utterance, symbol, action before, belief before, belief after, answer)
 

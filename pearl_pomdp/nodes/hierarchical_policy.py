@@ -197,6 +197,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self._confirm_srv: Optional[Any] = None
         self._confirm_timer: Optional[Any] = None
         self.repeated_beliefs = 0       # beliefs of a (run, step) already answered (a restarted tracker's)
+        self._held_belief: Optional[Any] = None   # the latest belief that came while inactive
         self._belief_key: Optional[Tuple[int, int]] = None   # (run, step) of the belief being answered
         self._acted_key: Optional[Tuple[int, int]] = None    # … of the last one an action was published for
         self.journal: Optional[NodeJournal] = None
@@ -244,6 +245,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                                f"{self.gate.autonomy}")
 
     def cleanup_node(self) -> None:
+        self._held_belief = None
         self.decider = None
         self.gate = None
         if self._confirm_srv is not None:
@@ -251,9 +253,17 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             self._confirm_srv = None
         self._confirm_timer = None
 
+    def activate_node(self) -> None:
+        """Answer the latest belief that came while inactive (a restarted node gets the tracker's
+        latched belief between configure and activate): a step nobody answered would stall."""
+        held, self._held_belief = self._held_belief, None
+        if held is not None:
+            self._on_belief(held)
+
     def _on_belief(self, msg) -> None:
         if not self.active or self.decider is None:
-            self.inactive_beliefs += 1   # a deactivated policy does not act
+            self.inactive_beliefs += 1   # a deactivated policy does not act now; the latest is answered on activate
+            self._held_belief = msg
             return
         start = time.perf_counter()
         try:
