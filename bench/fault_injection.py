@@ -6,7 +6,8 @@ as processes over Fast DDS) and SIGKILLs one manager node — the tracker, the p
 executor, in turn — at a random moment (seeded) of the episode's first ``--window`` wall
 seconds. The launcher respawns it and the supervisor re-activates it. Per trial: whether the
 episode still delivered the reminder, completed the walk and answered the question (the world's
-scores), the time from the kill to the node being active again (the supervisor's line), and the
+scores), whether the guidance was closed (``TerminateGuidance``: "We have arrived"), the time
+from the kill to the node being active again (the supervisor's line), and the
 *repeated actions*: actions beyond one per belief the tracker published (each belief, named by
 its run and step, is answered once; a resumed tracker's repeated belief must not be answered again). The
 same is run with ``journal:=false`` (``--no-journal-trials``) to show what is lost without the
@@ -146,6 +147,8 @@ def trial(index: int, kind: str, kill_after: float, rate: float, policy: Path, j
         out["actions"], out["beliefs"] = len(actions), len(keys)
         out["repeated_actions"] = max(0, len(actions) - len(keys))
         out["resumed"] = "resuming from journal" in lines.text()
+        # What a tracker that forgot loses: the guidance's end ("We have arrived") is never said.
+        out["guidance_closed"] = "TerminateGuidance" in actions
         return out
     finally:
         if proc.poll() is None:
@@ -169,6 +172,7 @@ def _summary(results: List[dict]) -> dict:
                      "errors": [r["error"] for r in rows if "error" in r],
                      "recover_p50_s": round(float(np.percentile(rec, 50)), 3) if rec else None,
                      "recover_p99_s": round(float(np.percentile(rec, 99)), 3) if rec else None,
+                     "guidance_closed": sum(bool(r.get("guidance_closed")) for r in rows),
                      "repeated_actions": sum(r.get("repeated_actions", 0) for r in rows),
                      "max_repeated_in_a_trial": max((r.get("repeated_actions", 0) for r in rows), default=0)}
     return out

@@ -34,13 +34,15 @@ def _node_classes():
     from pearl_pomdp.nodes.landmark_detector import LandmarkDetectorNode
     from pearl_pomdp.nodes.speech_recognizer import SpeechRecognizerNode
     from pearl_pomdp.nodes.speech_synthesizer import SpeechSynthesizerNode
+    from pearl_pomdp.nodes.supervisor import LifecycleSupervisorNode
     from pearl_sim.bt_node import BehaviourTreeNode
     from pearl_sim.world_node import _make_node_class
 
     return {"belief_tracker": BeliefTrackerNode, "hierarchical_policy": HierarchicalPolicyNode,
             "action_executor": ActionExecutorNode, "landmark_detector": LandmarkDetectorNode,
             "guide_pace": GuidePaceNode, "speech_recognizer": SpeechRecognizerNode,
-            "speech_synthesizer": SpeechSynthesizerNode, "pearl_bt": BehaviourTreeNode,
+            "speech_synthesizer": SpeechSynthesizerNode, "lifecycle_supervisor": LifecycleSupervisorNode,
+            "pearl_bt": BehaviourTreeNode,
             "pearl_sim_world": _make_node_class()}
 
 

@@ -395,8 +395,11 @@ class BeliefTrackerNode(ManagedPearlNode):
     # -------------------------------------------------------------- output
     def _handle(self, outcome: InputOutcome) -> None:
         """Act on what the core did: publish a closed step's belief, follow the deadline, log."""
-        # The belief goes out first: logging and diagnostics must not delay the policy.
+        # The belief goes out first: logging and diagnostics must not delay the policy. The journal
+        # comes before it: a tracker killed after publishing must not resume a step behind what
+        # the policy answered (the policy would answer the older step again).
         if outcome.closed is not None:
+            self._journal()
             self._publish_belief(outcome.closed.action, outcome.closed.observation)
         self._arm_deadline()
         for event in outcome.events:
