@@ -71,6 +71,9 @@ def test_pearl_experiment_day_runs_the_study_and_matches_run_day(tmp_path, capsy
     assert report["protocol"]["resident_seed"] == 11 and report["protocol"]["days"] == 2
     assert set(report["per_policy"]) == {"qmdp", BASELINE}
     assert (tmp_path / "day-study.json").exists() and (tmp_path / "day-study.png").stat().st_size > 10_000
+    # Each day was kept as it came in (a study stopped half way keeps what it did).
+    kept = [json.loads(line) for line in (tmp_path / "days.jsonl").read_text().splitlines()]
+    assert kept == report["days"]
     tree_day = next(d for d in report["days"] if d["policy"] == BASELINE)
     # The same day run directly gives the same checklist: the study adds nothing of its own.
     domain = load_domain("config/pearl.domain.yaml")

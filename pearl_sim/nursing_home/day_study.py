@@ -131,28 +131,34 @@ def _run_job(job: _Job) -> Dict[str, Any]:
 
 
 def run_days(domain, agents, cases: Sequence[DayCase], noise_levels: Sequence[float], jobs: int = 1,
-             record: bool = False, progress: bool = False) -> List[Dict[str, Any]]:
-    """Every controller × case × noise level; the results in a fixed order whatever ``jobs`` is."""
+             record: bool = False, progress: bool = False,
+             each: Optional[Callable[[Dict[str, Any]], None]] = None) -> List[Dict[str, Any]]:
+    """Every controller × case × noise level; the results in a fixed order whatever ``jobs`` is.
+
+    ``each`` is called with every day's result as soon as it is in (in that order): a long study
+    keeps what it has done (``pearl experiment --day`` appends each day to ``days.jsonl``)."""
     work = [_Job(name, case, float(level), record) for level in noise_levels for case in cases for name in agents]
     iterator: Any
     if jobs <= 1:
         _init_worker(domain, agents)
-        iterator = map(_run_job, work)
-        results = _progress(iterator, len(work), progress)
-    else:
-        import multiprocessing
+        return _progress(map(_run_job, work), len(work), progress, each)
+    import multiprocessing
 
-        with multiprocessing.get_context("fork").Pool(jobs, initializer=_init_worker, initargs=(domain, agents)) as pool:
-            results = _progress(pool.imap(_run_job, work, chunksize=1), len(work), progress)
-    return results
+    with multiprocessing.get_context("fork").Pool(jobs, initializer=_init_worker, initargs=(domain, agents)) as pool:
+        return _progress(pool.imap(_run_job, work, chunksize=1), len(work), progress, each)
 
 
-def _progress(iterator, total: int, show: bool) -> List[Dict[str, Any]]:
-    if not show:
-        return list(iterator)
-    from tqdm import tqdm
+def _progress(iterator, total: int, show: bool, each=None) -> List[Dict[str, Any]]:
+    if show:
+        from tqdm import tqdm
 
-    return list(tqdm(iterator, total=total, desc="days", unit="day"))
+        iterator = tqdm(iterator, total=total, desc="days", unit="day")
+    out = []
+    for result in iterator:
+        out.append(result)
+        if each is not None:
+            each(result)
+    return out
 
 
 def _shares(c: Dict[str, Any]) -> Dict[str, float]:
@@ -320,12 +326,17 @@ def run_cli(args) -> int:
     domain = load_domain(args.domain)
     agents = day_agents(domain, hierarchy, policies, log=log)
     logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
-    t0 = time.perf_counter()
-    results = run_days(domain, agents, cases, noise, jobs=args.jobs, progress=terminal)
-    day_seconds = time.perf_counter() - t0
-    summary = summarize(results)
     out = Path(args.out) if args.out else Path("out") / f"day-study-{time.strftime('%Y%m%d-%H%M%S')}"
     out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    with (out / "days.jsonl").open("w", encoding="utf-8") as sink:
+        def keep(day: Dict[str, Any]) -> None:
+            sink.write(json.dumps(day) + "\n")
+            sink.flush()
+
+        results = run_days(domain, agents, cases, noise, jobs=args.jobs, progress=terminal, each=keep)
+    day_seconds = time.perf_counter() - t0
+    summary = summarize(results)
     png = plot_study(summary, out / "day-study.png")
     report = {
         "protocol": {"domain": str(args.domain), "hierarchy": str(hierarchy), "residents": [p.name for p in profiles],
@@ -334,7 +345,7 @@ def run_cli(args) -> int:
         "plan_seconds": {k: round(v, 1) for k, v in agents.timings.items()},
         **summary,
         "acceptance": acceptance(summary) if "hierarchical" in policies and BASELINE in policies else None,
-        "files": {"json": str(out / "day-study.json"), "png": str(png)},
+        "files": {"json": str(out / "day-study.json"), "png": str(png), "days": str(out / "days.jsonl")},
         "day_seconds": round(day_seconds, 1), "seconds": round(time.perf_counter() - started, 1),
         "days": results,
     }
