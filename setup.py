@@ -5,6 +5,7 @@ The same file serves ``pip install -e .`` (console scripts land in the venv's
 ``ros2 run`` finds them).
 """
 from glob import glob
+from pathlib import Path
 
 from setuptools import Extension, find_packages, setup
 
@@ -14,7 +15,6 @@ PACKAGE = "pearl_pomdp"
 def _version() -> str:
     # One fact in one place: the version lives in package.xml (ROS reads it there).
     import re
-    from pathlib import Path
 
     text = (Path(__file__).parent / "package.xml").read_text(encoding="utf-8")
     return re.search(r"<version>([^<]+)</version>", text).group(1)
@@ -29,6 +29,11 @@ NODES = {
     "speech_recognizer": "pearl_pomdp.nodes.speech_recognizer:main",
     "speech_synthesizer": "pearl_pomdp.nodes.speech_synthesizer:main",
 }
+
+#: The ROS 2 messages and services (pearl_interfaces/, an ament_cmake package): pip builds it with
+#: cmake from the ROS 2 wheels on PyPI (its pyproject.toml names them; see docs/ros-nodes.md) and
+#: installs it into the same environment. A colcon workspace builds the same folder as its own package.
+INTERFACES = f"pearl_interfaces @ {(Path(__file__).resolve().parent / 'pearl_interfaces').as_uri()}"
 
 #: Real speech (pearl_pomdp.asr): CMU Sphinx with its en-us model in the wheel, and
 #: libespeak-ng with its voice data; nothing downloads at run time. A microphone or
@@ -82,6 +87,7 @@ setup(
             "ros-jazzy-rclpy",
             "ros-jazzy-common-interfaces",
             "ros-jazzy-rmw-fastrtps-cpp",
+            INTERFACES,
             "mcap>=1.1",
             "mcap-ros2-support>=0.5",
             "matplotlib>=3.6",
