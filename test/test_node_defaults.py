@@ -245,10 +245,18 @@ def test_a_domains_own_params_file_beside_it_gives_its_nodes_their_defaults(cont
         node.destroy_node()
 
 
-def test_pearls_domain_named_explicitly_still_reads_pearls_params(context):
+@pytest.mark.parametrize("where", ["shipped", "copy"])
+def test_pearls_domain_named_explicitly_or_copied_still_reads_pearls_params(context, tmp_path, where):
+    """Pearl's own domain file, or a copy of it under another file name (``pearl demo`` runs on
+    ``OUT/domain.yaml``): the domain's ``name: pearl`` is Pearl's, so Pearl's params apply."""
+    import shutil
+
     from pearl_pomdp.nodes.belief_tracker import BeliefTrackerNode
 
-    node = BeliefTrackerNode(context=context, parameter_overrides={"domain": str(REPO / "config" / "pearl.domain.yaml")})
+    path = REPO / "config" / "pearl.domain.yaml"
+    if where == "copy":
+        path = Path(shutil.copyfile(path, tmp_path / "domain.yaml"))
+    node = BeliefTrackerNode(context=context, parameter_overrides={"domain": str(path)})
     try:
         assert (node.get_parameter("place_feature").value, node.get_parameter("stale_after").value) == \
             ("RobotLocation", 30.0)

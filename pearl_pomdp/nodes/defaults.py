@@ -15,11 +15,13 @@ and declares each parameter with the file's value as its default. So
 * ``-p defaults_file:=''`` starts from the code's defaults (no places, no action table);
 * a node given a ``domain`` and no ``defaults_file`` reads that domain's own params file instead:
   ``NAME_nodes.yaml`` beside ``NAME.domain.yaml`` (Pearl's ``config/pearl.domain.yaml`` gives
-  ``config/pearl_nodes.yaml``), or only the code's defaults when the domain has none. Pearl's
+  ``config/pearl_nodes.yaml``); a domain without one whose ``name:`` is Pearl's (a copy of Pearl's
+  domain, as ``pearl demo`` writes) reads Pearl's file; any other only the code's defaults. Pearl's
   values never reach another robot (``-p domain:=courier.domain.yaml`` alone starts a courier node).
 """
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence
@@ -37,18 +39,35 @@ DEFAULTS_FILE = "config/pearl_nodes.yaml"
 DOMAIN_SUFFIX, NODES_SUFFIX = ".domain.yaml", "_nodes.yaml"
 
 
+def _domain_name(path: Path) -> Optional[str]:
+    """The top-level ``name:`` of a domain file (``None``: none, or unreadable)."""
+    try:
+        found = re.search(r"^name:\s*['\"]?([^'\"#\s]+)", path.read_text(encoding="utf-8"), re.MULTILINE)
+    except (OSError, UnicodeDecodeError):
+        return None
+    return found.group(1) if found else None
+
+
 def domain_params_file(domain: str) -> Optional[Path]:
     """The node params file of the domain file ``domain`` (a parameter value, looked up like every
-    file parameter): ``NAME_nodes.yaml`` beside ``NAME.domain.yaml``; ``None`` when the domain has
-    none (or the domain file is missing: the node's own ``domain`` check reports that)."""
+    file parameter): ``NAME_nodes.yaml`` beside ``NAME.domain.yaml``; else, for a domain named as
+    Pearl's (``config/pearl.domain.yaml``'s ``name:``), Pearl's :data:`DEFAULTS_FILE`; else ``None``
+    (also when the domain file is missing: the node's own ``domain`` check reports that)."""
     try:
         path = resolve_path(domain, "domain")
     except NodeSetupError:
         return None
-    if not path.name.endswith(DOMAIN_SUFFIX):
+    if path.name.endswith(DOMAIN_SUFFIX):
+        params = path.with_name(path.name[: -len(DOMAIN_SUFFIX)] + NODES_SUFFIX)
+        if params.is_file():
+            return params
+    try:
+        pearl = resolve_path(DEFAULTS_FILE, "defaults_file")
+    except NodeSetupError:
         return None
-    params = path.with_name(path.name[: -len(DOMAIN_SUFFIX)] + NODES_SUFFIX)
-    return params if params.is_file() else None
+    own = pearl.with_name(pearl.name[: -len(NODES_SUFFIX)] + DOMAIN_SUFFIX)
+    name = _domain_name(path)
+    return pearl if name is not None and name == _domain_name(own) else None
 
 
 def _type_name(value: Any) -> str:
