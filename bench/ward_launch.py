@@ -115,7 +115,7 @@ def main() -> int:
     # decision, the action back).
     node.create_subscription(cv.TextMsg, "/pearl/belief_marginals", lambda m: marginals.append(time.perf_counter()),
                              LATCHED_QOS)
-    node.create_subscription(cv.TextMsg, "/pearl/decision", lambda m: decisions.append(m), EVENT_QOS)
+    node.create_subscription(cv.DecisionMsg, "/pearl/decision", lambda m: decisions.append(m), EVENT_QOS)
     pubs = {t: node.create_publisher(cv.TextMsg, t, INPUT_QOS) for t in ("/ward/arrived", "/ward/call_button", "/ward/speech")}
 
     def spin_until(pred, timeout):
@@ -153,7 +153,7 @@ def main() -> int:
                 tracker.append(marginals[m] - t0)
                 rest.append(actions[-1][0] - marginals[m])
         spin_until(lambda: len(decisions) >= len(actions), 5.0)
-        node_latency = [json.loads(d.data).get("latency_s") for d in decisions[1:]]
+        node_latency = [d.latency_s for d in decisions[1:]]
         report = {"bench": "ward_launch", "policy": f"online:{args.trials}" if args.policy == "online" else "hierarchical", "steps": len(wall),
                   "startup_s": round(startup, 1), "observation_to_action_ms": _stats(wall),
                   "policy_node_decision_ms": _stats([x for x in node_latency if x is not None]),

@@ -223,6 +223,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
 
     from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.bags.writer import BagWriter
+    from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.graph import PearlGraph
     from std_msgs.msg import String
 
@@ -285,14 +286,14 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
                 live_view.publish(topic, value, sim_now["s"])
 
         def on_decision(msg) -> None:
-            decisions.append(json.loads(msg.data))
+            decisions.append(cv.msg_to_decision(msg))
             shown("/pearl/decision", decisions[-1])
 
         def on_marginals(msg) -> None:
             marginals.append(json.loads(msg.data))
             shown("/pearl/belief_marginals", marginals[-1])
 
-        listener.create_subscription(String, "/pearl/decision", on_decision, 50)
+        listener.create_subscription(cv.DecisionMsg, "/pearl/decision", on_decision, 50)
         from rclpy.qos import DurabilityPolicy, QoSProfile
 
         latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)

@@ -60,10 +60,18 @@ def test_decision_trace_from_objects_and_dicts():
             self.subtask, self.choice, self.value = subtask, choice, value
 
     msg = cv.decision_to_msg(7, "TellTime", [Step("Act", "Assist", 12.5), {"subtask": "Inform", "choice": "TellTime",
-                                                                          "value": float("nan")}], 0.00025, 12)
-    assert cv.msg_to_decision(msg) == {"step": 7, "action": "TellTime", "latency_s": 0.00025, "expansions": 12, "trace": [
+                                                                          "value": float("nan")}], 0.00025, 12,
+                             belief_step=6, stamp_s=3.5)
+    assert type(msg).__name__ == "Decision" and (msg.stamp.sec, msg.stamp.nanosec) == (3, 500_000_000)
+    assert math.isnan(msg.trace[1].value) and not msg.has_search
+    assert cv.msg_to_decision(msg) == {"step": 7, "belief_step": 6, "action": "TellTime", "latency_s": 0.00025,
+                                       "expansions": 12, "trace": [
         {"subtask": "Act", "choice": "Assist", "value": 12.5},
         {"subtask": "Inform", "choice": "TellTime", "value": None}]}  # NaN is not JSON: null
+    # Through CDR and back (what a subscriber or a bag gets).
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    assert cv.msg_to_decision(deserialize_message(serialize_message(msg), cv.DecisionMsg)) == cv.msg_to_decision(msg)
 
 
 def test_pose_quaternion_and_stamp():

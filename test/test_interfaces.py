@@ -163,3 +163,29 @@ def test_a_bag_of_decisions_decodes_with_mcap_ros2_support_alone(tmp_path):
     assert out.stdout.splitlines() == [
         "pearl_interfaces/msg/Decision /pearl/decision 2 GuideToPhysio [('Act', 'Guide', 3.25)] trials",
         "project modules: []"]
+
+
+def test_replay_reads_the_decisions_of_a_typed_bag_and_of_one_recorded_before_the_change(tmp_path):
+    """``pearl replay --explain`` takes /pearl/decision as pearl_interfaces/msg/Decision, and still reads the
+    JSON std_msgs/String of a bag recorded before the typed interfaces (the shipped bags): same plain form."""
+    import json
+
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from pearl_pomdp.bags.reader import BagReader
+    from pearl_pomdp.bags.writer import BagWriter
+    from pearl_pomdp.nodes import conversions as cv
+    from pearl_pomdp.nodes.bag_replay import _recorded_decisions
+
+    typed = cv.decision_to_msg(1, "Remind", [{"subtask": "Act", "choice": "Remind", "value": 2.5}], 0.003, 4)
+    plain = cv.msg_to_decision(typed)
+    old = {k: v for k, v in plain.items() if k != "belief_step"}   # what the old JSON held
+    for name, type_name, data in (("new", "pearl_interfaces/msg/Decision", serialize_message(typed)),
+                                  ("old", "std_msgs/msg/String", serialize_message(String(data=json.dumps(old))))):
+        with BagWriter(tmp_path / name) as bag:
+            bag.add_topic("/pearl/decision", type_name)
+            bag.write("/pearl/decision", data, 1_000)
+            bag.write("/pearl/decision", data[:6], 2_000)   # truncated: no recorded trace for that step
+    assert _recorded_decisions(BagReader(tmp_path / "new")) == [plain, {}]
+    assert _recorded_decisions(BagReader(tmp_path / "old")) == [old, {}]

@@ -91,7 +91,7 @@ def _probe(graph):
     probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
     probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
     probe.listen("/pearl/belief_marginals", cv.TextMsg, LATCHED_QOS)
-    probe.listen("/pearl/decision", cv.TextMsg, EVENT_QOS)
+    probe.listen("/pearl/decision", cv.DecisionMsg, EVENT_QOS)
     probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
     probe.listen("/pearl/display", cv.TextMsg, EVENT_QOS)
     probe.listen("/goal_pose", cv.PoseMsg, LATCHED_QOS)

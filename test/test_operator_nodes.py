@@ -106,7 +106,7 @@ def _probe(g, record=None):
     for topic in ("/pearl/action", "/pearl/proposal"):
         probe.listen(topic, String, latched)
     probe.listen("/pearl/belief", cv.BeliefMsg, latched)
-    probe.listen("/pearl/decision", String, EVENT_QOS)
+    probe.listen("/pearl/decision", cv.DecisionMsg, EVENT_QOS)
     probe.listen("/pearl/operator/events", String, EVENT_QOS)
     probe.listen("/diagnostics", cv.DiagnosticsMsg, EVENT_QOS)
     probe.publisher("/clock", cv.ClockMsg, 10)
@@ -221,7 +221,7 @@ def test_veto_re_decides_command_moves_the_belief_and_the_bag_records_it(ros_con
         assert g.spin_until(lambda: len(_actions(probe)) == 3, 10.0)
         assert _actions(probe)[-1] == "DoA"
         assert g.spin_until(lambda: len(probe.received["/pearl/decision"]) == 3, 10.0)
-        redecided = json.loads(probe.received["/pearl/decision"][-1].data)
+        redecided = cv.msg_to_decision(probe.received["/pearl/decision"][-1])
         assert redecided["action"] == "DoA"
         assert redecided["trace"][0]["value"] == pytest.approx(expected.trace[0].value, abs=1e-12)
         assert g.spin_until(lambda: g.tracker.core.open_action == "DoA", 10.0)   # the robot does DoA now

@@ -230,14 +230,25 @@ def _graph_options() -> Dict[str, Any]:
 
 
 def _recorded_decisions(reader: BagReader) -> List[Dict[str, Any]]:
-    """The ``/pearl/decision`` JSON messages of the bag (empty when not recorded or unreadable)."""
-    if DECISION_TOPIC not in reader.topics:
+    """The ``/pearl/decision`` messages of the bag in their plain form (``conversions.msg_to_decision``):
+    ``pearl_interfaces/msg/Decision``, or the JSON ``std_msgs/msg/String`` of a bag recorded before
+    the typed interfaces (same keys). Empty when not recorded; ``{}`` for a message that does not decode."""
+    info = reader.topics.get(DECISION_TOPIC)
+    if info is None:
         return []
+    if info.type == wk.STRING_TYPE:
+        decode = lambda data: json.loads(_string_data(data))  # noqa: E731
+    else:
+        from rclpy.serialization import deserialize_message
+
+        from pearl_pomdp.nodes import conversions as cv
+
+        decode = lambda data: cv.msg_to_decision(deserialize_message(data, cv.DecisionMsg))  # noqa: E731
     out = []
     for m in reader.read_messages([DECISION_TOPIC]):
         try:
-            out.append(json.loads(_string_data(m.data)))
-        except (ValueError, UnicodeDecodeError):
+            out.append(decode(m.data))
+        except Exception:   # a truncated or foreign message: that step shows no recorded trace
             out.append({})
     return out
 
@@ -362,6 +373,7 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
 
     from std_msgs.msg import String
 
+    from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.common import EVENT_QOS
     from pearl_pomdp.nodes.graph import PearlGraph
     from pearl_pomdp.nodes.sim_clock import SimClockDriver
@@ -403,7 +415,8 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
         _check_topics(reader, {t: type_name for t, (type_name, _) in input_types.items()})
         if explain:
             core.keep_history()
-            node.create_subscription(String, DECISION_TOPIC, lambda m: decisions.append(json.loads(m.data)), 1000)
+            node.create_subscription(cv.DecisionMsg, DECISION_TOPIC, lambda m: decisions.append(cv.msg_to_decision(m)),
+                                     1000)
         replayed_events: List[Dict[str, Any]] = []
         node.create_subscription(String, OPERATOR_EVENTS_TOPIC, lambda m: replayed_events.append(json.loads(m.data)),
                                  QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,

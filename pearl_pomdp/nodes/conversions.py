@@ -5,7 +5,7 @@ nodes call the pairs below (``belief_to_msg`` / ``msg_to_belief``, …) so that 
 types stay at the edge (py_trees_ros ``conversions.py`` style). The message classes the
 nodes create publishers and subscriptions with are exported here too.
 
-Wire formats (all message types come from common_interfaces):
+Wire formats (common_interfaces, and this project's pearl_interfaces):
 
 * **belief** — ``std_msgs/Float64MultiArray``, one dimension: ``layout.dim[0].label`` is
   :data:`BELIEF_LABEL` (``"state"``), ``size = stride = S``, ``data_offset = 0``; ``data[s]``
@@ -18,10 +18,11 @@ Wire formats (all message types come from common_interfaces):
   A flat model without features reports one pseudo-feature ``"state"``.
 * **action** / **speech** / **touchscreen** / **laser** / **reminder** / **say** / **display** —
   ``std_msgs/String``; the action is the primitive action's name.
-* **decision** — ``std_msgs/String`` JSON ``{"step", "action", "trace": [{"subtask",
-  "choice", "value"}], "latency_s"}``; the trace runs root → … → primitive; ``step`` counts
-  the beliefs this policy node answered before (0 for ``b0``), ``latency_s`` is belief
-  received → action published (wall clock).
+* **decision** — ``pearl_interfaces/Decision`` (``pearl_interfaces/msg/Decision.msg``): the step,
+  the belief step it answers, the action, the EXECUTE trace root → … → primitive (``TraceStep``:
+  subtask, choice, value; NaN: no α-vector), the forward search's expansions, ``latency_s`` (belief
+  received → action published, wall clock) and an online search's ``SearchStats`` (``has_search``);
+  ``step`` counts the beliefs this policy node answered before (0 for ``b0``).
 * **nav goal** — ``geometry_msgs/PoseStamped`` (position x, y; orientation from yaw).
 * **localised pose** — ``geometry_msgs/PoseWithCovarianceStamped`` (``/amcl_pose``) or
   ``nav_msgs/Odometry`` (``/odom``): planar x, y, yaw and the x/y standard deviation.
@@ -43,13 +44,18 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import Odometry
+from pearl_interfaces.msg import Decision as DecisionMsg
+from pearl_interfaces.msg import SearchAction as SearchActionMsg
+from pearl_interfaces.msg import SearchBranch as SearchBranchMsg
+from pearl_interfaces.msg import SearchStats as SearchStatsMsg
+from pearl_interfaces.msg import TraceStep as TraceStepMsg
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
 from pearl_pomdp.errors import BeliefError
 
 __all__ = [
-    "BELIEF_LABEL", "BeliefMsg", "TextMsg", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
+    "BELIEF_LABEL", "BeliefMsg", "TextMsg", "DecisionMsg", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
     "belief_to_msg", "msg_to_belief", "marginals_to_msg", "msg_to_marginals",
     "text_to_msg", "msg_to_text", "action_to_msg", "msg_to_action",
     "decision_to_msg", "msg_to_decision", "pose_to_msg", "msg_to_pose",
@@ -164,33 +170,85 @@ def msg_to_action(msg: String) -> str:
 
 
 def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: float, expansions: int = 0,
-                    belief_step: Optional[int] = None, search: Optional[dict] = None) -> String:
-    """The EXECUTE trace as JSON on a String (root → … → primitive).
+                    belief_step: Optional[int] = None, search: Optional[Mapping] = None,
+                    stamp_s: float = 0.0) -> DecisionMsg:
+    """A ``pearl_interfaces/Decision``: the EXECUTE trace (root → … → primitive) and its record.
 
     Args:
-        trace: items with ``subtask``, ``choice`` and ``value`` attributes (``TraceStep``) or dicts.
+        trace: items with ``subtask``, ``choice`` and ``value`` attributes (``TraceStep``) or dicts
+            (a value ``None`` is NaN: no α-vector).
         expansions: beliefs the decision's forward search expanded (``Decision.expansions``).
         belief_step: the belief this decision answers (0: ``b0``), when it may differ from
-            ``step`` (an operator's veto makes the policy decide again at the same belief).
+            ``step`` (an operator's veto makes the policy decide again at the same belief);
+            ``None``: ``step``.
+        search: an online search's record (``SearchResult.as_dict()``), or ``None``.
+        stamp_s: the node's clock (s).
     """
     steps = []
     for t in trace:
         get = (lambda k: t[k]) if isinstance(t, Mapping) else (lambda k: getattr(t, k))
-        value = float(get("value"))
-        steps.append({"subtask": str(get("subtask")), "choice": str(get("choice")),
-                      "value": value if math.isfinite(value) else None})
-    body = {"step": int(step), "action": action_name, "trace": steps, "latency_s": float(latency_s),
-            "expansions": int(expansions)}
-    if belief_step is not None:
-        body["belief_step"] = int(belief_step)
+        value = get("value")
+        steps.append(TraceStepMsg(subtask=str(get("subtask")), choice=str(get("choice")),
+                                  value=math.nan if value is None else float(value)))
+    msg = DecisionMsg(stamp=seconds_to_time(max(0.0, stamp_s)), step=int(step),
+                      belief_step=int(step if belief_step is None else belief_step), action=str(action_name),
+                      trace=steps, expansions=int(expansions), latency_s=float(latency_s))
     if search is not None:
-        body["search"] = search
-    return String(data=json.dumps(body, separators=(",", ":")))
+        msg.has_search = True
+        msg.search = _search_to_msg(search)
+    return msg
 
 
-def msg_to_decision(msg: String) -> dict:
-    """The JSON object of a ``/pearl/decision`` message."""
-    return json.loads(msg.data)
+_SEARCH_FIELDS = ("lower", "upper", "gap", "trials", "nodes", "expansions", "seconds", "stop")
+_BRANCH_FIELDS = ("observation", "share", "lower", "upper", "expanded")
+
+
+def _search_action(a: Mapping) -> SearchActionMsg:
+    return SearchActionMsg(action=str(a["action"]), lower=float(a["lower"]), upper=float(a["upper"]),
+                           reward=float(a.get("reward", math.nan)),
+                           children=[SearchBranchMsg(observation=int(c["observation"]), share=float(c["share"]),
+                                                     lower=float(c["lower"]), upper=float(c["upper"]),
+                                                     expanded=bool(c["expanded"])) for c in a.get("children", ())])
+
+
+def _search_to_msg(search: Mapping) -> SearchStatsMsg:
+    top = search.get("top") or {}
+    return SearchStatsMsg(lower=float(search.get("lower", math.nan)), upper=float(search.get("upper", math.nan)),
+                          gap=float(search.get("gap", math.nan)), trials=int(search.get("trials", 0)),
+                          nodes=int(search.get("nodes", 0)), expansions=int(search.get("expansions", 0)),
+                          seconds=float(search.get("seconds", 0.0)), stop=str(search.get("stop", "")),
+                          bounds=str(search.get("bounds", "")), scenarios=int(top.get("scenarios", 0)),
+                          top=[_search_action(a) for a in top.get("actions", ())],
+                          action_bounds=[_search_action(a) for a in search.get("action_bounds", ())])
+
+
+def _search_from_msg(msg: SearchStatsMsg) -> dict:
+    def action(a) -> dict:
+        out = {"action": a.action, "lower": a.lower, "upper": a.upper,
+               "children": [{k: getattr(c, k) for k in _BRANCH_FIELDS} for c in a.children]}
+        if math.isfinite(a.reward):
+            out["reward"] = a.reward
+        return out
+
+    body = {k: getattr(msg, k) for k in _SEARCH_FIELDS}
+    body.update(bounds=msg.bounds, top={"lower": msg.lower, "upper": msg.upper, "scenarios": msg.scenarios,
+                                        "actions": [action(a) for a in msg.top]},
+                action_bounds=[{"action": a.action, "lower": a.lower, "upper": a.upper} for a in msg.action_bounds])
+    return body
+
+
+def msg_to_decision(msg: DecisionMsg) -> dict:
+    """The plain form of a ``/pearl/decision`` message: ``{"step", "belief_step", "action", "trace":
+    [{"subtask", "choice", "value"}], "latency_s", "expansions"}`` (a NaN value is ``None``) and,
+    for an online search, ``"search"`` (``lower, upper, gap, trials, nodes, expansions, seconds, stop,
+    bounds, top, action_bounds``: the form ``OnlineDecider`` records)."""
+    body = {"step": int(msg.step), "belief_step": int(msg.belief_step), "action": msg.action,
+            "trace": [{"subtask": t.subtask, "choice": t.choice,
+                       "value": t.value if math.isfinite(t.value) else None} for t in msg.trace],
+            "latency_s": float(msg.latency_s), "expansions": int(msg.expansions)}
+    if msg.has_search:
+        body["search"] = _search_from_msg(msg.search)
+    return body
 
 
 # ------------------------------------------------------------------------ poses

@@ -115,10 +115,10 @@ class HierarchicalPolicyNode(ManagedPearlNode):
 
     Publishers:
         * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL depth 1): the primitive action.
-        * ``/pearl/decision`` (std_msgs/String JSON): ``{"step", "action", "trace": [{"subtask",
-          "choice", "value"}], "latency_s", "expansions"}`` — the EXECUTE trace, the decision's step
-          latency (belief message received → action published, wall clock) and the beliefs its
-          forward search expanded (0: the one-step choice only).
+        * ``/pearl/decision`` (pearl_interfaces/Decision): the step, the belief step it answers, the
+          action, the EXECUTE trace (subtask, choice, value), the decision's latency (belief message
+          received → action published, wall clock), the beliefs its forward search expanded (0: the
+          one-step choice only) and an online search's record (``has_search``, ``search``).
         * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): decisions, rejected beliefs and
           latency p50/p99/max over the last 1000 decisions; one ERROR status per refused operator input.
         * ``/pearl/proposal`` (std_msgs/String JSON, TRANSIENT_LOCAL depth 1): the step's current
@@ -153,7 +153,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
         Param("belief_topic", "/pearl/belief", "Belief input (std_msgs/Float64MultiArray)"),
         Param("action_topic", "/pearl/action", "Primitive action output (std_msgs/String)"),
-        Param("decision_topic", "/pearl/decision", "EXECUTE trace output (JSON std_msgs/String)"),
+        Param("decision_topic", "/pearl/decision", "EXECUTE trace output (pearl_interfaces/Decision)"),
         Param("autonomy", "full", f"Autonomy level: {' / '.join(AUTONOMY_LEVELS)} (full acts, confirm waits for "
                                   "the operator's yes, off only proposes); changeable at run time", read_only=False),
         Param("confirm_categories", [], "Under confirm, the action categories that wait for a yes (the domain's "
@@ -213,7 +213,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         except ValueError as err:
             raise NodeSetupError(f"parameter {err}") from None
         self.action_pub = self.lifecycle_publisher(cv.TextMsg, p["action_topic"], LATCHED_QOS)
-        self.decision_pub = self.lifecycle_publisher(cv.TextMsg, p["decision_topic"], EVENT_QOS)
+        self.decision_pub = self.lifecycle_publisher(cv.DecisionMsg, p["decision_topic"], EVENT_QOS)
         self.proposal_pub = self.lifecycle_publisher(cv.TextMsg, p["proposal_topic"], LATCHED_QOS)
         # Depth 100: a burst of events (a veto re-deciding, a command withdrawing) reaches the recorder.
         self.operator_events_pub = self.lifecycle_publisher(cv.TextMsg, p["operator_events_topic"],
@@ -268,7 +268,8 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             self.decision_pub.publish(cv.decision_to_msg(self.decisions, decision.action_name, decision.trace,
                                                          latency, getattr(decision, "expansions", 0),
                                                          belief_step=self.gate.step,
-                                                         search=getattr(decision, "search", None)))
+                                                         search=getattr(decision, "search", None),
+                                                         stamp_s=self.now_s()))
             self.decisions += 1
             self.last_decision = decision
         if out.proposal_changed:

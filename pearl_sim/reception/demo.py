@@ -98,6 +98,7 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
     from pearl_pomdp.hierarchy.plan import plan
     from pearl_pomdp.hierarchy.spec import load_hierarchy
     from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.nodes.graph import PearlGraph
     from pearl_pomdp.nodes.sim_clock import SimClockDriver
@@ -149,7 +150,8 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
         def keep(into: List[dict]) -> Callable[[Any], None]:
             return lambda msg: into.append(json.loads(msg.data))   # std_msgs/String holding JSON
 
-        listener.create_subscription(String, "/pearl/decision", keep(decisions), 50)
+        listener.create_subscription(cv.DecisionMsg, "/pearl/decision",
+                                     lambda msg: decisions.append(cv.msg_to_decision(msg)), 50)
         latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         listener.create_subscription(String, "/pearl/belief_marginals", keep(marginals), latched)
         rec_node = graph.add_node(rclpy.create_node("demo_recorder", context=context, parameter_overrides=[
