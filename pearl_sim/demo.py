@@ -303,12 +303,11 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
                 shown("/pearl/action", msg.data)
 
             listener.create_subscription(String, "/pearl/action", on_action_message, latched)
-            # What a person in the loop sees: the proposal and every operator event (JSON).
-            def on_operator(topic: str):
-                return lambda msg: shown(topic, json.loads(msg.data))   # std_msgs/String JSON
-
-            listener.create_subscription(String, "/pearl/proposal", on_operator("/pearl/proposal"), latched)
-            listener.create_subscription(String, "/pearl/operator/events", on_operator("/pearl/operator/events"), 100)
+            # What a person in the loop sees: the proposal and every operator event.
+            listener.create_subscription(cv.OperatorProposalMsg, "/pearl/proposal",
+                                         lambda msg: shown("/pearl/proposal", cv.msg_to_proposal(msg)), latched)
+            listener.create_subscription(cv.OperatorEventMsg, "/pearl/operator/events",
+                                         lambda msg: shown("/pearl/operator/events", cv.msg_to_operator_event(msg)), 100)
             live_view.publish_places({name: [x, y, 0.0] for name, (x, y) in scenario.map.items()}, 0.0)
         rec_node = graph.add_node(rclpy.create_node("demo_recorder", context=context,
                                                     parameter_overrides=[rclpy.parameter.Parameter(

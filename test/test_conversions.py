@@ -107,3 +107,22 @@ def test_diagnostics_round_trip():
 def test_strings_and_observations():
     assert cv.msg_to_action(cv.action_to_msg(" TellTime \n")) == "TellTime"
     assert cv.msg_to_text(cv.text_to_msg("what time is it")) == "what time is it"
+
+
+def test_operator_event_and_proposal_round_trip_their_plain_forms():
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from pearl_pomdp.operator import OperatorEvent
+
+    change = OperatorEvent("autonomy", "", 3, 12.5, "confirm", "", {"autonomy": "confirm",
+                                                                     "confirm_categories": ["Move"],
+                                                                     "confirm_timeout": 20.0})
+    plain = OperatorEvent("vetoed", "Ask", 4, 13.0, "full", "re-decided without Ask: DoA")
+    for event in (change, plain):
+        msg = deserialize_message(serialize_message(cv.operator_event_to_msg(event)), cv.OperatorEventMsg)
+        assert cv.msg_to_operator_event(msg) == event.as_dict()
+    waiting = {"step": 2, "action": "DoA", "source": "policy", "status": "waiting", "autonomy": "confirm",
+               "vetoed": ["Ask"], "deadline": 105.0}
+    for proposal in (waiting, {**waiting, "status": "acted", "vetoed": [], "deadline": None}):
+        msg = deserialize_message(serialize_message(cv.proposal_to_msg(proposal)), cv.OperatorProposalMsg)
+        assert cv.msg_to_proposal(msg) == proposal

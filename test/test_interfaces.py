@@ -33,7 +33,7 @@ def test_every_interface_of_the_source_folder_is_installed_with_its_fields():
     assert _interface_names("msg") == ["Action", "Belief", "Decision", "FeatureMarginal", "OperatorEvent",
                                        "OperatorProposal", "RecognisedSpeech", "SearchAction", "SearchBranch",
                                        "SearchStats", "TraceStep"]
-    assert _interface_names("srv") == ["Command", "Confirm", "SetAutonomy", "Veto"]
+    assert _interface_names("srv") == ["Command", "SetAutonomy", "Veto"]   # confirm: std_srvs/SetBool
     for name in _interface_names("msg"):
         assert hasattr(msgs, name), name
     for name in _interface_names("srv"):

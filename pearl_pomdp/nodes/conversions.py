@@ -36,7 +36,7 @@ from __future__ import annotations
 import array
 import json
 import math
-from typing import Dict, Mapping, Optional, Sequence
+from typing import Any, Dict, Mapping, Optional, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time as TimeMsg
@@ -45,6 +45,8 @@ from geometry_msgs.msg import PoseStamped
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import Odometry
 from pearl_interfaces.msg import Decision as DecisionMsg
+from pearl_interfaces.msg import OperatorEvent as OperatorEventMsg
+from pearl_interfaces.msg import OperatorProposal as OperatorProposalMsg
 from pearl_interfaces.msg import SearchAction as SearchActionMsg
 from pearl_interfaces.msg import SearchBranch as SearchBranchMsg
 from pearl_interfaces.msg import SearchStats as SearchStatsMsg
@@ -55,7 +57,8 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 from pearl_pomdp.errors import BeliefError
 
 __all__ = [
-    "BELIEF_LABEL", "BeliefMsg", "TextMsg", "DecisionMsg", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
+    "BELIEF_LABEL", "BeliefMsg", "TextMsg", "DecisionMsg", "OperatorEventMsg", "OperatorProposalMsg",
+    "operator_event_to_msg", "msg_to_operator_event", "proposal_to_msg", "msg_to_proposal", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
     "belief_to_msg", "msg_to_belief", "marginals_to_msg", "msg_to_marginals",
     "text_to_msg", "msg_to_text", "action_to_msg", "msg_to_action",
     "decision_to_msg", "msg_to_decision", "pose_to_msg", "msg_to_pose",
@@ -249,6 +252,45 @@ def msg_to_decision(msg: DecisionMsg) -> dict:
     if msg.has_search:
         body["search"] = _search_from_msg(msg.search)
     return body
+
+
+# -------------------------------------------------------------------- operator
+def operator_event_to_msg(event) -> OperatorEventMsg:
+    """An :class:`~pearl_pomdp.operator.OperatorEvent` as a ``pearl_interfaces/OperatorEvent``."""
+    msg = OperatorEventMsg(kind=event.kind, action=event.action, step=int(event.step), stamp=float(event.stamp),
+                           autonomy=event.autonomy, detail=event.detail)
+    if event.settings is not None:
+        msg.has_settings = True
+        msg.confirm_categories = [str(c) for c in event.settings.get("confirm_categories", ())]
+        msg.confirm_timeout = float(event.settings.get("confirm_timeout", math.nan))
+    return msg
+
+
+def msg_to_operator_event(msg: OperatorEventMsg) -> dict:
+    """The plain form of an operator event (``OperatorEvent.as_dict``: ``event, action, step, stamp,
+    autonomy, detail`` and, for ``autonomy`` events, ``settings``)."""
+    out = {"event": msg.kind, "action": msg.action, "step": int(msg.step), "stamp": float(msg.stamp),
+           "autonomy": msg.autonomy, "detail": msg.detail}
+    if msg.has_settings:
+        out["settings"] = {"autonomy": msg.autonomy, "confirm_categories": list(msg.confirm_categories),
+                           "confirm_timeout": float(msg.confirm_timeout)}
+    return out
+
+
+def proposal_to_msg(proposal: Mapping[str, Any]) -> OperatorProposalMsg:
+    """``OperatorGate.proposal()`` as a ``pearl_interfaces/OperatorProposal`` (no deadline: NaN)."""
+    deadline = proposal.get("deadline")
+    return OperatorProposalMsg(step=int(proposal["step"]), action=str(proposal["action"]),
+                               source=str(proposal["source"] or ""), status=str(proposal["status"] or ""),
+                               autonomy=str(proposal["autonomy"]), vetoed=[str(v) for v in proposal["vetoed"]],
+                               deadline=math.nan if deadline is None else float(deadline))
+
+
+def msg_to_proposal(msg: OperatorProposalMsg) -> dict:
+    """The plain form of a proposal (``OperatorGate.proposal()``; a NaN deadline is ``None``)."""
+    return {"step": int(msg.step), "action": msg.action, "source": msg.source, "status": msg.status,
+            "autonomy": msg.autonomy, "vetoed": list(msg.vetoed),
+            "deadline": msg.deadline if math.isfinite(msg.deadline) else None}
 
 
 # ------------------------------------------------------------------------ poses
