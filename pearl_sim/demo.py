@@ -24,7 +24,7 @@ from pearl_sim.nursing_home.world import StepResult, World
 #: Features shown in the transcript (the ones a reader of Figure 4 follows).
 SHOWN_FEATURES = ("ReminderGoal", "UserPresent", "UserMotionGoal", "UserInfoGoal", "UserLocation")
 RECORDED_TOPICS = ["/clock", "/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder",
-                   "/pearl/action", "/pearl/belief", "/pearl/belief_marginals", "/pearl/decision",
+                   "/pearl/action", "/pearl/belief", "/pearl/decision",
                    "/pearl/say", "/pearl/display", "/goal_pose", "/pearl/pose", "/pearl/sim/said",
                    "/pearl/sim/truth"]
 
@@ -290,14 +290,14 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
             shown("/pearl/decision", decisions[-1])
 
         def on_marginals(msg) -> None:
-            marginals.append(json.loads(msg.data))
+            marginals.append(cv.msg_to_marginals(msg))
             shown("/pearl/belief_marginals", marginals[-1])
 
         listener.create_subscription(cv.DecisionMsg, "/pearl/decision", on_decision, 50)
         from rclpy.qos import DurabilityPolicy, QoSProfile
 
         latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        listener.create_subscription(String, "/pearl/belief_marginals", on_marginals, latched)
+        listener.create_subscription(cv.BeliefMsg, "/pearl/belief", on_marginals, latched)
         if live_view is not None:
             def on_action_message(msg: Any) -> None:   # std_msgs/String
                 shown("/pearl/action", msg.data)

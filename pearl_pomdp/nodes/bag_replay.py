@@ -158,12 +158,19 @@ def _clock_ns(data: bytes) -> int:
 
 
 def recorded_beliefs(reader: BagReader) -> List[List[float]]:
-    """The ``/pearl/belief`` messages recorded in the bag (std_msgs/Float64MultiArray), in order."""
+    """The ``/pearl/belief`` messages recorded in the bag, in order: pearl_interfaces/msg/Belief's
+    probabilities, or the std_msgs/msg/Float64MultiArray of a bag recorded before the typed interfaces."""
     from rclpy.serialization import deserialize_message
-    from std_msgs.msg import Float64MultiArray
 
-    return [list(deserialize_message(m.data, Float64MultiArray).data) for m in reader.messages
-            if m.topic == BELIEF_TOPIC]
+    if BELIEF_TOPIC not in reader.topics:
+        return []
+    if reader.topics[BELIEF_TOPIC].type == "std_msgs/msg/Float64MultiArray":
+        from std_msgs.msg import Float64MultiArray
+
+        return [list(deserialize_message(m.data, Float64MultiArray).data) for m in reader.read_messages([BELIEF_TOPIC])]
+    from pearl_pomdp.nodes import conversions as cv
+
+    return [list(deserialize_message(m.data, cv.BeliefMsg).probabilities) for m in reader.read_messages([BELIEF_TOPIC])]
 
 
 def expected_actions(reader: BagReader) -> List[str]:
@@ -420,13 +427,12 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
         node = driver.node
         decisions: List[Dict[str, Any]] = []
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-        from std_msgs.msg import Float64MultiArray
 
         beliefs: List[List[float]] = []
         # Transient-local: b0, published when the tracker activated, arrives on matching.
         keep_all = QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        belief_sub = node.create_subscription(Float64MultiArray, BELIEF_TOPIC, lambda m: beliefs.append(list(m.data)),
+        belief_sub = node.create_subscription(cv.BeliefMsg, BELIEF_TOPIC, lambda m: beliefs.append(list(m.probabilities)),
                                               keep_all)
         core = graph.tracker.core
         assert core is not None  # the graph's tracker is configured (autostart)

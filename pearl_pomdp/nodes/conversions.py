@@ -7,15 +7,11 @@ nodes create publishers and subscriptions with are exported here too.
 
 Wire formats (common_interfaces, and this project's pearl_interfaces):
 
-* **belief** — ``std_msgs/Float64MultiArray``, one dimension: ``layout.dim[0].label`` is
-  :data:`BELIEF_LABEL` (``"state"``), ``size = stride = S``, ``data_offset = 0``; ``data[s]``
-  is ``b(s)`` in the model's state order (for a factored domain: mixed radix, first
-  feature most significant).
-* **belief marginals** — ``std_msgs/String`` holding one JSON object
-  ``{"step": int, "action": str|null, "observation": str|null,
-  "marginals": {feature: {value: probability}}}``. JSON (not a Float64MultiArray) because
-  the features have different numbers of values and a viewer wants the value names.
-  A flat model without features reports one pseudo-feature ``"state"``.
+* **belief** — ``pearl_interfaces/Belief``: the step it closes, that step's action and observation
+  (empty for ``b0``), one ``FeatureMarginal`` per feature (value names and probabilities; a flat
+  model without features reports one pseudo-feature ``"state"``), and the full belief
+  ``probabilities[s] = b(s)`` in the model's state order (for a factored domain: mixed radix,
+  first feature most significant), named in ``state_names`` up to :data:`MAX_NAMED_STATES` states.
 * **action** / **speech** / **touchscreen** / **laser** / **reminder** / **say** / **display** —
   ``std_msgs/String``; the action is the primitive action's name.
 * **decision** — ``pearl_interfaces/Decision`` (``pearl_interfaces/msg/Decision.msg``): the step,
@@ -44,7 +40,9 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import Odometry
+from pearl_interfaces.msg import Belief as BeliefMsg
 from pearl_interfaces.msg import Decision as DecisionMsg
+from pearl_interfaces.msg import FeatureMarginal as FeatureMarginalMsg
 from pearl_interfaces.msg import OperatorEvent as OperatorEventMsg
 from pearl_interfaces.msg import OperatorProposal as OperatorProposalMsg
 from pearl_interfaces.msg import SearchAction as SearchActionMsg
@@ -52,14 +50,14 @@ from pearl_interfaces.msg import SearchBranch as SearchBranchMsg
 from pearl_interfaces.msg import SearchStats as SearchStatsMsg
 from pearl_interfaces.msg import TraceStep as TraceStepMsg
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
+from std_msgs.msg import String
 
 from pearl_pomdp.errors import BeliefError
 
 __all__ = [
-    "BELIEF_LABEL", "BeliefMsg", "TextMsg", "DecisionMsg", "OperatorEventMsg", "OperatorProposalMsg",
+    "MAX_NAMED_STATES", "BeliefMsg", "TextMsg", "DecisionMsg", "OperatorEventMsg", "OperatorProposalMsg",
     "operator_event_to_msg", "msg_to_operator_event", "proposal_to_msg", "msg_to_proposal", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
-    "belief_to_msg", "msg_to_belief", "marginals_to_msg", "msg_to_marginals",
+    "belief_to_msg", "msg_to_belief", "msg_to_marginals",
     "text_to_msg", "msg_to_text", "action_to_msg", "msg_to_action",
     "decision_to_msg", "msg_to_decision", "pose_to_msg", "msg_to_pose",
     "diagnostics_to_msg", "msg_to_diagnostics", "seconds_to_time", "time_to_seconds",
@@ -67,14 +65,14 @@ __all__ = [
 ]
 
 #: Message classes used by the nodes (import them from here, not from the message packages).
-BeliefMsg = Float64MultiArray
 TextMsg = String
 PoseMsg = PoseStamped
 DiagnosticsMsg = DiagnosticArray
 ClockMsg = Clock
 
-#: ``layout.dim[0].label`` of a belief message: the one dimension indexes states.
-BELIEF_LABEL = "state"
+#: A belief message names its states (``state_names``) up to this many; a larger model's order is
+#: the mixed radix of its features (first most significant), as the marginals list them.
+MAX_NAMED_STATES = 4096
 
 #: ``DiagnosticStatus`` levels as ints (the message field is one byte).
 DIAG_OK, DIAG_WARN, DIAG_ERROR = (DiagnosticStatus.OK[0], DiagnosticStatus.WARN[0], DiagnosticStatus.ERROR[0])
@@ -100,55 +98,50 @@ def clock_to_msg(seconds: float) -> Clock:
 
 
 # ---------------------------------------------------------------------- belief
-def belief_to_msg(belief: np.ndarray) -> Float64MultiArray:
-    """A ``[S]`` belief as a one-dimensional Float64MultiArray labelled :data:`BELIEF_LABEL`."""
+def belief_to_msg(belief: np.ndarray, marginals: Optional[Mapping[str, Mapping[str, float]]] = None, step: int = 0,
+                  action: Optional[str] = None, observation: Optional[str] = None,
+                  state_names: Sequence[str] = (), stamp_s: float = 0.0) -> BeliefMsg:
+    """A ``[S]`` belief as a ``pearl_interfaces/Belief``: ``probabilities`` in the model's state order
+    (named by ``state_names`` when given and at most :data:`MAX_NAMED_STATES` long), the per-feature
+    ``marginals`` ``{feature: {value: p}}``, the step it closes and that step's action and observation."""
     b = np.asarray(belief, dtype=float)
     if b.ndim != 1:
         raise BeliefError(f"belief must be one-dimensional [S], got shape {b.shape}")
-    msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label=BELIEF_LABEL, size=b.size, stride=b.size)]
-    msg.layout.data_offset = 0
+    msg = BeliefMsg(stamp=seconds_to_time(max(0.0, stamp_s)), step=int(step), action=action or "",
+                    observation=observation or "")
     # array('d') is taken as is by the generated setter (a list is checked element by element).
-    msg.data = array.array("d", np.ascontiguousarray(b).tobytes())
+    msg.probabilities = array.array("d", np.ascontiguousarray(b).tobytes())
+    if state_names and len(state_names) <= MAX_NAMED_STATES:
+        msg.state_names = [str(n) for n in state_names]
+    msg.marginals = [FeatureMarginalMsg(feature=str(f), values=[str(v) for v in vals],
+                                        probabilities=[float(p) for p in vals.values()])
+                     for f, vals in (marginals or {}).items()]
     return msg
 
 
-def msg_to_belief(msg: Float64MultiArray, num_states: Optional[int] = None) -> np.ndarray:
-    """The ``[S]`` belief of a message written by :func:`belief_to_msg`.
+def msg_to_belief(msg: BeliefMsg, num_states: Optional[int] = None) -> np.ndarray:
+    """The ``[S]`` belief of a ``pearl_interfaces/Belief`` (its ``probabilities``).
 
     Raises:
-        BeliefError: the layout is not one dimension labelled ``"state"``, its size disagrees
-            with the data or with ``num_states``, or the data is not a distribution.
+        BeliefError: the state names disagree in number with the probabilities, the size disagrees
+            with ``num_states``, or the data is not a distribution.
     """
-    dims = list(msg.layout.dim)
-    if len(dims) != 1 or dims[0].label != BELIEF_LABEL:
-        labels = [d.label for d in dims]
-        raise BeliefError(f"belief message layout must be one dimension labelled {BELIEF_LABEL!r}, got {labels}")
-    b = np.asarray(msg.data, dtype=float)[msg.layout.data_offset:]
-    if dims[0].size != b.size:
-        raise BeliefError(f"belief message says size {dims[0].size} but carries {b.size} values")
+    b = np.asarray(msg.probabilities, dtype=float)
+    if len(msg.state_names) and len(msg.state_names) != b.size:
+        raise BeliefError(f"belief message names {len(msg.state_names)} states but carries {b.size} values")
     if num_states is not None and b.size != num_states:
         raise BeliefError(f"belief has {b.size} states, the model has {num_states}")
-    if not np.isfinite(b).all() or (b < -1e-12).any() or abs(b.sum() - 1.0) > 1e-6:
+    if b.size == 0 or not np.isfinite(b).all() or (b < -1e-12).any() or abs(b.sum() - 1.0) > 1e-6:
         raise BeliefError(f"belief message is not a distribution (sum {b.sum():.9g}, min {b.min(initial=0):.3g})")
     return b
 
 
-def marginals_to_msg(marginals: Mapping[str, Mapping[str, float]], step: int,
-                     action: Optional[str] = None, observation: Optional[str] = None) -> String:
-    """Per-feature marginals ``{feature: {value: p}}`` as a JSON String (see the module doc)."""
-    body = {
-        "step": int(step),
-        "action": action,
-        "observation": observation,
-        "marginals": {f: {v: float(p) for v, p in vals.items()} for f, vals in marginals.items()},
-    }
-    return String(data=json.dumps(body, separators=(",", ":")))
-
-
-def msg_to_marginals(msg: String) -> dict:
-    """The JSON object of a marginals message (keys ``step, action, observation, marginals``)."""
-    return json.loads(msg.data)
+def msg_to_marginals(msg: BeliefMsg) -> dict:
+    """The plain per-step form of a belief message: ``{"step", "action", "observation", "marginals":
+    {feature: {value: p}}}`` (``action``/``observation`` ``None`` for ``b0``) — what the behaviour-tree
+    baseline, the demos, ``pearl fit`` and the live view read."""
+    return {"step": int(msg.step), "action": msg.action or None, "observation": msg.observation or None,
+            "marginals": {m.feature: {v: float(p) for v, p in zip(m.values, m.probabilities)} for m in msg.marginals}}
 
 
 # ---------------------------------------------------------------------- strings

@@ -111,7 +111,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
           ``operator_events_topic`` (str, read-only): the operator interfaces' names.
 
     Subscribers:
-        * ``/pearl/belief`` (std_msgs/Float64MultiArray, TRANSIENT_LOCAL): the tracker's belief.
+        * ``/pearl/belief`` (pearl_interfaces/Belief, TRANSIENT_LOCAL): the tracker's belief.
 
     Publishers:
         * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL depth 1): the primitive action.
@@ -155,7 +155,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                                                        "decision's search stops at its next expansion (a guard; "
                                                        "the budget is TRIALS); 0: no guard", range=(0.0, 3600.0)),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
-        Param("belief_topic", "/pearl/belief", "Belief input (std_msgs/Float64MultiArray)"),
+        Param("belief_topic", "/pearl/belief", "Belief input (pearl_interfaces/Belief)"),
         Param("action_topic", "/pearl/action", "Primitive action output (std_msgs/String)"),
         Param("decision_topic", "/pearl/decision", "EXECUTE trace output (pearl_interfaces/Decision)"),
         Param("autonomy", "full", f"Autonomy level: {' / '.join(AUTONOMY_LEVELS)} (full acts, confirm waits for "

@@ -147,16 +147,14 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
         decisions: List[dict] = []
         marginals: List[dict] = []
         listener = graph.add_node(rclpy.create_node("demo_listener", context=context))
-        def keep(into: List[dict]) -> Callable[[Any], None]:
-            return lambda msg: into.append(json.loads(msg.data))   # std_msgs/String holding JSON
-
         listener.create_subscription(cv.DecisionMsg, "/pearl/decision",
                                      lambda msg: decisions.append(cv.msg_to_decision(msg)), 50)
         latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        listener.create_subscription(String, "/pearl/belief_marginals", keep(marginals), latched)
+        listener.create_subscription(cv.BeliefMsg, "/pearl/belief", lambda msg: marginals.append(cv.msg_to_marginals(msg)),
+                                     latched)
         rec_node = graph.add_node(rclpy.create_node("demo_recorder", context=context, parameter_overrides=[
             rclpy.parameter.Parameter("use_sim_time", rclpy.parameter.Parameter.Type.BOOL, True)]))
-        topics = ["/clock", "/pearl/action", "/pearl/belief", "/pearl/belief_marginals", "/pearl/decision",
+        topics = ["/clock", "/pearl/action", "/pearl/belief", "/pearl/decision",
                   "/pearl/say", "/pearl/display", "/goal_pose", SAID_TOPIC, TRUTH_TOPIC] + [
                       c.topic for c in domain.inputs]
         writer = BagWriter(bag_dir, custom_data={
