@@ -30,9 +30,8 @@ def test_every_interface_of_the_source_folder_is_installed_with_its_fields():
 
     msgs = importlib.import_module("pearl_interfaces.msg")
     srvs = importlib.import_module("pearl_interfaces.srv")
-    assert _interface_names("msg") == ["Action", "Belief", "Decision", "FeatureMarginal", "OperatorEvent",
-                                       "OperatorProposal", "RecognisedSpeech", "SearchAction", "SearchBranch",
-                                       "SearchStats", "TraceStep"]
+    assert _interface_names("msg") == ["Belief", "Decision", "FeatureMarginal", "OperatorEvent", "OperatorProposal",
+                                       "SearchAction", "SearchBranch", "SearchStats", "TraceStep"]
     assert _interface_names("srv") == ["Command", "SetAutonomy", "Veto"]   # confirm: std_srvs/SetBool
     for name in _interface_names("msg"):
         assert hasattr(msgs, name), name
@@ -46,8 +45,6 @@ def test_every_interface_of_the_source_folder_is_installed_with_its_fields():
         "stamp": "builtin_interfaces/Time", "step": "uint32", "action": "string", "observation": "string",
         "marginals": "sequence<pearl_interfaces/FeatureMarginal>", "state_names": "sequence<string>",
         "probabilities": "sequence<double>"}
-    assert msgs.RecognisedSpeech.get_fields_and_field_types() == {
-        "stamp": "builtin_interfaces/Time", "text": "string", "confidence": "double", "symbol": "string"}
     assert srvs.SetAutonomy.Request.get_fields_and_field_types() == {
         "level": "string", "confirm_categories": "sequence<string>", "confirm_timeout": "double"}
     assert srvs.Veto.Response.get_fields_and_field_types() == {"accepted": "boolean", "message": "string"}
