@@ -374,7 +374,7 @@ def _reenact(driver, event: Dict[str, Any]) -> None:
     elif kind in ("vetoed", "commanded"):
         what = "veto" if kind == "vetoed" else "command"
         policy = driver.graph.policy
-        policy.operator_request(what, str(event.get("action")), policy.params[f"{what}_service"])
+        policy.operator_request(what, str(event.get("action")), policy.params[f"{what}_service"], by_service=True)
         driver.settle()
 
 

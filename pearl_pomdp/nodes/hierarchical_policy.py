@@ -311,22 +311,22 @@ class HierarchicalPolicyNode(ManagedPearlNode):
     def _operator_service(self, what: str):
         def handler(request, response):
             response.accepted, response.message = self.operator_request(what, request.action.strip(),
-                                                                        self.params[f"{what}_service"])
+                                                                        self.params[f"{what}_service"], by_service=True)
             return response
 
         return handler
 
-    def operator_request(self, what: str, action: str, via: str) -> Tuple[bool, str]:
-        """The operator's veto or command of ``action``, received on ``via`` (a topic, or a service:
-        then its vetoed/commanded event's detail ends with :data:`BY_SERVICE`, so that a replay,
-        which has no record of the call, does it again from the event) → ``(accepted, message)``."""
+    def operator_request(self, what: str, action: str, via: str, by_service: bool = False) -> Tuple[bool, str]:
+        """The operator's veto or command of ``action``, received on ``via`` (a topic or, ``by_service``,
+        a service: then its vetoed/commanded event's detail ends with :data:`BY_SERVICE`, so that a
+        replay, which has no record of the call, does it again from the event) → ``(accepted, message)``."""
         if not self.active or self.gate is None:
             self.inactive_operator += 1   # a deactivated policy does not act
             return False, "not active: the policy does not act"
         start = time.perf_counter()
         self.operator_inputs += 1
         out = self.gate.veto(action, self.now_s()) if what == "veto" else self.gate.command(action, self.now_s())
-        if via == self.params.get(f"{what}_service"):
+        if by_service:
             out.events = [replace(e, detail=f"{e.detail}; {BY_SERVICE}" if e.detail else BY_SERVICE)
                           if e.kind in ("vetoed", "commanded") else e for e in out.events]
         self._apply(out, start)
