@@ -117,12 +117,28 @@ class StandInServer:
         return result
 
 
-def _pearl_nodes(context, **executor):
+@pytest.fixture
+def pearl_nodes(ros_context):
+    """Pearl's tracker and executor (their params file, wall clock), a probe node and one executor
+    spinning them: ``(tracker, executor_node, probe_node, executor)``; all destroyed after."""
+    from rclpy.executors import SingleThreadedExecutor
+
     from pearl_pomdp.nodes.action_executor import ActionExecutorNode
     from pearl_pomdp.nodes.belief_tracker import BeliefTrackerNode
 
-    tracker = BeliefTrackerNode(context=context, parameter_overrides={"step_timeout": 0.0, "use_sim_time": False})
-    return tracker, ActionExecutorNode(context=context, parameter_overrides={"use_sim_time": False, **executor})
+    context, _ = ros_context
+    nodes = [BeliefTrackerNode(context=context, parameter_overrides={"step_timeout": 0.0, "use_sim_time": False}),
+             ActionExecutorNode(context=context, parameter_overrides={"use_sim_time": False}),
+             rclpy.create_node("nav_probe", context=context)]
+    ex = SingleThreadedExecutor(context=context)
+    for n in nodes:
+        ex.add_node(n)
+    try:
+        yield (*nodes, ex)
+    finally:
+        ex.shutdown()
+        for n in nodes:
+            n.destroy_node()
 
 
 def _spin(executor, predicate, timeout):
@@ -134,75 +150,51 @@ def _spin(executor, predicate, timeout):
     return predicate()
 
 
-def test_an_aborted_goal_closes_the_drive_as_navfailed_at_once(ros_context, navigate_to_pose):
-    from rclpy.executors import SingleThreadedExecutor
-
-    context, _ = ros_context
-    tracker, executor_node = _pearl_nodes(context)
-    node = rclpy.create_node("nav_probe", context=context)
-    ex = SingleThreadedExecutor(context=context)
-    for n in (tracker, executor_node, node):
-        ex.add_node(n)
-    try:
-        assert executor_node.nav is not None and "NavigateToPose action /navigate_to_pose" in executor_node.drive_path
-        server = StandInServer(node, navigate_to_pose, {ROOM[0]: "abort", HOME[0]: "succeed"})
-        probe = Probe(node)
-        beliefs = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
-        action = probe.publisher("/pearl/action", cv.TextMsg, LATCHED_QOS)
-        assert _spin(ex, lambda: not probe.unmatched([tracker, executor_node]) and beliefs
-                     and executor_node.nav.client.server_is_ready(), 20.0)
-        action.publish(cv.action_to_msg("GotoPatientRoom"))
-        assert _spin(ex, lambda: tracker.core.step_open and server.goals, 10.0), server.goals
-        deadline = tracker.core.deadline()
-        assert deadline is not None and deadline - tracker.now_s() > 30   # the drive's own deadline: 40.6 s
-        assert _spin(ex, lambda: len(beliefs) >= 2, 5.0)
-        closed = time.perf_counter()
-        last = cv.msg_to_marginals(beliefs[-1])
-        assert (last["action"], last["observation"]) == ("GotoPatientRoom", "navFailed")
-        assert closed - server.aborted_at[0] < 1.0
-        assert server.goals == [ROOM] and executor_node.nav.counts["failed"] == 1
-        # A drive that arrives: one feedback kept, nothing reported (the landmark detector says where).
-        action.publish(cv.action_to_msg("GoHome"))
-        assert _spin(ex, lambda: executor_node.nav.counts["succeeded"] == 1, 10.0), executor_node.nav.counts
-        assert executor_node.nav.feedback == {"distance_remaining": 3.5, "estimated_time_remaining": 7.0}
-        assert not _spin(ex, lambda: len(beliefs) > 2, 0.5)     # no observation closed GoHome's step
-    finally:
-        ex.shutdown()
-        for n in (tracker, executor_node, node):
-            n.destroy_node()
+def test_an_aborted_goal_closes_the_drive_as_navfailed_at_once(pearl_nodes, navigate_to_pose):
+    tracker, executor_node, node, ex = pearl_nodes
+    assert executor_node.nav is not None and "NavigateToPose action /navigate_to_pose" in executor_node.drive_path
+    server = StandInServer(node, navigate_to_pose, {ROOM[0]: "abort", HOME[0]: "succeed"})
+    probe = Probe(node)
+    beliefs = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
+    action = probe.publisher("/pearl/action", cv.TextMsg, LATCHED_QOS)
+    assert _spin(ex, lambda: not probe.unmatched([tracker, executor_node]) and beliefs
+                 and executor_node.nav.client.server_is_ready(), 20.0)
+    action.publish(cv.action_to_msg("GotoPatientRoom"))
+    assert _spin(ex, lambda: tracker.core.step_open and server.goals, 10.0), server.goals
+    deadline = tracker.core.deadline()
+    assert deadline is not None and deadline - tracker.now_s() > 30   # the drive's own deadline: 40.6 s
+    assert _spin(ex, lambda: len(beliefs) >= 2, 5.0)
+    closed = time.perf_counter()
+    last = cv.msg_to_marginals(beliefs[-1])
+    assert (last["action"], last["observation"]) == ("GotoPatientRoom", "navFailed")
+    assert closed - server.aborted_at[0] < 1.0
+    assert server.goals == [ROOM] and executor_node.nav.counts["failed"] == 1
+    # A drive that arrives: one feedback kept, nothing reported (the landmark detector says where).
+    action.publish(cv.action_to_msg("GoHome"))
+    assert _spin(ex, lambda: executor_node.nav.counts["succeeded"] == 1, 10.0), executor_node.nav.counts
+    assert executor_node.nav.feedback == {"distance_remaining": 3.5, "estimated_time_remaining": 7.0}
+    assert not _spin(ex, lambda: len(beliefs) > 2, 0.5)     # no observation closed GoHome's step
 
 
-def test_a_decision_that_changes_the_goal_cancels_the_running_one(ros_context, navigate_to_pose):
-    from rclpy.executors import SingleThreadedExecutor
-
-    context, _ = ros_context
-    tracker, executor_node = _pearl_nodes(context)
-    node = rclpy.create_node("nav_probe", context=context)
-    ex = SingleThreadedExecutor(context=context)
-    for n in (tracker, executor_node, node):
-        ex.add_node(n)
-    try:
-        server = StandInServer(node, navigate_to_pose, {ROOM[0]: "hold", HOME[0]: "hold"})
-        probe = Probe(node)
-        laser = probe.listen("/pearl/laser", cv.TextMsg, EVENT_QOS)
-        action = probe.publisher("/pearl/action", cv.TextMsg, LATCHED_QOS)
-        assert _spin(ex, lambda: not probe.unmatched([tracker, executor_node])
-                     and executor_node.nav.client.server_is_ready(), 20.0)
-        action.publish(cv.action_to_msg("GotoPatientRoom"))
-        assert _spin(ex, lambda: server.goals == [ROOM], 10.0)
-        action.publish(cv.action_to_msg("GotoPatientRoom"))      # the same drive again: the goal goes on
-        assert not _spin(ex, lambda: len(server.goals) > 1 or server.cancelled, 0.5)
-        action.publish(cv.action_to_msg("GoHome"))              # another place: the room's goal is cancelled
-        assert _spin(ex, lambda: server.cancelled == [ROOM] and server.goals == [ROOM, HOME], 10.0), \
-            (server.goals, server.cancelled)
-        action.publish(cv.action_to_msg("TellTime"))            # no drive: home's goal is cancelled too
-        assert _spin(ex, lambda: server.cancelled == [ROOM, HOME], 10.0), server.cancelled
-        assert not _spin(ex, lambda: laser, 0.5)                # our own cancels are not failures
-        assert executor_node.nav.counts == {"sent": 2, "succeeded": 0, "failed": 0, "cancelled": 2, "feedback": 0}
-    finally:
-        ex.shutdown()
-        for n in (tracker, executor_node, node):
-            n.destroy_node()
+def test_a_decision_that_changes_the_goal_cancels_the_running_one(pearl_nodes, navigate_to_pose):
+    tracker, executor_node, node, ex = pearl_nodes
+    server = StandInServer(node, navigate_to_pose, {ROOM[0]: "hold", HOME[0]: "hold"})
+    probe = Probe(node)
+    laser = probe.listen("/pearl/laser", cv.TextMsg, EVENT_QOS)
+    action = probe.publisher("/pearl/action", cv.TextMsg, LATCHED_QOS)
+    assert _spin(ex, lambda: not probe.unmatched([tracker, executor_node])
+                 and executor_node.nav.client.server_is_ready(), 20.0)
+    action.publish(cv.action_to_msg("GotoPatientRoom"))
+    assert _spin(ex, lambda: server.goals == [ROOM], 10.0)
+    action.publish(cv.action_to_msg("GotoPatientRoom"))      # the same drive again: the goal goes on
+    assert not _spin(ex, lambda: len(server.goals) > 1 or server.cancelled, 0.5)
+    action.publish(cv.action_to_msg("GoHome"))              # another place: the room's goal is cancelled
+    assert _spin(ex, lambda: server.cancelled == [ROOM] and server.goals == [ROOM, HOME], 10.0), \
+        (server.goals, server.cancelled)
+    action.publish(cv.action_to_msg("TellTime"))            # no drive: home's goal is cancelled too
+    assert _spin(ex, lambda: server.cancelled == [ROOM, HOME], 10.0), server.cancelled
+    assert not _spin(ex, lambda: laser, 0.5)                # our own cancels are not failures
+    assert executor_node.nav.counts == {"sent": 2, "succeeded": 0, "failed": 0, "cancelled": 2, "feedback": 0}
 
 
 def test_navigation_topic_publishes_goal_pose_even_with_nav2_msgs(ros_context, navigate_to_pose):
