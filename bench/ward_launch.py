@@ -109,13 +109,13 @@ def main() -> int:
     executor.add_node(node)
     actions, decisions, marginals = [], [], []
     node.create_subscription(cv.TextMsg, "/pearl/action", lambda m: actions.append((time.perf_counter(), m)), LATCHED_QOS)
-    # The tracker publishes the belief, then its marginals (a small message): their arrival splits a
-    # step's time into publish_to_marginals_ms (the tracker's update of the belief, its publication
-    # and the marginals) and marginals_to_action_ms (the belief's transfer, the policy node's
-    # decision, the action back).
-    node.create_subscription(cv.TextMsg, "/pearl/belief_marginals", lambda m: marginals.append(time.perf_counter()),
+    # The belief's arrival here splits a step's time into publish_to_marginals_ms (the tracker's
+    # update of the belief and its publication, marginals included: one pearl_interfaces/Belief) and
+    # marginals_to_action_ms (the policy node's decision, the action back). The names are kept from
+    # before the typed interfaces, when the marginals were a second, small message after the belief.
+    node.create_subscription(cv.BeliefMsg, "/pearl/belief", lambda m: marginals.append(time.perf_counter()),
                              LATCHED_QOS)
-    node.create_subscription(cv.TextMsg, "/pearl/decision", lambda m: decisions.append(m), EVENT_QOS)
+    node.create_subscription(cv.DecisionMsg, "/pearl/decision", lambda m: decisions.append(m), EVENT_QOS)
     pubs = {t: node.create_publisher(cv.TextMsg, t, INPUT_QOS) for t in ("/ward/arrived", "/ward/call_button", "/ward/speech")}
 
     def spin_until(pred, timeout):
@@ -153,7 +153,7 @@ def main() -> int:
                 tracker.append(marginals[m] - t0)
                 rest.append(actions[-1][0] - marginals[m])
         spin_until(lambda: len(decisions) >= len(actions), 5.0)
-        node_latency = [json.loads(d.data).get("latency_s") for d in decisions[1:]]
+        node_latency = [d.latency_s for d in decisions[1:]]
         report = {"bench": "ward_launch", "policy": f"online:{args.trials}" if args.policy == "online" else "hierarchical", "steps": len(wall),
                   "startup_s": round(startup, 1), "observation_to_action_ms": _stats(wall),
                   "policy_node_decision_ms": _stats([x for x in node_latency if x is not None]),

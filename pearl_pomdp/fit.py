@@ -24,8 +24,8 @@ not act on the feature, so nothing that happened while one of them ran is credit
   lower ``log P(observations) + log Dir(prior)`` (with ``k = 0``: the likelihood itself);
   :attr:`FitResult.history` records it.
 
-Episodes: a bag directory (``/pearl/belief_marginals`` gives each closed step's action and
-observation as the tracker saw them — timeouts included; ``/pearl/sim/truth`` the true
+Episodes: a bag directory (``/pearl/belief`` gives each closed step's action and
+observation as the tracker saw them (a bag recorded before the typed interfaces: ``/pearl/belief_marginals``) — timeouts included; ``/pearl/sim/truth`` the true
 state at the start of each action) or a ``.jsonl`` file, one episode per line:
 ``{"actions": [a_0 …], "observations": [o_1 …], "states": [{feature: value} …]}`` (states
 optional; ``len(states) == len(actions) + 1``).
@@ -125,20 +125,40 @@ def _string_data(data: bytes) -> str:
 
 
 def episodes_from_bag(path: Union[str, Path]) -> Episode:
-    """The episode of a bag: steps from ``/pearl/belief_marginals``, truth from ``/pearl/sim/truth`` if recorded.
+    """The episode of a bag: steps from ``/pearl/belief`` (``pearl_interfaces/msg/Belief``; a bag
+    recorded before the typed interfaces: its ``/pearl/belief_marginals`` JSON), truth from
+    ``/pearl/sim/truth`` if recorded.
 
     Raises:
-        PearlError: the bag has no ``/pearl/belief_marginals`` (names the bag and what is missing).
+        PearlError: the bag has neither (names the bag and what is missing).
     """
     from pearl_pomdp.bags.reader import BagReader
 
     reader = BagReader(path)
-    if "/pearl/belief_marginals" not in reader.topics:
-        raise PearlError(f"{path}: no /pearl/belief_marginals topic: record it (pearl demo and `pearl record` "
-                         "with the default topics do) so the fit knows each step's action and observation")
+    info = reader.topics.get("/pearl/belief")
+    if info is not None and info.type == "pearl_interfaces/msg/Belief":
+        # Decoded from the bag's own message definition (mcap-ros2-support): no ROS import in the core.
+        from mcap.records import Schema
+        from mcap_ros2.decoder import DecoderFactory
+
+        schema = Schema(id=1, name=info.type, encoding="ros2msg", data=info.definition.encode("utf-8"))
+        cdr = DecoderFactory().decoder_for("cdr", schema)
+        assert cdr is not None   # (the factory decodes every cdr + ros2msg channel)
+
+        def decode(data: bytes) -> dict:
+            msg = cdr(data)
+            return {"step": int(msg.step), "action": msg.action or None, "observation": msg.observation or None}
+
+        topic = "/pearl/belief"
+    elif "/pearl/belief_marginals" in reader.topics:
+        topic, decode = "/pearl/belief_marginals", lambda data: json.loads(_string_data(data))  # noqa: E731
+    else:
+        raise PearlError(f"{path}: no /pearl/belief topic of type pearl_interfaces/msg/Belief: record it (pearl demo "
+                         "and `pearl record` with the default topics do) so the fit knows each step's action and "
+                         "observation")
     steps = []
-    for m in reader.read_messages(["/pearl/belief_marginals"]):
-        body = json.loads(_string_data(m.data))
+    for m in reader.read_messages([topic]):
+        body = decode(m.data)
         if body.get("action") is not None:
             steps.append((int(body["step"]), body["action"], body["observation"]))
     steps.sort()

@@ -14,7 +14,8 @@ channel                    encoding / schema     what :meth:`LiveView.publish` t
 ``/pearl/belief_marginals`` JSON                ``{"step", "action", "observation", "marginals":
                                                  {feature: {value: p}}}`` (the tracker's message)
 ``/pearl/action``          JSON                 ``{"action": name}`` or the name itself
-``/pearl/decision``        JSON                 ``{"step", "action", "trace": [...], "latency_s", "expansions"}``
+``/pearl/decision``        JSON                 ``{"step", "belief_step", "action", "trace": [...], "latency_s",
+                                                 "expansions"}`` (``conversions.msg_to_decision``)
 ``/pearl/transcript``      foxglove.Log         ``{"speaker": "resident"|"robot"|…, "text": str}``
 ``/pearl/guide_pace``      JSON                 the guide_pace node's state object
 ``/pearl/pose``            foxglove.PoseInFrame ``{"x", "y", "yaw"}`` (map frame)
@@ -62,8 +63,8 @@ _ACTION_SCHEMA = {"type": "object", "properties": {"action": {"type": "string"}}
 _DECISION_SCHEMA = {
     "type": "object",
     "properties": {
-        "step": {"type": "integer"}, "action": {"type": "string"}, "latency_s": {"type": "number"},
-        "expansions": {"type": "integer"},
+        "step": {"type": "integer"}, "belief_step": {"type": "integer"}, "action": {"type": "string"},
+        "latency_s": {"type": "number"}, "expansions": {"type": "integer"},
         "search": {"type": "object"},   # an online policy's search record (docs/online.md)
         "trace": {"type": "array", "items": {"type": "object", "properties": {
             "subtask": {"type": "string"}, "choice": {"type": "string"}, "value": {"type": "number"}}}},

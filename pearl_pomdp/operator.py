@@ -33,10 +33,14 @@ import numpy as np
 from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.interfaces import Decider, Decision, MaskingDecider
 
-__all__ = ["AUTONOMY_LEVELS", "OperatorEvent", "GateOutput", "OperatorGate"]
+__all__ = ["AUTONOMY_LEVELS", "BY_SERVICE", "OperatorEvent", "GateOutput", "OperatorGate"]
 
 #: The autonomy levels, most autonomous first.
 AUTONOMY_LEVELS = ("full", "confirm", "off")
+
+#: How the detail of a ``vetoed`` / ``commanded`` event ends when the operator used the policy node's
+#: service (not its topic): a replay has no record of the call and does it again from the event.
+BY_SERVICE = "by service"
 
 
 @dataclass(frozen=True)

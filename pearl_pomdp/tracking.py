@@ -752,7 +752,7 @@ class BeliefTracker:
         self._mapper = _ObservationMapper(model, channels, domain.keywords if domain is not None else {},
                                           keyword_filter, settings.confidence_floor)
         self.history: Optional[Deque[StepResult]] = None
-        self._run = secrets.randbits(31)
+        self._run = 1 + secrets.randbits(31)   # never 0: a belief with run 0 carries none
         self._resumed_action: Optional[str] = None
 
     # ------------------------------------------------------------ read-only
@@ -952,7 +952,7 @@ class BeliefTracker:
         """Back to ``b0``: no open step, nothing queued, every counter zeroed (history kept)."""
         self._protocol.reset()
         self._mapper.reset()
-        self._run = secrets.randbits(31)
+        self._run = 1 + secrets.randbits(31)   # never 0: a belief with run 0 carries none
         self._resumed_action = None
 
     def on_action(self, name: str, now: float) -> InputOutcome:
@@ -1011,7 +1011,7 @@ class BeliefTracker:
         """Leave the open step without an update (a deactivated node: the robot stops what it was
         doing, and on activation the policy decides afresh). The belief and the queue are kept; a new
         :attr:`run` begins, so the policy answers the kept belief again."""
-        self._run = secrets.randbits(31)
+        self._run = 1 + secrets.randbits(31)   # never 0: a belief with run 0 carries none
         self._resumed_action = None
         return self._outcome("abandoned" if self._protocol.abandon() else "idle", None)
 

@@ -1,9 +1,9 @@
 """The behaviour-tree baseline as a ROS 2 node, in place of the POMDP policy node.
 
 ``pearl_bt`` (console script) runs :class:`~pearl_sim.nursing_home.behaviour_tree.PearlBehaviourTree`
-in the Pearl graph: it listens to the belief tracker's ``/pearl/belief_marginals`` (JSON
-``std_msgs/String`` with the ``step``, the ``action`` that opened the closed step and the
-``observation`` that closed it; :func:`pearl_pomdp.nodes.conversions.marginals_to_msg`) and
+in the Pearl graph: it listens to the belief tracker's ``/pearl/belief`` (``pearl_interfaces/Belief``
+with the ``step``, the ``action`` that opened the closed step and the ``observation`` that closed
+it; :func:`pearl_pomdp.nodes.conversions.msg_to_marginals`) and
 publishes the tree's action on ``/pearl/action`` (``std_msgs/String``, the policy node's
 latched QoS, so the tracker opens the next step with it). The tracker, the executor and
 the hardware are unchanged: start the graph with this node instead of
@@ -11,7 +11,7 @@ the hardware are unchanged: start the graph with this node instead of
 
 The tree ignores the marginals (it has no belief); it keeps its own memory on its
 blackboard. A message for a step already answered (a latched re-delivery) is ignored; a
-message that is not the tracker's JSON is logged and counted (``rejected``) and never
+closed step without its action or observation is logged and counted (``rejected``) and never
 stops the node. Step 0 (the tracker's ``b0``, no action yet) resets the tree.
 
 It lives in ``pearl_sim`` because the core never imports the simulator, and the tree is
@@ -19,7 +19,6 @@ the simulator study's baseline.
 """
 from __future__ import annotations
 
-import json
 import sys
 from typing import List, Optional
 
@@ -34,11 +33,11 @@ class BehaviourTreeNode(PearlNode):
 
     Parameters (read-only):
         * ``domain`` (str): the domain whose action names the tree may publish.
-        * ``marginals_topic`` (str): the tracker's per-step JSON (default ``/pearl/belief_marginals``).
+        * ``belief_topic`` (str): the tracker's belief with its step (default ``/pearl/belief``).
         * ``action_topic`` (str): where the action goes (default ``/pearl/action``).
 
     Subscribers:
-        * ``/pearl/belief_marginals`` (std_msgs/String JSON, TRANSIENT_LOCAL depth 1).
+        * ``/pearl/belief`` (pearl_interfaces/Belief, TRANSIENT_LOCAL depth 1).
 
     Publishers:
         * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL depth 1).
@@ -47,7 +46,7 @@ class BehaviourTreeNode(PearlNode):
     DEFAULT_NAME = "behaviour_tree"
     PARAMETERS = (
         Param("domain", "config/pearl.domain.yaml", "Factored domain (.yaml): the action names"),
-        Param("marginals_topic", "/pearl/belief_marginals", "Tracker's per-step JSON (std_msgs/String)"),
+        Param("belief_topic", "/pearl/belief", "Tracker's belief with its step (pearl_interfaces/Belief)"),
         Param("action_topic", "/pearl/action", "Primitive action output (std_msgs/String)"),
     )
 
@@ -65,8 +64,8 @@ class BehaviourTreeNode(PearlNode):
         self.decisions = 0
         self.rejected = 0
         self.action_pub = self.create_publisher(cv.TextMsg, p["action_topic"], LATCHED_QOS)
-        self.create_subscription(cv.TextMsg, p["marginals_topic"], self._on_step, LATCHED_QOS)
-        self.get_logger().info(f"behaviour tree ready; listening on {p['marginals_topic']}")
+        self.create_subscription(cv.BeliefMsg, p["belief_topic"], self._on_step, LATCHED_QOS)
+        self.get_logger().info(f"behaviour tree ready; listening on {p['belief_topic']}")
 
     def _on_step(self, msg) -> None:
         try:
@@ -75,9 +74,9 @@ class BehaviourTreeNode(PearlNode):
             action, observation = body.get("action"), body.get("observation")
             if step > 0 and not (isinstance(action, str) and isinstance(observation, str)):
                 raise ValueError("a closed step needs string 'action' and 'observation'")
-        except (ValueError, KeyError, TypeError, json.JSONDecodeError) as err:
+        except (ValueError, KeyError, TypeError) as err:
             self.rejected += 1
-            self.get_logger().error(f"rejected message on {self.params['marginals_topic']}: {err}")
+            self.get_logger().error(f"rejected message on {self.params['belief_topic']}: {err}")
             return
         restarted = step == 0 and bool(self.last_step)
         if self.last_step is not None and step <= self.last_step and not restarted:

@@ -24,7 +24,7 @@ from pearl_sim.nursing_home.world import StepResult, World
 #: Features shown in the transcript (the ones a reader of Figure 4 follows).
 SHOWN_FEATURES = ("ReminderGoal", "UserPresent", "UserMotionGoal", "UserInfoGoal", "UserLocation")
 RECORDED_TOPICS = ["/clock", "/pearl/speech", "/pearl/touchscreen", "/pearl/laser", "/pearl/reminder",
-                   "/pearl/action", "/pearl/belief", "/pearl/belief_marginals", "/pearl/decision",
+                   "/pearl/action", "/pearl/belief", "/pearl/decision",
                    "/pearl/say", "/pearl/display", "/goal_pose", "/pearl/pose", "/pearl/sim/said",
                    "/pearl/sim/truth"]
 
@@ -223,6 +223,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
 
     from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.bags.writer import BagWriter
+    from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.graph import PearlGraph
     from std_msgs.msg import String
 
@@ -285,29 +286,28 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
                 live_view.publish(topic, value, sim_now["s"])
 
         def on_decision(msg) -> None:
-            decisions.append(json.loads(msg.data))
+            decisions.append(cv.msg_to_decision(msg))
             shown("/pearl/decision", decisions[-1])
 
         def on_marginals(msg) -> None:
-            marginals.append(json.loads(msg.data))
+            marginals.append(cv.msg_to_marginals(msg))
             shown("/pearl/belief_marginals", marginals[-1])
 
-        listener.create_subscription(String, "/pearl/decision", on_decision, 50)
+        listener.create_subscription(cv.DecisionMsg, "/pearl/decision", on_decision, 50)
         from rclpy.qos import DurabilityPolicy, QoSProfile
 
         latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        listener.create_subscription(String, "/pearl/belief_marginals", on_marginals, latched)
+        listener.create_subscription(cv.BeliefMsg, "/pearl/belief", on_marginals, latched)
         if live_view is not None:
             def on_action_message(msg: Any) -> None:   # std_msgs/String
                 shown("/pearl/action", msg.data)
 
             listener.create_subscription(String, "/pearl/action", on_action_message, latched)
-            # What a person in the loop sees: the proposal and every operator event (JSON).
-            def on_operator(topic: str):
-                return lambda msg: shown(topic, json.loads(msg.data))   # std_msgs/String JSON
-
-            listener.create_subscription(String, "/pearl/proposal", on_operator("/pearl/proposal"), latched)
-            listener.create_subscription(String, "/pearl/operator/events", on_operator("/pearl/operator/events"), 100)
+            # What a person in the loop sees: the proposal and every operator event.
+            listener.create_subscription(cv.OperatorProposalMsg, "/pearl/proposal",
+                                         lambda msg: shown("/pearl/proposal", cv.msg_to_proposal(msg)), latched)
+            listener.create_subscription(cv.OperatorEventMsg, "/pearl/operator/events",
+                                         lambda msg: shown("/pearl/operator/events", cv.msg_to_operator_event(msg)), 100)
             live_view.publish_places({name: [x, y, 0.0] for name, (x, y) in scenario.map.items()}, 0.0)
         rec_node = graph.add_node(rclpy.create_node("demo_recorder", context=context,
                                                     parameter_overrides=[rclpy.parameter.Parameter(

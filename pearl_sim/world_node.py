@@ -25,7 +25,8 @@ the manager must publish its first action within this, or the node exits 1),
 Publishers: ``/clock`` (rosgraph_msgs/Clock), ``/pearl/speech``, ``/pearl/touchscreen``,
 ``/pearl/laser``, ``/pearl/reminder`` (std_msgs/String, reliable), ``/pearl/pose``
 (geometry_msgs/PoseStamped, the robot's place in the scenario's map).
-Subscriber: ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL like the policy's publisher).
+Subscribers: ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL like the policy's publisher), and
+``/pearl/belief`` (pearl_interfaces/Belief: the steps the tracker closed).
 """
 from __future__ import annotations
 
@@ -84,7 +85,9 @@ def _make_node_class():
             # The tracker's step count: a step it closed is answered by the policy; while that
             # answer is in flight the clock stands still (as the lock-step driver of pearl demo
             # does), so no time passes that the fast path would not have.
-            self.create_subscription(String, "/pearl/belief_marginals", self._on_marginals, LATCHED_QOS)
+            from pearl_interfaces.msg import Belief
+
+            self.create_subscription(Belief, "/pearl/belief", self._on_belief, LATCHED_QOS)
             self.closed_steps = 0
             self.actions: Deque[str] = deque()
             self.pending: Deque = deque()    # world messages not yet due
@@ -102,11 +105,8 @@ def _make_node_class():
         def _on_action(self, msg) -> None:
             self.actions.append(msg.data)
 
-        def _on_marginals(self, msg) -> None:
-            try:
-                self.closed_steps = max(self.closed_steps, int(json.loads(msg.data).get("step", 0)))
-            except (ValueError, TypeError, AttributeError):
-                pass   # not the tracker's message: ignored
+        def _on_belief(self, msg) -> None:
+            self.closed_steps = max(self.closed_steps, int(msg.step))
 
         def _publish(self, message) -> None:
             self.publishers_by_modality[message.modality].publish(self._String(data=message.text))

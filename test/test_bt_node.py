@@ -4,7 +4,6 @@ plays the resident and the hardware on the input topics and checks every action 
 same tree run in the core (tick for tick)."""
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -49,7 +48,7 @@ def test_bt_node_drives_the_tracker_over_dds(tmp_path):
         executor.add_node(node)
         probe = Probe(node)
         actions = probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
-        marginals = probe.listen("/pearl/belief_marginals", cv.TextMsg, LATCHED_QOS)
+        marginals = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
         pubs = {t: probe.publisher(f"/pearl/{t}", cv.TextMsg, INPUT_QOS) for t, _, _ in INPUTS}
         procs.append(Proc([str(BIN / "belief_tracker"), "--ros-args", "-p", f"domain:={DOMAIN}",
                            "-p", "step_timeout:=0.0"], env, tmp_path, "tracker"))
@@ -63,7 +62,7 @@ def test_bt_node_drives_the_tracker_over_dds(tmp_path):
         reference = PearlBehaviourTree(actions=list(load_domain(DOMAIN).actions))
         expected = [reference.execute(None).action_name]
         assert actions[0].data == expected[0] == "DoNothing"
-        first = json.loads(marginals[0].data)
+        first = cv.msg_to_marginals(marginals[0])
         assert (first["action"], first["observation"]) == (None, None)
         for topic, text, symbol in INPUTS:
             # The tracker has opened the step with the last action when its step count moved on.
@@ -73,16 +72,16 @@ def test_bt_node_drives_the_tracker_over_dds(tmp_path):
                 f"no action after {text!r}; tracker: {procs[0].stderr()[-400:]}"
             reference.observe(expected[-1], symbol)
             expected.append(reference.execute(None).action_name)
-            last = json.loads(marginals[-1].data)
+            last = cv.msg_to_marginals(marginals[-1])
             assert (last["action"], last["observation"]) == (expected[-2], symbol)
         assert [m.data for m in actions] == expected
         assert expected == ["DoNothing", "GotoPatientRoom", "RingDoorBell", "RemindPhysioAppt", "GuideToPhysio",
                             "TerminateGuidance"]
-        # A message that is not the tracker's JSON is logged and counted; the node carries on.
-        junk = probe.publisher("/pearl/belief_marginals", cv.TextMsg, LATCHED_QOS)
-        assert wait_for(lambda: junk.get_subscription_count() >= 2, DISCOVERY_TIMEOUT, executor)
-        junk.publish(cv.text_to_msg("{not json"))
-        assert wait_for(lambda: "rejected message on /pearl/belief_marginals" in procs[1].stderr(),
+        # A closed step without its action or observation is logged and counted; the node carries on.
+        junk = probe.publisher("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
+        assert wait_for(lambda: junk.get_subscription_count() >= 2, DISCOVERY_TIMEOUT, executor)   # bt + probe
+        junk.publish(cv.belief_to_msg([1.0], step=99))
+        assert wait_for(lambda: "rejected message on /pearl/belief" in procs[1].stderr(),
                         DISCOVERY_TIMEOUT, executor), procs[1].stderr()[-400:]
         for p in procs:
             assert p.returncode is None, f"{p.name} exited: {p.stderr()[-400:]}"

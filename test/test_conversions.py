@@ -17,22 +17,29 @@ from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 
 def test_belief_layout_and_round_trip_through_cdr():
     b = np.array([0.1, 0.2, 0.3, 0.4])
-    msg = cv.belief_to_msg(b)
-    assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == [("state", 4, 4)]
-    assert msg.layout.data_offset == 0
+    msg = cv.belief_to_msg(b, {"A": {"x": 0.3, "y": 0.7}}, step=2, action="Go", observation="seen",
+                           state_names=["s0", "s1", "s2", "s3"], stamp_s=1.5)
+    assert list(msg.state_names) == ["s0", "s1", "s2", "s3"] and (msg.step, msg.action, msg.observation) == (2, "Go", "seen")
+    assert (msg.stamp.sec, msg.stamp.nanosec) == (1, 500_000_000)
     wire = deserialize_message(serialize_message(msg), cv.BeliefMsg)
     np.testing.assert_array_equal(cv.msg_to_belief(wire, num_states=4), b)  # float64 on the wire: exact
+    assert cv.msg_to_marginals(wire) == {"step": 2, "action": "Go", "observation": "seen",
+                                         "marginals": {"A": {"x": 0.3, "y": 0.7}}}
+    # A model larger than MAX_NAMED_STATES: the vector goes out whole, its states unnamed.
+    big = np.full(cv.MAX_NAMED_STATES + 1, 1.0 / (cv.MAX_NAMED_STATES + 1))
+    msg = cv.belief_to_msg(big, state_names=[f"s{i}" for i in range(big.size)])
+    assert list(msg.state_names) == [] and len(msg.probabilities) == big.size
 
 
 @pytest.mark.parametrize("mutate, problem", [
-    (lambda m: setattr(m.layout.dim[0], "label", "states"), "labelled 'state'"),
-    (lambda m: setattr(m.layout.dim[0], "size", 3), "says size 3 but carries 4"),
-    (lambda m: setattr(m, "data", [0.5, 0.5, 0.5, 0.5]), "not a distribution"),
-    (lambda m: setattr(m, "data", [1.5, -0.5, 0.0, 0.0]), "not a distribution"),
-    (lambda m: setattr(m, "data", [math.nan, 0.5, 0.5, 0.0]), "not a distribution"),
+    (lambda m: setattr(m, "state_names", ["a", "b", "c"]), "names 3 states but carries 4 values"),
+    (lambda m: (setattr(m, "probabilities", []), setattr(m, "state_names", [])), "not a distribution"),
+    (lambda m: setattr(m, "probabilities", [0.5, 0.5, 0.5, 0.5]), "not a distribution"),
+    (lambda m: setattr(m, "probabilities", [1.5, -0.5, 0.0, 0.0]), "not a distribution"),
+    (lambda m: setattr(m, "probabilities", [math.nan, 0.5, 0.5, 0.0]), "not a distribution"),
 ])
 def test_bad_belief_messages_are_rejected_with_the_reason(mutate, problem):
-    msg = cv.belief_to_msg([0.25] * 4)
+    msg = cv.belief_to_msg([0.25] * 4, state_names=["a", "b", "c", "d"])
     mutate(msg)
     with pytest.raises(BeliefError, match=problem):
         cv.msg_to_belief(msg)
@@ -45,13 +52,11 @@ def test_belief_size_must_match_the_model():
         cv.belief_to_msg(np.eye(2) / 2)
 
 
-def test_marginals_json():
-    msg = cv.marginals_to_msg({"Battery": {"ok": 0.9, "low": np.float64(0.1)}}, step=3, action="TellTime",
-                              observation="yes")
-    body = json.loads(msg.data)
-    assert body == {"step": 3, "action": "TellTime", "observation": "yes",
-                    "marginals": {"Battery": {"ok": 0.9, "low": 0.1}}}
-    assert cv.msg_to_marginals(msg) == body
+def test_marginals_of_b0_have_no_action_and_stay_json_ready():
+    msg = cv.belief_to_msg([0.9, 0.1], {"Battery": {"ok": 0.9, "low": np.float64(0.1)}}, step=0)
+    body = cv.msg_to_marginals(msg)
+    assert body == {"step": 0, "action": None, "observation": None, "marginals": {"Battery": {"ok": 0.9, "low": 0.1}}}
+    assert json.loads(json.dumps(body)) == body
 
 
 def test_decision_trace_from_objects_and_dicts():
@@ -60,10 +65,18 @@ def test_decision_trace_from_objects_and_dicts():
             self.subtask, self.choice, self.value = subtask, choice, value
 
     msg = cv.decision_to_msg(7, "TellTime", [Step("Act", "Assist", 12.5), {"subtask": "Inform", "choice": "TellTime",
-                                                                          "value": float("nan")}], 0.00025, 12)
-    assert cv.msg_to_decision(msg) == {"step": 7, "action": "TellTime", "latency_s": 0.00025, "expansions": 12, "trace": [
+                                                                          "value": float("nan")}], 0.00025, 12,
+                             belief_step=6, stamp_s=3.5)
+    assert type(msg).__name__ == "Decision" and (msg.stamp.sec, msg.stamp.nanosec) == (3, 500_000_000)
+    assert math.isnan(msg.trace[1].value) and not msg.has_search
+    assert cv.msg_to_decision(msg) == {"step": 7, "belief_step": 6, "action": "TellTime", "latency_s": 0.00025,
+                                       "expansions": 12, "trace": [
         {"subtask": "Act", "choice": "Assist", "value": 12.5},
         {"subtask": "Inform", "choice": "TellTime", "value": None}]}  # NaN is not JSON: null
+    # Through CDR and back (what a subscriber or a bag gets).
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    assert cv.msg_to_decision(deserialize_message(serialize_message(msg), cv.DecisionMsg)) == cv.msg_to_decision(msg)
 
 
 def test_pose_quaternion_and_stamp():
@@ -99,3 +112,32 @@ def test_diagnostics_round_trip():
 def test_strings_and_observations():
     assert cv.msg_to_action(cv.action_to_msg(" TellTime \n")) == "TellTime"
     assert cv.msg_to_text(cv.text_to_msg("what time is it")) == "what time is it"
+
+
+def test_operator_event_and_proposal_round_trip_their_plain_forms():
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from pearl_pomdp.operator import OperatorEvent
+
+    change = OperatorEvent("autonomy", "", 3, 12.5, "confirm", "", {"autonomy": "confirm",
+                                                                     "confirm_categories": ["Move"],
+                                                                     "confirm_timeout": 20.0})
+    plain = OperatorEvent("vetoed", "Ask", 4, 13.0, "full", "re-decided without Ask: DoA")
+    for event in (change, plain):
+        msg = deserialize_message(serialize_message(cv.operator_event_to_msg(event)), cv.OperatorEventMsg)
+        assert cv.msg_to_operator_event(msg) == event.as_dict()
+    waiting = {"step": 2, "action": "DoA", "source": "policy", "status": "waiting", "autonomy": "confirm",
+               "vetoed": ["Ask"], "deadline": 105.0}
+    for proposal in (waiting, {**waiting, "status": "acted", "vetoed": [], "deadline": None}):
+        msg = deserialize_message(serialize_message(cv.proposal_to_msg(proposal)), cv.OperatorProposalMsg)
+        assert cv.msg_to_proposal(msg) == proposal
+
+
+def test_a_trackers_belief_carries_its_run_and_step_and_a_replays_carries_none():
+    """A policy answers each (run, step) once (docs/reliability.md, "Crashes"): the typed Belief's run
+    and step are the key; run 0 (a replay, a graph without a journal) is no key at all."""
+    msg = cv.belief_to_msg([0.5, 0.5], step=3, run=7)
+    assert (msg.run, msg.step) == (7, 3) and cv.msg_to_belief_key(msg) == (7, 3)
+    assert cv.msg_to_belief_key(cv.belief_to_msg([0.5, 0.5], step=3)) is None
+    with pytest.raises(BeliefError, match="run"):
+        cv.belief_to_msg([0.5, 0.5], run=-1)

@@ -127,7 +127,7 @@ def test_bad_input_is_named(tmp_path):
 
     with BagWriter(empty_bag) as w:
         w.add_topic("/pearl/speech", "std_msgs/msg/String")
-    with pytest.raises(PearlError, match=r"no /pearl/belief_marginals topic"):
+    with pytest.raises(PearlError, match=r"no /pearl/belief topic of type pearl_interfaces/msg/Belief"):
         load_episodes([empty_bag])
     with pytest.raises(PearlError, match="--prior-strength must be >= 0"):
         fit_domain(designer, simulate_episodes(designer, 1, 2), prior_strength=-1)

@@ -21,7 +21,7 @@ MODULES = {"ros-jazzy-rclpy": "rclpy", "ros-jazzy-common-interfaces": "std_msgs.
            "mcap-ros2-support": "mcap_ros2", "matplotlib": "matplotlib", "foxglove-sdk": "foxglove",
            "py_trees": "py_trees", "pocketsphinx": "pocketsphinx", "espeakng-loader": "espeakng_loader",
            "pytest": "pytest", "hypothesis": "hypothesis", "rosbags": "rosbags", "websockets": "websockets",
-           "mypy": "mypy", "numpy": "numpy", "scipy": "scipy", "PyYAML": "yaml", "tqdm": "tqdm"}
+           "mypy": "mypy", "pearl_interfaces": "pearl_interfaces.msg", "numpy": "numpy", "scipy": "scipy", "PyYAML": "yaml", "tqdm": "tqdm"}
 
 
 def _requirements() -> list:
@@ -33,7 +33,9 @@ def _requirements() -> list:
             try:
                 names[node.targets[0].id] = ast.literal_eval(node.value)
             except ValueError:
-                pass
+                # A direct reference built from setup.py's folder (f"pearl_interfaces @ {…}"): its name.
+                if isinstance(node.value, ast.JoinedStr) and isinstance(node.value.values[0], ast.Constant):
+                    names[node.targets[0].id] = str(node.value.values[0].value).split("@")[0].strip()
     setup_call = next(n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "setup")
     kw = {k.arg: k.value for k in setup_call.keywords}
     reqs = list(ast.literal_eval(kw["install_requires"]))
@@ -52,6 +54,8 @@ def _list(node: ast.expr, names: dict) -> list:
         return _list(node.left, names) + _list(node.right, names)
     if isinstance(node, ast.Name):
         return list(names[node.id])
+    if isinstance(node, ast.List):
+        return [names[e.id] if isinstance(e, ast.Name) else ast.literal_eval(e) for e in node.elts]
     return list(ast.literal_eval(node))
 
 
@@ -60,7 +64,7 @@ REQUIREMENTS = _requirements()
 
 def test_the_requirements_are_read():
     names = {re.split(r"[<>=!~ ]", r, 1)[0] for r in REQUIREMENTS}
-    assert {"numpy", "ros-jazzy-rclpy", "pocketsphinx", "foxglove-sdk", "pytest", "mypy"} <= names
+    assert {"numpy", "ros-jazzy-rclpy", "pocketsphinx", "foxglove-sdk", "pytest", "mypy", "pearl_interfaces"} <= names
 
 
 @pytest.mark.parametrize("requirement", REQUIREMENTS)

@@ -228,7 +228,7 @@ def test_over_dds_the_drive_closes_at_its_deadline_diagnostics_say_why_and_actio
     from rclpy.context import Context
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
-    from std_msgs.msg import Float64MultiArray
+    from pearl_interfaces.msg import Belief
 
     from ros_helpers import allocate_domain_id, configure_test_process
     from pearl_pomdp.hierarchy import load_hierarchical_policy
@@ -262,8 +262,8 @@ def test_over_dds_the_drive_closes_at_its_deadline_diagnostics_say_why_and_actio
         listener = graph.add_node(rclpy.create_node("nav_listener", context=context))
         every = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        listener.create_subscription(Float64MultiArray, "/pearl/belief",
-                                     lambda m: beliefs.append(cv.msg_to_belief(m)), every)
+        listener.create_subscription(Belief, "/pearl/belief",
+                                     lambda m: beliefs.append(np.array(m.probabilities, dtype=float)), every)
         listener.create_subscription(DiagnosticArray, "/diagnostics",
                                      lambda m: statuses.extend(s for s in m.status if "belief_tracker" in s.name), 50)
         assert graph.spin_until(lambda: beliefs and graph.tracker.diag_pub.get_subscription_count() >= 1,

@@ -196,3 +196,71 @@ def test_a_live_parameter_goes_through_the_core_and_is_checked(context):
         assert not read_only.successful and node.core.settings.drive_speed == 0.6
     finally:
         node.destroy_node()
+
+
+def _courier(tmp_path, nodes_yaml: Optional[str] = None) -> Path:
+    """A robot that is not Pearl (the battery domain of test_channels, named courier) in ``tmp_path``,
+    with ``courier_nodes.yaml`` beside it when ``nodes_yaml`` is given."""
+    from test_channels import BATTERY
+
+    path = tmp_path / "courier.domain.yaml"
+    path.write_text(BATTERY.replace("name: battery-robot", "name: courier"))
+    if nodes_yaml is not None:
+        (tmp_path / "courier_nodes.yaml").write_text(nodes_yaml)
+    return path
+
+
+def test_a_tracker_given_only_another_robots_domain_runs_on_the_code_defaults_and_its_topics(context, tmp_path):
+    """Pearl's params (place_feature RobotLocation, its guidance, its places) never reach another
+    robot: with only ``domain:=`` the tracker starts and subscribes to that domain's own inputs."""
+    from pearl_pomdp.nodes.belief_tracker import BeliefTrackerNode
+
+    path = _courier(tmp_path)
+    node = BeliefTrackerNode(context=context, parameter_overrides={"domain": str(path)})
+    try:
+        assert node.core is not None
+        values = {name: param.value for name, param in node._parameters.items()}
+        assert (values["place_feature"], values["guide_actions"], values["stale_after"]) == ("", [""], 0.0)
+        assert values["defaults_file"] == "config/pearl_nodes.yaml"   # declared, but not read: the domain has no params
+        topics = {sub.topic_name for sub in node.subscriptions}
+        assert {"/robot/battery_state", "/robot/speech"} <= topics
+    finally:
+        node.destroy_node()
+
+
+def test_a_domains_own_params_file_beside_it_gives_its_nodes_their_defaults(context, tmp_path):
+    from pearl_pomdp.nodes.belief_tracker import BeliefTrackerNode
+
+    path = _courier(tmp_path, "belief_tracker:\n  ros__parameters:\n    stale_after: 12.5   # the courier's own\n")
+    node = BeliefTrackerNode(context=context, parameter_overrides={"domain": str(path)})
+    try:
+        values = {name: param.value for name, param in node._parameters.items()}
+        assert (values["stale_after"], values["place_feature"]) == (12.5, "")
+        assert node.core is not None and node.core.settings.stale_after == 12.5
+    finally:
+        node.destroy_node()
+    # An explicit defaults_file still wins (here: none, the code's defaults).
+    node = BeliefTrackerNode(context=context, parameter_overrides={"domain": str(path), "defaults_file": ""})
+    try:
+        assert node.get_parameter("stale_after").value == 0.0
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize("where", ["shipped", "copy"])
+def test_pearls_domain_named_explicitly_or_copied_still_reads_pearls_params(context, tmp_path, where):
+    """Pearl's own domain file, or a copy of it under another file name (``pearl demo`` runs on
+    ``OUT/domain.yaml``): the domain's ``name: pearl`` is Pearl's, so Pearl's params apply."""
+    import shutil
+
+    from pearl_pomdp.nodes.belief_tracker import BeliefTrackerNode
+
+    path = REPO / "config" / "pearl.domain.yaml"
+    if where == "copy":
+        path = Path(shutil.copyfile(path, tmp_path / "domain.yaml"))
+    node = BeliefTrackerNode(context=context, parameter_overrides={"domain": str(path)})
+    try:
+        assert (node.get_parameter("place_feature").value, node.get_parameter("stale_after").value) == \
+            ("RobotLocation", 30.0)
+    finally:
+        node.destroy_node()

@@ -90,8 +90,7 @@ def _probe(graph):
     probe = Probe(node)
     probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
     probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
-    probe.listen("/pearl/belief_marginals", cv.TextMsg, LATCHED_QOS)
-    probe.listen("/pearl/decision", cv.TextMsg, EVENT_QOS)
+    probe.listen("/pearl/decision", cv.DecisionMsg, EVENT_QOS)
     probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
     probe.listen("/pearl/display", cv.TextMsg, EVENT_QOS)
     probe.listen("/goal_pose", cv.PoseMsg, LATCHED_QOS)
@@ -122,7 +121,7 @@ def _say(probe, topic, text, graph):
 def _steps(g, probe, n):
     """Spin until the probe holds n actions, beliefs and marginals (topics arrive in any order)."""
     return g.spin_until(lambda: all(len(probe.received[t]) >= n for t in
-                                    ("/pearl/action", "/pearl/belief", "/pearl/belief_marginals")), 10.0)
+                                    ("/pearl/action", "/pearl/belief")), 10.0)
 
 
 def _actions(probe):
@@ -162,8 +161,8 @@ def test_tiger_dialogue_in_one_process(ros_context):
         assert pose["yaw"] == pytest.approx(np.pi / 2) and pose["stamp"] == pytest.approx(130.0)
 
         # Marginals: one pseudo-feature for a flat model, with the step's action and observation.
-        assert g.spin_until(lambda: cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])["step"] == 2, 5)
-        last = cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])
+        assert g.spin_until(lambda: cv.msg_to_marginals(probe.received["/pearl/belief"][-1])["step"] == 2, 5)
+        last = cv.msg_to_marginals(probe.received["/pearl/belief"][-1])
         assert last["action"] == "listen" and last["observation"] == "hear-left"
         assert last["marginals"]["state"]["tiger-left"] == pytest.approx(0.7225 / 0.745)
         # The decision trace and the decider saw exactly the published beliefs.
@@ -225,7 +224,7 @@ def test_step_timeout_follows_sim_time(ros_context):
         assert g.spin_until(lambda: g.tracker.core.counters()["timeouts"] == 1, 10.0)
         assert _steps(g, probe, 2)
         np.testing.assert_allclose(g.tracker.core.belief, [0.15, 0.85])
-        last = cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])
+        last = cv.msg_to_marginals(probe.received["/pearl/belief"][-1])
         assert last["observation"] == "hear-right" and last["step"] == 1
 
 
@@ -251,7 +250,7 @@ def test_pearl_inputs_map_to_modality_symbols(ros_context, pearl_policy):
         _say(probe, "speech", "Could you tell me what TIME it is?", g)
         assert _steps(g, probe, 2)
         assert g.tracker.core.counters()["invalid_touchscreen"] == 1
-        last = cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])
+        last = cv.msg_to_marginals(probe.received["/pearl/belief"][-1])
         assert (last["action"], last["observation"]) == (a0, "time")
         expected = BeliefFilter(model).update(model.b0, model.actions.index(a0), model.observations.index("time"))
         np.testing.assert_allclose(cv.msg_to_belief(probe.received["/pearl/belief"][-1]), expected, atol=1e-12)
@@ -263,5 +262,5 @@ def test_pearl_inputs_map_to_modality_symbols(ros_context, pearl_policy):
         assert g.spin_until(lambda: g.tracker.core.step_open, 10.0)
         _say(probe, "speech", "hmm", g)
         assert _steps(g, probe, 3)
-        assert cv.msg_to_marginals(probe.received["/pearl/belief_marginals"][-1])["observation"] == "unknown"
+        assert cv.msg_to_marginals(probe.received["/pearl/belief"][-1])["observation"] == "unknown"
         assert g.tracker.counters()["unknown_speech"] == 1

@@ -67,7 +67,7 @@ class LaunchedGraph:
         self.actions = probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
         self.beliefs = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
         self.says = probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
-        self.marginals = probe.listen("/pearl/belief_marginals", cv.TextMsg, LATCHED_QOS)
+        self.marginals = self.beliefs   # each belief message carries its step's marginals
         self.inputs = {t: probe.publisher(f"/pearl/{t}", cv.TextMsg, INPUT_QOS) for t in inputs}
         self.speech = self.inputs["speech"]
         # step_timeout:=0.0 so that no silence step can slip between the test's utterances.

@@ -55,7 +55,7 @@ def on_graph(domain, model, decider, scenario, seed, tmp_path):
     import rclpy
     from rclpy.context import Context
     from rclpy.signals import SignalHandlerOptions
-    from std_msgs.msg import Float64MultiArray
+    from pearl_interfaces.msg import Belief
 
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from pearl_pomdp.nodes.graph import PearlGraph
@@ -84,8 +84,8 @@ def on_graph(domain, model, decider, scenario, seed, tmp_path):
         # Keep every belief (the tracker's latched publisher keeps only the last for late joiners).
         every = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        listener.create_subscription(Float64MultiArray, "/pearl/belief",
-                                     lambda m: beliefs.append(cv.msg_to_belief(m)), every)
+        listener.create_subscription(Belief, "/pearl/belief",
+                                     lambda m: beliefs.append(np.array(m.probabilities, dtype=float)), every)
         assert graph.spin_until(lambda: graph.tracker.belief_pub.get_subscription_count() >= 2 and beliefs,
                                 timeout_sec=20.0), "the listener never got b0"
         driver = SimClockDriver(graph, wait_s=20.0)

@@ -353,8 +353,16 @@ def test_policy_online_wires_the_decider_and_decision_messages_carry_the_search(
     with pytest.raises(NodeSetupError, match="parameter policy: 'online:0'"):
         load_decider(tiger, None, "online:0", "")
     d = decider.execute(tiger.b0)
-    body = json.loads(decision_to_msg(0, d.action_name, d.trace, 0.01, d.expansions, search=d.search).data)
+    from pearl_pomdp.nodes.conversions import msg_to_decision
+
+    msg = decision_to_msg(0, d.action_name, d.trace, 0.01, d.expansions, search=d.search)
+    assert msg.has_search and msg.search.trials == 7 and msg.search.top[0].children
+    body = msg_to_decision(msg)
+    json.dumps(body)   # the plain form stays JSON-ready (the live view sends it)
     search = body["search"]
+    assert search["action_bounds"] == [{"action": a["action"], "lower": a["lower"], "upper": a["upper"]}
+                                       for a in d.search["action_bounds"]]
+    assert search["bounds"] == d.search["bounds"] and search["top"]["scenarios"] == d.search["top"]["scenarios"]
     assert search["trials"] == 7 and search["nodes"] >= 7 and search["gap"] == pytest.approx(
         search["upper"] - search["lower"])
     assert search["seconds"] > 0 and search["top"]["actions"][0]["action"] == d.action_name

@@ -103,11 +103,11 @@ def _probe(g, record=None):
     probe = Probe(node)
     # Latched like the writers, but a deep reader queue: two messages between spins are both kept.
     latched = QoSProfile(depth=100, reliability=LATCHED_QOS.reliability, durability=LATCHED_QOS.durability)
-    for topic in ("/pearl/action", "/pearl/proposal"):
-        probe.listen(topic, String, latched)
+    probe.listen("/pearl/action", String, latched)
+    probe.listen("/pearl/proposal", cv.OperatorProposalMsg, latched)
     probe.listen("/pearl/belief", cv.BeliefMsg, latched)
-    probe.listen("/pearl/decision", String, EVENT_QOS)
-    probe.listen("/pearl/operator/events", String, EVENT_QOS)
+    probe.listen("/pearl/decision", cv.DecisionMsg, EVENT_QOS)
+    probe.listen("/pearl/operator/events", cv.OperatorEventMsg, EVENT_QOS)
     probe.listen("/diagnostics", cv.DiagnosticsMsg, EVENT_QOS)
     probe.publisher("/clock", cv.ClockMsg, 10)
     for topic in ("/test/answer", "/pearl/operator/veto", "/pearl/operator/command"):
@@ -147,7 +147,7 @@ def _actions(probe):
 
 
 def _events(probe):
-    return [json.loads(m.data) for m in probe.received["/pearl/operator/events"]]
+    return [cv.msg_to_operator_event(m) for m in probe.received["/pearl/operator/events"]]
 
 
 def _answer(g, client, yes):
@@ -175,7 +175,7 @@ def test_confirm_publishes_a_confirmed_category_only_after_the_yes(ros_context, 
         waiting = lambda: any(e["event"] == "waiting" and e["action"] == "DoA" for e in _events(probe))  # noqa: E731
         assert g.spin_until(waiting, 10.0), _events(probe)
         # Waiting: proposed, not published, and the tracker has no step open (no action reached it).
-        assert json.loads(probe.received["/pearl/proposal"][-1].data)["status"] == "waiting"
+        assert cv.msg_to_proposal(probe.received["/pearl/proposal"][-1])["status"] == "waiting"
         assert not g.spin_until(lambda: len(_actions(probe)) > 3, 0.3)
         assert _actions(probe) == ["Ask"] * 3 and not g.tracker.core.step_open
         asked = time.perf_counter()
@@ -221,7 +221,7 @@ def test_veto_re_decides_command_moves_the_belief_and_the_bag_records_it(ros_con
         assert g.spin_until(lambda: len(_actions(probe)) == 3, 10.0)
         assert _actions(probe)[-1] == "DoA"
         assert g.spin_until(lambda: len(probe.received["/pearl/decision"]) == 3, 10.0)
-        redecided = json.loads(probe.received["/pearl/decision"][-1].data)
+        redecided = cv.msg_to_decision(probe.received["/pearl/decision"][-1])
         assert redecided["action"] == "DoA"
         assert redecided["trace"][0]["value"] == pytest.approx(expected.trace[0].value, abs=1e-12)
         assert g.spin_until(lambda: g.tracker.core.open_action == "DoA", 10.0)   # the robot does DoA now
@@ -254,17 +254,44 @@ def test_veto_re_decides_command_moves_the_belief_and_the_bag_records_it(ros_con
     writer.close()
     recorded = {}
     for message in BagReader(tmp_path / "operator").read_messages():
-        recorded.setdefault(message.topic, []).append(deserialize_message(message.data, String).data)
+        msg_type = {"/pearl/operator/events": cv.OperatorEventMsg, "/pearl/proposal": cv.OperatorProposalMsg,
+                    "/pearl/decision": cv.DecisionMsg}.get(message.topic, String)
+        recorded.setdefault(message.topic, []).append(deserialize_message(message.data, msg_type))
+    recorded = {t: [m.data if isinstance(m, String) else m for m in ms] for t, ms in recorded.items()}
     assert recorded["/pearl/operator/veto"] == ["Ask"]
     assert recorded["/pearl/operator/command"] == ["Jump", "Ask"]
-    assert [json.loads(e)["event"] for e in recorded["/pearl/operator/events"]] == kinds
+    assert [e.kind for e in recorded["/pearl/operator/events"]] == kinds
     assert recorded["/pearl/action"][-3:] == ["DoA", "Ask", _actions(probe)[-1]]
 
 
-def test_a_recorded_run_with_an_operator_replays_and_explains(ros_context, planned, tmp_path):
+def _call(g, probe, service: str, request):
+    """Call one of the policy's operator services (pearl_interfaces) from the probe; its reply."""
+    client = probe.node.create_client(_SERVICES[service], service)
+    assert g.spin_until(client.service_is_ready, 10.0), f"{service} not ready"
+    future = client.call_async(request)
+    assert g.spin_until(future.done, 10.0), f"no answer from {service}"
+    return future.result()
+
+
+def _service_types():
+    from pearl_interfaces.srv import Command, SetAutonomy, Veto
+
+    return {"/pearl/operator/veto_action": Veto, "/pearl/operator/command_action": Command,
+            "/pearl/operator/set_autonomy": SetAutonomy}
+
+
+_SERVICES = _service_types()
+
+
+@pytest.mark.parametrize("via", ["topics", "services"])
+def test_a_recorded_run_with_an_operator_replays_and_explains(ros_context, planned, tmp_path, via):
     """Confirm, veto, no, command and a level change, recorded with /clock and the inputs; the
     replay (a fresh graph loading the saved policy) feeds the operator's inputs and re-does
-    the level change and the answers: same actions, beliefs to 1e-12, same operator events."""
+    the level change and the answers: same actions, beliefs to 1e-12, same operator events.
+    ``services``: the veto, the command and the level go through the policy's pearl_interfaces
+    services (Veto, Command, SetAutonomy, what ``ros2 service call`` uses) and each reply says what
+    happened; the bag holds only their events, and the replay does them again from those."""
+    from pearl_interfaces.srv import Command, SetAutonomy, Veto
     from rclpy.parameter import Parameter
 
     from pearl_pomdp.bags.writer import BagWriter
@@ -299,17 +326,29 @@ def test_a_recorded_run_with_an_operator_replays_and_explains(ros_context, plann
         assert n_events(1)                                   # b0: Ask acted
         _send(g, probe, "/test/answer", "sayA")
         assert n_events(2)                                   # Ask acted again
-        _send(g, probe, "/pearl/operator/veto", "Ask")
+        if via == "topics":
+            _send(g, probe, "/pearl/operator/veto", "Ask")
+        else:
+            reply = _call(g, probe, "/pearl/operator/veto_action", Veto.Request(action="Ask"))
+            assert reply.accepted and reply.message == ("vetoed Ask (re-decided without Ask: DoA; by service); "
+                                                        "waiting DoA (until 105.000 s)"), reply.message
         assert n_events(4)                                   # vetoed, DoA waiting
         reply = _answer(g, client, False)                    # declined: answered, not acted
         assert reply.success and reply.message == "declined (not acted) DoA"
         assert n_events(5)
-        _send(g, probe, "/pearl/operator/command", "Ask")
+        if via == "topics":
+            _send(g, probe, "/pearl/operator/command", "Ask")
+        else:
+            assert _call(g, probe, "/pearl/operator/command_action", Command.Request(action="Ask")).accepted
         assert n_events(6)
         for n in (7, 8):
             _send(g, probe, "/test/answer", "sayA")
             assert n_events(n)                               # Ask acted, then DoA waiting
-        g.policy.set_parameters([Parameter("autonomy", value="full")])
+        if via == "topics":
+            g.policy.set_parameters([Parameter("autonomy", value="full")])
+        else:
+            reply = _call(g, probe, "/pearl/operator/set_autonomy", SetAutonomy.Request(level="full"))
+            assert reply.accepted and reply.message == "autonomy full"
         assert n_events(10)                                  # autonomy, DoA acted
         _send(g, probe, "/test/answer", "silent")
         assert n_events(11)
@@ -318,6 +357,11 @@ def test_a_recorded_run_with_an_operator_replays_and_explains(ros_context, plann
             (recorder.counts, len(probe.received["/pearl/belief"]), _actions(probe))
         live_actions, live_events = _actions(probe), [e["event"] for e in _events(probe)]
         recorder.stop()
+        if via == "services":   # refused, each with the reason in the reply (not recorded: the bag is closed)
+            refused = _call(g, probe, "/pearl/operator/veto_action", Veto.Request(action="Fly"))
+            assert not refused.accepted and "Fly" in refused.message, refused.message
+            bad = _call(g, probe, "/pearl/operator/set_autonomy", SetAutonomy.Request(level="sometimes"))
+            assert not bad.accepted and "sometimes" in bad.message and g.policy.gate.autonomy == "full", bad.message
     writer.close()
     assert live_actions == ["Ask", "Ask", "Ask", "Ask", "DoA", "DoA"], live_actions
     assert live_events == ["acted", "acted", "vetoed", "waiting", "declined", "commanded", "acted", "waiting",
@@ -333,4 +377,5 @@ def test_a_recorded_run_with_an_operator_replays_and_explains(ros_context, plann
     assert result.explanation[2]["operator"] == []     # the policy acted, nobody intervened
     assert step1["decision"]["action"] == "DoA"     # the re-decision after the veto is the one that stood
     text = format_explanation(result.explanation, result.divergence)
-    assert "operator: vetoed Ask (re-decided without Ask: DoA)" in text and "operator: declined DoA" in text
+    via_service = "; by service" if via == "services" else ""
+    assert f"operator: vetoed Ask (re-decided without Ask: DoA{via_service})" in text and "operator: declined DoA" in text

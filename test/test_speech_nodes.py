@@ -80,7 +80,7 @@ def test_synthesised_speech_reaches_the_tracker_as_keywords(tmp_path, probe_cont
                       env, tmp_path, "recognizer")
     try:
         probe = Probe(node)
-        marginals = probe.listen("/pearl/belief_marginals", cv.TextMsg, LATCHED_QOS)
+        marginals = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
         speech = probe.listen("/pearl/speech", cv.TextMsg, EVENT_QOS)
         action = probe.publisher("/pearl/action", cv.TextMsg, LATCHED_QOS)
         audio = probe.publisher("/pearl/audio_in", AudioMsg, AUDIO_QOS)

@@ -59,7 +59,7 @@ def launched(request, tmp_path_factory, ward_domain):
     g = {"domain": domain, "policy": policy,
          "actions": probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS),
          "beliefs": probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS),
-         "decisions": probe.listen("/pearl/decision", cv.TextMsg, EVENT_QOS),
+         "decisions": probe.listen("/pearl/decision", cv.DecisionMsg, EVENT_QOS),
          "arrived": node.create_publisher(cv.TextMsg, "/ward/arrived", INPUT_QOS),
          "call": node.create_publisher(cv.TextMsg, "/ward/call_button", INPUT_QOS),
          "speech": node.create_publisher(cv.TextMsg, "/ward/speech", INPUT_QOS)}
@@ -119,7 +119,7 @@ def test_the_ward_plans_online_through_the_nodes_as_the_core_does(launched):
             action = _feed(g, "call", "call_bob", "call_bob")
         else:
             action = _feed(g, "speech", "could i have some water", "water")
-    record = json.loads(g["decisions"][-1].data)
+    record = cv.msg_to_decision(g["decisions"][-1])
     if g["policy"] == "hierarchical":
         # The root searched (20 trials, config/ward.hierarchy.yaml) and the trace starts at the root.
         assert record["trace"][0]["subtask"] == "Ward", record

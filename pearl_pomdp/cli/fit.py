@@ -4,8 +4,8 @@
     pearl fit DOMAIN --speech CHANNEL.json --snr DB --out FITTED.yaml [--prior-strength K] [--chatter-share F]
 
 EPISODES are bag directories (``pearl demo`` / ``pearl record`` output: each closed step's
-action and observation from /pearl/belief_marginals, the true state from /pearl/sim/truth
-when a simulator recorded it) or ``.jsonl`` files with one episode per line
+action and observation from /pearl/belief (older bags: /pearl/belief_marginals), the true
+state from /pearl/sim/truth when a simulator recorded it) or ``.jsonl`` files with one episode per line
 (``{"actions": [...], "observations": [...], "states": [...]}``, states optional).
 
 Each table row (one configuration of the row's parents) becomes

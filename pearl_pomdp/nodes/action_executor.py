@@ -5,8 +5,11 @@ display and a named place to drive to; the places are poses in the map frame. Th
 of all of it come from the package's params file (``config/pearl_nodes.yaml``, see
 :mod:`pearl_pomdp.nodes.defaults`); this module names no action of any domain.
 
-A drive is a ``geometry_msgs/PoseStamped`` on ``/goal_pose``: what Nav2's BT navigator and
-RViz's "2D Goal Pose" use, so the executor drives a Nav2 robot unchanged.
+A drive is a ``nav2_msgs/action/NavigateToPose`` goal where ``nav2_msgs`` is installed (a robot
+with Nav2; :mod:`pearl_pomdp.nodes.nav2_drive`: an aborted goal closes the drive at once, a new
+decision cancels a goal it no longer wants), else a ``geometry_msgs/PoseStamped`` on
+``/goal_pose`` (what Nav2's BT navigator and RViz's "2D Goal Pose" use); ``navigation`` chooses,
+and configure says which is in use.
 
 It is a managed (lifecycle) node like the tracker and the policy
 (:mod:`pearl_pomdp.nodes.managed`): configure validates the tables and creates the topics,
@@ -18,7 +21,7 @@ from __future__ import annotations
 
 import datetime
 import sys
-from typing import Dict, List, Optional
+from typing import Any, Dict, List, Optional
 
 from rclpy.parameter import Parameter
 
@@ -26,6 +29,7 @@ from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS, NodeSetupError, Param, run_node
 from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
+from pearl_pomdp.nodes.nav2_drive import NAVIGATION_MODES, Nav2Drive, navigate_to_pose_type
 from pearl_pomdp.navigation import places_from_parameters
 
 __all__ = ["ActionExecutorNode", "ACTION_FIELDS", "main"]
@@ -69,7 +73,13 @@ class ActionExecutorNode(ManagedPearlNode):
         * ``/pearl/say``, ``/pearl/display`` (std_msgs/String).
         * ``/goal_pose`` (geometry_msgs/PoseStamped in ``frame_id``, reliable, TRANSIENT_LOCAL
           depth 1: a navigator started late still gets the current goal; Nav2's volatile
-          subscription matches it).
+          subscription matches it) — without nav2_msgs, or ``navigation:=topic``.
+        * ``drive_result_topic`` (std_msgs/String, '' by default; Pearl: ``/pearl/laser``):
+          ``nav_failed_observation`` when Nav2 aborts a drive.
+
+    Action client (where nav2_msgs is installed, ``navigation`` auto or action):
+        * ``/navigate_to_pose`` (nav2_msgs/action/NavigateToPose): one goal per drive, cancelled
+          when a new decision no longer wants it (:mod:`pearl_pomdp.nodes.nav2_drive`).
         * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): executed and unknown actions.
 
     In-process use: ``ActionExecutorNode(context=ctx, parameter_overrides={"action_names": [...],
@@ -91,6 +101,12 @@ class ActionExecutorNode(ManagedPearlNode):
         Param("say_topic", "/pearl/say", "Sentences to speak (std_msgs/String)"),
         Param("display_topic", "/pearl/display", "Touchscreen text (std_msgs/String)"),
         Param("goal_topic", "/goal_pose", "Navigation goals (geometry_msgs/PoseStamped, Nav2's goal topic)"),
+        Param("navigation", "auto", "How drives go: auto (the NavigateToPose action where nav2_msgs is installed, "
+                                    "else goal_topic), action (the action, required) or topic (goal_topic)"),
+        Param("navigate_action", "/navigate_to_pose", "Nav2's NavigateToPose action server"),
+        Param("drive_result_topic", "", "Where a drive that ended without arriving is reported as "
+                                        "nav_failed_observation (std_msgs/String, the tracker's input); '': not"),
+        Param("nav_failed_observation", "", "What is published on drive_result_topic when Nav2 aborts a drive"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
         AUTOSTART,
     )
@@ -117,6 +133,10 @@ class ActionExecutorNode(ManagedPearlNode):
         self.unknown = 0
         self.inactive_actions = 0  # actions that arrived while the node was not active (not executed)
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
+        self.nav: Optional[Nav2Drive] = None
+        self.goal_pub: Any = None
+        self.result_pub: Any = None
+        self.drive_path = ""
         self.start(p["autostart"])
 
     # ----------------------------------------------------------- lifecycle
@@ -142,14 +162,52 @@ class ActionExecutorNode(ManagedPearlNode):
             self.behaviour[action] = dict(spec)
         self.say_pub = self.lifecycle_publisher(cv.TextMsg, p["say_topic"], EVENT_QOS)
         self.display_pub = self.lifecycle_publisher(cv.TextMsg, p["display_topic"], EVENT_QOS)
-        self.goal_pub = self.lifecycle_publisher(cv.PoseMsg, p["goal_topic"], LATCHED_QOS)
+        self._configure_navigation()
         self.managed_subscription(cv.TextMsg, p["action_topic"], self._on_action, EVENT_QOS)
         self.managed_timer(p["diagnostics_period"], self.publish_diagnostics)
         if not self.behaviour:
             self.get_logger().warning("no action configured (action_names is empty): every action will be "
                                       "counted as unknown")
         self.get_logger().info(f"executing {len(self.behaviour)} actions; locations: "
-                               f"{', '.join(self.locations) or 'none'}; goals on {p['goal_topic']}")
+                               f"{', '.join(self.locations) or 'none'}; drives through {self.drive_path}")
+
+    def _configure_navigation(self) -> None:
+        p = self.params
+        mode = p["navigation"]
+        if mode not in NAVIGATION_MODES:
+            raise NodeSetupError(f"parameter navigation: {mode!r} is not one of {', '.join(NAVIGATION_MODES)}")
+        action_type = navigate_to_pose_type() if mode != "topic" else None
+        if mode == "action" and action_type is None:
+            raise NodeSetupError("parameter navigation: 'action' needs nav2_msgs (NavigateToPose), which is not "
+                                 "installed; 'auto' or 'topic' publishes goals on goal_topic")
+        if p["drive_result_topic"] and not p["nav_failed_observation"]:
+            raise NodeSetupError("parameter nav_failed_observation: needed when drive_result_topic is set "
+                                 f"({p['drive_result_topic']})")
+        # Only the action reports a failed drive (goal_topic has no answer to report).
+        self.result_pub = (self.lifecycle_publisher(cv.TextMsg, p["drive_result_topic"], EVENT_QOS)
+                           if p["drive_result_topic"] and action_type is not None else None)
+        if action_type is not None:
+            self.nav = Nav2Drive(self, action_type, p["navigate_action"], self._drive_failed)
+            self.goal_pub = None
+            self.drive_path = f"the NavigateToPose action {p['navigate_action']}"
+        else:
+            self.nav = None
+            self.goal_pub = self.lifecycle_publisher(cv.PoseMsg, p["goal_topic"], LATCHED_QOS)
+            self.drive_path = f"goals on {p['goal_topic']}"
+
+    def cleanup_node(self) -> None:
+        if self.nav is not None:
+            self.nav.destroy()
+            self.nav = None
+
+    def _drive_failed(self, place: str, why: str) -> None:
+        """A wanted drive ended without arriving: said at once on drive_result_topic."""
+        self.get_logger().warning(f"drive to {place} failed: {why}"
+                                  + (f"; {self.params['nav_failed_observation']} on {self.params['drive_result_topic']}"
+                                     if self.result_pub is not None else ""))
+        if self.result_pub is not None and self.active:
+            self.result_pub.publish(cv.text_to_msg(self.params["nav_failed_observation"]))
+        self.publish_diagnostics()
 
     def _fields(self, action: str) -> _Template:
         now = datetime.datetime.fromtimestamp(self.now_s(), tz=datetime.timezone.utc)
@@ -177,12 +235,21 @@ class ActionExecutorNode(ManagedPearlNode):
             self.display_pub.publish(cv.text_to_msg(spec["display"].format_map(fields)))
         if spec["goal"]:
             x, y, yaw = self.locations[spec["goal"]]
-            self.goal_pub.publish(cv.pose_to_msg(x, y, yaw, self.params["frame_id"], self.now_s()))
+            pose = cv.pose_to_msg(x, y, yaw, self.params["frame_id"], self.now_s())
+            if self.nav is not None:
+                self.nav.drive(spec["goal"], pose)
+            else:
+                self.goal_pub.publish(pose)
+        elif self.nav is not None:
+            self.nav.stop(f"{action} does not drive")
 
     def publish_diagnostics(self) -> None:
         """Publish executed/unknown action counts on /diagnostics."""
+        nav: Dict[str, Any] = {f"nav_{k}": v for k, v in self.nav.counts.items()} if self.nav is not None else {}
+        if self.nav is not None:
+            nav.update({f"nav_{k}": v for k, v in self.nav.feedback.items()})
         values = {"executed": sum(self.executed.values()), "unknown_actions": self.unknown,
-                  "inactive_actions": self.inactive_actions,
+                  "inactive_actions": self.inactive_actions, **nav,
                   **{f"executed_{k}": v for k, v in sorted(self.executed.items())}}
         level = cv.DIAG_WARN if self.unknown else cv.DIAG_OK
         self.diag_pub.publish(cv.diagnostics_to_msg(f"pearl: {self.get_name()}", "pearl", level,

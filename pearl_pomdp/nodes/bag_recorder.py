@@ -30,7 +30,7 @@ from pearl_pomdp.errors import PearlError
 _NS = 1_000_000_000
 
 #: The decision loop's topics a bag must hold from their first message ...
-LOOP_TOPICS = ("/pearl/belief", "/pearl/belief_marginals", "/pearl/decision", "/pearl/action")
+LOOP_TOPICS = ("/pearl/belief", "/pearl/decision", "/pearl/action")
 #: ... and those of them that are latched (depth 1): b0 and the answer to it, already out
 #: when the recorder joins.
 LATCHED_LOOP_TOPICS = ("/pearl/belief", "/pearl/action")

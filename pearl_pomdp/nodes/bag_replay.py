@@ -58,6 +58,7 @@ from typing import Any, Dict, List, Optional, Union
 from pearl_pomdp.bags import well_known as wk
 from pearl_pomdp.bags.reader import BagError, BagReader
 from pearl_pomdp.errors import PearlError
+from pearl_pomdp.operator import BY_SERVICE
 
 ACTION_TOPIC = "/pearl/action"
 BELIEF_TOPIC = "/pearl/belief"
@@ -157,17 +158,24 @@ def _clock_ns(data: bytes) -> int:
 
 
 def recorded_beliefs(reader: BagReader) -> List[List[float]]:
-    """The ``/pearl/belief`` messages recorded in the bag (std_msgs/Float64MultiArray), in order."""
+    """The ``/pearl/belief`` messages recorded in the bag, in order: pearl_interfaces/msg/Belief's
+    probabilities, or the std_msgs/msg/Float64MultiArray of a bag recorded before the typed interfaces."""
     from rclpy.serialization import deserialize_message
-    from std_msgs.msg import Float64MultiArray
 
-    return [_belief_values(deserialize_message(m.data, Float64MultiArray)) for m in reader.messages
-            if m.topic == BELIEF_TOPIC]
+    if BELIEF_TOPIC not in reader.topics:
+        return []
+    if reader.topics[BELIEF_TOPIC].type == "std_msgs/msg/Float64MultiArray":
+        from std_msgs.msg import Float64MultiArray
+
+        return [_belief_values(deserialize_message(m.data, Float64MultiArray)) for m in reader.read_messages([BELIEF_TOPIC])]
+    from pearl_pomdp.nodes import conversions as cv
+
+    return [list(deserialize_message(m.data, cv.BeliefMsg).probabilities) for m in reader.read_messages([BELIEF_TOPIC])]
 
 
 def _belief_values(msg) -> List[float]:
-    """A belief message's ``b(s)``, without its padding (the tracker's run and step, which differ
-    between a recording and its replay: pearl_pomdp.nodes.conversions)."""
+    """A ``Float64MultiArray`` belief's ``b(s)`` (a bag recorded before the typed Belief), without
+    any padding before it (``layout.data_offset``)."""
     return list(msg.data)[msg.layout.data_offset:]
 
 
@@ -236,14 +244,19 @@ def _graph_options() -> Dict[str, Any]:
 
 
 def _recorded_decisions(reader: BagReader) -> List[Dict[str, Any]]:
-    """The ``/pearl/decision`` JSON messages of the bag (empty when not recorded or unreadable)."""
+    """The ``/pearl/decision`` messages of the bag in their plain form (``conversions.msg_to_decision``):
+    ``pearl_interfaces/msg/Decision``, or the JSON ``std_msgs/msg/String`` of a bag recorded before
+    the typed interfaces (same keys). Empty when not recorded; ``{}`` for a message that does not decode."""
     if DECISION_TOPIC not in reader.topics:
         return []
+    from pearl_pomdp.nodes import conversions as cv
+
+    decode = _plain_decoder(reader, DECISION_TOPIC, "DecisionMsg", cv.msg_to_decision)
     out = []
     for m in reader.read_messages([DECISION_TOPIC]):
         try:
-            out.append(json.loads(_string_data(m.data)))
-        except (ValueError, UnicodeDecodeError):
+            out.append(decode(m.data))
+        except Exception:   # a truncated or foreign message: that step shows no recorded trace
             out.append({})
     return out
 
@@ -308,18 +321,43 @@ def explain_steps(history, decisions: List[Dict[str, Any]], marginals_of,
     return steps
 
 
+def _plain_decoder(reader: BagReader, topic: str, msg_type_name: str, to_plain) -> Any:
+    """``bytes -> plain dict`` for ``topic`` of the bag: the typed message (``msg_type_name`` of
+    ``conversions``, read by ``to_plain``), or the JSON std_msgs/String of a bag recorded before the
+    typed interfaces."""
+    if reader.topics[topic].type == wk.STRING_TYPE:
+        return lambda data: json.loads(_string_data(data))
+    from rclpy.serialization import deserialize_message
+
+    from pearl_pomdp.nodes import conversions as cv
+
+    msg_type = getattr(cv, msg_type_name)
+    return lambda data: to_plain(deserialize_message(data, msg_type))
+
+
 def _recorded_operator_events(reader: BagReader) -> List[Any]:
-    """``(bag message index, event object)`` of the recorded operator events."""
+    """The recorded operator events in their plain form (``conversions.msg_to_operator_event``)."""
     if OPERATOR_EVENTS_TOPIC not in reader.topics:
         return []
+    from pearl_pomdp.nodes import conversions as cv
+
+    decode = _plain_decoder(reader, OPERATOR_EVENTS_TOPIC, "OperatorEventMsg", cv.msg_to_operator_event)
     out = []
     for m in reader.read_messages([OPERATOR_EVENTS_TOPIC]):
         try:
-            out.append(json.loads(_string_data(m.data)))
-        except (ValueError, UnicodeDecodeError) as err:
+            out.append(decode(m.data))
+        except Exception as err:   # (CDR or JSON): the bag is not what a replay can redo
             raise BagError(f"{reader.path}: topic {OPERATOR_EVENTS_TOPIC}: message at log time {m.log_time} "
                            f"is not an operator event: {err}") from None
     return out
+
+
+def _reenacted(event: Dict[str, Any]) -> bool:
+    """An operator act the bag holds only as its event: an autonomy change, a yes/no, and a veto or
+    command given through the policy's service (the topics' are fed from their own messages)."""
+    kind = event.get("event")
+    return kind in REENACTED or (kind in ("vetoed", "commanded")
+                                 and str(event.get("detail", "")).endswith(BY_SERVICE))
 
 
 def _reenact(driver, event: Dict[str, Any]) -> None:
@@ -339,6 +377,11 @@ def _reenact(driver, event: Dict[str, Any]) -> None:
         driver.settle()
     elif kind in ("confirmed", "declined"):
         driver.answer(kind == "confirmed")
+    elif kind in ("vetoed", "commanded"):
+        what = "veto" if kind == "vetoed" else "command"
+        policy = driver.graph.policy
+        policy.operator_request(what, str(event.get("action")), policy.params[f"{what}_service"], by_service=True)
+        driver.settle()
 
 
 def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: Optional[str] = None,
@@ -368,6 +411,7 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
 
     from std_msgs.msg import String
 
+    from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.common import EVENT_QOS
     from pearl_pomdp.nodes.graph import PearlGraph
     from pearl_pomdp.nodes.sim_clock import SimClockDriver
@@ -389,13 +433,12 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
         node = driver.node
         decisions: List[Dict[str, Any]] = []
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-        from std_msgs.msg import Float64MultiArray
 
         beliefs: List[List[float]] = []
         # Transient-local: b0, published when the tracker activated, arrives on matching.
         keep_all = QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        belief_sub = node.create_subscription(Float64MultiArray, BELIEF_TOPIC, lambda m: beliefs.append(_belief_values(m)),
+        belief_sub = node.create_subscription(cv.BeliefMsg, BELIEF_TOPIC, lambda m: beliefs.append(list(m.probabilities)),
                                               keep_all)
         core = graph.tracker.core
         assert core is not None  # the graph's tracker is configured (autostart)
@@ -409,9 +452,11 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
         _check_topics(reader, {t: type_name for t, (type_name, _) in input_types.items()})
         if explain:
             core.keep_history()
-            node.create_subscription(String, DECISION_TOPIC, lambda m: decisions.append(json.loads(m.data)), 1000)
+            node.create_subscription(cv.DecisionMsg, DECISION_TOPIC, lambda m: decisions.append(cv.msg_to_decision(m)),
+                                     1000)
         replayed_events: List[Dict[str, Any]] = []
-        node.create_subscription(String, OPERATOR_EVENTS_TOPIC, lambda m: replayed_events.append(json.loads(m.data)),
+        node.create_subscription(cv.OperatorEventMsg, OPERATOR_EVENTS_TOPIC,
+                                 lambda m: replayed_events.append(cv.msg_to_operator_event(m)),
                                  QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
                                             durability=DurabilityPolicy.VOLATILE))
         pubs = {t: node.create_publisher(msg_type, t, EVENT_QOS) for t, (_, msg_type) in input_types.items()
@@ -464,7 +509,7 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
                 event: Optional[Dict[str, Any]] = None
                 if m.topic == OPERATOR_EVENTS_TOPIC:
                     event = next(recorded_events, {})
-                if event is not None and event.get("event") not in REENACTED:
+                if event is not None and not _reenacted(event):
                     continue   # an outcome: the replay makes its own
                 if pending is not None:
                     driver.set_time(pending[1], raw=pending[0])

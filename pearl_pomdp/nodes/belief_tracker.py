@@ -82,7 +82,7 @@ class BeliefTrackerNode(ManagedPearlNode):
           ``best_effort``), ``inputs.<name>.depth`` (int): one set per input of the domain
           (:func:`input_parameters`; ``<name>`` is the modality's name in lower case), declared at
           configure with the domain's declaration as default — a remap of an input's topic or QoS.
-        * ``action_topic``, ``belief_topic``, ``marginals_topic`` (str): topic names.
+        * ``action_topic``, ``belief_topic`` (str): topic names.
         * ``use_sim_time`` (bool): follow /clock (rclpy's own parameter).
         * ``journal`` (str, ``auto``), ``journal_max_age`` (double, s): the journal this node writes
           after every change and resumes from when restarted (:mod:`pearl_pomdp.nodes.journaling`:
@@ -98,11 +98,10 @@ class BeliefTrackerNode(ManagedPearlNode):
         * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL): the action that opens a step.
 
     Publishers:
-        * ``/pearl/belief`` (std_msgs/Float64MultiArray, TRANSIENT_LOCAL depth 1): ``b`` after each
-          step, after its run and step (:func:`~pearl_pomdp.nodes.conversions.belief_to_msg`); ``b0``
-          (or the journal's belief) once at start so a late policy still gets it.
-        * ``/pearl/belief_marginals`` (std_msgs/String JSON, TRANSIENT_LOCAL depth 1): step, action,
-          observation and per-feature marginals (see :mod:`pearl_pomdp.nodes.conversions`).
+        * ``/pearl/belief`` (pearl_interfaces/Belief, TRANSIENT_LOCAL depth 1): ``b`` after each
+          step with the step, the tracker's run, the step's action and observation and the per-feature
+          marginals (see :mod:`pearl_pomdp.nodes.conversions`); ``b0`` (or the journal's belief) once
+          at start so a late policy still gets it.
         * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): counters (updates, timeouts,
           queued/dropped observations, speech without keywords, invalid inputs, zero-likelihood
           recoveries, ``lost_inputs``: input messages DDS dropped before the node took them,
@@ -132,8 +131,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         Param("location_names", EMPTY_STRINGS, "Named places (locations.<name> = [x, y, yaw] in the map frame)"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
         Param("action_topic", "/pearl/action", "Primitive actions, which open steps (std_msgs/String)"),
-        Param("belief_topic", "/pearl/belief", "Belief output (std_msgs/Float64MultiArray)"),
-        Param("marginals_topic", "/pearl/belief_marginals", "Per-feature marginals output (JSON String)"),
+        Param("belief_topic", "/pearl/belief", "Belief output (pearl_interfaces/Belief)"),
         Param("reset_service", "/pearl/reset", "std_srvs/Trigger service that returns the belief to b0"),
         *JOURNAL_PARAMETERS,
         AUTOSTART,
@@ -192,7 +190,6 @@ class BeliefTrackerNode(ManagedPearlNode):
         self.journal.resume(self._resume)
 
         self.belief_pub = self.lifecycle_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
-        self.marginals_pub = self.lifecycle_publisher(cv.TextMsg, p["marginals_topic"], LATCHED_QOS)
         for reader, topic, qos in inputs:
             key = reader.channel.name
             callback = self._on_speech(key) if reader.channel.kind == "speech" else self._input_callback(key)
@@ -466,9 +463,9 @@ class BeliefTrackerNode(ManagedPearlNode):
         """The current belief and its marginals (with the step's action and observation, if one closed)."""
         assert self.core is not None
         belief = self.core.belief
-        self.belief_pub.publish(cv.belief_to_msg(belief, (self.core.run, self.core.step)))
-        self.marginals_pub.publish(cv.marginals_to_msg(self.core.marginals(belief), self.core.step, action,
-                                                       observation))
+        self.belief_pub.publish(cv.belief_to_msg(belief, self.core.marginals(belief), self.core.step, action,
+                                                 observation, self.core.model.states, self.now_s(),
+                                                 run=self.core.run))
 
     def counters(self) -> Dict[str, int]:
         """Every counter reported on /diagnostics."""

@@ -5,27 +5,20 @@ nodes call the pairs below (``belief_to_msg`` / ``msg_to_belief``, …) so that 
 types stay at the edge (py_trees_ros ``conversions.py`` style). The message classes the
 nodes create publishers and subscriptions with are exported here too.
 
-Wire formats (all message types come from common_interfaces):
+Wire formats (common_interfaces, and this project's pearl_interfaces):
 
-* **belief** — ``std_msgs/Float64MultiArray``, one dimension: ``layout.dim[0].label`` is
-  :data:`BELIEF_LABEL` (``"state"``), ``size = stride = S``; ``data[data_offset + s]``
-  is ``b(s)`` in the model's state order (for a factored domain: mixed radix, first
-  feature most significant). The tracker's beliefs have ``data_offset = 2``: the padding
-  ``data[0], data[1]`` is the tracker's run and step (whole numbers), so the policy answers
-  each belief once even when a restarted tracker publishes it again (docs/reliability.md,
-  "Crashes"); ``data_offset = 0`` carries no step (any reader that honours ``data_offset``
-  reads both).
-* **belief marginals** — ``std_msgs/String`` holding one JSON object
-  ``{"step": int, "action": str|null, "observation": str|null,
-  "marginals": {feature: {value: probability}}}``. JSON (not a Float64MultiArray) because
-  the features have different numbers of values and a viewer wants the value names.
-  A flat model without features reports one pseudo-feature ``"state"``.
+* **belief** — ``pearl_interfaces/Belief``: the step it closes, that step's action and observation
+  (empty for ``b0``), one ``FeatureMarginal`` per feature (value names and probabilities; a flat
+  model without features reports one pseudo-feature ``"state"``), and the full belief
+  ``probabilities[s] = b(s)`` in the model's state order (for a factored domain: mixed radix,
+  first feature most significant), named in ``state_names`` up to :data:`MAX_NAMED_STATES` states.
 * **action** / **speech** / **touchscreen** / **laser** / **reminder** / **say** / **display** —
   ``std_msgs/String``; the action is the primitive action's name.
-* **decision** — ``std_msgs/String`` JSON ``{"step", "action", "trace": [{"subtask",
-  "choice", "value"}], "latency_s"}``; the trace runs root → … → primitive; ``step`` counts
-  the beliefs this policy node answered before (0 for ``b0``), ``latency_s`` is belief
-  received → action published (wall clock).
+* **decision** — ``pearl_interfaces/Decision`` (``pearl_interfaces/msg/Decision.msg``): the step,
+  the belief step it answers, the action, the EXECUTE trace root → … → primitive (``TraceStep``:
+  subtask, choice, value; NaN: no α-vector), the forward search's expansions, ``latency_s`` (belief
+  received → action published, wall clock) and an online search's ``SearchStats`` (``has_search``);
+  ``step`` counts the beliefs this policy node answered before (0 for ``b0``).
 * **nav goal** — ``geometry_msgs/PoseStamped`` (position x, y; orientation from yaw).
 * **localised pose** — ``geometry_msgs/PoseWithCovarianceStamped`` (``/amcl_pose``) or
   ``nav_msgs/Odometry`` (``/odom``): planar x, y, yaw and the x/y standard deviation.
@@ -39,7 +32,7 @@ from __future__ import annotations
 import array
 import json
 import math
-from typing import Dict, Mapping, Optional, Sequence, Tuple
+from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 from builtin_interfaces.msg import Time as TimeMsg
@@ -47,14 +40,24 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import Odometry
+from pearl_interfaces.msg import Belief as BeliefMsg
+from pearl_interfaces.msg import Decision as DecisionMsg
+from pearl_interfaces.msg import FeatureMarginal as FeatureMarginalMsg
+from pearl_interfaces.msg import OperatorEvent as OperatorEventMsg
+from pearl_interfaces.msg import OperatorProposal as OperatorProposalMsg
+from pearl_interfaces.msg import SearchAction as SearchActionMsg
+from pearl_interfaces.msg import SearchBranch as SearchBranchMsg
+from pearl_interfaces.msg import SearchStats as SearchStatsMsg
+from pearl_interfaces.msg import TraceStep as TraceStepMsg
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
+from std_msgs.msg import String
 
 from pearl_pomdp.errors import BeliefError
 
 __all__ = [
-    "BELIEF_LABEL", "BeliefMsg", "TextMsg", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
-    "belief_to_msg", "msg_to_belief", "msg_to_belief_key", "marginals_to_msg", "msg_to_marginals",
+    "MAX_NAMED_STATES", "BeliefMsg", "TextMsg", "DecisionMsg", "OperatorEventMsg", "OperatorProposalMsg",
+    "operator_event_to_msg", "msg_to_operator_event", "proposal_to_msg", "msg_to_proposal", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
+    "belief_to_msg", "msg_to_belief", "msg_to_belief_key", "msg_to_marginals",
     "text_to_msg", "msg_to_text", "action_to_msg", "msg_to_action",
     "decision_to_msg", "msg_to_decision", "pose_to_msg", "msg_to_pose",
     "diagnostics_to_msg", "msg_to_diagnostics", "seconds_to_time", "time_to_seconds",
@@ -62,14 +65,14 @@ __all__ = [
 ]
 
 #: Message classes used by the nodes (import them from here, not from the message packages).
-BeliefMsg = Float64MultiArray
 TextMsg = String
 PoseMsg = PoseStamped
 DiagnosticsMsg = DiagnosticArray
 ClockMsg = Clock
 
-#: ``layout.dim[0].label`` of a belief message: the one dimension indexes states.
-BELIEF_LABEL = "state"
+#: A belief message names its states (``state_names``) up to this many; a larger model's order is
+#: the mixed radix of its features (first most significant), as the marginals list them.
+MAX_NAMED_STATES = 4096
 
 #: ``DiagnosticStatus`` levels as ints (the message field is one byte).
 DIAG_OK, DIAG_WARN, DIAG_ERROR = (DiagnosticStatus.OK[0], DiagnosticStatus.WARN[0], DiagnosticStatus.ERROR[0])
@@ -95,68 +98,60 @@ def clock_to_msg(seconds: float) -> Clock:
 
 
 # ---------------------------------------------------------------------- belief
-def belief_to_msg(belief: np.ndarray, key: Optional[Tuple[int, int]] = None) -> Float64MultiArray:
-    """A ``[S]`` belief as a one-dimensional Float64MultiArray labelled :data:`BELIEF_LABEL`;
-    ``key`` ``(run, step)``, when given, goes in the two padding values before it (module doc)."""
+def belief_to_msg(belief: np.ndarray, marginals: Optional[Mapping[str, Mapping[str, float]]] = None, step: int = 0,
+                  action: Optional[str] = None, observation: Optional[str] = None,
+                  state_names: Sequence[str] = (), stamp_s: float = 0.0, run: int = 0) -> BeliefMsg:
+    """A ``[S]`` belief as a ``pearl_interfaces/Belief``: ``probabilities`` in the model's state order
+    (named by ``state_names`` when given and at most :data:`MAX_NAMED_STATES` long), the per-feature
+    ``marginals`` ``{feature: {value: p}}``, the step it closes and that step's action and observation;
+    ``run`` the tracker's run (0: none), so a policy answers each ``(run, step)`` once even when a
+    restarted tracker publishes it again (docs/reliability.md, "Crashes")."""
     b = np.asarray(belief, dtype=float)
     if b.ndim != 1:
         raise BeliefError(f"belief must be one-dimensional [S], got shape {b.shape}")
-    msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label=BELIEF_LABEL, size=b.size, stride=b.size)]
-    msg.layout.data_offset = 0 if key is None else 2
-    if key is not None:
-        b = np.concatenate([np.asarray(key, dtype=float), b])
+    if run < 0:
+        raise BeliefError(f"belief run must be a whole number >= 0, got {run}")
+    msg = BeliefMsg(stamp=seconds_to_time(max(0.0, stamp_s)), step=int(step), action=action or "",
+                    observation=observation or "", run=int(run))
     # array('d') is taken as is by the generated setter (a list is checked element by element).
-    msg.data = array.array("d", np.ascontiguousarray(b).tobytes())
+    msg.probabilities = array.array("d", np.ascontiguousarray(b).tobytes())
+    if state_names and len(state_names) <= MAX_NAMED_STATES:
+        msg.state_names = [str(n) for n in state_names]
+    msg.marginals = [FeatureMarginalMsg(feature=str(f), values=[str(v) for v in vals],
+                                        probabilities=[float(p) for p in vals.values()])
+                     for f, vals in (marginals or {}).items()]
     return msg
 
 
-def msg_to_belief_key(msg: Float64MultiArray) -> Optional[Tuple[int, int]]:
-    """The ``(run, step)`` a tracker's belief message carries, or ``None`` (no padding of two)."""
-    if msg.layout.data_offset != 2 or len(msg.data) < 2:
-        return None
-    run, step = msg.data[0], msg.data[1]
-    if not (math.isfinite(run) and math.isfinite(step)):
-        return None
-    return int(run), int(step)
+def msg_to_belief_key(msg: BeliefMsg) -> Optional[Tuple[int, int]]:
+    """The ``(run, step)`` a tracker's belief message carries, or ``None`` (``run`` 0: no run, e.g. replay)."""
+    run = int(getattr(msg, "run", 0))
+    return (run, int(msg.step)) if run > 0 else None
 
 
-def msg_to_belief(msg: Float64MultiArray, num_states: Optional[int] = None) -> np.ndarray:
-    """The ``[S]`` belief of a message written by :func:`belief_to_msg`.
+def msg_to_belief(msg: BeliefMsg, num_states: Optional[int] = None) -> np.ndarray:
+    """The ``[S]`` belief of a ``pearl_interfaces/Belief`` (its ``probabilities``).
 
     Raises:
-        BeliefError: the layout is not one dimension labelled ``"state"``, its size disagrees
-            with the data or with ``num_states``, or the data is not a distribution.
+        BeliefError: the state names disagree in number with the probabilities, the size disagrees
+            with ``num_states``, or the data is not a distribution.
     """
-    dims = list(msg.layout.dim)
-    if len(dims) != 1 or dims[0].label != BELIEF_LABEL:
-        labels = [d.label for d in dims]
-        raise BeliefError(f"belief message layout must be one dimension labelled {BELIEF_LABEL!r}, got {labels}")
-    b = np.asarray(msg.data, dtype=float)[msg.layout.data_offset:]
-    if dims[0].size != b.size:
-        raise BeliefError(f"belief message says size {dims[0].size} but carries {b.size} values")
+    b = np.asarray(msg.probabilities, dtype=float)
+    if len(msg.state_names) and len(msg.state_names) != b.size:
+        raise BeliefError(f"belief message names {len(msg.state_names)} states but carries {b.size} values")
     if num_states is not None and b.size != num_states:
         raise BeliefError(f"belief has {b.size} states, the model has {num_states}")
-    if not np.isfinite(b).all() or (b < -1e-12).any() or abs(b.sum() - 1.0) > 1e-6:
+    if b.size == 0 or not np.isfinite(b).all() or (b < -1e-12).any() or abs(b.sum() - 1.0) > 1e-6:
         raise BeliefError(f"belief message is not a distribution (sum {b.sum():.9g}, min {b.min(initial=0):.3g})")
     return b
 
 
-def marginals_to_msg(marginals: Mapping[str, Mapping[str, float]], step: int,
-                     action: Optional[str] = None, observation: Optional[str] = None) -> String:
-    """Per-feature marginals ``{feature: {value: p}}`` as a JSON String (see the module doc)."""
-    body = {
-        "step": int(step),
-        "action": action,
-        "observation": observation,
-        "marginals": {f: {v: float(p) for v, p in vals.items()} for f, vals in marginals.items()},
-    }
-    return String(data=json.dumps(body, separators=(",", ":")))
-
-
-def msg_to_marginals(msg: String) -> dict:
-    """The JSON object of a marginals message (keys ``step, action, observation, marginals``)."""
-    return json.loads(msg.data)
+def msg_to_marginals(msg: BeliefMsg) -> dict:
+    """The plain per-step form of a belief message: ``{"step", "action", "observation", "marginals":
+    {feature: {value: p}}}`` (``action``/``observation`` ``None`` for ``b0``) — what the behaviour-tree
+    baseline, the demos, ``pearl fit`` and the live view read."""
+    return {"step": int(msg.step), "action": msg.action or None, "observation": msg.observation or None,
+            "marginals": {m.feature: {v: float(p) for v, p in zip(m.values, m.probabilities)} for m in msg.marginals}}
 
 
 # ---------------------------------------------------------------------- strings
@@ -181,33 +176,124 @@ def msg_to_action(msg: String) -> str:
 
 
 def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: float, expansions: int = 0,
-                    belief_step: Optional[int] = None, search: Optional[dict] = None) -> String:
-    """The EXECUTE trace as JSON on a String (root → … → primitive).
+                    belief_step: Optional[int] = None, search: Optional[Mapping] = None,
+                    stamp_s: float = 0.0) -> DecisionMsg:
+    """A ``pearl_interfaces/Decision``: the EXECUTE trace (root → … → primitive) and its record.
 
     Args:
-        trace: items with ``subtask``, ``choice`` and ``value`` attributes (``TraceStep``) or dicts.
+        trace: items with ``subtask``, ``choice`` and ``value`` attributes (``TraceStep``) or dicts
+            (a value ``None`` is NaN: no α-vector).
         expansions: beliefs the decision's forward search expanded (``Decision.expansions``).
         belief_step: the belief this decision answers (0: ``b0``), when it may differ from
-            ``step`` (an operator's veto makes the policy decide again at the same belief).
+            ``step`` (an operator's veto makes the policy decide again at the same belief);
+            ``None``: ``step``.
+        search: an online search's record (``SearchResult.as_dict()``), or ``None``.
+        stamp_s: the node's clock (s).
     """
     steps = []
     for t in trace:
         get = (lambda k: t[k]) if isinstance(t, Mapping) else (lambda k: getattr(t, k))
-        value = float(get("value"))
-        steps.append({"subtask": str(get("subtask")), "choice": str(get("choice")),
-                      "value": value if math.isfinite(value) else None})
-    body = {"step": int(step), "action": action_name, "trace": steps, "latency_s": float(latency_s),
-            "expansions": int(expansions)}
-    if belief_step is not None:
-        body["belief_step"] = int(belief_step)
+        value = get("value")
+        steps.append(TraceStepMsg(subtask=str(get("subtask")), choice=str(get("choice")),
+                                  value=math.nan if value is None else float(value)))
+    msg = DecisionMsg(stamp=seconds_to_time(max(0.0, stamp_s)), step=int(step),
+                      belief_step=int(step if belief_step is None else belief_step), action=str(action_name),
+                      trace=steps, expansions=int(expansions), latency_s=float(latency_s))
     if search is not None:
-        body["search"] = search
-    return String(data=json.dumps(body, separators=(",", ":")))
+        msg.has_search = True
+        msg.search = _search_to_msg(search)
+    return msg
 
 
-def msg_to_decision(msg: String) -> dict:
-    """The JSON object of a ``/pearl/decision`` message."""
-    return json.loads(msg.data)
+_SEARCH_FIELDS = ("lower", "upper", "gap", "trials", "nodes", "expansions", "seconds", "stop")
+_BRANCH_FIELDS = ("observation", "share", "lower", "upper", "expanded")
+
+
+def _search_action(a: Mapping) -> SearchActionMsg:
+    return SearchActionMsg(action=str(a["action"]), lower=float(a["lower"]), upper=float(a["upper"]),
+                           reward=float(a.get("reward", math.nan)),
+                           children=[SearchBranchMsg(observation=int(c["observation"]), share=float(c["share"]),
+                                                     lower=float(c["lower"]), upper=float(c["upper"]),
+                                                     expanded=bool(c["expanded"])) for c in a.get("children", ())])
+
+
+def _search_to_msg(search: Mapping) -> SearchStatsMsg:
+    top = search.get("top") or {}
+    return SearchStatsMsg(lower=float(search.get("lower", math.nan)), upper=float(search.get("upper", math.nan)),
+                          gap=float(search.get("gap", math.nan)), trials=int(search.get("trials", 0)),
+                          nodes=int(search.get("nodes", 0)), expansions=int(search.get("expansions", 0)),
+                          seconds=float(search.get("seconds", 0.0)), stop=str(search.get("stop", "")),
+                          bounds=str(search.get("bounds", "")), scenarios=int(top.get("scenarios", 0)),
+                          top=[_search_action(a) for a in top.get("actions", ())],
+                          action_bounds=[_search_action(a) for a in search.get("action_bounds", ())])
+
+
+def _search_from_msg(msg: SearchStatsMsg) -> dict:
+    def action(a) -> dict:
+        out = {"action": a.action, "lower": a.lower, "upper": a.upper,
+               "children": [{k: getattr(c, k) for k in _BRANCH_FIELDS} for c in a.children]}
+        if math.isfinite(a.reward):
+            out["reward"] = a.reward
+        return out
+
+    body = {k: getattr(msg, k) for k in _SEARCH_FIELDS}
+    body.update(bounds=msg.bounds, top={"lower": msg.lower, "upper": msg.upper, "scenarios": msg.scenarios,
+                                        "actions": [action(a) for a in msg.top]},
+                action_bounds=[{"action": a.action, "lower": a.lower, "upper": a.upper} for a in msg.action_bounds])
+    return body
+
+
+def msg_to_decision(msg: DecisionMsg) -> dict:
+    """The plain form of a ``/pearl/decision`` message: ``{"step", "belief_step", "action", "trace":
+    [{"subtask", "choice", "value"}], "latency_s", "expansions"}`` (a NaN value is ``None``) and,
+    for an online search, ``"search"`` (``lower, upper, gap, trials, nodes, expansions, seconds, stop,
+    bounds, top, action_bounds``: the form ``OnlineDecider`` records)."""
+    body = {"step": int(msg.step), "belief_step": int(msg.belief_step), "action": msg.action,
+            "trace": [{"subtask": t.subtask, "choice": t.choice,
+                       "value": t.value if math.isfinite(t.value) else None} for t in msg.trace],
+            "latency_s": float(msg.latency_s), "expansions": int(msg.expansions)}
+    if msg.has_search:
+        body["search"] = _search_from_msg(msg.search)
+    return body
+
+
+# -------------------------------------------------------------------- operator
+def operator_event_to_msg(event) -> OperatorEventMsg:
+    """An :class:`~pearl_pomdp.operator.OperatorEvent` as a ``pearl_interfaces/OperatorEvent``."""
+    msg = OperatorEventMsg(kind=event.kind, action=event.action, step=int(event.step), stamp=float(event.stamp),
+                           autonomy=event.autonomy, detail=event.detail)
+    if event.settings is not None:
+        msg.has_settings = True
+        msg.confirm_categories = [str(c) for c in event.settings.get("confirm_categories", ())]
+        msg.confirm_timeout = float(event.settings.get("confirm_timeout", math.nan))
+    return msg
+
+
+def msg_to_operator_event(msg: OperatorEventMsg) -> dict:
+    """The plain form of an operator event (``OperatorEvent.as_dict``: ``event, action, step, stamp,
+    autonomy, detail`` and, for ``autonomy`` events, ``settings``)."""
+    out = {"event": msg.kind, "action": msg.action, "step": int(msg.step), "stamp": float(msg.stamp),
+           "autonomy": msg.autonomy, "detail": msg.detail}
+    if msg.has_settings:
+        out["settings"] = {"autonomy": msg.autonomy, "confirm_categories": list(msg.confirm_categories),
+                           "confirm_timeout": float(msg.confirm_timeout)}
+    return out
+
+
+def proposal_to_msg(proposal: Mapping[str, Any]) -> OperatorProposalMsg:
+    """``OperatorGate.proposal()`` as a ``pearl_interfaces/OperatorProposal`` (no deadline: NaN)."""
+    deadline = proposal.get("deadline")
+    return OperatorProposalMsg(step=int(proposal["step"]), action=str(proposal["action"]),
+                               source=str(proposal["source"] or ""), status=str(proposal["status"] or ""),
+                               autonomy=str(proposal["autonomy"]), vetoed=[str(v) for v in proposal["vetoed"]],
+                               deadline=math.nan if deadline is None else float(deadline))
+
+
+def msg_to_proposal(msg: OperatorProposalMsg) -> dict:
+    """The plain form of a proposal (``OperatorGate.proposal()``; a NaN deadline is ``None``)."""
+    return {"step": int(msg.step), "action": msg.action, "source": msg.source, "status": msg.status,
+            "autonomy": msg.autonomy, "vetoed": list(msg.vetoed),
+            "deadline": msg.deadline if math.isfinite(msg.deadline) else None}
 
 
 # ------------------------------------------------------------------------ poses

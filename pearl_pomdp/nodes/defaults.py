@@ -12,21 +12,62 @@ and declares each parameter with the file's value as its default. So
 * ``ros2 run pearl_pomdp belief_tracker`` (or any node) with no parameters behaves as under the
   launch file (``test/test_node_params.py`` checks every node);
 * ``--params-file`` and ``-p`` still override every value (they are overrides in rclpy);
-* ``-p defaults_file:=''`` starts from the code's defaults (no places, no action table).
+* ``-p defaults_file:=''`` starts from the code's defaults (no places, no action table);
+* a node given a ``domain`` and no ``defaults_file`` reads that domain's own params file instead:
+  ``NAME_nodes.yaml`` beside ``NAME.domain.yaml`` (Pearl's ``config/pearl.domain.yaml`` gives
+  ``config/pearl_nodes.yaml``); a domain without one whose ``name:`` is Pearl's (a copy of Pearl's
+  domain, as ``pearl demo`` writes) reads Pearl's file; any other only the code's defaults. Pearl's
+  values never reach another robot (``-p domain:=courier.domain.yaml`` alone starts a courier node).
 """
 from __future__ import annotations
 
+import re
 from dataclasses import replace
-from typing import Any, Dict, List, Mapping, Sequence
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional, Sequence
 
 from pearl_pomdp.errors import SpecError
 from pearl_pomdp.nodes.common import NodeSetupError, Param, PearlNode, resolve_path
 from pearl_pomdp.params import node_parameters
 
-__all__ = ["DEFAULTS_FILE", "FileDefaults"]
+__all__ = ["DEFAULTS_FILE", "DOMAIN_SUFFIX", "NODES_SUFFIX", "FileDefaults", "domain_params_file"]
 
 #: The params file the package ships; its sections hold every node's defaults.
 DEFAULTS_FILE = "config/pearl_nodes.yaml"
+
+#: A domain ``NAME.domain.yaml`` keeps its robot's node params in ``NAME_nodes.yaml`` beside it.
+DOMAIN_SUFFIX, NODES_SUFFIX = ".domain.yaml", "_nodes.yaml"
+
+
+def _domain_name(path: Path) -> Optional[str]:
+    """The top-level ``name:`` of a domain file (``None``: none, or unreadable)."""
+    try:
+        found = re.search(r"^name:\s*['\"]?([^'\"#\s]+)", path.read_text(encoding="utf-8"), re.MULTILINE)
+    except (OSError, UnicodeDecodeError):
+        return None
+    return found.group(1) if found else None
+
+
+def domain_params_file(domain: str) -> Optional[Path]:
+    """The node params file of the domain file ``domain`` (a parameter value, looked up like every
+    file parameter): ``NAME_nodes.yaml`` beside ``NAME.domain.yaml``; else, for a domain named as
+    Pearl's (``config/pearl.domain.yaml``'s ``name:``), Pearl's :data:`DEFAULTS_FILE`; else ``None``
+    (also when the domain file is missing: the node's own ``domain`` check reports that)."""
+    try:
+        path = resolve_path(domain, "domain")
+    except NodeSetupError:
+        return None
+    if path.name.endswith(DOMAIN_SUFFIX):
+        params = path.with_name(path.name[: -len(DOMAIN_SUFFIX)] + NODES_SUFFIX)
+        if params.is_file():
+            return params
+    try:
+        pearl = resolve_path(DEFAULTS_FILE, "defaults_file")
+    except NodeSetupError:
+        return None
+    own = pearl.with_name(pearl.name[: -len(NODES_SUFFIX)] + DOMAIN_SUFFIX)
+    name = _domain_name(path)
+    return pearl if name is not None and name == _domain_name(own) else None
 
 
 def _type_name(value: Any) -> str:
@@ -75,12 +116,20 @@ class FileDefaults:
     """
 
     PARAM = Param("defaults_file", DEFAULTS_FILE,
-                  "Params file whose '/**' and node sections give this node's defaults ('': none)")
+                  "Params file whose '/**' and node sections give this node's defaults ('': none); "
+                  "when only 'domain' is given: that domain's NAME_nodes.yaml, if it has one")
 
     def __init__(self, node: PearlNode):
         value = node.declare_table([self.PARAM])["defaults_file"]
         self.section = node.DEFAULT_NAME
-        self.path = resolve_path(value, "defaults_file") if value else None
+        # rclpy keeps what -p / --params-file / parameter_overrides gave the node here (no public getter).
+        given = getattr(node, "_parameter_overrides", {})
+        if "defaults_file" not in given and "domain" in given and isinstance(given["domain"].value, str) \
+                and given["domain"].value:
+            own = domain_params_file(given["domain"].value)
+            self.path: Optional[Path] = own
+        else:
+            self.path = resolve_path(value, "defaults_file") if value else None
         self.values: Dict[str, Any] = {}
         if self.path is not None:
             try:

@@ -12,9 +12,9 @@ of it is published on the events topic, so a bag records it.
 from __future__ import annotations
 
 import collections
-import json
 import sys
 import time
+from dataclasses import replace
 from typing import Any, Deque, List, Optional, Tuple
 
 import numpy as np
@@ -28,7 +28,7 @@ from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Pa
 from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.journaling import JOURNAL_PARAMETERS, NodeJournal
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
-from pearl_pomdp.operator import AUTONOMY_LEVELS, GateOutput, OperatorGate
+from pearl_pomdp.operator import AUTONOMY_LEVELS, BY_SERVICE, GateOutput, OperatorGate
 
 #: The parameters an operator may change while the node runs (``ros2 param set``).
 OPERATOR_LIVE = ("autonomy", "confirm_categories", "confirm_timeout")
@@ -115,19 +115,19 @@ class HierarchicalPolicyNode(ManagedPearlNode):
           ``operator_events_topic`` (str, read-only): the operator interfaces' names.
 
     Subscribers:
-        * ``/pearl/belief`` (std_msgs/Float64MultiArray, TRANSIENT_LOCAL): the tracker's belief.
+        * ``/pearl/belief`` (pearl_interfaces/Belief, TRANSIENT_LOCAL): the tracker's belief.
 
     Publishers:
         * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL depth 1): the primitive action.
-        * ``/pearl/decision`` (std_msgs/String JSON): ``{"step", "action", "trace": [{"subtask",
-          "choice", "value"}], "latency_s", "expansions"}`` — the EXECUTE trace, the decision's step
-          latency (belief message received → action published, wall clock) and the beliefs its
-          forward search expanded (0: the one-step choice only).
+        * ``/pearl/decision`` (pearl_interfaces/Decision): the step, the belief step it answers, the
+          action, the EXECUTE trace (subtask, choice, value), the decision's latency (belief message
+          received → action published, wall clock), the beliefs its forward search expanded (0: the
+          one-step choice only) and an online search's record (``has_search``, ``search``).
         * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): decisions, rejected beliefs and
           latency p50/p99/max over the last 1000 decisions; one ERROR status per refused operator input.
-        * ``/pearl/proposal`` (std_msgs/String JSON, TRANSIENT_LOCAL depth 1): the step's current
+        * ``/pearl/proposal`` (pearl_interfaces/OperatorProposal, TRANSIENT_LOCAL depth 1): the step's current
           action and its status (:meth:`~pearl_pomdp.operator.OperatorGate.proposal`).
-        * ``/pearl/operator/events`` (std_msgs/String JSON): every operator event
+        * ``/pearl/operator/events`` (pearl_interfaces/OperatorEvent): every operator event
           (:class:`~pearl_pomdp.operator.OperatorEvent`).
 
     Operator inputs:
@@ -135,6 +135,10 @@ class HierarchicalPolicyNode(ManagedPearlNode):
           policy re-decides at once when it was the choice.
         * ``/pearl/operator/command`` (std_msgs/String): an action name, published as the robot's action.
         * ``/pearl/operator/confirm`` (std_srvs/SetBool service): yes/no to the waiting action.
+        * ``/pearl/operator/set_autonomy`` (pearl_interfaces/SetAutonomy service): the level, and the
+          confirm categories / timeout when given; set as the parameters (a bad level is refused).
+        * ``/pearl/operator/veto_action``, ``/pearl/operator/command_action`` (pearl_interfaces/Veto,
+          Command services): the veto and command with a reply (accepted, what happened or why not).
 
     In-process use: ``HierarchicalPolicyNode(context=ctx, parameter_overrides={...}, domain=dom,
     model=model, decider=d)`` — ``decider`` (anything with ``.execute(belief) -> Decision``)
@@ -155,9 +159,9 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                                                        "decision's search stops at its next expansion (a guard; "
                                                        "the budget is TRIALS); 0: no guard", range=(0.0, 3600.0)),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
-        Param("belief_topic", "/pearl/belief", "Belief input (std_msgs/Float64MultiArray)"),
+        Param("belief_topic", "/pearl/belief", "Belief input (pearl_interfaces/Belief)"),
         Param("action_topic", "/pearl/action", "Primitive action output (std_msgs/String)"),
-        Param("decision_topic", "/pearl/decision", "EXECUTE trace output (JSON std_msgs/String)"),
+        Param("decision_topic", "/pearl/decision", "EXECUTE trace output (pearl_interfaces/Decision)"),
         Param("autonomy", "full", f"Autonomy level: {' / '.join(AUTONOMY_LEVELS)} (full acts, confirm waits for "
                                   "the operator's yes, off only proposes); changeable at run time", read_only=False),
         Param("confirm_categories", [], "Under confirm, the action categories that wait for a yes (the domain's "
@@ -170,8 +174,15 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                                                           "robot's (std_msgs/String)"),
         Param("confirm_service", "/pearl/operator/confirm", "Operator's yes/no to the waiting action "
                                                             "(std_srvs/SetBool)"),
-        Param("proposal_topic", "/pearl/proposal", "The step's action and its status (JSON std_msgs/String)"),
-        Param("operator_events_topic", "/pearl/operator/events", "Every operator event (JSON std_msgs/String)"),
+        Param("set_autonomy_service", "/pearl/operator/set_autonomy", "Operator's autonomy level (and confirm "
+                                                                      "settings) (pearl_interfaces/SetAutonomy)"),
+        Param("veto_service", "/pearl/operator/veto_action", "Operator's veto with a reply (pearl_interfaces/Veto)"),
+        Param("command_service", "/pearl/operator/command_action", "Operator's command with a reply "
+                                                                  "(pearl_interfaces/Command)"),
+        Param("proposal_topic", "/pearl/proposal", "The step's action and its status "
+                                                   "(pearl_interfaces/OperatorProposal)"),
+        Param("operator_events_topic", "/pearl/operator/events", "Every operator event "
+                                                                 "(pearl_interfaces/OperatorEvent)"),
         *JOURNAL_PARAMETERS,
         AUTOSTART,
     )
@@ -195,6 +206,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self.actions_published = 0      # actions put on action_topic (policy's, confirmed, commanded)
         self.inactive_operator = 0      # operator inputs while not active (not acted)
         self._confirm_srv: Optional[Any] = None
+        self._operator_srvs: List[Any] = []
         self._confirm_timer: Optional[Any] = None
         self.repeated_beliefs = 0       # beliefs of a (run, step) already answered (a restarted tracker's)
         self._held_belief: Optional[Any] = None   # the latest belief that came while inactive
@@ -226,17 +238,23 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                                    domain.source if domain is not None else p["domain"])
         self.journal.resume(self._resume)
         self.action_pub = self.lifecycle_publisher(cv.TextMsg, p["action_topic"], LATCHED_QOS)
-        self.decision_pub = self.lifecycle_publisher(cv.TextMsg, p["decision_topic"], EVENT_QOS)
-        self.proposal_pub = self.lifecycle_publisher(cv.TextMsg, p["proposal_topic"], LATCHED_QOS)
+        self.decision_pub = self.lifecycle_publisher(cv.DecisionMsg, p["decision_topic"], EVENT_QOS)
+        self.proposal_pub = self.lifecycle_publisher(cv.OperatorProposalMsg, p["proposal_topic"], LATCHED_QOS)
         # Depth 100: a burst of events (a veto re-deciding, a command withdrawing) reaches the recorder.
-        self.operator_events_pub = self.lifecycle_publisher(cv.TextMsg, p["operator_events_topic"],
+        self.operator_events_pub = self.lifecycle_publisher(cv.OperatorEventMsg, p["operator_events_topic"],
                                                             _deep(EVENT_QOS, 100))
         self.managed_subscription(cv.BeliefMsg, p["belief_topic"], self._on_belief, LATCHED_QOS)
         self.managed_subscription(cv.TextMsg, p["veto_topic"], self._operator_input("veto"), EVENT_QOS)
         self.managed_subscription(cv.TextMsg, p["command_topic"], self._operator_input("command"), EVENT_QOS)
         from std_srvs.srv import SetBool
 
+        from pearl_interfaces.srv import Command, SetAutonomy, Veto
+
         self._confirm_srv = self.create_service(SetBool, p["confirm_service"], self._on_confirm)
+        self._operator_srvs = [
+            self.create_service(SetAutonomy, p["set_autonomy_service"], self._on_set_autonomy),
+            self.create_service(Veto, p["veto_service"], self._operator_service("veto")),
+            self.create_service(Command, p["command_service"], self._operator_service("command"))]
         # One-shot timer for the waiting action's deadline (node clock: sim time under /clock).
         self._confirm_timer = self.managed_timer(p["confirm_timeout"], self._on_confirm_deadline)
         self._confirm_timer.cancel()
@@ -251,6 +269,9 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         if self._confirm_srv is not None:
             self.destroy_service(self._confirm_srv)
             self._confirm_srv = None
+        for srv in self._operator_srvs:
+            self.destroy_service(srv)
+        self._operator_srvs = []
         self._confirm_timer = None
 
     def activate_node(self) -> None:
@@ -298,13 +319,14 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             self.decision_pub.publish(cv.decision_to_msg(self.decisions, decision.action_name, decision.trace,
                                                          latency, getattr(decision, "expansions", 0),
                                                          belief_step=self.gate.step,
-                                                         search=getattr(decision, "search", None)))
+                                                         search=getattr(decision, "search", None),
+                                                         stamp_s=self.now_s()))
             self.decisions += 1
             self.last_decision = decision
         if out.proposal_changed:
-            self.proposal_pub.publish(cv.text_to_msg(json.dumps(self.gate.proposal(), separators=(",", ":"))))
+            self.proposal_pub.publish(cv.proposal_to_msg(self.gate.proposal()))
         for event in out.events:
-            self.operator_events_pub.publish(cv.text_to_msg(json.dumps(event.as_dict(), separators=(",", ":"))))
+            self.operator_events_pub.publish(cv.operator_event_to_msg(event))
             if event.kind not in ("acted", "rejected"):
                 self.get_logger().info(f"operator: {event.kind} {event.action}"
                                        + (f" ({event.detail})" if event.detail else ""))
@@ -336,21 +358,53 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         return f"last acted {step}; autonomy {autonomy}"
 
     def _operator_input(self, what: str):
-        topic = self.params[f"{what}_topic"]
-
         def callback(msg) -> None:
-            if not self.active or self.gate is None:
-                self.inactive_operator += 1   # a deactivated policy does not act
-                return
-            start = time.perf_counter()
-            self.operator_inputs += 1
-            action = cv.msg_to_action(msg)
-            out = self.gate.veto(action, self.now_s()) if what == "veto" else self.gate.command(action, self.now_s())
-            self._apply(out, start)
-            if out.error is not None:
-                self._refused(f"{topic}: {out.error}")
+            self.operator_request(what, cv.msg_to_action(msg), self.params[f"{what}_topic"])
 
         return callback
+
+    def _operator_service(self, what: str):
+        def handler(request, response):
+            response.accepted, response.message = self.operator_request(what, request.action.strip(),
+                                                                        self.params[f"{what}_service"], by_service=True)
+            return response
+
+        return handler
+
+    def operator_request(self, what: str, action: str, via: str, by_service: bool = False) -> Tuple[bool, str]:
+        """The operator's veto or command of ``action``, received on ``via`` (a topic or, ``by_service``,
+        a service: then its vetoed/commanded event's detail ends with :data:`BY_SERVICE`, so that a
+        replay, which has no record of the call, does it again from the event) → ``(accepted, message)``."""
+        if not self.active or self.gate is None:
+            self.inactive_operator += 1   # a deactivated policy does not act
+            return False, "not active: the policy does not act"
+        start = time.perf_counter()
+        self.operator_inputs += 1
+        out = self.gate.veto(action, self.now_s()) if what == "veto" else self.gate.command(action, self.now_s())
+        if by_service:
+            out.events = [replace(e, detail=f"{e.detail}; {BY_SERVICE}" if e.detail else BY_SERVICE)
+                          if e.kind in ("vetoed", "commanded") else e for e in out.events]
+        self._apply(out, start)
+        if out.error is not None:
+            self._refused(f"{via}: {out.error}")
+            return False, out.error
+        return True, "; ".join(f"{e.kind} {e.action}" + (f" ({e.detail})" if e.detail else "") for e in out.events)
+
+    def _on_set_autonomy(self, request, response):
+        """``/pearl/operator/set_autonomy`` (pearl_interfaces/SetAutonomy): the level (and, when given,
+        the confirm categories and timeout), set as the node's parameters (checked by the core)."""
+        from rclpy.parameter import Parameter
+
+        params = [Parameter("autonomy", Parameter.Type.STRING, request.level.strip())]
+        if request.confirm_categories:
+            params.append(Parameter("confirm_categories", Parameter.Type.STRING_ARRAY, list(request.confirm_categories)))
+        if request.confirm_timeout > 0:
+            params.append(Parameter("confirm_timeout", Parameter.Type.DOUBLE, float(request.confirm_timeout)))
+        result = self.set_parameters_atomically(params)
+        response.accepted = bool(result.successful)
+        response.message = (f"autonomy {self.get_parameter('autonomy').value}" if result.successful
+                            else f"{self.params['set_autonomy_service']}: {result.reason}")
+        return response
 
     def _refused(self, text: str) -> None:
         """One operator input was refused: one ERROR status on /diagnostics, naming the topic."""

@@ -98,6 +98,7 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
     from pearl_pomdp.hierarchy.plan import plan
     from pearl_pomdp.hierarchy.spec import load_hierarchy
     from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.nodes.graph import PearlGraph
     from pearl_pomdp.nodes.sim_clock import SimClockDriver
@@ -146,15 +147,14 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
         decisions: List[dict] = []
         marginals: List[dict] = []
         listener = graph.add_node(rclpy.create_node("demo_listener", context=context))
-        def keep(into: List[dict]) -> Callable[[Any], None]:
-            return lambda msg: into.append(json.loads(msg.data))   # std_msgs/String holding JSON
-
-        listener.create_subscription(String, "/pearl/decision", keep(decisions), 50)
+        listener.create_subscription(cv.DecisionMsg, "/pearl/decision",
+                                     lambda msg: decisions.append(cv.msg_to_decision(msg)), 50)
         latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        listener.create_subscription(String, "/pearl/belief_marginals", keep(marginals), latched)
+        listener.create_subscription(cv.BeliefMsg, "/pearl/belief", lambda msg: marginals.append(cv.msg_to_marginals(msg)),
+                                     latched)
         rec_node = graph.add_node(rclpy.create_node("demo_recorder", context=context, parameter_overrides=[
             rclpy.parameter.Parameter("use_sim_time", rclpy.parameter.Parameter.Type.BOOL, True)]))
-        topics = ["/clock", "/pearl/action", "/pearl/belief", "/pearl/belief_marginals", "/pearl/decision",
+        topics = ["/clock", "/pearl/action", "/pearl/belief", "/pearl/decision",
                   "/pearl/say", "/pearl/display", "/goal_pose", SAID_TOPIC, TRUTH_TOPIC] + [
                       c.topic for c in domain.inputs]
         writer = BagWriter(bag_dir, custom_data={

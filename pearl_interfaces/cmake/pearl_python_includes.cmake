@@ -1,0 +1,36 @@
+# The ROS 2 wheels on PyPI export their *__rosidl_generator_py targets with the include
+# directories of the machine that built them (/opt/python/cpXY-cpXY/include/pythonX.Y and its
+# numpy headers). On a ROS install these exist and nothing below changes; elsewhere each missing
+# Python or numpy include directory is replaced by this Python's.
+#
+# Call it after rosidl_generate_interfaces (the dependencies' targets are imported then).
+macro(pearl_python_includes)
+  find_package(Python3 REQUIRED COMPONENTS Interpreter Development.Module NumPy)
+  get_property(_imported DIRECTORY PROPERTY IMPORTED_TARGETS)
+  foreach(_target IN LISTS _imported)
+    get_target_property(_dirs ${_target} INTERFACE_INCLUDE_DIRECTORIES)
+    if(NOT _dirs)
+      continue()
+    endif()
+    set(_fixed "")
+    set(_changed FALSE)
+    foreach(_dir IN LISTS _dirs)
+      if(_dir MATCHES "^\\$<" OR EXISTS "${_dir}")
+        list(APPEND _fixed "${_dir}")
+      elseif(_dir MATCHES "/numpy/")
+        list(APPEND _fixed ${Python3_NumPy_INCLUDE_DIRS})
+        set(_changed TRUE)
+      elseif(_dir MATCHES "/include/python[0-9.]+$")
+        list(APPEND _fixed ${Python3_INCLUDE_DIRS})
+        set(_changed TRUE)
+      else()
+        list(APPEND _fixed "${_dir}")
+      endif()
+    endforeach()
+    if(_changed)
+      list(REMOVE_DUPLICATES _fixed)
+      message(STATUS "${_target}: missing Python include directories replaced by this Python's")
+      set_target_properties(${_target} PROPERTIES INTERFACE_INCLUDE_DIRECTORIES "${_fixed}")
+    endif()
+  endforeach()
+endmacro()
