@@ -124,7 +124,10 @@ def test_a_node_stopped_by_sigint_leaves_its_segment_and_the_clean_up_removes_on
                      str(REPO / "config" / "pearl_nodes.yaml")], ros_env(domain_id, tmp_path / "log"),
                     tmp_path / "log", "action_executor")
         try:
-            assert wait_for(lambda: "action_executor" in probe.get_node_names(), timeout=60), node.stderr()
+            # Up means its start-up is done (it says what it executes), not only its name in the graph:
+            # a SIGINT in the middle of its start-up is test_shutdown's business.
+            assert wait_for(lambda: "executing" in node.stdout() + node.stderr()
+                            and "action_executor" in probe.get_node_names(), timeout=60), node.stderr()
             left_by_node = _segments_locked_by(node.popen.pid)
             assert left_by_node, "the node's participant has no shared-memory segment"
             # Other test processes clean /dev/shm too (a `pearl launch` ending in another xdist worker),
