@@ -105,7 +105,9 @@ setup(
         + SPEECH,
         "speech": SPEECH,
         "cluster": CLUSTER,
-        "test": ["pytest>=7", "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6", "py_trees>=2.2",
+        "test": ["pytest>=7",
+                 "pytest-xdist>=3",  # `pytest -q` runs its tests on every core (test/conftest.py)
+                 "hypothesis>=6", "rosbags>=0.10", "matplotlib>=3.6", "py_trees>=2.2",
                  "websockets>=12",  # a real WebSocket client for test/test_live_view.py
                  "mypy>=1.8"]  # .ci/run type-checks the core (mypy.ini)
         + SPEECH + CLUSTER + AMENT_BUILD,

@@ -56,12 +56,62 @@ def ward_domain():
 
 # ROS fixtures (ros_context, pearl_policy) live in test/ros_helpers.py; registered here once so
 # the session-scoped planned Pearl policy is shared by every test module.
-from ros_helpers import day_policy, pearl_policy, ros_context  # noqa: E402,F401
+from ros_helpers import day_policy, domain_leases, pearl_policy, ros_context  # noqa: E402,F401
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _module_domain_leases():
+    """The ROS domain ids a module's fixtures leased go back when the module ends (ros_helpers)."""
+    with domain_leases():
+        yield
+
+
+@pytest.fixture(autouse=True)
+def _test_domain_leases():
+    """The ROS domain ids a test (and its function fixtures) leased go back when it ends."""
+    with domain_leases():
+        yield
+
+
+# ------------------------------------------------------------------ both cores (pytest-xdist)
+#: At most this many worker processes by default: each may compile the ward (~0.5 GB) and run a
+#: ROS graph of four processes, so more than four buys little even on a bigger machine.
+MAX_WORKERS = 4
+
+
+def _is_worker(config) -> bool:
+    return hasattr(config, "workerinput")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config):
+    """`pytest -q` runs on every core (up to MAX_WORKERS) when pytest-xdist is installed (the test
+    extra installs it), a test file per worker at a time (--dist loadfile). An explicit ``-n`` /
+    ``--dist`` / ``-p no:xdist`` wins; without xdist the run is sequential, as before.
+
+    Why by file: a module's fixtures (a ROS graph, a planned policy, the ward's two launches) are
+    built once per worker that runs one of its tests; split over workers, a module builds them twice
+    and the ward launch test would run two ward graphs at once (each compiles the
+    233,280-state ward in three processes). (Finer groups, --dist
+    loadgroup, are no option: pytest-xdist 3.8 cannot group under pytest >= 9.2, its
+    issue #1386, and then silently hands out the tests one by one.)"""
+    if not config.pluginmanager.hasplugin("xdist") or _is_worker(config):
+        return
+    option = config.option
+    if option.numprocesses is None and not option.tx and option.dist == "no" and not option.usepdb:
+        workers = min(len(os.sched_getaffinity(0)), MAX_WORKERS)
+        option.numprocesses = workers if workers > 1 else 0
+        if workers > 1:
+            option.dist = "loadfile"
 
 
 def pytest_sessionfinish(session, exitstatus):
     """Leave no Fast DDS shared memory behind: the tests stop node processes by signal, and each such
-    stop leaves its participant's segment in /dev/shm (pearl_pomdp.shared_memory; ~150 MB a run)."""
+    stop leaves its participant's segment in /dev/shm (pearl_pomdp.shared_memory; ~150 MB a run).
+    Under xdist only the controller cleans, once every worker has ended: a worker that finished
+    early must not clean while another still runs a test that counts the segments."""
+    if _is_worker(session.config):
+        return
     from pearl_pomdp.shared_memory import remove_dead_files
 
     remove_dead_files()

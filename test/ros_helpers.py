@@ -1,8 +1,10 @@
 """Helpers for tests that run real ROS 2 nodes (what launch_testing would do, in pytest).
 
-* :func:`allocate_domain_id` — a ``ROS_DOMAIN_ID`` per test in 1..101 (above 101 DDS ports reach
-  Linux's ephemeral range), spread by process id, pytest-xdist worker and a counter, so parallel
-  runs and tests do not see each other.
+* :func:`allocate_domain_id` — a ``ROS_DOMAIN_ID`` in 1..101 (above 101 DDS ports reach Linux's
+  ephemeral range) that no other test process on this machine holds: each id is a lease, an
+  ``flock`` on a file of :data:`LEASE_DIR`, so the pytest-xdist workers of a run and other runs
+  (another checkout's suite) never share one. :func:`domain_leases` gives a scope's leases back
+  (conftest wraps every test and module in it); the kernel drops them when the process ends.
 * :func:`ros_env` — the environment for a node process: the domain, discovery on localhost only,
   the fast-discovery Fast DDS profile (``config/fastdds_profile.xml``), logs and node journals
   (``ROS_HOME``) in a temporary dir.
@@ -15,14 +17,17 @@
 """
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import itertools
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, Iterator, List, Optional, Tuple
 
 import pytest
 
@@ -33,14 +38,66 @@ PYTHON = sys.executable
 #: Discovery between processes: allow this long (2-core machine under load).
 DISCOVERY_TIMEOUT = 20.0
 
+#: The ROS domain ids the tests use: 1..101 (DDS ports of higher ids reach the ephemeral range).
+DOMAIN_IDS = 101
+#: Where the leases on domain ids live: one lock file per id, per user (any checkout, any run).
+LEASE_DIR = Path(tempfile.gettempdir()) / f"pearl_pomdp-ros-domains-{os.getuid()}"
+
+#: This process's leases, oldest first: (domain id, the open file whose flock is the lease).
+_leases: List[Tuple[int, int]] = []
 _counter = itertools.count()
 
 
+def _worker() -> Tuple[int, int]:
+    """(index, count) of this pytest-xdist worker; (0, 1) outside xdist."""
+    name = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+    count = os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")
+    return (int(name[2:]) if name[2:].isdigit() else 0), (int(count) if count.isdigit() else 1)
+
+
+def _lease(domain_id: int) -> bool:
+    """Take the lease on ``domain_id`` if no process holds it (never blocks)."""
+    try:
+        LEASE_DIR.mkdir(mode=0o700, exist_ok=True)
+        fd = os.open(LEASE_DIR / f"{domain_id}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        return False
+    _leases.append((domain_id, fd))
+    return True
+
+
 def allocate_domain_id() -> int:
-    """A ROS domain id in 1..101, different for each call in a process and likely across processes."""
-    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
-    w = int(worker[2:]) if worker[2:].isdigit() else 0
-    return 1 + (os.getpid() * 7 + w * 37 + next(_counter) * 13) % 101
+    """A ROS domain id in 1..:data:`DOMAIN_IDS` that no other process holds, leased until the
+    scope that asked for it ends (:func:`domain_leases`; the test, or the module for a module
+    fixture). Each worker starts its search in its own share of the range, so the workers of a
+    run rarely even look at the same ids. If all ids are held (> 100 tests at once on one
+    machine), the least recently leased of this process is handed out again."""
+    index, count = _worker()
+    share = DOMAIN_IDS // max(count, 1)
+    start = index * share + (os.getpid() + next(_counter)) % max(share, 1)
+    mine = {domain_id for domain_id, _ in _leases}
+    for step in range(DOMAIN_IDS):
+        domain_id = 1 + (start + step) % DOMAIN_IDS
+        if domain_id not in mine and _lease(domain_id):
+            return domain_id
+    return _leases[0][0] if _leases else 1 + start % DOMAIN_IDS
+
+
+@contextlib.contextmanager
+def domain_leases() -> Iterator[None]:
+    """Give back, on leaving, the domain ids leased inside (see :func:`allocate_domain_id`)."""
+    mark = len(_leases)
+    try:
+        yield
+    finally:
+        while len(_leases) > mark:
+            _, fd = _leases.pop()
+            os.close(fd)            # (closing drops the flock)
 
 
 def configure_test_process(log_dir: Path) -> None:
@@ -286,26 +343,27 @@ def _planned_policy(request, tmp_path_factory, domain_path: Path, candidates) ->
     cache_provider = getattr(request.config, "cache", None)  # absent under -p no:cacheprovider
     root = Path(cache_provider.mkdir("pearl_policy")) if cache_provider else tmp_path_factory.mktemp("pearl_policy")
     cache = root / h.hexdigest()[:16]
-    if not ((cache / "hierarchy.json").is_file() and _policy_fits(cache, domain)):
-        from pearl_pomdp.hierarchy import load_hierarchy, plan
-
-        # Plan into a private directory and rename it into place: parallel workers (xdist)
-        # never see a half-written policy; if another worker won the race, use its policy.
-        tmp = root / f"{cache.name}.tmp{os.getpid()}"
-        plan(domain, load_hierarchy(HIERARCHY, domain)).save(tmp)
-        try:
-            if cache.exists() and not _policy_fits(cache, domain):
-                import shutil
-
-                shutil.rmtree(cache)  # an unusable leftover
-            if not cache.exists():
-                os.rename(tmp, cache)
-        except OSError:
-            if not (cache / "hierarchy.json").is_file():
-                raise
-        finally:
-            if tmp.exists():
-                import shutil
-
-                shutil.rmtree(tmp, ignore_errors=True)
+    with open(root / f"{cache.name}.lock", "w") as lock:
+        # One worker plans (Pearl: ~6 s), the others wait for its policy instead of planning it again.
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        _plan_into(cache, domain)
     return cache
+
+
+def _plan_into(cache: Path, domain) -> None:
+    """Plan ``domain``'s policy into ``cache`` unless a usable one is there (the caller holds the lock).
+    The plan is saved into a private folder and renamed into place: a run killed mid-save leaves no
+    half-written policy."""
+    import shutil
+
+    if (cache / "hierarchy.json").is_file() and _policy_fits(cache, domain):
+        return
+    from pearl_pomdp.hierarchy import load_hierarchy, plan
+
+    tmp = cache.parent / f"{cache.name}.tmp{os.getpid()}"
+    try:
+        plan(domain, load_hierarchy(HIERARCHY, domain)).save(tmp)
+        shutil.rmtree(cache, ignore_errors=True)  # an unusable leftover
+        os.rename(tmp, cache)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)

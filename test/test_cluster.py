@@ -22,8 +22,10 @@ CHANNELS = {"white": "config/speech/pearl_channel.json", "babble": "config/speec
 def cluster():
     from distributed import LocalCluster
 
+    # No dashboard, and the scheduler's HTTP server on a free port: by default it takes 8787, which a
+    # parallel test process (or the user's own cluster) may hold.
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                      host="127.0.0.1") as local:
+                      host="127.0.0.1", scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}) as local:
         yield local.scheduler_address
 
 

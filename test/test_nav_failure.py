@@ -249,7 +249,7 @@ def test_over_dds_the_drive_closes_at_its_deadline_diagnostics_say_why_and_actio
     configure_test_process(tmp_path)
     context = Context()
     rclpy.init(args=["--ros-args", "--log-level", "error"], context=context,
-               domain_id=150 + allocate_domain_id() % 80, signal_handler_options=SignalHandlerOptions.NO)
+               domain_id=allocate_domain_id(), signal_handler_options=SignalHandlerOptions.NO)
     graph = sim = None
     try:
         graph = PearlGraph(context=context, domain=domain, model=model, decider=decider, parameter_services=False,

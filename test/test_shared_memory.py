@@ -75,16 +75,39 @@ def test_a_missing_directory_is_nothing_to_clean(tmp_path):
     assert result.removed == [] and result.in_use == 0
 
 
-def _age(name: str) -> float:
-    try:
-        return time.time() - (DEFAULT_DIRECTORY / name).stat().st_mtime
-    except OSError:
-        return float("inf")
-
-
 def _segments() -> set:
     return {n for n in os.listdir(DEFAULT_DIRECTORY) if n.startswith("fastrtps_") and n.endswith("_el")
             and not n.startswith("fastrtps_port")}
+
+
+def _segments_locked_by(pid: int) -> set:
+    """The segment lock files of ``DEFAULT_DIRECTORY`` that process ``pid`` holds (``/proc/locks``).
+    Other test processes (pytest-xdist workers, another run) start and stop participants meanwhile:
+    a difference of two listings would count theirs too."""
+    held = set()
+    for line in Path("/proc/locks").read_text().splitlines():
+        fields = line.split()
+        # "1: FLOCK  ADVISORY  WRITE 12345 00:1b:9548 0 EOF": device (hex major:minor) and inode of the
+        # locked file; a waiter's line ("1: -> FLOCK …") is not a holder.
+        if len(fields) >= 6 and fields[1] == "FLOCK" and fields[4] == str(pid):
+            major, minor, inode = fields[5].split(":")
+            held.add((int(major, 16), int(minor, 16), int(inode)))
+    owned = set()
+    for name in _segments():
+        try:
+            info = (DEFAULT_DIRECTORY / name).stat()
+        except OSError:
+            continue
+        if (os.major(info.st_dev), os.minor(info.st_dev), info.st_ino) in held:
+            owned.add(name)
+    return owned
+
+
+def _date(names: set, offset: float) -> None:
+    """Set the modification time of ``DEFAULT_DIRECTORY``'s ``names`` to now + ``offset`` s."""
+    when = time.time() + offset
+    for name in names:
+        os.utime(DEFAULT_DIRECTORY / name, (when, when))
 
 
 @pytest.mark.ros
@@ -95,28 +118,34 @@ def test_a_node_stopped_by_sigint_leaves_its_segment_and_the_clean_up_removes_on
     context, domain_id = ros_context
     probe = rclpy.create_node("shm_probe", context=context)      # a participant that stays alive
     try:
-        living = {n for n in _segments() if _held_by_a_living_process(DEFAULT_DIRECTORY / n)}
+        living = _segments_locked_by(os.getpid())
         assert living, "this process's participant has no shared-memory segment"
-        before = _segments()
         node = Proc([str(Path(sys.executable).parent / "action_executor"), "--ros-args", "--params-file",
                      str(REPO / "config" / "pearl_nodes.yaml")], ros_env(domain_id, tmp_path / "log"),
                     tmp_path / "log", "action_executor")
         try:
-            assert wait_for(lambda: "action_executor" in probe.get_node_names(), timeout=60), node.stderr()
-            left_by_node = _segments() - before
+            # Up means its start-up is done (it says what it executes), not only its name in the graph:
+            # a SIGINT in the middle of its start-up is test_shutdown's business.
+            assert wait_for(lambda: "executing" in node.stdout() + node.stderr()
+                            and "action_executor" in probe.get_node_names(), timeout=60), node.stderr()
+            left_by_node = _segments_locked_by(node.popen.pid)
             assert left_by_node, "the node's participant has no shared-memory segment"
-            # The clean-up leaves lock files younger than a second (a participant between creating
-            # its lock file and locking it): let the node's get that old.
-            assert wait_for(lambda: min(_age(n) for n in left_by_node) > 1.0, timeout=10)
+            # Other test processes clean /dev/shm too (a `pearl launch` ending in another xdist worker),
+            # and would take the stopped node's segment before this test looks. Every clean-up leaves
+            # lock files younger than a second (a participant between creating its lock file and
+            # locking it): dated a minute ahead, the node's are left alone until the test dates them back.
+            _date(left_by_node, +60.0)
             node.popen.send_signal(signal.SIGINT)
             assert node.wait(10) == 0, node.stderr()
         finally:
             node.stop()
         assert left_by_node <= _segments(), "the stopped node removed its segment: nothing to clean"
+        assert not any(_held_by_a_living_process(DEFAULT_DIRECTORY / n) for n in left_by_node)
+        _date(left_by_node, -5.0)
         result = remove_dead_files()
         assert left_by_node <= set(result.removed)
         after = _segments()
         assert not (left_by_node & after) and living <= after
-        assert all(_held_by_a_living_process(DEFAULT_DIRECTORY / n) for n in after)
+        assert all(_held_by_a_living_process(DEFAULT_DIRECTORY / n) for n in living)
     finally:
         probe.destroy_node()

@@ -80,9 +80,11 @@ def launched(request, tmp_path_factory, ward_domain):
             g["decider"] = plan(domain, load_hierarchy(REPO / "config" / "ward.hierarchy.yaml", domain))
         else:
             g["decider"] = OnlineDecider(model, settings=DespotSettings(trials=5))
-        ready = g["wait"](lambda: all(g[k].get_subscription_count() >= 1 for k in ("arrived", "call", "speech"))
-                          and len(g["actions"]) >= 1 and len(g["beliefs"]) >= 1, STARTUP)
-        assert ready, f"graph not ready: {launch.stderr()[-3000:]}"
+        ready = g["wait"](lambda: launch.returncode is not None or (
+            all(g[k].get_subscription_count() >= 1 for k in ("arrived", "call", "speech"))
+            and len(g["actions"]) >= 1 and len(g["beliefs"]) >= 1), STARTUP)
+        # (a launch that ended, e.g. a node killed, fails now rather than at the start-up guard)
+        assert ready and launch.returncode is None, f"graph not ready: {launch.stderr()[-3000:]}"
         yield g
     finally:
         g["exit_code"] = launch.stop(timeout=15.0)
