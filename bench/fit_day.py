@@ -67,7 +67,6 @@ def main() -> int:
     out_path = Path(args.out)
     out_path.write_text(HEADER.format(seed=args.seed, residents=args.residents, days=args.days, noise=TRAINING_NOISE)
                         + out_path.read_text(encoding="utf-8"), encoding="utf-8")
-    rows = sorted(result.rows, key=lambda r: -r.change)
     print(json.dumps({
         "training": {"resident_seed": args.seed, "residents": args.residents, "days": args.days,
                      "noise": TRAINING_NOISE, "controllers": list(agents)},
@@ -76,10 +75,7 @@ def main() -> int:
         "episodes": len(episodes), "steps": sum(len(e.actions) for e in episodes),
         "plan_seconds": round(plan_s, 1), "record_seconds": round(record_s, 1),
         "rows_fitted": len(result.rows), "rows_kept": len(result.kept), "out": str(args.out),
-        "largest_changes": [{"table": r.table, "row": r.row, "n": round(r.n, 1), "change": round(r.change, 3),
-                             "before": {k: round(v, 3) for k, v in r.before.items() if v > 0.005},
-                             "after": {k: round(v, 3) for k, v in r.after.items() if v > 0.005}}
-                            for r in rows[:args.top]],
+        "largest_changes": result.largest_changes(args.top),
     }))
     return 0
 

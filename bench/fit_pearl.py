@@ -79,15 +79,11 @@ def main() -> int:
     result = fit_domain(domain, episodes, prior_strength=args.prior_strength, tied=not args.untied)
     fitted = out / "pearl.fitted.domain.yaml"
     write_fitted(args.domain, result, fitted, prior_strength=args.prior_strength)
-    rows = sorted(result.rows, key=lambda r: -r.change)
     print(json.dumps({
         "episodes": len(episodes), "steps": sum(len(e.actions) for e in episodes),
         "record_seconds": round(record_s, 1), "prior_strength": args.prior_strength, "tied": not args.untied,
         "rows_fitted": len(result.rows), "rows_kept": len(result.kept), "out": str(fitted),
-        "largest_changes": [{"table": r.table, "row": r.row, "n": round(r.n, 1), "change": round(r.change, 3),
-                             "before": {k: round(v, 3) for k, v in r.before.items() if v > 0.005},
-                             "after": {k: round(v, 3) for k, v in r.after.items() if v > 0.005}}
-                            for r in rows[:args.top]],
+        "largest_changes": result.largest_changes(args.top),
     }))
     return 0
 

@@ -101,6 +101,14 @@ class FitResult:
     steps: int = 0
     tied: bool = False
 
+    def largest_changes(self, top: int) -> List[Dict[str, Any]]:
+        """The ``top`` rows that moved most: table, row, data, change, and the row before and after
+        (probabilities above 0.005, rounded): what the fitting benches print."""
+        rows = sorted(self.rows, key=lambda r: -r.change)[:top]
+        return [{"table": r.table, "row": r.row, "n": round(r.n, 1), "change": round(r.change, 3),
+                 "before": {k: round(v, 3) for k, v in r.before.items() if v > 0.005},
+                 "after": {k: round(v, 3) for k, v in r.after.items() if v > 0.005}} for r in rows]
+
     def tables(self) -> Dict[str, Dict[str, Any]]:
         """Per table: rows fitted, data, largest change (the summary ``pearl fit`` prints)."""
         out: Dict[str, Dict[str, Any]] = {}
