@@ -90,6 +90,11 @@ def sigkill_trial(tmp: Path, delay: float, chunk_size=None, after_first: bool = 
     if not mcaps:  # killed before the file existed: then nothing was reported either
         assert n_reported == 0
         return {"reported": 0, "read": 0, "salvaged": False}
+    if n_reported == 0 and all(m.stat().st_size < 8 for m in mcaps):
+        # Killed between creating the file and writing its magic: an empty bag, nothing lost
+        # (no write() had returned). The reader refuses it with a named error; that is checked
+        # in test_bag_writer::test_malformed_bags_name_file_and_problem, not here.
+        return {"reported": 0, "read": 0, "salvaged": False}
     reader = BagReader(bag)
     got = [(m.topic, m.data, m.log_time) for m in reader.messages]
     expected = [("/pearl/speech" if i % 4 else "/pearl/action", cdr_string(f"message {i} " + "x" * (i % 37)), 1_000 + i)
