@@ -35,11 +35,26 @@ __all__ = ["TraceStep", "Decision", "Policy", "BatchPolicy", "Decider", "Masking
 @dataclass(frozen=True)
 class TraceStep:
     """One level of an EXECUTE trace: in ``subtask`` the local policy chose ``choice``, whose
-    α-vector gives the subtask value ``value`` at the current belief (NaN: the policy has none)."""
+    α-vector gives the subtask value ``value`` at the current belief (NaN: the policy has none).
+
+    ``runner_up``/``runner_up_value``: the best other child at that level and its value by the
+    same measure (``""``/NaN where the level did not choose — a group passing an offer up — or
+    has one child), so a reader sees what the choice beat and by how much."""
 
     subtask: str
     choice: str
     value: float
+    runner_up: str = ""
+    runner_up_value: float = math.nan
+
+    def as_dict(self) -> dict:
+        """JSON-ready form: NaN values become ``None``; the runner-up only where there is one."""
+        out: dict = {"subtask": self.subtask, "choice": self.choice,
+                     "value": None if math.isnan(self.value) else self.value}
+        if self.runner_up:
+            out["runner_up"] = self.runner_up
+            out["runner_up_value"] = None if math.isnan(self.runner_up_value) else self.runner_up_value
+        return out
 
 
 @dataclass(frozen=True)
@@ -60,8 +75,7 @@ class Decision:
     def as_dict(self) -> dict:
         """JSON-ready form (``value`` NaN becomes ``None``)."""
         return {"action": self.action, "action_name": self.action_name,
-                "trace": [{"subtask": t.subtask, "choice": t.choice,
-                           "value": None if math.isnan(t.value) else t.value} for t in self.trace],
+                "trace": [t.as_dict() for t in self.trace],
                 "expansions": self.expansions, **({"search": self.search} if self.search is not None else {})}
 
 

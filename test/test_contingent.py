@@ -318,6 +318,31 @@ def test_a_group_passes_its_childrens_offers_up_and_the_parent_chooses_by_its_ow
         assert hp.actions_batch(b[None, :])[0] == d.action
 
 
+def test_each_choosing_level_names_its_runner_up_and_the_runner_ups_value():
+    """The trace shows, beside each choice, the best offer the level did not take and its value by
+    the same one-step measure (computed here by hand); a group that only passed offers up has none."""
+    domain = parse_domain(PROBE_DOMAIN)
+    model = domain.compile()
+    hp = plan(domain, parse_hierarchy(GROUP_HIERARCHY, domain.actions))
+    top, do = hp.subtasks["Top"], hp.subtasks["Do"]
+    rng = np.random.default_rng(8)
+    for p in np.concatenate([[0.5, 0.85, 0.98, 0.02], rng.uniform(size=20)]):
+        b = belief(model, a=float(p), b=float(1 - p))
+        do_pick = hp.action_names[hp._pick("Do", b, {})[0]]
+        d = hp.execute(b)
+        rival, label = ("Ask", "Act→Ask") if d.action_name != "Ask" else (do_pick, f"Act→Do→{do_pick}")
+        assert d.trace[0].runner_up == label
+        assert d.trace[0].runner_up_value == pytest.approx(one_step_value(top, b, rival), abs=1e-9)
+        assert d.trace[0].runner_up_value <= d.trace[0].value
+        assert d.trace[1].subtask == "Act" and d.trace[1].runner_up == ""      # passed the offer up
+        if d.action_name != "Ask":
+            other = "DoB" if d.action_name == "DoA" else "DoA"
+            assert (d.trace[2].subtask, d.trace[2].runner_up) == ("Do", other)
+            assert d.trace[2].runner_up_value == pytest.approx(one_step_value(do, b, other), abs=1e-9)
+        plain = d.as_dict()["trace"][0]
+        assert (plain["runner_up"], plain["runner_up_value"]) == (label, d.trace[0].runner_up_value)
+
+
 def test_pearl_answers_a_question_it_is_sure_of_while_the_walk_is_still_uncertain(pearl_policy):
     """Issue 21's second protocol found the converged plan waiting for a dozen steps while she
     asked for the time over and over: after the reminder the walk was wanted with 0.64, and

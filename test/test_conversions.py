@@ -79,6 +79,19 @@ def test_decision_trace_from_objects_and_dicts():
     assert cv.msg_to_decision(deserialize_message(serialize_message(msg), cv.DecisionMsg)) == cv.msg_to_decision(msg)
 
 
+def test_decision_trace_carries_each_levels_runner_up_through_cdr():
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from pearl_pomdp.interfaces import TraceStep
+
+    trace = [TraceStep("Act", "DoNothing", 19.1, "Rest→GoHome", 18.25), TraceStep("Rest", "GoHome", 3.0)]
+    msg = cv.decision_to_msg(3, "DoNothing", trace, 0.001)
+    got = cv.msg_to_decision(deserialize_message(serialize_message(msg), cv.DecisionMsg))["trace"]
+    assert got == [t.as_dict() for t in trace] == [
+        {"subtask": "Act", "choice": "DoNothing", "value": 19.1, "runner_up": "Rest→GoHome", "runner_up_value": 18.25},
+        {"subtask": "Rest", "choice": "GoHome", "value": 3.0}]   # no runner-up: no key
+
+
 def test_pose_quaternion_and_stamp():
     msg = cv.pose_to_msg(8.0, 3.5, math.pi / 2, "map", 12.25)
     assert msg.pose.orientation.z == pytest.approx(math.sqrt(0.5))

@@ -14,7 +14,8 @@ recorded), "match" (bool), "messages", "messages_per_second" (replay loop only).
 With --explain, why the robot did what it did: per step the input that closed it (topic,
 text, recognised symbol, recogniser confidence), the most probable value of each belief
 feature after the update, and the EXECUTE trace of the answer with the value of each
-choice; where replay and recording differ, the first divergence with both traces (when
+choice and, beside it, the runner-up at that level with its value (`Act→DoNothing (19.10;
+next Rest→GoHome 18.42)`: what the choice beat and by how much); where replay and recording differ, the first divergence with both traces (when
 the bag recorded /pearl/decision). In --json these are "steps" and "divergence".
 
 A person in the loop is replayed too: the recorded vetoes and commands are fed to the
@@ -79,7 +80,11 @@ def _trace_text(trace) -> str:
     parts = []
     for t in trace or []:
         value = t.get("value")
-        parts.append(f"{t.get('subtask')}→{t.get('choice')} ({'–' if value is None else f'{value:.2f}'})")
+        text = f"{t.get('subtask')}→{t.get('choice')} ({'–' if value is None else f'{value:.2f}'}"
+        if t.get("runner_up"):
+            rival = t.get("runner_up_value")
+            text += f"; next {t['runner_up']} {'–' if rival is None else f'{rival:.2f}'}"
+        parts.append(text + ")")
     return "  ".join(parts)
 
 

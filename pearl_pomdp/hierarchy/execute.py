@@ -25,6 +25,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Collection, Dict, FrozenSet, List, Optional, Sequence, Tuple, Union, cast
@@ -152,6 +153,21 @@ class SubtaskPolicy:
         values = self.alphas_full @ belief
         k = int(np.argmax(values))
         return int(self.alpha_actions[k]), float(values[k])
+
+    def runner_up(self, belief: np.ndarray, chosen: int) -> Tuple[str, float]:
+        """The best child other than ``chosen`` (an index into ``self.actions``) at a full belief,
+        by :meth:`choose`'s measure: ``(name, value)``, or ``("", NaN)`` when no other child has one."""
+        if self.lookahead is not None:
+            q = self._q_values(np.asarray(belief, dtype=float)[None, :])[0]
+            q[chosen] = -np.inf
+            k = int(np.argmax(q))
+            return (self.actions[k], float(q[k])) if np.isfinite(q[k]) else ("", math.nan)
+        others = self.alpha_actions != chosen
+        if not others.any():
+            return "", math.nan
+        values = np.where(others, self.alphas_full @ belief, -np.inf)
+        k = int(np.argmax(values))
+        return self.actions[int(self.alpha_actions[k])], float(values[k])
 
     def choose_allowed(self, belief: np.ndarray, allowed: np.ndarray):
         """:meth:`choose` among the children with ``allowed[k]`` true (``[len(actions)]`` bools):
@@ -299,7 +315,7 @@ class HierarchicalPolicy:
             sub = self.subtasks[node]
             k, value = sub.choose(b)
             choice = sub.actions[k]
-            trace.append(TraceStep(node, choice, value))
+            trace.append(TraceStep(node, choice, value, *sub.runner_up(b, k)))
             if not sub.abstract[k]:
                 return Decision(self._index[choice], choice, trace)
             node = choice
@@ -494,8 +510,10 @@ class HierarchicalPolicy:
             raise PolicyError(f"no action is left below {self.root!r} once {len(banned)} are forbidden")
         prim, k, value, path = got
         self.last_expansions = root.expansions - budget[0] if root.search_depth > 1 else 0
-        trace = [TraceStep(self.root, root.actions[k], value)]
         memo: Dict[str, Any] = {}
+        # A searched root's values are its search's; the runner-up by one step would not compare.
+        rival = self._runner_up(self.root, b, memo, prim, path, banned) if root.search_depth <= 1 else ("", math.nan)
+        trace = [TraceStep(self.root, root.actions[k], value, *rival)]
         # Down the path to the subtask that offered the primitive: each group on the way with its
         # own value of that primitive (it passed the offer up; it did not choose it).
         node, child = self.root, root.actions[k]
@@ -508,10 +526,37 @@ class HierarchicalPolicy:
             if child not in self.subtasks:
                 return Decision(self._index[child], child, trace, expansions=self.last_expansions)
             node = child
-            _, k, value, _path = self._pick(node, b, memo, banned)
+            picked, k, value, picked_path = self._pick(node, b, memo, banned)
             child = self.subtasks[node].actions[k]
-            trace.append(TraceStep(node, child, value))
+            trace.append(TraceStep(node, child, value, *self._runner_up(node, b, memo, picked, picked_path, banned)))
         raise PolicyError(f"the hierarchy below {self.root!r} has a cycle")  # pragma: no cover - validated at load
+
+    def _runner_up(self, name: str, b: np.ndarray, memo: Dict[str, Any], chosen: int, chosen_path: Tuple[int, ...],
+                   banned: FrozenSet[int] = frozenset()) -> Tuple[str, float]:
+        """The best offer subtask ``name`` did not take at ``b``, by the one-step value it chose with:
+        ``(label, value)``, the label the children's names down to the primitive (``Rest→GoHome``);
+        ``("", NaN)`` when it had no other offer. ``chosen``/``chosen_path``: what it took."""
+        sub = self.subtasks[name]
+        q = sub.one_step.q(sub.project(b)[0])
+        table = self._to_model[name]
+        best: Optional[Tuple[int, Tuple[int, ...], float]] = None
+        for prim, path in self.offers(sub.actions, b, memo, banned):
+            if prim == chosen and path == chosen_path:
+                continue
+            value = float(q[table[prim]])
+            if best is None or value > best[2]:
+                best = (prim, path, value)
+        if best is None:
+            return "", math.nan
+        prim, path, value = best
+        names, node = [], name
+        for idx in path:
+            child = self.subtasks[node].actions[idx]
+            names.append(child)
+            node = child
+        if names[-1] != self.action_names[prim]:
+            names.append(self.action_names[prim])
+        return "→".join(names), value
 
     def _pick_batch(self, name: str, B: np.ndarray, memo: Dict[str, np.ndarray]) -> np.ndarray:
         """:meth:`_pick`'s primitive for every row of ``B`` ``[N, S]`` at once (ties as :meth:`_pick`)."""

@@ -192,10 +192,12 @@ def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: flo
     """
     steps = []
     for t in trace:
-        get = (lambda k: t[k]) if isinstance(t, Mapping) else (lambda k: getattr(t, k))
-        value = get("value")
+        get = (lambda k, d=None: t.get(k, d)) if isinstance(t, Mapping) else (lambda k, d=None: getattr(t, k, d))
+        value, rival_value = get("value"), get("runner_up_value")
         steps.append(TraceStepMsg(subtask=str(get("subtask")), choice=str(get("choice")),
-                                  value=math.nan if value is None else float(value)))
+                                  value=math.nan if value is None else float(value),
+                                  runner_up=str(get("runner_up") or ""),
+                                  runner_up_value=math.nan if rival_value is None else float(rival_value)))
     msg = DecisionMsg(stamp=seconds_to_time(max(0.0, stamp_s)), step=int(step),
                       belief_step=int(step if belief_step is None else belief_step), action=str(action_name),
                       trace=steps, expansions=int(expansions), latency_s=float(latency_s))
@@ -243,14 +245,25 @@ def _search_from_msg(msg: SearchStatsMsg) -> dict:
     return body
 
 
+def _trace_step_from_msg(t) -> dict:
+    """One ``TraceStep`` as :meth:`pearl_pomdp.interfaces.TraceStep.as_dict` gives it (a bag from
+    before the runner-up fields decodes them empty: no ``runner_up`` key)."""
+    out = {"subtask": t.subtask, "choice": t.choice, "value": t.value if math.isfinite(t.value) else None}
+    rival = getattr(t, "runner_up", "")
+    if rival:
+        rival_value = float(getattr(t, "runner_up_value", math.nan))
+        out["runner_up"] = rival
+        out["runner_up_value"] = rival_value if math.isfinite(rival_value) else None
+    return out
+
+
 def msg_to_decision(msg: DecisionMsg) -> dict:
     """The plain form of a ``/pearl/decision`` message: ``{"step", "belief_step", "action", "trace":
-    [{"subtask", "choice", "value"}], "latency_s", "expansions"}`` (a NaN value is ``None``) and,
+    [{"subtask", "choice", "value"[, "runner_up", "runner_up_value"]}], "latency_s", "expansions"}`` (a NaN value is ``None``) and,
     for an online search, ``"search"`` (``lower, upper, gap, trials, nodes, expansions, seconds, stop,
     bounds, top, action_bounds``: the form ``OnlineDecider`` records)."""
     body = {"step": int(msg.step), "belief_step": int(msg.belief_step), "action": msg.action,
-            "trace": [{"subtask": t.subtask, "choice": t.choice,
-                       "value": t.value if math.isfinite(t.value) else None} for t in msg.trace],
+            "trace": [_trace_step_from_msg(t) for t in msg.trace],
             "latency_s": float(msg.latency_s), "expansions": int(msg.expansions)}
     if msg.has_search:
         body["search"] = _search_from_msg(msg.search)

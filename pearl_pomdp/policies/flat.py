@@ -59,15 +59,23 @@ class FlatPolicyDecider:
             q = self._q(b)
             a = int(np.argmax(q))
             name = self.model.actions[a]
-            return Decision(a, name, [TraceStep(self.name, name, float(q[a]))])
+            rest = np.where(np.arange(q.shape[0]) == a, -np.inf, q)
+            r = int(np.argmax(rest))
+            rival = (self.model.actions[r], float(rest[r])) if np.isfinite(rest[r]) else ("", math.nan)
+            return Decision(a, name, [TraceStep(self.name, name, float(q[a]), *rival)])
+        rival = ("", math.nan)
         if self._alphas is not None and self._labels is not None:
             values = self._alphas @ b
             k = int(np.argmax(values))
             a, value = int(self._labels[k]), float(values[k])
+            others = np.where(self._labels != a, values, -np.inf)
+            r = int(np.argmax(others))
+            if np.isfinite(others[r]):
+                rival = (self.model.actions[int(self._labels[r])], float(others[r]))
         else:
             a, value = int(self.policy.action(b)), math.nan
         name = self.model.actions[a]
-        return Decision(a, name, [TraceStep(self.name, name, value)])
+        return Decision(a, name, [TraceStep(self.name, name, value, *rival)])
 
     def execute_without(self, belief, forbidden: Collection[str]) -> Decision:
         """The best action at ``belief`` among those not in ``forbidden`` (names), by the policy's values.
