@@ -4,7 +4,8 @@ The protocol's training set: the resident generator at seed 11 (a seed no study 
 residents, days 0–3 each; every day run by the day tree and by the hierarchical policy of the
 domain being fitted (its designer's rows), at the paper's noise level (0.25). The days (true
 state included) go to ``pearl fit`` with the designer's rows as prior (strength 10); the fitted
-domain is written to ``--out`` (default ``config/pearl_day.domain.yaml``). Rewards are the
+domain is written to ``--out`` (default ``config/pearl_day.domain.yaml``, the designer's day domain
+fitted in place: its designer text is kept, its ``fitted:`` section replaced). Rewards are the
 designer's, untouched.
 
     python bench/fit_day.py [--residents 6] [--days 4] [--seed 11] [--jobs 2] [--out FILE]
@@ -34,7 +35,8 @@ def main() -> int:
     from pearl_sim.nursing_home.residents import generate_residents
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--domain", default=str(REPO / "config/pearl.domain.yaml"))
+    ap.add_argument("--domain", default=str(REPO / "config/pearl_day.domain.yaml"),
+                    help="the designer's day domain (its fitted: section, if any, is ignored and replaced)")
     ap.add_argument("--hierarchy", default=str(REPO / "config/pearl.hierarchy.yaml"))
     ap.add_argument("--residents", type=int, default=6)
     ap.add_argument("--days", type=int, default=4)
@@ -65,8 +67,11 @@ def main() -> int:
     result = fit_domain(domain, episodes, prior_strength=args.prior_strength)
     write_fitted(args.domain, result, args.out, prior_strength=args.prior_strength)
     out_path = Path(args.out)
+    body = out_path.read_text(encoding="utf-8")
+    if body.startswith(HEADER.splitlines()[0]):   # fitted in place: the old header goes with the old fit
+        body = body.split("\n", HEADER.count("\n"))[-1]
     out_path.write_text(HEADER.format(seed=args.seed, residents=args.residents, days=args.days, noise=TRAINING_NOISE)
-                        + out_path.read_text(encoding="utf-8"), encoding="utf-8")
+                        + body, encoding="utf-8")
     print(json.dumps({
         "training": {"resident_seed": args.seed, "residents": args.residents, "days": args.days,
                      "noise": TRAINING_NOISE, "controllers": list(agents)},

@@ -1,11 +1,15 @@
 """The working day (pearl_sim/nursing_home/day.py, docs/day.md Part 1): her routine, the session,
 the battery over hours, the questions she voices, the checklist and the day score."""
+from pathlib import Path
+
 import pytest
 
 from pearl_sim.nursing_home.day import (APPOINTMENT_SLOTS, CHARGE_RATE, CHECKLIST_WINDOW, DAY_SECONDS, DAY_START,
                                         DRIVE_DRAIN, IDLE_DRAIN, SCORE_WEIGHTS, SESSION_SECONDS, SETTLE_SECONDS,
                                         STAFF_TAKE_AFTER, VITAMIN_WINDOW, VITAMIN_WINDOW_AFTERNOON, DayPlan, DayWorld, clock, day_scenario,
                                         day_score, plan_day)
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def _world(seed=0, plan=None, **resident):
@@ -157,6 +161,29 @@ def test_a_question_is_raised_only_when_she_voices_it_to_the_robot():
     w.act("TellTime")
     c = w.checklist()
     assert c["questions_answered"] == 1 and len(c["answer_delay_s"]) == 1 and 0 < c["answer_delay_s"][0] < 10
+
+
+def test_the_truth_says_what_she_wants_before_she_says_it_and_when_the_robot_sits_on_its_dock():
+    """Amendment 4: her unvoiced question is her UserInfoGoal in the truth the fit counts (the checklist
+    still counts only voiced ones); amendment 3: with the day domain, Battery=docked while it charges."""
+    from pearl_pomdp.model.factored import load_domain
+    from pearl_sim.nursing_home.scenario import default_domain
+
+    day_domain = load_domain(REPO / "config/pearl_day.domain.yaml")
+    plan = _plan(appointment=6 * 3600.0)
+    fields = {"name": "Mrs B", "walking_speed": 0.5, "willingness": 1.0, "answers_door": 1.0, "touchscreen": 0.0}
+    w = DayWorld(day_scenario(fields, 0.0, 0, plan=plan), plan, domain=day_domain)
+    assert w.truth()["Battery"] == "docked" and w.truth()["UserInfoGoal"] == "none"
+    w._latent = ("weather", w.time)
+    _until(w, 60.0)
+    assert w.truth()["UserInfoGoal"] == "wantWeather" and w.checklist()["questions_raised"] == 0
+    w.act("GotoPatientRoom")                              # off the dock: the level again
+    assert w.truth()["Battery"] == "ok"
+    day_domain.state_index(w.truth())                     # every value is the day domain's
+    # The episode domain has no dock: the same world speaks its terms.
+    e = DayWorld(day_scenario(fields, 0.0, 0, plan=plan), plan, domain=default_domain())
+    assert e.truth()["Battery"] == "ok"
+    default_domain().state_index(e.truth())
 
 
 def test_an_unvoiced_question_is_dropped_after_30_minutes():

@@ -190,6 +190,13 @@ class DayWorld(World):
         self._latent: Optional[Tuple[str, float]] = None
         self._voiced_at: Optional[float] = None
         self._due_at: Dict[str, float] = {}
+        from pearl_sim.nursing_home.scenario import default_domain
+
+        battery = next((f for f in (domain if domain is not None else default_domain()).features
+                        if f.name == "Battery"), None)
+        #: The domain tells a robot on its dock from a charged one off it (the day domain's Battery):
+        #: the truth then says ``docked`` whenever it charges at home.
+        self._reports_dock = battery is not None and "docked" in battery.values
         super().__init__(scenario, seed=seed, domain=domain)
         self.metrics: DayMetrics = DayMetrics()
         self._question_rng = np.random.default_rng([self.seed, 3])
@@ -214,6 +221,18 @@ class DayWorld(World):
         if self.activity == "nap":
             return "asleep"
         return "room" if self.resident_at == "room" else self.resident_at
+
+    def truth(self) -> Dict[str, str]:
+        """The episode world's truth, with two things only a day has: ``Battery=docked`` while it charges
+        on its dock at home (when the domain has that value), and her question as ``UserInfoGoal`` from
+        the moment she has it in mind — Table 3's feature is what she wants to know, said or not yet
+        said (she says it when the robot is with her and waits or asks)."""
+        state = super().truth()
+        if self._reports_dock and self.docked and self.robot_at == "home":
+            state["Battery"] = "docked"
+        if state["UserInfoGoal"] == "none" and self._latent is not None:
+            state["UserInfoGoal"] = {"time": "wantTime", "weather": "wantWeather"}[self._latent[0]]
+        return state
 
     # ------------------------------------------------------------------ acting
     def act(self, action: str) -> StepResult:
