@@ -199,6 +199,10 @@ class SubtaskPolicy:
         return float(np.max(self.alphas_full @ belief))
 
 
+#: A subtask's runner-up offer sits in EXECUTE's memo under its name plus this (no name has a NUL).
+RUNNER_UP = "\0runner-up"
+
+
 class HierarchicalPolicy:
     """The collection of local policies, with EXECUTE.
 
@@ -244,6 +248,8 @@ class HierarchicalPolicy:
         #: Beliefs the last :meth:`execute` expanded in its forward search (0: one step, no search).
         self.last_expansions = 0
         self._pick_cache: Dict[tuple, tuple] = {}
+        #: The runner-up of each cached pick (same keys), for the trace.
+        self._rival_cache: Dict[tuple, Optional[tuple]] = {}
         #: Subtasks with a subtask among their children: their children's offers go up to their
         #: parent (:meth:`_offers`), so a level of organisation hides no alternative.
         self._groups = {name for name, sub in subtasks.items() if any(sub.abstract)}
@@ -448,20 +454,30 @@ class HierarchicalPolicy:
         got = None if banned else self._pick_cache.get(key)
         if got is not None:
             memo[name] = got
+            if key in self._rival_cache:   # (a pick_projected entry has none: valued again if asked)
+                memo[name + RUNNER_UP] = self._rival_cache[key]
             return got
         q = sub.one_step.q(bh)
         table = self._to_model[name]
         best: Optional[tuple] = None
+        second: Optional[tuple] = None   # the runner-up offer (prim, path, value), for the trace
         for prim, path in self.offers(sub.actions, b, memo, banned):
             value = float(q[table[prim]])
             if best is None or value > best[2]:
+                if best is not None:
+                    second = (best[0], best[3], best[2])
                 best = (prim, path[0], value, path)
+            elif second is None or value > second[2]:
+                second = (prim, path, value)
         memo[name] = best
+        memo[name + RUNNER_UP] = second
         if banned:
             return best   # a masked pick is for this decision only: not cached
         if len(self._pick_cache) >= self.PICK_CACHE:
             self._pick_cache.clear()
+            self._rival_cache.clear()
         self._pick_cache[key] = memo[name]
+        self._rival_cache[key] = second
         return memo[name]
 
     def _search_value(self, name: str, b: np.ndarray, depth: int, budget: List[int],
@@ -502,15 +518,16 @@ class HierarchicalPolicy:
     def _execute_contingent(self, b: np.ndarray, banned: FrozenSet[int] = frozenset()) -> Decision:
         root = self.subtasks[self.root]
         budget = [root.expansions]
+        memo: Dict[str, Any] = {}
         if root.search_depth > 1:
             got = self._search_value(self.root, b, root.search_depth, budget, banned)
+            memo = {}   # the search asked the children at other beliefs too
         else:
-            got = self._pick(self.root, b, {}, banned)
+            got = self._pick(self.root, b, memo, banned)
         if got is None:
             raise PolicyError(f"no action is left below {self.root!r} once {len(banned)} are forbidden")
         prim, k, value, path = got
         self.last_expansions = root.expansions - budget[0] if root.search_depth > 1 else 0
-        memo: Dict[str, Any] = {}
         # A searched root's values are its search's; the runner-up by one step would not compare.
         rival = self._runner_up(self.root, b, memo, prim, path, banned) if root.search_depth <= 1 else ("", math.nan)
         trace = [TraceStep(self.root, root.actions[k], value, *rival)]
@@ -535,17 +552,23 @@ class HierarchicalPolicy:
                    banned: FrozenSet[int] = frozenset()) -> Tuple[str, float]:
         """The best offer subtask ``name`` did not take at ``b``, by the one-step value it chose with:
         ``(label, value)``, the label the children's names down to the primitive (``Rest→GoHome``);
-        ``("", NaN)`` when it had no other offer. ``chosen``/``chosen_path``: what it took."""
-        sub = self.subtasks[name]
-        q = sub.one_step.q(sub.project(b)[0])
-        table = self._to_model[name]
-        best: Optional[Tuple[int, Tuple[int, ...], float]] = None
-        for prim, path in self.offers(sub.actions, b, memo, banned):
-            if prim == chosen and path == chosen_path:
-                continue
-            value = float(q[table[prim]])
-            if best is None or value > best[2]:
-                best = (prim, path, value)
+        ``("", NaN)`` when it had no other offer. ``chosen``/``chosen_path``: what it took (its
+        :meth:`_pick`, which kept the runner-up in ``memo``, or else the offers are valued again)."""
+        best: Optional[Tuple[int, Tuple[int, ...], float]]
+        picked = memo.get(name)
+        if picked is not None and picked[0] == chosen and picked[3] == chosen_path and name + RUNNER_UP in memo:
+            best = memo[name + RUNNER_UP]
+        else:
+            sub = self.subtasks[name]
+            q = sub.one_step.q(sub.project(b)[0])
+            table = self._to_model[name]
+            best = None
+            for prim, path in self.offers(sub.actions, b, memo, banned):
+                if prim == chosen and path == chosen_path:
+                    continue
+                value = float(q[table[prim]])
+                if best is None or value > best[2]:
+                    best = (prim, path, value)
         if best is None:
             return "", math.nan
         prim, path, value = best
