@@ -353,7 +353,19 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
             if echo is not None:
                 echo(format_step(step, scenario.resident.name))
 
-        run_episode(world, backend, on_action=on_action,
+        went_out = {"yes": False}
+
+        def pearl_left() -> bool:
+            # Figure 4(f), "Pearl leaves": once the robot has been out and is back at its station
+            # with nothing wanted and no appointment still to come, the episode is over (else the
+            # scenario's max_steps end it, as before).
+            if world.robot_at != "home":
+                went_out["yes"] = True
+                return False
+            return (went_out["yes"] and not world.due and not world.wants_guidance and world.info_goal is None
+                    and all(a.at <= world.time for a in scenario.appointments))
+
+        run_episode(world, backend, on_action=on_action, stop_when=pearl_left,
                     before_action=lambda action: sim.publish_truth(backend.now_ns * 1e-9, "start", action))
         sim.publish_truth(backend.now_ns * 1e-9, "start")   # the state after the last action
         # The policy answers the last belief too: wait until that action is in the bag, or a
