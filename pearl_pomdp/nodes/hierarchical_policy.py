@@ -37,54 +37,35 @@ __all__ = ["HierarchicalPolicyNode", "load_decider", "main"]
 
 
 def load_decider(model, domain, policy: str, hierarchy: str, logger=None, time_guard: Optional[float] = None):
-    """The decider the node runs (an object with ``.execute(belief) -> Decision``).
-
-    * ``policy`` a directory: a saved hierarchical policy (``pearl plan --out DIR``).
-    * ``policy`` a file: a flat α-vector policy (``.npz`` + ``.json``), wrapped in
-      :class:`pearl_pomdp.executive.FlatPolicyDecider`.
-    * ``policy`` ``online`` or ``online:TRIALS``: plan online at every belief
-      (:class:`pearl_pomdp.online.decider.OnlineDecider`: DESPOT from the exact belief, FIB and
-      blind-policy bounds, ``TRIALS`` trials per decision; ``time_guard`` seconds of wall clock
-      stop a search early, 0 or ``None`` never).
-    * ``policy`` empty: PLAN now from ``domain`` and the ``hierarchy`` file.
+    """The decider the node runs: :func:`pearl_pomdp.deciders.load_decider` (the one reader of a
+    policy spec: a saved hierarchical policy directory, a flat ``.npz`` policy, ``online[:TRIALS]``,
+    or empty to PLAN now from ``hierarchy``), with what a node adds: a relative path is looked up as
+    every node parameter is (:func:`~pearl_pomdp.nodes.common.resolve_path`), the errors name the
+    node's parameters, and planning at start-up is logged.
 
     Raises:
-        NodeSetupError: nothing to load, or a file is missing.
+        NodeSetupError: nothing to load, a missing file, a malformed spec or time guard.
     """
-    if policy:
-        from pearl_pomdp.online.decider import online_settings, online_trials
+    from pearl_pomdp.deciders import load_decider as load_spec
+    from pearl_pomdp.online.decider import online_trials
 
-        try:
-            trials = online_trials(policy, "parameter policy")
-            settings = None if trials is None else online_settings(trials, time_guard, "parameter online_time_guard")
-        except PolicyError as err:
-            raise NodeSetupError(str(err)) from None
-        if settings is not None:
-            from pearl_pomdp.online.decider import OnlineDecider
-
-            return OnlineDecider(model, settings=settings)
-        path = resolve_path(policy, "policy", kind="policy file or directory")
-        if path.is_dir():
-            from pearl_pomdp.hierarchy import load_hierarchical_policy
-
-            # A flat .pomdp model can have a (flat-featured) hierarchy too: pass the model then.
-            return load_hierarchical_policy(path, domain if domain is not None else model)
-        from pearl_pomdp.executive import FlatPolicyDecider
-        from pearl_pomdp.policy_io import load_policy
-
-        return FlatPolicyDecider(load_policy(path, model), model)
-    if not hierarchy:
-        raise NodeSetupError("parameters policy and hierarchy are both empty: give a planned policy "
-                             "(policy:=DIR from `pearl plan --out DIR`) or a hierarchy to plan at start-up")
-    from pearl_pomdp.hierarchy import load_hierarchy, plan
-
-    hpath = resolve_path(hierarchy, "hierarchy")
-    if logger is not None:
-        logger.info(f"planning {hpath} at start-up (pass policy:=DIR to skip)")
-    start = time.perf_counter()
-    target = domain if domain is not None else model
-    decider = plan(target, load_hierarchy(hpath, target))
-    if logger is not None:
+    hierarchy_path = None
+    try:
+        if policy and online_trials(policy, "parameter policy") is None:
+            policy = str(resolve_path(policy, "policy", kind="policy file or directory"))
+        elif not policy:
+            if not hierarchy:
+                raise NodeSetupError("parameters policy and hierarchy are both empty: give a planned policy "
+                                     "(policy:=DIR from `pearl plan --out DIR`) or a hierarchy to plan at start-up")
+            hierarchy_path = resolve_path(hierarchy, "hierarchy")
+            if logger is not None:
+                logger.info(f"planning {hierarchy_path} at start-up (pass policy:=DIR to skip)")
+        start = time.perf_counter()
+        decider = load_spec(policy, model, domain, hierarchy=hierarchy_path, time_guard=time_guard,
+                            where="parameter policy", guard_where="parameter online_time_guard")
+    except PolicyError as err:
+        raise NodeSetupError(str(err)) from None
+    if hierarchy_path is not None and logger is not None:
         logger.info(f"planned in {time.perf_counter() - start:.2f} s")
     return decider
 
