@@ -12,6 +12,7 @@ of it is published on the events topic, so a bag records it.
 from __future__ import annotations
 
 import collections
+import os
 import sys
 import time
 from dataclasses import replace
@@ -29,6 +30,7 @@ from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.journaling import JOURNAL_PARAMETERS, NodeJournal
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
 from pearl_pomdp.operator import AUTONOMY_LEVELS, BY_SERVICE, GateOutput, OperatorGate
+from pearl_pomdp.sros2_policy import OPERATOR_PARAMETERS, security_notice
 
 #: The parameters an operator may change while the node runs (``ros2 param set``).
 OPERATOR_LIVE = ("autonomy", "confirm_categories", "confirm_timeout")
@@ -215,7 +217,16 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self.journal: Optional[NodeJournal] = None
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._say_if_unsecured()
         self.start(p["autostart"])
+
+    def _say_if_unsecured(self) -> None:
+        """Once at start: without DDS security anyone on the domain may command the robot; say so."""
+        names = ([self.resolve_topic_name(self.params[p]) for p in OPERATOR_PARAMETERS["publishes"]]
+                 + [self.resolve_service_name(self.params[p]) for p in OPERATOR_PARAMETERS["calls"]])
+        notice = security_notice(os.environ, self.context.get_domain_id(), names)
+        if notice:
+            self.get_logger().warning(notice)
 
     def configure_node(self) -> None:
         """Load the domain and the policy (or PLAN it); create the topics."""
