@@ -1,5 +1,6 @@
 """pearl_pomdp.sros2_policy without ROS: building, reading back, the schema's rules, actions, the notice."""
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import pytest
 
@@ -152,3 +153,17 @@ def test_the_security_notice_is_said_only_when_security_is_off():
     assert "ROS domain 7" in line and "/pearl/operator/veto" in line and "docs/reliability.md" in line
     assert security_notice({"ROS_SECURITY_ENABLE": "false"}, 7, ["/v"]) is not None
     assert security_notice({"ROS_SECURITY_ENABLE": "true"}, 7, ["/v"]) is None
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["security", "policy", "nope.launch.xml"], "nope.launch.xml: no such launch file"),
+    (["security", "policy", "launch/pearl.launch.xml", "--ros-domain-id", "999"], "--ros-domain-id must be 0..232"),
+    (["security", "policy", "launch/pearl.launch.xml", "--timeout", "0"], "--timeout must be > 0 s"),
+])
+def test_pearl_security_policy_refuses_with_one_line(argv, message, capsys, monkeypatch):
+    from pearl_pomdp.cli import main
+
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("pearl security: error: ") and message in err[0], err
