@@ -217,11 +217,15 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self.journal: Optional[NodeJournal] = None
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self._say_if_unsecured()
+        self._security_said = False
         self.start(p["autostart"])
 
     def _say_if_unsecured(self) -> None:
-        """Once at start: without DDS security anyone on the domain may command the robot; say so."""
+        """Once, when the operator's topics and services first come up: without DDS security anyone
+        on the domain may command the robot; say so."""
+        if self._security_said:
+            return
+        self._security_said = True
         names = ([self.resolve_topic_name(self.params[p]) for p in OPERATOR_PARAMETERS["publishes"]]
                  + [self.resolve_service_name(self.params[p]) for p in OPERATOR_PARAMETERS["calls"]])
         notice = security_notice(os.environ, self.context.get_domain_id(), names)
@@ -266,6 +270,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             self.create_service(SetAutonomy, p["set_autonomy_service"], self._on_set_autonomy),
             self.create_service(Veto, p["veto_service"], self._operator_service("veto")),
             self.create_service(Command, p["command_service"], self._operator_service("command"))]
+        self._say_if_unsecured()
         # One-shot timer for the waiting action's deadline (node clock: sim time under /clock).
         self._confirm_timer = self.managed_timer(p["confirm_timeout"], self._on_confirm_deadline)
         self._confirm_timer.cancel()
