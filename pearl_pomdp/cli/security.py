@@ -42,7 +42,7 @@ DOMAIN_RANGE = (150, 230)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    verbs = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
+    verbs = parser.add_subparsers(dest="verb", metavar="VERB", required=True, help="policy: generate the SROS2 policy")
     policy = verbs.add_parser("policy", help="start the launch file's graph on a private domain and print its SROS2 "
                                              "policy (every node's endpoints; the operator's enclave)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
