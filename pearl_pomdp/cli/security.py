@@ -15,7 +15,7 @@ security turns it on; the shipped ``config/sros2/pearl.policy.xml`` is this comm
 
 Examples:
   pearl security policy launch/pearl.launch.xml > pearl.policy.xml
-  pearl security policy launch/pearl.launch.xml speech:=true --out config/sros2/pearl.policy.xml
+  pearl security policy launch/pearl.launch.xml speech:=true --out robot.policy.xml
 """
 from __future__ import annotations
 
