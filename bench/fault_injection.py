@@ -13,6 +13,12 @@ its run and step, is answered once; a resumed tracker's repeated belief must not
 same is run with ``journal:=false`` (``--no-journal-trials``) to show what is lost without the
 journal: reported, not asserted.
 
+A ``pearl record`` beside each launch records every topic but /rosout. Per trial also: whether the
+recorder was still running at the episode's end (it survived the kill), whether ``pearl bag-info``
+reads the bag and it holds messages logged after the kill, and what ``pearl replay`` makes of it
+(exit code, whether its actions match the recorded ones: reported, not asserted, since the
+recorded run had a crash and the replay has none).
+
 The simulated world itself (``pearl_sim_world``) is not killed: it is the world of this
 simulation (resident, clock, robot base) and keeps no journal; killing it ends the episode.
 
@@ -78,7 +84,9 @@ class _Lines:
 
 
 def trial(index: int, kind: str, kill_after: float, rate: float, policy: Path, journal: bool, tmp: Path,
-          timeout: float) -> dict:
+          timeout: float, domain_ids: Optional[Tuple[int, int]] = None) -> dict:
+    """One episode with one SIGKILL (see the module doc); ``domain_ids``: the ROS domains of the
+    launch and of the bag's replay (default: two of 102..149, from the pid and ``index``)."""
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -96,6 +104,9 @@ def trial(index: int, kind: str, kill_after: float, rate: float, policy: Path, j
     # 102..149: above the suite's 1..101, below the 150..229 of test_one_loop (a stranger's latched action
     # on the same domain would be taken for this graph's).
     domain_id = 102 + (os.getpid() * 7 + index * 13) % 48
+    replay_domain_id = 102 + (domain_id - 102 + 24) % 48
+    if domain_ids is not None:
+        domain_id, replay_domain_id = domain_ids
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                ROS_HOME=str(home), ROS_LOG_DIR=str(home / "log"), PYTHONUNBUFFERED="1",
                FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_profile.xml"))
@@ -109,6 +120,11 @@ def trial(index: int, kind: str, kill_after: float, rate: float, policy: Path, j
     actions: List[str] = []
     node.create_subscription(cv.BeliefMsg, "/pearl/belief", lambda m: keys.add(cv.msg_to_belief_key(m)), DEEP)
     node.create_subscription(cv.TextMsg, "/pearl/action", lambda m: actions.append(m.data), DEEP)
+    bag = home / "bag"
+    recorder = subprocess.Popen([str(BIN / "pearl"), "record", str(bag), "--exclude", "/rosout", "--custom-data",
+                                 f"pearl.domain={REPO / 'config' / 'pearl.domain.yaml'}", f"pearl.policy={policy}"],
+                                env=env, cwd=str(REPO), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                stdin=subprocess.DEVNULL)
     cmd = [str(BIN / "pearl"), "launch", "launch/pearl_sim.launch.xml", f"rate:={rate}", f"policy:={policy}",
            f"journal:={'true' if journal else 'false'}"]
     proc = subprocess.Popen(cmd, env=env, cwd=str(REPO), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -132,6 +148,7 @@ def trial(index: int, kind: str, kill_after: float, rate: float, policy: Path, j
             out["error"] = "the episode ended before the kill" if proc.poll() is not None else f"no pid for {kind}"
             return out
         os.kill(pid, signal.SIGKILL)
+        killed_ns = time.time_ns()
         while proc.poll() is None and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
         if proc.poll() is None:
@@ -144,23 +161,74 @@ def trial(index: int, kind: str, kill_after: float, rate: float, policy: Path, j
                                 and scores["questions_answered"] >= 1)
         # Each belief (run, step) is answered by one action: more actions than beliefs are repeats.
         # (Counted over the whole run: an action and its belief travel on two topics, in either order.)
-        out["actions"], out["beliefs"] = len(actions), len(keys)
-        out["repeated_actions"] = max(0, len(actions) - len(keys))
+        # The topics keep one message for a late reader, so the probe can miss a message a respawned node
+        # published before the probe matched it: beliefs are counted by their numbers (steps 0..n of each
+        # run), actions as the most of what the probe and the world saw.
+        steps: Dict[int, int] = {}
+        for run, step in filter(None, keys):
+            steps[run] = max(step, steps.get(run, -1))
+        world = scores["actions"] if scores else 0
+        out["actions"], out["beliefs"] = max(len(actions), world), sum(n + 1 for n in steps.values())
+        out["actions_seen"], out["beliefs_seen"] = len(actions), len(keys)
+        out["repeated_actions"] = max(0, out["actions"] - out["beliefs"])
         out["resumed"] = "resuming from journal" in lines.text()
         # What a tracker that forgot loses: the guidance's end ("We have arrived") is never said.
-        out["guidance_closed"] = "TerminateGuidance" in actions
+        out["guidance_closed"] = "TerminateGuidance" in actions + (scores or {}).get("first_actions", [])
+        out.update(_bag_check(recorder, bag, killed_ns, policy, env, replay_domain_id))
         return out
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(10)
+        _stop(proc)
+        _stop(recorder)
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def _stop(child: subprocess.Popen) -> None:
+    """SIGINT a child still running; SIGKILL it after 30 s."""
+    if child.poll() is None:
+        child.send_signal(signal.SIGINT)
+        try:
+            child.wait(30)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait(10)
+
+
+def _bag_check(recorder: subprocess.Popen, bag: Path, killed_ns: int, policy: Path, env: dict,
+               replay_domain_id: int) -> dict:
+    """The trial's bag (``pearl record`` beside the launch, all topics but /rosout): whether the
+    recorder was still running when the episode ended (it survived the kill), whether ``pearl
+    bag-info`` reads the bag and it holds messages logged after the kill, and what ``pearl replay``
+    makes of it (its exit code: 0 same actions, 1 other actions, 2 unreadable; reported, not
+    asserted: the recorded run had a crash in it, the replay has none)."""
+    out: Dict = {"recorder_survived": recorder.poll() is None}
+    _stop(recorder)
+    info = subprocess.run([str(BIN / "pearl"), "bag-info", str(bag), "--json"], capture_output=True, text=True,
+                          cwd=str(REPO), timeout=120)
+    out["bag_read"] = info.returncode == 0
+    if info.returncode == 0:
+        summary = json.loads(info.stdout)
+        out["bag_messages"] = summary["message_count"]
+        out["bag_after_kill"] = summary["end_ns"] > killed_ns
+    else:
+        out["bag_error"] = (info.stderr.strip().splitlines() or ["?"])[-1]
+        return out
+    replay_env = dict(env, ROS_DOMAIN_ID=str(replay_domain_id))
+    try:
+        replay = subprocess.run([str(BIN / "pearl"), "replay", str(bag), "--json", "--domain-id", str(replay_domain_id)],
+                                capture_output=True, text=True, cwd=str(REPO), env=replay_env, timeout=600)
+    except subprocess.TimeoutExpired:
+        out["replay_exit"] = None
+        return out
+    out["replay_exit"] = replay.returncode
+    if replay.returncode in (0, 1):
+        result = json.loads(replay.stdout)
+        out["replay_match"] = result["match"]
+        out["replay_actions"], out["recorded_actions"] = len(result["actions"]), len(result["expected_actions"])
+    else:
+        out["replay_error"] = (replay.stderr.strip().splitlines() or ["?"])[-1]
+    return out
 
 
 def _summary(results: List[dict]) -> dict:
@@ -174,7 +242,12 @@ def _summary(results: List[dict]) -> dict:
                      "recover_p99_s": round(float(np.percentile(rec, 99)), 3) if rec else None,
                      "guidance_closed": sum(bool(r.get("guidance_closed")) for r in rows),
                      "repeated_actions": sum(r.get("repeated_actions", 0) for r in rows),
-                     "max_repeated_in_a_trial": max((r.get("repeated_actions", 0) for r in rows), default=0)}
+                     "max_repeated_in_a_trial": max((r.get("repeated_actions", 0) for r in rows), default=0),
+                     "recorder_survived": sum(bool(r.get("recorder_survived")) for r in rows),
+                     "bags_read_with_messages_after_the_kill": sum(bool(r.get("bag_read") and r.get("bag_after_kill"))
+                                                                   for r in rows),
+                     "bags_replayed": sum(r.get("replay_exit") in (0, 1) for r in rows),
+                     "replays_matching_the_recorded_actions": sum(bool(r.get("replay_match")) for r in rows)}
     return out
 
 

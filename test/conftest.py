@@ -54,6 +54,21 @@ def ward_domain():
     return load_domain(Path(__file__).resolve().parents[1] / "config" / "ward.domain.yaml")
 
 
+@pytest.fixture(scope="session")
+def load_bench():
+    """``load_bench("online")``: the script ``bench/online.py`` as a module (``bench/`` is no package)."""
+    import importlib.util
+
+    def load(name: str):
+        path = Path(__file__).resolve().parents[1] / "bench" / f"{name}.py"
+        spec = importlib.util.spec_from_file_location(f"bench_{name}", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    return load
+
+
 # ROS fixtures (ros_context, pearl_policy) live in test/ros_helpers.py; registered here once so
 # the session-scoped planned Pearl policy is shared by every test module.
 from ros_helpers import day_policy, domain_leases, pearl_policy, ros_context  # noqa: E402,F401

@@ -1,21 +1,14 @@
 """bench/online.py's pooling of runs over disjoint episodes (``--first-episode``, ``--combine``):
 the pooled mean and CI equal those of one run over all the episodes."""
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / "bench" / "online.py"
-
 
 @pytest.fixture(scope="module")
-def online_bench():
-    spec = importlib.util.spec_from_file_location("bench_online", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def online_bench(load_bench):
+    return load_bench("online")
 
 
 def _part(bench, returns, first):

@@ -12,6 +12,7 @@ of it is published on the events topic, so a bag records it.
 from __future__ import annotations
 
 import collections
+import os
 import sys
 import time
 from dataclasses import replace
@@ -29,6 +30,7 @@ from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.journaling import JOURNAL_PARAMETERS, NodeJournal
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
 from pearl_pomdp.operator import AUTONOMY_LEVELS, BY_SERVICE, GateOutput, OperatorGate
+from pearl_pomdp.sros2_policy import OPERATOR_PARAMETERS, security_notice
 
 #: The parameters an operator may change while the node runs (``ros2 param set``).
 OPERATOR_LIVE = ("autonomy", "confirm_categories", "confirm_timeout")
@@ -196,7 +198,20 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self.journal: Optional[NodeJournal] = None
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._security_said = False
         self.start(p["autostart"])
+
+    def _say_if_unsecured(self) -> None:
+        """Once, when the operator's topics and services first come up: without DDS security anyone
+        on the domain may command the robot; say so."""
+        if self._security_said:
+            return
+        self._security_said = True
+        names = ([self.resolve_topic_name(self.params[p]) for p in OPERATOR_PARAMETERS["publishes"]]
+                 + [self.resolve_service_name(self.params[p]) for p in OPERATOR_PARAMETERS["calls"]])
+        notice = security_notice(os.environ, self.context.get_domain_id(), names)
+        if notice:
+            self.get_logger().warning(notice)
 
     def configure_node(self) -> None:
         """Load the domain and the policy (or PLAN it); create the topics."""
@@ -236,6 +251,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             self.create_service(SetAutonomy, p["set_autonomy_service"], self._on_set_autonomy),
             self.create_service(Veto, p["veto_service"], self._operator_service("veto")),
             self.create_service(Command, p["command_service"], self._operator_service("command"))]
+        self._say_if_unsecured()
         # One-shot timer for the waiting action's deadline (node clock: sim time under /clock).
         self._confirm_timer = self.managed_timer(p["confirm_timeout"], self._on_confirm_deadline)
         self._confirm_timer.cancel()
