@@ -6,8 +6,9 @@ receive, in file order,
 
 * every ``/clock`` message of the bag (``rosgraph_msgs/Clock``), and
 * every message of the tracker's input topics — the inputs its domain declares (Pearl's:
-  ``/pearl/speech``, ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder``, all
-  ``std_msgs/String``), each with its declared message type,
+  ``/pearl/speech``, ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder``), each with its
+  declared message type — and the drives' progress (``/pearl/drive_progress``, which moves a
+  drive's deadline, when the bag has it),
 
 published as the recorded bytes (``publish`` of raw CDR: nothing is re-serialised). The
 actions the policy publishes on ``/pearl/action`` are collected and compared with the
@@ -65,6 +66,7 @@ BELIEF_TOPIC = "/pearl/belief"
 #: Beliefs equal to this (max abs difference) count as the same in :attr:`ReplayResult.beliefs_match`.
 BELIEF_TOLERANCE = 1e-12
 DECISION_TOPIC = "/pearl/decision"
+DRIVE_PROGRESS_TYPE = "pearl_interfaces/msg/DriveProgress"
 #: custom_data keys of a replayable bag.
 KEY_DOMAIN, KEY_POLICY, KEY_TRACKER = "pearl.domain", "pearl.policy", "pearl.tracker_params"
 KEY_POLICY_PARAMS = "pearl.policy_params"
@@ -450,6 +452,11 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
             topic = graph.tracker.resolve_topic_name(graph.tracker.get_parameter(f"inputs.{channel.name}.topic").value)
             input_types[topic] = (channel.type, reader_for(channel, cfg["domain"]).msg_type)
         _check_topics(reader, {t: type_name for t, (type_name, _) in input_types.items()})
+        if core.drive_timer is not None and graph.tracker.get_parameter("drive_progress_topic").value:
+            # The navigation's progress moves drive deadlines: fed like an input (a bag recorded
+            # through Nav2's action has it; one of the string era has not).
+            topic = graph.tracker.resolve_topic_name(graph.tracker.get_parameter("drive_progress_topic").value)
+            input_types.setdefault(topic, (DRIVE_PROGRESS_TYPE, cv.DriveProgressMsg))
         if explain:
             core.keep_history()
             node.create_subscription(cv.DecisionMsg, DECISION_TOPIC, lambda m: decisions.append(cv.msg_to_decision(m)),

@@ -20,6 +20,8 @@ Wire formats (common_interfaces, and this project's pearl_interfaces):
   received → action published, wall clock) and an online search's ``SearchStats`` (``has_search``);
   ``step`` counts the beliefs this policy node answered before (0 for ``b0``).
 * **nav goal** — ``geometry_msgs/PoseStamped`` (position x, y; orientation from yaw).
+* **drive progress** — ``pearl_interfaces/DriveProgress``: the drive's action and place, Nav2's
+  distance remaining (m) and estimated time remaining (s), stamped.
 * **localised pose** — ``geometry_msgs/PoseWithCovarianceStamped`` (``/amcl_pose``) or
   ``nav_msgs/Odometry`` (``/odom``): planar x, y, yaw and the x/y standard deviation.
 * **velocity** — ``geometry_msgs/Twist`` (``/cmd_vel_nav``, ``/cmd_vel``): linear.x, angular.z.
@@ -42,6 +44,7 @@ from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import Odometry
 from pearl_interfaces.msg import Belief as BeliefMsg
 from pearl_interfaces.msg import Decision as DecisionMsg
+from pearl_interfaces.msg import DriveProgress as DriveProgressMsg
 from pearl_interfaces.msg import FeatureMarginal as FeatureMarginalMsg
 from pearl_interfaces.msg import OperatorEvent as OperatorEventMsg
 from pearl_interfaces.msg import OperatorProposal as OperatorProposalMsg
@@ -62,6 +65,7 @@ __all__ = [
     "decision_to_msg", "msg_to_decision", "pose_to_msg", "msg_to_pose",
     "diagnostics_to_msg", "msg_to_diagnostics", "seconds_to_time", "time_to_seconds",
     "clock_to_msg", "DIAG_OK", "DIAG_WARN", "DIAG_ERROR",
+    "DriveProgressMsg", "drive_progress_to_msg", "msg_to_drive_progress",
 ]
 
 #: Message classes used by the nodes (import them from here, not from the message packages).
@@ -294,6 +298,22 @@ def msg_to_proposal(msg: OperatorProposalMsg) -> dict:
     return {"step": int(msg.step), "action": msg.action, "source": msg.source, "status": msg.status,
             "autonomy": msg.autonomy, "vetoed": list(msg.vetoed),
             "deadline": msg.deadline if math.isfinite(msg.deadline) else None}
+
+
+# ------------------------------------------------------------- drive progress
+def drive_progress_to_msg(action: str, place: str, distance_remaining: float, estimated_time_remaining: float,
+                          stamp_s: float) -> DriveProgressMsg:
+    """A running drive's progress (Nav2's feedback) as a ``pearl_interfaces/DriveProgress``."""
+    return DriveProgressMsg(stamp=seconds_to_time(max(0.0, stamp_s)), action=str(action), place=str(place),
+                            distance_remaining=float(distance_remaining),
+                            estimated_time_remaining=float(estimated_time_remaining))
+
+
+def msg_to_drive_progress(msg: DriveProgressMsg) -> Dict[str, Any]:
+    """The plain form of a drive progress message: ``action, place, distance_remaining,
+    estimated_time_remaining, stamp`` (seconds)."""
+    return {"action": msg.action, "place": msg.place, "distance_remaining": float(msg.distance_remaining),
+            "estimated_time_remaining": float(msg.estimated_time_remaining), "stamp": time_to_seconds(msg.stamp)}
 
 
 # ------------------------------------------------------------------------ poses
