@@ -108,7 +108,7 @@ def trial(index: int, kind: str, kill_after: float, rate: float, policy: Path, j
     keys: set = set()
     actions: List[str] = []
     node.create_subscription(cv.BeliefMsg, "/pearl/belief", lambda m: keys.add(cv.msg_to_belief_key(m)), DEEP)
-    node.create_subscription(cv.TextMsg, "/pearl/action", lambda m: actions.append(m.data), DEEP)
+    node.create_subscription(cv.ActionMsg, "/pearl/action", lambda m: actions.append(cv.msg_to_action(m)), DEEP)
     cmd = [str(BIN / "pearl"), "launch", "launch/pearl_sim.launch.xml", f"rate:={rate}", f"policy:={policy}",
            f"journal:={'true' if journal else 'false'}"]
     proc = subprocess.Popen(cmd, env=env, cwd=str(REPO), stdout=subprocess.PIPE, stderr=subprocess.PIPE,

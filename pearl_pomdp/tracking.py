@@ -95,7 +95,7 @@ from pearl_pomdp.belief import BeliefFilter
 from pearl_pomdp.channels import InputChannel, NumberDiscretiser, flat_channels
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.navigation import DriveTimer, places_from_parameters
-from pearl_pomdp.speech import KeywordFilter, parse_speech_message
+from pearl_pomdp.speech import KeywordFilter, Utterance, parse_speech_message
 
 __all__ = ["BeliefTracker", "InputOutcome", "StepResult", "StepSettings", "SettingSpec", "Event",
            "COUNTERS", "drive_actions"]
@@ -1032,20 +1032,27 @@ class BeliefTracker:
                                                  self.settings.drive_max_seconds, now)
         return self._outcome("moved" if moved else "idle", None)
 
-    def on_input(self, key: str, data: Union[str, float], now: float) -> InputOutcome:
+    def on_input(self, key: str, data: Union[str, float, Utterance], now: float) -> InputOutcome:
         """One input message on input ``key`` (one of :attr:`channels`' names).
 
-        A speech input's ``data`` is recogniser text, optionally with its confidence
-        (:func:`~pearl_pomdp.speech.parse_speech_message`); a symbol input's is a symbol; a number
-        input's is the reading (a float, or one of its symbols as text).
+        A speech input's ``data`` is an :class:`~pearl_pomdp.speech.Utterance` (the typed message:
+        text, confidence and, when the recogniser mapped it, a symbol of the input, which is taken
+        as heard; any other symbol is ignored and the text filtered), or recogniser text, optionally
+        with its confidence (:func:`~pearl_pomdp.speech.parse_speech_message`); a symbol input's is a
+        symbol; a number input's is the reading (a float, or one of its symbols as text).
 
         Raises:
             ValueError: ``key`` is not an input (names the inputs).
         """
         kind = self._mapper.channels[self._check_input(key)].kind
         if kind == "speech":
-            text, confidence = parse_speech_message(str(data))
-            symbol, heard = self._mapper.speech(key, text, confidence)
+            if isinstance(data, Utterance):
+                text, confidence = data.text, data.confidence
+                given = data.symbol if data.symbol in self._mapper.allowed[key] else ""
+                symbol, heard = self._mapper.speech(key, given or text, confidence)
+            else:
+                text, confidence = parse_speech_message(str(data))
+                symbol, heard = self._mapper.speech(key, text, confidence)
         elif kind == "number":
             text, confidence = (data if isinstance(data, str) else str(data)), 1.0
             symbol, heard = self._mapper.number(key, data)

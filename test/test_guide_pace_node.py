@@ -32,7 +32,7 @@ class Rig:
         self.state = self.probe.listen("/pearl/guide_pace", cv.TextMsg, EVENT_QOS)
         self.nav = self.probe.publisher("/cmd_vel_nav", cv.TwistMsg, CMD_QOS)
         self.person = self.probe.publisher("/pearl/resident_position", cv.PointMsg, POSE_QOS)
-        self.action = self.probe.publisher("/pearl/action", cv.TextMsg, LATCHED_QOS)
+        self.action = self.probe.publisher("/pearl/action", cv.ActionMsg, LATCHED_QOS)
         self.executor = SingleThreadedExecutor(context=context)
         for n in (self.node, self.probe.node):
             self.executor.add_node(n)

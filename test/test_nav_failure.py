@@ -296,7 +296,7 @@ def test_over_dds_the_drive_closes_at_its_deadline_diagnostics_say_why_and_actio
         graph = PearlGraph(context=context, domain=domain, model=model, decider=decider, parameter_services=False,
                            overrides={"belief_tracker": {**scenario.tracker_parameters(), "diagnostics_period": 3600.0}})
         world = World(scenario, seed=3, domain=domain)
-        sim = SimulatedHardware(context, world)
+        sim = SimulatedHardware(context, world, domain)
         for node in sim.nodes:
             graph.add_node(node)
         beliefs, statuses = [], []

@@ -123,7 +123,7 @@ def test_broken_bags_are_errors_naming_file_and_problem(tmp_path, capsys):
     # wrong type on the action topic
     retyped = _copy_bag(src, tmp_path / "retyped", retype={"/pearl/action": "geometry_msgs/msg/PoseStamped"})
     with pytest.raises(BagError, match=r"retyped: topic /pearl/action: recorded as geometry_msgs/msg/PoseStamped, "
-                                       r"replay needs std_msgs/msg/String"):
+                                       r"replay needs pearl_interfaces/msg/Action or std_msgs/msg/String"):
         replay_bag(retyped)
     # no replay configuration
     bare = _copy_bag(src, tmp_path / "bare", custom={})

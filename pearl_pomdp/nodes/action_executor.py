@@ -68,7 +68,7 @@ class ActionExecutorNode(ManagedPearlNode):
           for ``ros2 lifecycle set /action_executor configure`` / ``activate``.
 
     Subscribers:
-        * ``/pearl/action`` (std_msgs/String, volatile — a restarted executor does not repeat an
+        * ``/pearl/action`` (pearl_interfaces/Action, volatile — a restarted executor does not repeat an
           old action).
 
     Publishers:
@@ -103,7 +103,7 @@ class ActionExecutorNode(ManagedPearlNode):
               type=Parameter.Type.STRING_ARRAY),
         Param("location_names", [], "Named navigation goals (see locations.<name>)", type=Parameter.Type.STRING_ARRAY),
         Param("frame_id", "map", "Frame of the navigation goals"),
-        Param("action_topic", "/pearl/action", "Primitive action input (std_msgs/String)"),
+        Param("action_topic", "/pearl/action", "Primitive action input (pearl_interfaces/Action)"),
         Param("say_topic", "/pearl/say", "Sentences to speak (std_msgs/String)"),
         Param("display_topic", "/pearl/display", "Touchscreen text (std_msgs/String)"),
         Param("goal_topic", "/goal_pose", "Navigation goals (geometry_msgs/PoseStamped, Nav2's goal topic)"),
@@ -182,7 +182,7 @@ class ActionExecutorNode(ManagedPearlNode):
         self.say_pub = self.lifecycle_publisher(cv.TextMsg, p["say_topic"], EVENT_QOS)
         self.display_pub = self.lifecycle_publisher(cv.TextMsg, p["display_topic"], EVENT_QOS)
         self._configure_navigation()
-        self.managed_subscription(cv.TextMsg, p["action_topic"], self._on_action, EVENT_QOS)
+        self.managed_subscription(cv.ActionMsg, p["action_topic"], self._on_action, EVENT_QOS)
         self.managed_timer(p["diagnostics_period"], self.publish_diagnostics)
         if not self.behaviour:
             self.get_logger().warning("no action configured (action_names is empty): every action will be "

@@ -95,7 +95,7 @@ class BeliefTrackerNode(ManagedPearlNode):
           ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder`` symbols; all
           ``std_msgs/String``). A number input reads its message's number and discretises it.
           A flat model (no domain) has one input, ``observation`` on ``/pearl/observation``.
-        * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL): the action that opens a step.
+        * ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL): the action that opens a step.
         * ``/pearl/drive_progress`` (pearl_interfaces/DriveProgress; ``drive_progress_topic``), when
           drives have deadlines: the open drive's remaining path moves its deadline
           (:meth:`~pearl_pomdp.tracking.BeliefTracker.on_drive_progress`).
@@ -133,7 +133,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         *step_parameters(),
         Param("location_names", EMPTY_STRINGS, "Named places (locations.<name> = [x, y, yaw] in the map frame)"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
-        Param("action_topic", "/pearl/action", "Primitive actions, which open steps (std_msgs/String)"),
+        Param("action_topic", "/pearl/action", "Primitive actions, which open steps (pearl_interfaces/Action)"),
         Param("belief_topic", "/pearl/belief", "Belief output (pearl_interfaces/Belief)"),
         Param("drive_progress_topic", "/pearl/drive_progress", "A running drive's progress (pearl_interfaces/"
               "DriveProgress, the action executor's from Nav2's feedback), which moves the drive's deadline; "
@@ -200,7 +200,7 @@ class BeliefTrackerNode(ManagedPearlNode):
             key = reader.channel.name
             callback = self._on_speech(key) if reader.channel.kind == "speech" else self._input_callback(key)
             self.managed_subscription(reader.msg_type, topic, self._counted(key, callback, reader.read), qos)
-        self.managed_subscription(cv.TextMsg, p["action_topic"], self._on_action, LATCHED_QOS)
+        self.managed_subscription(cv.ActionMsg, p["action_topic"], self._on_action, LATCHED_QOS)
         if core.drive_timer is not None and p["drive_progress_topic"]:
             self.managed_subscription(cv.DriveProgressMsg, p["drive_progress_topic"], self._on_drive_progress,
                                       EVENT_QOS)

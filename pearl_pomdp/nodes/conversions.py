@@ -12,8 +12,13 @@ Wire formats (common_interfaces, and this project's pearl_interfaces):
   model without features reports one pseudo-feature ``"state"``), and the full belief
   ``probabilities[s] = b(s)`` in the model's state order (for a factored domain: mixed radix,
   first feature most significant), named in ``state_names`` up to :data:`MAX_NAMED_STATES` states.
-* **action** / **speech** / **touchscreen** / **laser** / **reminder** / **say** / **display** —
-  ``std_msgs/String``; the action is the primitive action's name.
+* **speech** — ``pearl_interfaces/RecognisedSpeech``: the recognised text, the recogniser's
+  confidence in [0, 1] and, when the recogniser mapped it, the speech symbol; stamped. (Bags recorded
+  before it hold the JSON ``{"text", "confidence"}`` in a ``std_msgs/String``.)
+* **action** — ``pearl_interfaces/Action``: the primitive action's name, stamped (bags recorded
+  before it hold the name in a ``std_msgs/String``).
+* **touchscreen** / **laser** / **reminder** / **say** / **display** / the operator's veto and
+  command — ``std_msgs/String``.
 * **decision** — ``pearl_interfaces/Decision`` (``pearl_interfaces/msg/Decision.msg``): the step,
   the belief step it answers, the action, the EXECUTE trace root → … → primitive (``TraceStep``:
   subtask, choice, value; NaN: no α-vector), the forward search's expansions, ``latency_s`` (belief
@@ -42,12 +47,14 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import Odometry
+from pearl_interfaces.msg import Action as ActionMsg
 from pearl_interfaces.msg import Belief as BeliefMsg
 from pearl_interfaces.msg import Decision as DecisionMsg
 from pearl_interfaces.msg import DriveProgress as DriveProgressMsg
 from pearl_interfaces.msg import FeatureMarginal as FeatureMarginalMsg
 from pearl_interfaces.msg import OperatorEvent as OperatorEventMsg
 from pearl_interfaces.msg import OperatorProposal as OperatorProposalMsg
+from pearl_interfaces.msg import RecognisedSpeech as RecognisedSpeechMsg
 from pearl_interfaces.msg import SearchAction as SearchActionMsg
 from pearl_interfaces.msg import SearchBranch as SearchBranchMsg
 from pearl_interfaces.msg import SearchStats as SearchStatsMsg
@@ -55,10 +62,12 @@ from pearl_interfaces.msg import TraceStep as TraceStepMsg
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
+from pearl_pomdp.channels import SPEECH_TYPE, TEXT_TYPE
 from pearl_pomdp.errors import BeliefError
+from pearl_pomdp.speech import Utterance, parse_speech_message, utterance
 
 __all__ = [
-    "MAX_NAMED_STATES", "BeliefMsg", "TextMsg", "DecisionMsg", "OperatorEventMsg", "OperatorProposalMsg",
+    "MAX_NAMED_STATES", "ActionMsg", "BeliefMsg", "TextMsg", "DecisionMsg", "OperatorEventMsg", "OperatorProposalMsg",
     "operator_event_to_msg", "msg_to_operator_event", "proposal_to_msg", "msg_to_proposal", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
     "belief_to_msg", "msg_to_belief", "msg_to_belief_key", "msg_to_marginals",
     "text_to_msg", "msg_to_text", "action_to_msg", "msg_to_action",
@@ -66,6 +75,7 @@ __all__ = [
     "diagnostics_to_msg", "msg_to_diagnostics", "seconds_to_time", "time_to_seconds",
     "clock_to_msg", "DIAG_OK", "DIAG_WARN", "DIAG_ERROR",
     "DriveProgressMsg", "drive_progress_to_msg", "msg_to_drive_progress",
+    "RecognisedSpeechMsg", "speech_to_msg", "msg_to_speech", "input_to_msg",
 ]
 
 #: Message classes used by the nodes (import them from here, not from the message packages).
@@ -169,14 +179,43 @@ def msg_to_text(msg: String) -> str:
     return msg.data
 
 
-def action_to_msg(action_name: str) -> String:
-    """The primitive action's name as a ``std_msgs/String``."""
-    return String(data=action_name)
+def action_to_msg(action_name: str, stamp_s: float = 0.0) -> ActionMsg:
+    """The primitive action as a ``pearl_interfaces/Action`` (its name, stamped ``stamp_s``)."""
+    return ActionMsg(stamp=seconds_to_time(max(0.0, stamp_s)), name=str(action_name))
 
 
-def msg_to_action(msg: String) -> str:
+def msg_to_action(msg: ActionMsg) -> str:
     """The action name of an ``/pearl/action`` message (surrounding blanks removed)."""
-    return msg.data.strip()
+    return msg.name.strip()
+
+
+# ---------------------------------------------------------------------- speech
+def speech_to_msg(text: str, confidence: float = 1.0, symbol: str = "", stamp_s: float = 0.0) -> RecognisedSpeechMsg:
+    """What the recogniser heard as a ``pearl_interfaces/RecognisedSpeech`` (confidence clamped to [0, 1])."""
+    conf = min(1.0, max(0.0, float(confidence))) if math.isfinite(float(confidence)) else 1.0
+    return RecognisedSpeechMsg(stamp=seconds_to_time(max(0.0, stamp_s)), text=str(text), confidence=conf,
+                               symbol=str(symbol))
+
+
+def msg_to_speech(msg: RecognisedSpeechMsg) -> Utterance:
+    """The :class:`~pearl_pomdp.speech.Utterance` of a ``pearl_interfaces/RecognisedSpeech``."""
+    return utterance(msg.text, msg.confidence, msg.symbol)
+
+
+def input_to_msg(type_name: str, data: str) -> Any:
+    """The message an input of message type ``type_name`` carries for ``data``, a simulated world's
+    text: a ``RecognisedSpeech`` for the typed speech input (``data`` plain text, or the JSON of
+    :func:`pearl_pomdp.speech.speech_message` with its confidence), a ``std_msgs/String`` otherwise.
+
+    Raises:
+        ValueError: ``type_name`` is neither (a number input is not fed text).
+    """
+    if type_name == SPEECH_TYPE:
+        text, confidence = parse_speech_message(data)
+        return speech_to_msg(text, confidence)
+    if type_name == TEXT_TYPE:
+        return String(data=str(data))
+    raise ValueError(f"an input of type {type_name} is not fed text (expected {SPEECH_TYPE} or {TEXT_TYPE})")
 
 
 def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: float, expansions: int = 0,

@@ -58,7 +58,7 @@ class GuidePaceNode(PearlNode):
           ``diagnostics_period`` (0.01–3600 s).
 
     Subscribers: ``/cmd_vel_nav`` (Twist), person topic (PointStamped, best effort),
-    ``/pearl/action`` (String, TRANSIENT_LOCAL: a restarted node resumes a running guidance).
+    ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL: a restarted node resumes a running guidance).
 
     Publishers: ``/cmd_vel`` (Twist), ``lost_topic`` (String), ``/pearl/guide_pace``
     (String JSON ``{"active", "state", "speed", "nav_speed", "pace", "behind", "waited",
@@ -87,7 +87,7 @@ class GuidePaceNode(PearlNode):
         Param("lost_topic", "/pearl/laser", "Where 'resident lost' is reported (String)"),
         Param("lost_symbol", "", "Observation published when she is lost, a symbol of the domain ('': none)"),
         Param("domain", "", "Domain whose observations lost_symbol should be ('': no check)"),
-        Param("action_topic", "/pearl/action", "Primitive actions (String)"),
+        Param("action_topic", "/pearl/action", "Primitive actions (pearl_interfaces/Action)"),
         Param("state_topic", "/pearl/guide_pace", "Filter state for viewers (JSON String)"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
     )
@@ -123,7 +123,7 @@ class GuidePaceNode(PearlNode):
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self.create_subscription(cv.TwistMsg, p["cmd_in_topic"], self._on_cmd, CMD_QOS)
         self.create_subscription(cv.PointMsg, p["person_topic"], self._on_person, POSE_QOS)
-        self.create_subscription(cv.TextMsg, p["action_topic"], self._on_action, LATCHED_QOS)
+        self.create_subscription(cv.ActionMsg, p["action_topic"], self._on_action, LATCHED_QOS)
         self.create_timer(1.0 / p["control_rate"], self._control)
         self.create_timer(p["diagnostics_period"], self.publish_diagnostics)
         self.get_logger().info(f"guide pace for {', '.join(p['guide_actions']) or 'no action'}: "
