@@ -34,11 +34,29 @@ def test_bags_hold_the_two_paper_scenarios():
         assert len(expected) >= 5
 
 
-@pytest.mark.parametrize("bag", BAGS, ids=[b.name for b in BAGS])
+#: The Figure 4 bag as shipped before the typed interfaces (issue 39): action, decision and speech as
+#: std_msgs/String (JSON for the decision and the speech's confidence), the belief a Float64MultiArray
+#: plus /pearl/belief_marginals; its domain snapshot declares the speech input a String.
+BEFORE_TYPED = REPO / "test" / "data" / "bag_before_typed" / "figure4_guidance"
+
+
+def test_the_shipped_bags_are_typed():
+    for bag in BAGS:
+        types = {t: i.type for t, i in BagReader(bag).topics.items()}
+        assert (types["/pearl/action"], types["/pearl/belief"], types["/pearl/decision"], types["/pearl/speech"]) == (
+            "pearl_interfaces/msg/Action", "pearl_interfaces/msg/Belief", "pearl_interfaces/msg/Decision",
+            "pearl_interfaces/msg/RecognisedSpeech"), bag.name
+    old = {t: i.type for t, i in BagReader(BEFORE_TYPED).topics.items()}
+    assert (old["/pearl/action"], old["/pearl/belief"], old["/pearl/speech"]) == (
+        "std_msgs/msg/String", "std_msgs/msg/Float64MultiArray", "std_msgs/msg/String")
+
+
+@pytest.mark.parametrize("bag", [*BAGS, BEFORE_TYPED], ids=[*(b.name for b in BAGS), "before_typed"])
 def test_replay_matches_recorded_actions(bag, tmp_path):
+    """Every shipped bag, and one recorded before the typed interfaces: the same actions, the same beliefs."""
     configure_test_process(tmp_path)
     result = replay_bag(bag, domain_id=allocate_domain_id())
-    expected = json.loads((REPO / "bags" / f"{bag.name}.expected.json").read_text())["expected_actions"]
+    expected = json.loads((bag.parent / f"{bag.name}.expected.json").read_text())["expected_actions"]
     assert result.expected_actions == expected  # what the bag holds is what was seen live
     assert result.actions == expected and result.match and result.first_mismatch is None
     # Parity: the tracker publishes the beliefs it published when the bag was recorded (b0 and one per step).
@@ -71,7 +89,8 @@ def test_cli_replay_json(tmp_path, capsys):
 def _copy_bag(src: Path, dst: Path, *, action_override=None, custom=None, retype=None) -> Path:
     """Rewrite ``src`` to ``dst`` (absolute custom_data paths), optionally altering it."""
     from rclpy.serialization import serialize_message
-    from std_msgs.msg import String
+
+    from pearl_pomdp.nodes import conversions as cv
 
     reader = BagReader(src)
     data = dict((reader.metadata or {}).get("custom_data") or {})
@@ -87,7 +106,7 @@ def _copy_bag(src: Path, dst: Path, *, action_override=None, custom=None, retype
             payload = m.data
             if m.topic == "/pearl/action":
                 if action_override and k in action_override:
-                    payload = serialize_message(String(data=action_override[k]))
+                    payload = serialize_message(cv.action_to_msg(action_override[k]))
                 k += 1
             out.write(m.topic, payload, m.log_time, m.publish_time, m.sequence)
     return dst
