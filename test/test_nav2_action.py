@@ -160,15 +160,25 @@ def _spin(executor, predicate, timeout):
     return predicate()
 
 
+def _ready(pearl_nodes, **listen):
+    """A probe listening on ``listen`` (name → (topic, type, qos)) with a ``/pearl/action`` publisher, once
+    it is matched with the tracker and the executor and the stand-in server is up: ``(action, received)``."""
+    tracker, executor_node, node, ex = pearl_nodes
+    probe = Probe(node)
+    received = {name: probe.listen(topic, msg_type, qos) for name, (topic, msg_type, qos) in listen.items()}
+    action = probe.publisher("/pearl/action", cv.ActionMsg, LATCHED_QOS)
+    assert _spin(ex, lambda: not probe.unmatched([tracker, executor_node])
+                 and executor_node.nav.client.server_is_ready(), 20.0)
+    return action, received
+
+
 def test_an_aborted_goal_closes_the_drive_as_navfailed_at_once(pearl_nodes, navigate_to_pose):
     tracker, executor_node, node, ex = pearl_nodes
     assert executor_node.nav is not None and "NavigateToPose action /navigate_to_pose" in executor_node.drive_path
     server = StandInServer(node, navigate_to_pose, {ROOM[0]: "abort", HOME[0]: "succeed"})
-    probe = Probe(node)
-    beliefs = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
-    action = probe.publisher("/pearl/action", cv.ActionMsg, LATCHED_QOS)
-    assert _spin(ex, lambda: not probe.unmatched([tracker, executor_node]) and beliefs
-                 and executor_node.nav.client.server_is_ready(), 20.0)
+    action, got = _ready(pearl_nodes, beliefs=("/pearl/belief", cv.BeliefMsg, LATCHED_QOS))
+    beliefs = got["beliefs"]
+    assert _spin(ex, lambda: beliefs, 5.0)                  # b0
     action.publish(cv.action_to_msg("GotoPatientRoom"))
     assert _spin(ex, lambda: tracker.core.step_open and server.goals, 10.0), server.goals
     deadline = tracker.core.deadline()
@@ -191,12 +201,10 @@ def test_an_aborted_goal_closes_the_drive_as_navfailed_at_once(pearl_nodes, navi
 def test_an_arrival_the_landmark_detector_said_first_is_not_said_again(pearl_nodes, navigate_to_pose):
     tracker, executor_node, node, ex = pearl_nodes
     server = StandInServer(node, navigate_to_pose, {ROOM[0]: "succeed"}, succeed_after=1.0)
-    probe = Probe(node)
-    laser_in = probe.listen("/pearl/laser", cv.TextMsg, EVENT_QOS)
-    laser = probe.publisher("/pearl/laser", cv.TextMsg, EVENT_QOS)
-    action = probe.publisher("/pearl/action", cv.ActionMsg, LATCHED_QOS)
-    assert _spin(ex, lambda: not probe.unmatched([tracker, executor_node])
-                 and executor_node.nav.client.server_is_ready(), 20.0)
+    laser = Probe(node).publisher("/pearl/laser", cv.TextMsg, EVENT_QOS)
+    action, got = _ready(pearl_nodes, laser=("/pearl/laser", cv.TextMsg, EVENT_QOS))
+    laser_in = got["laser"]
+    assert _spin(ex, lambda: laser.get_subscription_count() >= 3, 10.0)   # tracker, executor, laser_in
     action.publish(cv.action_to_msg("GotoPatientRoom"))
     assert _spin(ex, lambda: server.goals == [ROOM], 10.0)
     laser.publish(cv.text_to_msg("atRoom"))                 # the landmark detector, before Nav2's tolerance
@@ -211,12 +219,10 @@ def test_feedback_moves_the_drive_deadline_and_the_step_closes_at_the_moved_one(
     deadline comes soon): later, earlier, unchanged, and the step closes ~1.75 s after the last."""
     tracker, executor_node, node, ex = pearl_nodes
     server = StandInServer(node, navigate_to_pose, {ROOM[0]: ("progress", (20.0, 8.0, 9.0, 0.3))})
-    probe = Probe(node)
-    beliefs = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
-    progress = probe.listen("/pearl/drive_progress", cv.DriveProgressMsg, EVENT_QOS)
-    action = probe.publisher("/pearl/action", cv.ActionMsg, LATCHED_QOS)
-    assert _spin(ex, lambda: not probe.unmatched([tracker, executor_node]) and beliefs
-                 and executor_node.nav.client.server_is_ready(), 20.0)
+    action, got = _ready(pearl_nodes, beliefs=("/pearl/belief", cv.BeliefMsg, LATCHED_QOS),
+                         progress=("/pearl/drive_progress", cv.DriveProgressMsg, EVENT_QOS))
+    beliefs, progress = got["beliefs"], got["progress"]
+    assert _spin(ex, lambda: beliefs, 5.0)                  # b0
     action.publish(cv.action_to_msg("GotoPatientRoom"))
     assert _spin(ex, lambda: tracker.core.step_open and server.goals, 10.0)
     core = tracker.core
@@ -247,11 +253,8 @@ def test_feedback_moves_the_drive_deadline_and_the_step_closes_at_the_moved_one(
 def test_a_decision_that_changes_the_goal_cancels_the_running_one(pearl_nodes, navigate_to_pose):
     tracker, executor_node, node, ex = pearl_nodes
     server = StandInServer(node, navigate_to_pose, {ROOM[0]: "hold", HOME[0]: "hold"})
-    probe = Probe(node)
-    laser = probe.listen("/pearl/laser", cv.TextMsg, EVENT_QOS)
-    action = probe.publisher("/pearl/action", cv.ActionMsg, LATCHED_QOS)
-    assert _spin(ex, lambda: not probe.unmatched([tracker, executor_node])
-                 and executor_node.nav.client.server_is_ready(), 20.0)
+    action, got = _ready(pearl_nodes, laser=("/pearl/laser", cv.TextMsg, EVENT_QOS))
+    laser = got["laser"]
     action.publish(cv.action_to_msg("GotoPatientRoom"))
     assert _spin(ex, lambda: server.goals == [ROOM], 10.0)
     action.publish(cv.action_to_msg("GotoPatientRoom"))      # the same drive again: the goal goes on
