@@ -112,6 +112,47 @@ def _copy_bag(src: Path, dst: Path, *, action_override=None, custom=None, retype
     return dst
 
 
+def _with_drive_progress(src: Path, dst: Path, at_s: float, distance: float) -> Path:
+    """``src`` (absolute custom_data paths) with one /pearl/drive_progress for GotoPatientRoom at ``at_s``
+    (log time), ``distance`` metres from the room, in its place in the file."""
+    from rclpy.serialization import serialize_message
+
+    from pearl_pomdp.nodes import conversions as cv
+
+    reader = BagReader(src)
+    data = dict((reader.metadata or {}).get("custom_data") or {})
+    for key in ("pearl.domain", "pearl.policy"):
+        data[key] = str((src / data[key]).resolve())
+    at_ns = int(at_s * 1e9)
+    progress = serialize_message(cv.drive_progress_to_msg("GotoPatientRoom", "room", distance, distance / 0.5, at_s))
+    with BagWriter(dst, custom_data=data) as out:
+        for name, t in reader.topics.items():
+            out.add_topic(name, t.type, qos=t.offered_qos_profiles)
+        out.add_topic("/pearl/drive_progress", "pearl_interfaces/msg/DriveProgress")
+        pending = True
+        for m in reader.messages:
+            if pending and m.log_time > at_ns:
+                out.write("/pearl/drive_progress", progress, at_ns)
+                pending = False
+            out.write(m.topic, m.data, m.log_time, m.publish_time, m.sequence)
+    return dst
+
+
+def test_replay_feeds_recorded_drive_progress_to_the_tracker(tmp_path):
+    """Figure 4's GotoPatientRoom opens at 5 s with a 62.5 s deadline (home → room, 15 m) and arrives at
+    30 s. A recorded progress report at 6 s moves the deadline: 12 m left → 46 s, the replay still
+    matches; 0.5 m left → 17.25 s, the drive closes with navFailed before the landmark and the replay
+    departs from the recording at the next action."""
+    configure_test_process(tmp_path)
+    src = REPO / "bags" / "figure4_guidance"
+    far = replay_bag(_with_drive_progress(src, tmp_path / "far", 6.0, 12.0), domain_id=allocate_domain_id())
+    assert far.match and far.counters["drive_progress"] == 1 and far.counters["deadline_moves"] == 1
+    assert far.counters["nav_failures"] == 0
+    near = replay_bag(_with_drive_progress(src, tmp_path / "near", 6.0, 0.5), domain_id=allocate_domain_id())
+    assert near.counters["drive_progress"] == 1 and near.counters["nav_failures"] == 1
+    assert not near.match and near.first_mismatch == 2 and near.expected_actions[2] == "RingDoorBell"
+
+
 def test_altered_recording_is_a_mismatch(tmp_path, capsys):
     from pearl_pomdp.cli import main
 
