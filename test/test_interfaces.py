@@ -31,8 +31,8 @@ def test_every_interface_of_the_source_folder_is_installed_with_its_fields():
     msgs = importlib.import_module("pearl_interfaces.msg")
     srvs = importlib.import_module("pearl_interfaces.srv")
     assert _interface_names("msg") == ["Action", "Belief", "Decision", "DriveProgress", "FeatureMarginal",
-                                       "OperatorEvent", "OperatorProposal", "RecognisedSpeech", "SearchAction",
-                                       "SearchBranch", "SearchStats", "TraceStep"]
+                                       "GuidePace", "OperatorEvent", "OperatorProposal", "RecognisedSpeech",
+                                       "SearchAction", "SearchBranch", "SearchStats", "TraceStep"]
     assert _interface_names("srv") == ["Command", "SetAutonomy", "Veto"]   # confirm: std_srvs/SetBool
     for name in _interface_names("msg"):
         assert hasattr(msgs, name), name
@@ -53,6 +53,9 @@ def test_every_interface_of_the_source_folder_is_installed_with_its_fields():
     assert msgs.DriveProgress.get_fields_and_field_types() == {
         "stamp": "builtin_interfaces/Time", "action": "string", "place": "string", "distance_remaining": "float",
         "estimated_time_remaining": "float"}
+    assert msgs.GuidePace.get_fields_and_field_types() == {
+        "stamp": "builtin_interfaces/Time", "active": "string", "state": "string", "speed": "double",
+        "nav_speed": "double", "pace": "double", "behind": "double", "waited": "double", "times_lost": "uint32"}
     assert srvs.SetAutonomy.Request.get_fields_and_field_types() == {
         "level": "string", "confirm_categories": "sequence<string>", "confirm_timeout": "double"}
     assert srvs.Veto.Response.get_fields_and_field_types() == {"accepted": "boolean", "message": "string"}

@@ -25,6 +25,8 @@ Wire formats (common_interfaces, and this project's pearl_interfaces):
   received → action published, wall clock) and an online search's ``SearchStats`` (``has_search``);
   ``step`` counts the beliefs this policy node answered before (0 for ``b0``).
 * **nav goal** — ``geometry_msgs/PoseStamped`` (position x, y; orientation from yaw).
+* **guide pace** — ``pearl_interfaces/GuidePace``: the guide_pace node's filter state (the guidance,
+  the state, speeds, how far behind she is — NaN: not seen —, the wait, the times lost), stamped.
 * **drive progress** — ``pearl_interfaces/DriveProgress``: the drive's action and place, Nav2's
   distance remaining (m) and estimated time remaining (s), stamped.
 * **localised pose** — ``geometry_msgs/PoseWithCovarianceStamped`` (``/amcl_pose``) or
@@ -52,6 +54,7 @@ from pearl_interfaces.msg import Belief as BeliefMsg
 from pearl_interfaces.msg import Decision as DecisionMsg
 from pearl_interfaces.msg import DriveProgress as DriveProgressMsg
 from pearl_interfaces.msg import FeatureMarginal as FeatureMarginalMsg
+from pearl_interfaces.msg import GuidePace as GuidePaceMsg
 from pearl_interfaces.msg import OperatorEvent as OperatorEventMsg
 from pearl_interfaces.msg import OperatorProposal as OperatorProposalMsg
 from pearl_interfaces.msg import RecognisedSpeech as RecognisedSpeechMsg
@@ -76,6 +79,7 @@ __all__ = [
     "clock_to_msg", "DIAG_OK", "DIAG_WARN", "DIAG_ERROR",
     "DriveProgressMsg", "drive_progress_to_msg", "msg_to_drive_progress",
     "RecognisedSpeechMsg", "speech_to_msg", "msg_to_speech", "input_to_msg",
+    "GuidePaceMsg", "guide_pace_to_msg", "msg_to_guide_pace",
 ]
 
 #: Message classes used by the nodes (import them from here, not from the message packages).
@@ -353,6 +357,26 @@ def msg_to_drive_progress(msg: DriveProgressMsg) -> Dict[str, Any]:
     estimated_time_remaining, stamp`` (seconds)."""
     return {"action": msg.action, "place": msg.place, "distance_remaining": float(msg.distance_remaining),
             "estimated_time_remaining": float(msg.estimated_time_remaining), "stamp": time_to_seconds(msg.stamp)}
+
+
+# ----------------------------------------------------------------- guide pace
+def guide_pace_to_msg(state: Mapping[str, Any], stamp_s: float = 0.0) -> GuidePaceMsg:
+    """The guide_pace node's state ``{"active", "state", "speed", "nav_speed", "pace", "behind",
+    "waited", "times_lost"}`` (``active``/``behind`` ``None``: no guidance / not seen) as a
+    ``pearl_interfaces/GuidePace``."""
+    behind = state.get("behind")
+    return GuidePaceMsg(stamp=seconds_to_time(max(0.0, stamp_s)), active=str(state.get("active") or ""),
+                        state=str(state["state"]), speed=float(state["speed"]), nav_speed=float(state["nav_speed"]),
+                        pace=float(state["pace"]), behind=math.nan if behind is None else float(behind),
+                        waited=float(state["waited"]), times_lost=int(state["times_lost"]))
+
+
+def msg_to_guide_pace(msg: GuidePaceMsg) -> Dict[str, Any]:
+    """The plain form of a ``pearl_interfaces/GuidePace`` (the JSON the topic carried before; what the
+    live view's ``/pearl/guide_pace`` channel takes)."""
+    return {"active": msg.active or None, "state": msg.state, "speed": msg.speed, "nav_speed": msg.nav_speed,
+            "pace": msg.pace, "behind": None if math.isnan(msg.behind) else msg.behind, "waited": msg.waited,
+            "times_lost": int(msg.times_lost)}
 
 
 # ------------------------------------------------------------------------ poses
