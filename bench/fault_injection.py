@@ -119,7 +119,7 @@ def trial(index: int, kind: str, kill_after: float, rate: float, policy: Path, j
     keys: set = set()
     actions: List[str] = []
     node.create_subscription(cv.BeliefMsg, "/pearl/belief", lambda m: keys.add(cv.msg_to_belief_key(m)), DEEP)
-    node.create_subscription(cv.TextMsg, "/pearl/action", lambda m: actions.append(m.data), DEEP)
+    node.create_subscription(cv.ActionMsg, "/pearl/action", lambda m: actions.append(cv.msg_to_action(m)), DEEP)
     bag = home / "bag"
     recorder = subprocess.Popen([str(BIN / "pearl"), "record", str(bag), "--exclude", "/rosout", "--custom-data",
                                  f"pearl.domain={REPO / 'config' / 'pearl.domain.yaml'}", f"pearl.policy={policy}"],

@@ -99,10 +99,11 @@ def _drive(probe_node, executor, steps, warmup, timeout=10.0, on_measure=None):
 
     def on_action(msg):
         arrivals.append(time.perf_counter())
-        actions.append(msg.data)
+        actions.append(cv.msg_to_action(msg))
 
-    probe_node.create_subscription(cv.TextMsg, "/pearl/action", on_action, LATCHED_QOS)
-    pubs = {t: probe_node.create_publisher(cv.TextMsg, f"/pearl/{t}", INPUT_QOS)
+    probe_node.create_subscription(cv.ActionMsg, "/pearl/action", on_action, LATCHED_QOS)
+    pubs = {t: probe_node.create_publisher(cv.RecognisedSpeechMsg if t == "speech" else cv.TextMsg, f"/pearl/{t}",
+                                           INPUT_QOS)
             for t in ("speech", "touchscreen", "laser", "reminder")}
     deadline = time.monotonic() + 60.0
     while not (actions and all(p.get_subscription_count() >= 1 for p in pubs.values())):
@@ -116,7 +117,7 @@ def _drive(probe_node, executor, steps, warmup, timeout=10.0, on_measure=None):
         topic, text = _next_input(i, actions[-1])
         n = len(actions)
         start = time.perf_counter()
-        pubs[topic].publish(cv.text_to_msg(text))
+        pubs[topic].publish(cv.speech_to_msg(text) if topic == "speech" else cv.text_to_msg(text))
         step_deadline = time.monotonic() + timeout
         while len(actions) == n:
             if time.monotonic() > step_deadline:

@@ -108,7 +108,7 @@ def main() -> int:
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     actions, decisions, marginals = [], [], []
-    node.create_subscription(cv.TextMsg, "/pearl/action", lambda m: actions.append((time.perf_counter(), m)), LATCHED_QOS)
+    node.create_subscription(cv.ActionMsg, "/pearl/action", lambda m: actions.append((time.perf_counter(), m)), LATCHED_QOS)
     # The belief's arrival here splits a step's time into publish_to_marginals_ms (the tracker's
     # update of the belief and its publication, marginals included: one pearl_interfaces/Belief) and
     # marginals_to_action_ms (the policy node's decision, the action back). The names are kept from
@@ -116,7 +116,8 @@ def main() -> int:
     node.create_subscription(cv.BeliefMsg, "/pearl/belief", lambda m: marginals.append(time.perf_counter()),
                              LATCHED_QOS)
     node.create_subscription(cv.DecisionMsg, "/pearl/decision", lambda m: decisions.append(m), EVENT_QOS)
-    pubs = {t: node.create_publisher(cv.TextMsg, t, INPUT_QOS) for t in ("/ward/arrived", "/ward/call_button", "/ward/speech")}
+    pubs = {t: node.create_publisher(cv.RecognisedSpeechMsg if t == "/ward/speech" else cv.TextMsg, t, INPUT_QOS)
+            for t in ("/ward/arrived", "/ward/call_button", "/ward/speech")}
 
     def spin_until(pred, timeout):
         end = time.perf_counter() + timeout
@@ -145,7 +146,7 @@ def main() -> int:
                 k += 1
             m = len(marginals)
             t0 = time.perf_counter()
-            pubs[topic].publish(cv.text_to_msg(text))
+            pubs[topic].publish(cv.speech_to_msg(text) if topic == "/ward/speech" else cv.text_to_msg(text))
             if not spin_until(lambda: len(actions) > n, 120.0):
                 raise SystemExit(f"bench/ward_launch.py: no action after {text!r} (log: {log_dir / 'launch.err'})")
             wall.append(actions[-1][0] - t0)

@@ -45,7 +45,8 @@ from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["KINDS", "REPORTS", "RELIABILITIES", "Bin", "InputChannel", "NumberDiscretiser", "parse_input",
-           "default_channel", "flat_channels", "check_topics", "DEFAULT_TOPIC_PREFIX", "TEXT_TYPE"]
+           "default_channel", "flat_channels", "check_topics", "DEFAULT_TOPIC_PREFIX", "TEXT_TYPE", "SPEECH_TYPE",
+           "SPEECH_TYPES"]
 
 #: The kinds of input channel.
 KINDS = ("speech", "symbol", "number")
@@ -55,8 +56,14 @@ REPORTS = ("change", "every")
 RELIABILITIES = ("reliable", "best_effort")
 #: Namespace of a channel's topic when the domain names none.
 DEFAULT_TOPIC_PREFIX = "/pearl/"
-#: The message type of a text channel when the domain names none.
+#: The message type of a symbol channel when the domain names none (and of a modality's generic channel).
 TEXT_TYPE = "std_msgs/msg/String"
+#: The message type of a declared speech channel when the domain names none: what the recogniser
+#: node publishes (text, confidence, symbol).
+SPEECH_TYPE = "pearl_interfaces/msg/RecognisedSpeech"
+#: The types a speech channel reads: the typed message, or plain text (a bag recorded before it
+#: holds the recogniser's JSON in a String; a hand-made publisher may send bare text).
+SPEECH_TYPES = (SPEECH_TYPE, TEXT_TYPE)
 #: Keys an ``input:`` mapping may have.
 INPUT_KEYS = ("kind", "topic", "type", "field", "qos", "depth", "unknown", "silence", "bins", "range", "hysteresis",
               "report")
@@ -225,7 +232,7 @@ def parse_input(modality: str, symbols: Sequence[str], node: Any, keywords: Mapp
         return value
 
     topic = text("topic", DEFAULT_TOPIC_PREFIX + name, _TOPIC, "a ROS topic name (/robot/battery_state)")
-    type_name = text("type", TEXT_TYPE if kind != "number" else "std_msgs/msg/Float32", _TYPE,
+    type_name = text("type", {"number": "std_msgs/msg/Float32", "speech": SPEECH_TYPE}.get(kind, TEXT_TYPE), _TYPE,
                      "a ROS message type (package/msg/Name, e.g. std_msgs/msg/String)")
     field = text("field", "", _FIELD, "a message field name (percentage, data)") if "field" in node else ""
     if field and kind != "number":

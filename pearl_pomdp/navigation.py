@@ -231,6 +231,23 @@ class DriveTimer:
         speed = self.guide_speed if action in self.guide_actions else None
         return self.deadline.seconds(distance, speed)
 
+    def remaining_seconds(self, action: str, path_remaining: float) -> Optional[float]:
+        """Seconds allowed for the ``path_remaining`` metres a running drive ``action`` still has
+        along its planned path (Nav2's feedback: a path length, so no ``path_factor``), at its speed
+        (``guide_speed`` for a guidance), with the rule's slack and margin, capped at ``max_seconds``;
+        ``None`` if ``action`` is not a timed drive.
+
+        Raises:
+            ValueError: ``path_remaining`` < 0 or not finite.
+        """
+        if action not in self.goals:
+            return None
+        if not (math.isfinite(path_remaining) and path_remaining >= 0):
+            raise ValueError(f"distance remaining must be a finite number >= 0 m, got {path_remaining}")
+        rule = self.deadline
+        speed = self.guide_speed if action in self.guide_actions else rule.speed
+        return min(rule.max_seconds, rule.margin + rule.slack * path_remaining / speed)
+
 
 def places_from_parameters(names: Iterable[str], poses: Mapping[str, Sequence[float]]) -> Dict[str, Place]:
     """``{name: Place}`` from ``location_names`` and ``locations.<name>`` = [x, y, yaw].

@@ -23,11 +23,14 @@ The paper applies "a keyword filter to the output of the speech recognizer
 """
 from __future__ import annotations
 
+import math
 import re
 from collections import deque
+from dataclasses import dataclass
 from typing import Deque, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple
 
-__all__ = ["KeywordFilter", "normalise", "tokens", "parse_speech_message", "speech_message"]
+__all__ = ["KeywordFilter", "normalise", "tokens", "parse_speech_message", "speech_message", "Utterance",
+           "utterance"]
 
 _QUOTES = str.maketrans({"\u2019": "'", "\u2018": "'", "\u02bc": "'", "`": "'"})
 _BREAK = re.compile(r"[^0-9a-z']+")
@@ -44,15 +47,15 @@ def normalise(text: str) -> str:
 def parse_speech_message(data: str) -> Tuple[str, float]:
     """``(text, confidence)`` of a ``/pearl/speech`` message's data; never raises.
 
-    The recogniser node sends a JSON object ``{"text": "...", "confidence": 0.83}``; any
-    other sender may send plain text, which means confidence 1.0. Data counts as the JSON
+    Bags recorded before the typed ``pearl_interfaces/msg/RecognisedSpeech`` (:class:`Utterance`) hold
+    the recogniser's JSON object ``{"text": "...", "confidence": 0.83}`` in a ``std_msgs/String``;
+    any other sender of a String may send plain text, which means confidence 1.0. Data counts as the JSON
     form only when it is an object with a string ``text`` and a number ``confidence`` in
     [0, 1] (not a bool); anything else — other JSON, a malformed object, a confidence out
     of range — is taken as plain text with confidence 1.0, so nothing a person could have
     said is lost.
     """
     import json
-    import math
 
     text = data if isinstance(data, str) else str(data)
     stripped = text.strip()
@@ -69,8 +72,36 @@ def parse_speech_message(data: str) -> Tuple[str, float]:
     return text, 1.0
 
 
+@dataclass(frozen=True)
+class Utterance:
+    """What a speech recogniser heard, as the typed ``/pearl/speech`` message carries it
+    (``pearl_interfaces/msg/RecognisedSpeech``).
+
+    Attributes:
+        text: the recognised words (``""``: nothing understood).
+        confidence: the recogniser's confidence in [0, 1].
+        symbol: the speech symbol the recogniser already mapped the text to; ``""`` (the usual
+            case): the tracker's keyword filter maps :attr:`text`.
+    """
+
+    text: str
+    confidence: float = 1.0
+    symbol: str = ""
+
+
+def utterance(text: str, confidence: float, symbol: str = "") -> Utterance:
+    """An :class:`Utterance` from a typed message's fields; never raises. A confidence that is not a
+    number in [0, 1] (NaN, 7.0) is taken as 1.0, as :func:`parse_speech_message` takes a malformed one:
+    nothing a person could have said is lost."""
+    conf = float(confidence) if isinstance(confidence, (int, float)) and not isinstance(confidence, bool) else 1.0
+    if not (math.isfinite(conf) and 0.0 <= conf <= 1.0):
+        conf = 1.0
+    return Utterance(str(text), conf, str(symbol).strip())
+
+
 def speech_message(text: str, confidence: float) -> str:
-    """The JSON data the recogniser node publishes (inverse of :func:`parse_speech_message`)."""
+    """The JSON data of a speech ``std_msgs/String`` as the recogniser published it before the typed
+    message (inverse of :func:`parse_speech_message`; the simulator's worlds still write it)."""
     import json
 
     return json.dumps({"text": str(text), "confidence": round(min(1.0, max(0.0, float(confidence))), 4)})

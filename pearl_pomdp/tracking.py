@@ -61,7 +61,9 @@ Each input is read by its kind:
   :class:`~pearl_pomdp.navigation.DriveDeadline`. When it passes without an observation
   the step closes with ``nav_failed_observation`` (a symbol of the domain whose rows say the
   robot is most likely still where it started; Pearl's ``navFailed``), counter
-  ``nav_failures``, a warning; the policy decides what next (retry, ask, go home).
+  ``nav_failures``, a warning; the policy decides what next (retry, ask, go home). The
+  navigation's progress reports (Nav2's feedback, :meth:`BeliefTracker.on_drive_progress`)
+  move that deadline to what the remaining path needs while the robot gets closer.
 * *Observation before any action / several in one step.* Inputs have no header, so
   arrival order is the only order there is. An observation while no step is open is
   *queued* (FIFO, at most ``max_pending``; on overflow the oldest is dropped — counter
@@ -93,7 +95,7 @@ from pearl_pomdp.belief import BeliefFilter
 from pearl_pomdp.channels import InputChannel, NumberDiscretiser, flat_channels
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.navigation import DriveTimer, places_from_parameters
-from pearl_pomdp.speech import KeywordFilter, parse_speech_message
+from pearl_pomdp.speech import KeywordFilter, Utterance, parse_speech_message
 
 __all__ = ["BeliefTracker", "InputOutcome", "StepResult", "StepSettings", "SettingSpec", "Event",
            "COUNTERS", "drive_actions"]
@@ -102,7 +104,7 @@ __all__ = ["BeliefTracker", "InputOutcome", "StepResult", "StepSettings", "Setti
 #: adds the input mapping's: ``unknown_speech``, ``low_confidence``, ``invalid_<input>`` for
 #: every input and ``unchanged_<input>`` for every number input).
 COUNTERS = ("updates", "timeouts", "nav_failures", "queued", "dropped_stale", "dropped_overflow",
-            "replaced_actions", "unknown_actions", "zero_likelihood")
+            "replaced_actions", "unknown_actions", "zero_likelihood", "drive_progress", "deadline_moves")
 
 #: A step may close this much before its deadline (clock rounding: sim time travels in ns).
 _DEADLINE_SLACK = 1e-9
@@ -345,8 +347,10 @@ class InputOutcome:
             * ``"abandoned"``: :meth:`~BeliefTracker.abandon_step` left the open step without an update;
             * ``"resumed"``: the action a step resumed from a journal was opened with, heard again
               (the policy's latched copy): the step goes on, nothing is reopened;
+            * ``"moved"``: a drive's progress report moved its deadline
+              (:meth:`~BeliefTracker.on_drive_progress`);
             * ``"idle"``: nothing happened (a tick before any deadline, nothing to abandon, a
-              number input's reading that kept its symbol).
+              number input's reading that kept its symbol, a progress report that moved nothing).
         closed: the step closed by this call, or ``None``.
         symbol: the observation symbol the input was taken as (``None`` for an invalid input,
             an action or a tick).
@@ -442,6 +446,8 @@ class _StepProtocol:
         self.opened_at: Optional[float] = None
         #: Seconds the open drive may take (``None``: not a timed drive).
         self.drive_limit: Optional[float] = None
+        #: The fewest metres the open drive's progress reports have said remain (``None``: none yet).
+        self.closest_remaining: Optional[float] = None
         #: Why the last drive failed (for /diagnostics); empty until one did.
         self.last_nav_failure = ""
         self.pending: Deque[_Pending] = collections.deque()
@@ -472,6 +478,7 @@ class _StepProtocol:
         self.current_action = None
         self.opened_at = None
         self.drive_limit = None
+        self.closest_remaining = None
         return was_open
 
     def take_events(self) -> List[Event]:
@@ -499,6 +506,7 @@ class _StepProtocol:
         self.current_action = name
         self.opened_at = float(now)
         self.drive_limit = None if drive_limit is None else float(drive_limit)
+        self.closest_remaining = None
         while self.pending:
             item = self.pending.popleft()
             if self.stale_after > 0 and now - item.stamp > self.stale_after:
@@ -562,6 +570,24 @@ class _StepProtocol:
             return self._close(self.timeout_observation, "timeout", now)
         return None
 
+    def on_drive_progress(self, action: str, path_remaining: float, allowed: float, max_seconds: float,
+                          now: float) -> bool:
+        """Progress of the open timed drive ``action`` at ``now``: ``path_remaining`` metres left, which
+        are ``allowed`` seconds. When the robot is closer than any earlier report of this drive said,
+        the deadline moves to ``now + allowed`` (at most ``max_seconds`` after the drive began); True
+        if it moved. Every report is counted (``drive_progress``), each move too (``deadline_moves``)."""
+        self.counters["drive_progress"] += 1
+        if (self.current_action != action or self.drive_limit is None or self.opened_at is None
+                or (self.closest_remaining is not None and path_remaining >= self.closest_remaining)):
+            return False
+        self.closest_remaining = path_remaining
+        limit = min(max_seconds, max(0.0, now - self.opened_at) + allowed)
+        if limit == self.drive_limit:
+            return False
+        self.drive_limit = limit
+        self.counters["deadline_moves"] += 1
+        return True
+
     # --------------------------------------------------------------- update
     def _close(self, symbol: str, source: str, now: float, text: str = "", confidence: float = 1.0) -> StepResult:
         action = self.current_action
@@ -578,6 +604,7 @@ class _StepProtocol:
         self.current_action = None
         self.opened_at = None
         self.drive_limit = None
+        self.closest_remaining = None
         return StepResult(self.step, action, symbol, source, self.belief, zero, float(now), text or symbol,
                           confidence)
 
@@ -979,20 +1006,53 @@ class BeliefTracker:
         closed = self._protocol.on_tick(now)
         return self._outcome("closed" if closed is not None else "idle", closed)
 
-    def on_input(self, key: str, data: Union[str, float], now: float) -> InputOutcome:
+    def on_drive_progress(self, action: str, path_remaining: float, now: float) -> InputOutcome:
+        """The navigation's progress on the drive ``action`` at ``now``: ``path_remaining`` metres left
+        along its planned path (Nav2's ``NavigateToPose`` feedback, ``distance_remaining``).
+
+        When ``action`` is the open step and a timed drive, and the robot is closer to its goal than
+        any earlier report of this drive said, the drive's deadline moves to ``now`` plus the seconds
+        those metres are allowed (:meth:`DriveTimer.remaining_seconds
+        <pearl_pomdp.navigation.DriveTimer.remaining_seconds>`), never past ``drive_max_seconds`` after
+        the drive began. So a drive that advances is timed by what is left, not by the distance guessed
+        from where the robot most likely started; one that stands still or backs off gains no time
+        (Nav2 ends it with an abort, or the deadline with ``nav_failed_observation``). Outcome kind
+        ``"moved"`` when the deadline moved, else ``"idle"`` (a report for another action, no timed
+        drive, no progress, or an invalid distance; counter ``drive_progress`` counts every report).
+        """
+        timer = self._drive_timer
+        try:
+            allowed = timer.remaining_seconds(action, float(path_remaining)) if timer is not None else None
+        except ValueError:
+            allowed = None
+        if allowed is None:
+            self._protocol.counters["drive_progress"] += 1
+            return self._outcome("idle", None)
+        moved = self._protocol.on_drive_progress(action, float(path_remaining), allowed,
+                                                 self.settings.drive_max_seconds, now)
+        return self._outcome("moved" if moved else "idle", None)
+
+    def on_input(self, key: str, data: Union[str, float, Utterance], now: float) -> InputOutcome:
         """One input message on input ``key`` (one of :attr:`channels`' names).
 
-        A speech input's ``data`` is recogniser text, optionally with its confidence
-        (:func:`~pearl_pomdp.speech.parse_speech_message`); a symbol input's is a symbol; a number
-        input's is the reading (a float, or one of its symbols as text).
+        A speech input's ``data`` is an :class:`~pearl_pomdp.speech.Utterance` (the typed message:
+        text, confidence and, when the recogniser mapped it, a symbol of the input, which is taken
+        as heard; any other symbol is ignored and the text filtered), or recogniser text, optionally
+        with its confidence (:func:`~pearl_pomdp.speech.parse_speech_message`); a symbol input's is a
+        symbol; a number input's is the reading (a float, or one of its symbols as text).
 
         Raises:
             ValueError: ``key`` is not an input (names the inputs).
         """
         kind = self._mapper.channels[self._check_input(key)].kind
         if kind == "speech":
-            text, confidence = parse_speech_message(str(data))
-            symbol, heard = self._mapper.speech(key, text, confidence)
+            if isinstance(data, Utterance):
+                text, confidence = data.text, data.confidence
+                given = data.symbol if data.symbol in self._mapper.allowed[key] else ""
+                symbol, heard = self._mapper.speech(key, given or text, confidence)
+            else:
+                text, confidence = parse_speech_message(str(data))
+                symbol, heard = self._mapper.speech(key, text, confidence)
         elif kind == "number":
             text, confidence = (data if isinstance(data, str) else str(data)), 1.0
             symbol, heard = self._mapper.number(key, data)

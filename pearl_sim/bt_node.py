@@ -4,7 +4,7 @@
 in the Pearl graph: it listens to the belief tracker's ``/pearl/belief`` (``pearl_interfaces/Belief``
 with the ``step``, the ``action`` that opened the closed step and the ``observation`` that closed
 it; :func:`pearl_pomdp.nodes.conversions.msg_to_marginals`) and
-publishes the tree's action on ``/pearl/action`` (``std_msgs/String``, the policy node's
+publishes the tree's action on ``/pearl/action`` (``pearl_interfaces/Action``, the policy node's
 latched QoS, so the tracker opens the next step with it). The tracker, the executor and
 the hardware are unchanged: start the graph with this node instead of
 ``hierarchical_policy``.
@@ -40,14 +40,14 @@ class BehaviourTreeNode(PearlNode):
         * ``/pearl/belief`` (pearl_interfaces/Belief, TRANSIENT_LOCAL depth 1).
 
     Publishers:
-        * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL depth 1).
+        * ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL depth 1).
     """
 
     DEFAULT_NAME = "behaviour_tree"
     PARAMETERS = (
         Param("domain", "config/pearl.domain.yaml", "Factored domain (.yaml): the action names"),
         Param("belief_topic", "/pearl/belief", "Tracker's belief with its step (pearl_interfaces/Belief)"),
-        Param("action_topic", "/pearl/action", "Primitive action output (std_msgs/String)"),
+        Param("action_topic", "/pearl/action", "Primitive action output (pearl_interfaces/Action)"),
     )
 
     def __init__(self, *, actions: Optional[List[str]] = None, **kwargs):
@@ -63,7 +63,7 @@ class BehaviourTreeNode(PearlNode):
         self.last_step: Optional[int] = None
         self.decisions = 0
         self.rejected = 0
-        self.action_pub = self.create_publisher(cv.TextMsg, p["action_topic"], LATCHED_QOS)
+        self.action_pub = self.create_publisher(cv.ActionMsg, p["action_topic"], LATCHED_QOS)
         self.create_subscription(cv.BeliefMsg, p["belief_topic"], self._on_step, LATCHED_QOS)
         self.get_logger().info(f"behaviour tree ready; listening on {p['belief_topic']}")
 
@@ -88,7 +88,7 @@ class BehaviourTreeNode(PearlNode):
             self.tree.observe(action, observation)
         self.last_step = step
         decision = self.tree.execute(None)
-        self.action_pub.publish(cv.action_to_msg(decision.action_name))
+        self.action_pub.publish(cv.action_to_msg(decision.action_name, self.now_s()))
         self.decisions += 1
 
 

@@ -225,7 +225,6 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
     from pearl_pomdp.bags.writer import BagWriter
     from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.graph import PearlGraph
-    from std_msgs.msg import String
 
     started = time.monotonic()
     scenario: Scenario = load_scenarios(scenario_path)[0]
@@ -273,7 +272,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
         from pearl_sim.loop import run_episode
         from pearl_sim.nodes import GraphBackend, SimulatedHardware
 
-        sim = SimulatedHardware(context, world)
+        sim = SimulatedHardware(context, world, domain)
         for node in sim.nodes:
             graph.add_node(node)
         decisions: List[dict] = []
@@ -299,10 +298,10 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
         latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         listener.create_subscription(cv.BeliefMsg, "/pearl/belief", on_marginals, latched)
         if live_view is not None:
-            def on_action_message(msg: Any) -> None:   # std_msgs/String
-                shown("/pearl/action", msg.data)
+            def on_action_message(msg: Any) -> None:   # pearl_interfaces/Action
+                shown("/pearl/action", cv.msg_to_action(msg))
 
-            listener.create_subscription(String, "/pearl/action", on_action_message, latched)
+            listener.create_subscription(cv.ActionMsg, "/pearl/action", on_action_message, latched)
             # What a person in the loop sees: the proposal and every operator event.
             listener.create_subscription(cv.OperatorProposalMsg, "/pearl/proposal",
                                          lambda msg: shown("/pearl/proposal", cv.msg_to_proposal(msg)), latched)

@@ -11,7 +11,8 @@ node                   publishes
                        (geometry_msgs/PoseStamped); follows ``/goal_pose`` (Nav2's topic)
 ``sim_user``           ``/pearl/touchscreen`` (the resident's screen presses) and
                        ``/pearl/sim/said`` (what she actually said, for transcripts)
-``sim_speech``         ``/pearl/speech`` (recogniser text, with word errors)
+``sim_speech``         ``/pearl/speech`` (recogniser text, with word errors, as the domain's
+                       speech input declares it: pearl_interfaces/RecognisedSpeech)
 ``sim_reminder``       ``/pearl/reminder`` (scheduler: ``g_physio`` …)
 =====================  ===========================================================
 
@@ -40,6 +41,9 @@ if TYPE_CHECKING:   # the nursing home's world; GraphBackend serves any world's 
     from pearl_sim.nursing_home.world import World
 
 RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+#: The message type of ``/pearl/speech`` when no domain is given: what Pearl's domains declare.
+SPEECH_TYPE = "pearl_interfaces/msg/RecognisedSpeech"
 
 MODALITY_TOPICS = {
     "Speech": "/pearl/speech",
@@ -89,12 +93,25 @@ class SimUserNode(Node):
         self.said = self.create_publisher(String, "/pearl/sim/said", RELIABLE)
 
 
-class SimSpeechNode(Node):
-    """The speech recogniser: recognised text (with the scenario's word errors) on ``/pearl/speech``."""
+def speech_type(domain=None) -> str:
+    """The message type of ``domain``'s speech input on ``/pearl/speech`` (a bag's copy of an older
+    domain: ``std_msgs/msg/String``), or :data:`SPEECH_TYPE` without a domain."""
+    for channel in getattr(domain, "inputs", ()):
+        if channel.kind == "speech" and channel.topic == MODALITY_TOPICS["Speech"]:
+            return channel.type
+    return SPEECH_TYPE
 
-    def __init__(self, context):
+
+class SimSpeechNode(Node):
+    """The speech recogniser: recognised text (with the scenario's word errors) on ``/pearl/speech``,
+    as ``type_name`` (a :func:`speech_type`)."""
+
+    def __init__(self, context, type_name: str = SPEECH_TYPE):
+        from pearl_pomdp.nodes.bag_recorder import message_class
+
         super().__init__("sim_speech", context=context)
-        self.pub = self.create_publisher(String, MODALITY_TOPICS["Speech"], RELIABLE)
+        self.type_name = type_name
+        self.pub = self.create_publisher(message_class(type_name), MODALITY_TOPICS["Speech"], RELIABLE)
 
 
 class SimReminderNode(Node):
@@ -111,17 +128,19 @@ class SimulatedHardware:
     Args:
         context: an initialised rclpy context (the same as the Pearl nodes').
         world: the simulated nursing home.
+        domain: the domain the graph runs, whose speech input's message type ``/pearl/speech``
+            follows (default: :data:`SPEECH_TYPE`, Pearl's).
 
     Attributes:
         nodes: the rclpy nodes, to add to an executor. ``/clock`` is published by the
             graph's :class:`~pearl_pomdp.nodes.sim_clock.SimClockDriver`, not here.
     """
 
-    def __init__(self, context, world: World):
+    def __init__(self, context, world: World, domain=None):
         self.world = world
         self.navigation = SimNavigationNode(context, world)
         self.user = SimUserNode(context)
-        self.speech = SimSpeechNode(context)
+        self.speech = SimSpeechNode(context, speech_type(domain))
         self.reminder = SimReminderNode(context)
         self.truth = self.navigation.create_publisher(String, "/pearl/sim/truth", RELIABLE)
         self.nodes = [self.navigation, self.user, self.speech, self.reminder]
@@ -129,7 +148,12 @@ class SimulatedHardware:
                            "Laser": self.navigation.laser, "Reminder": self.reminder.pub}
 
     def outgoing(self, message) -> tuple:
-        """``(publisher, message)`` that carries a world message: its modality's node, as text."""
+        """``(publisher, message)`` that carries a world message: its modality's node, as text (speech
+        as its input's type: the world's JSON text with confidence becomes a typed RecognisedSpeech)."""
+        from pearl_pomdp.nodes.conversions import input_to_msg
+
+        if message.modality == "Speech":
+            return self.speech.pub, input_to_msg(self.speech.type_name, message.text)
         return self.publishers[message.modality], String(data=message.text)
 
     def publish_said(self, said: str) -> None:

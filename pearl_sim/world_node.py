@@ -22,10 +22,11 @@ directory), ``seed`` (int, −1: the scenario's), ``rate`` (double, 1–1000, de
 the manager must publish its first action within this, or the node exits 1),
 ``wall_timeout`` (double, s, default 600: the episode must end within this, else exit 1).
 
-Publishers: ``/clock`` (rosgraph_msgs/Clock), ``/pearl/speech``, ``/pearl/touchscreen``,
-``/pearl/laser``, ``/pearl/reminder`` (std_msgs/String, reliable), ``/pearl/pose``
+Publishers: ``/clock`` (rosgraph_msgs/Clock), ``/pearl/speech`` (pearl_interfaces/RecognisedSpeech,
+as Pearl's domain declares it), ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder``
+(std_msgs/String), all reliable, ``/pearl/pose``
 (geometry_msgs/PoseStamped, the robot's place in the scenario's map).
-Subscribers: ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL like the policy's publisher), and
+Subscribers: ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL like the policy's publisher), and
 ``/pearl/belief`` (pearl_interfaces/Belief: the steps the tracker closed).
 """
 from __future__ import annotations
@@ -54,7 +55,8 @@ def _make_node_class():
             from std_msgs.msg import String
 
             from pearl_pomdp.nodes.common import resolve_path
-            from pearl_sim.nodes import MODALITY_TOPICS, RELIABLE
+            from pearl_pomdp.nodes.bag_recorder import message_class
+            from pearl_sim.nodes import MODALITY_TOPICS, RELIABLE, SPEECH_TYPE
             from pearl_sim.nursing_home.scenario import load_scenarios
             from pearl_sim.nursing_home.world import World
 
@@ -75,13 +77,18 @@ def _make_node_class():
             self.world = World(self.scenario, seed=None if seed < 0 else seed)
             self._String, self._Clock, self._Pose = String, Clock, PoseStamped
             self.clock_pub = self.create_publisher(Clock, "/clock", 10)
-            self.publishers_by_modality = {m: self.create_publisher(String, t, RELIABLE)
+            self.types_by_modality = {m: SPEECH_TYPE if m == "Speech" else "std_msgs/msg/String"
+                                      for m in MODALITY_TOPICS}
+            self.publishers_by_modality = {m: self.create_publisher(message_class(self.types_by_modality[m]), t,
+                                                                    RELIABLE)
                                            for m, t in MODALITY_TOPICS.items()}
             self.pose_pub = self.create_publisher(PoseStamped, "/pearl/pose", 10)
             # The true state at the start and end of every action, as pearl demo records it
             # (pearl fit counts from it when this topic is recorded).
             self.truth_pub = self.create_publisher(String, "/pearl/sim/truth", RELIABLE)
-            self.create_subscription(String, "/pearl/action", self._on_action, LATCHED_QOS)
+            from pearl_interfaces.msg import Action
+
+            self.create_subscription(Action, "/pearl/action", self._on_action, LATCHED_QOS)
             # The tracker's step count: a step it closed is answered by the policy; while that
             # answer is in flight the clock stands still (as the lock-step driver of pearl demo
             # does), so no time passes that the fast path would not have.
@@ -103,13 +110,16 @@ def _make_node_class():
 
         # --------------------------------------------------------------- inputs
         def _on_action(self, msg) -> None:
-            self.actions.append(msg.data)
+            self.actions.append(msg.name.strip())
 
         def _on_belief(self, msg) -> None:
             self.closed_steps = max(self.closed_steps, int(msg.step))
 
         def _publish(self, message) -> None:
-            self.publishers_by_modality[message.modality].publish(self._String(data=message.text))
+            from pearl_pomdp.nodes.conversions import input_to_msg
+
+            self.publishers_by_modality[message.modality].publish(
+                input_to_msg(self.types_by_modality[message.modality], message.text))
 
         def _publish_truth(self, phase: str, action: str, result=None) -> None:
             self.truth_pub.publish(self._String(data=json.dumps(self.world.truth_record(phase, action, result))))

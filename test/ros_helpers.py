@@ -367,3 +367,51 @@ def _plan_into(cache: Path, domain) -> None:
         os.rename(tmp, cache)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+#: A reader that imports nothing of this project (nor rclpy): every /pearl/* message of the MCAP
+#: files it is given, decoded by mcap-ros2-support from the bag's own schemas; one JSON object.
+MCAP_ROS2_ALONE = r"""
+import collections, json, sys
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+def plain(value, depth=0):
+    # The decoded message as JSON: fields by name (mcap_ros2 builds plain classes with __slots__).
+    if isinstance(value, (str, int, float, bool)) or value is None:
+        return value
+    if isinstance(value, (list, tuple)):
+        return [plain(v, depth + 1) for v in value[:50]]
+    if isinstance(value, (bytes, bytearray)):
+        return list(value[:50])
+    names = getattr(value, "__slots__", None) or list(vars(value))
+    return {n: plain(getattr(value, n), depth + 1) for n in names}
+
+topics = {}
+for path in sys.argv[1:]:
+    with open(path, "rb") as fh:
+        for schema, channel, message, decoded in make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            if not channel.topic.startswith("/pearl/"):
+                continue
+            entry = topics.setdefault(channel.topic, {"type": schema.name, "count": 0, "first": plain(decoded)})
+            entry["count"] += 1
+print(json.dumps({"topics": topics,
+                  "project_modules": sorted(m for m in sys.modules if m.split(".")[0] in ("pearl_pomdp", "pearl_sim",
+                                                                                          "pearl_interfaces", "rclpy"))}))
+"""
+
+
+def decode_with_mcap_ros2_alone(bag_dir: Path) -> Dict[str, dict]:
+    """``{topic: {"type", "count", "first"}}`` of every ``/pearl/*`` message of the bag in ``bag_dir``, decoded
+    in a fresh process by ``mcap-ros2-support`` alone (it asserts that process imported nothing of this
+    project); ``first`` is the topic's first message as plain JSON."""
+    import json
+
+    files = sorted(str(p) for p in Path(bag_dir).glob("*.mcap"))
+    assert files, f"no .mcap in {bag_dir}"
+    out = subprocess.run([sys.executable, "-c", MCAP_ROS2_ALONE, *files], capture_output=True, text=True, timeout=120,
+                         cwd=tempfile.gettempdir())
+    assert out.returncode == 0, out.stderr[-3000:]
+    result = json.loads(out.stdout)
+    assert result["project_modules"] == [], result["project_modules"]
+    return result["topics"]

@@ -38,7 +38,7 @@ class Rig:
         self.say = self.probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
         self.display = self.probe.listen("/pearl/display", cv.TextMsg, EVENT_QOS)
         self.goals = self.probe.listen("/goal_pose", cv.PoseMsg, LATCHED_QOS)
-        self.action = self.probe.publisher("/pearl/action", cv.TextMsg, LATCHED_QOS)
+        self.action = self.probe.publisher("/pearl/action", cv.ActionMsg, LATCHED_QOS)
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.node)
         self.executor.add_node(self.probe.node)

@@ -356,7 +356,7 @@ def test_recorded_scenarios_read_by_rosbags_and_mcap_ros2():
         ours = BagReader(bag, salvage=False)
         with AnyReader([bag]) as ar:
             theirs = [(c.topic, t, bytes(d)) for c, t, d in ar.messages()]
-            actions = [ar.deserialize(d, c.msgtype).data for c, _t, d in ar.messages() if c.topic == "/pearl/action"]
+            actions = [ar.deserialize(d, c.msgtype).name for c, _t, d in ar.messages() if c.topic == "/pearl/action"]
         assert sorted(theirs) == sorted((m.topic, m.log_time, m.data) for m in ours.messages)
         assert actions == json.loads((repo / "bags" / f"{bag.name}.expected.json").read_text())["expected_actions"]
         with open(next(bag.glob("*.mcap")), "rb") as f:

@@ -47,9 +47,10 @@ def test_bt_node_drives_the_tracker_over_dds(tmp_path):
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         probe = Probe(node)
-        actions = probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
+        actions = probe.listen("/pearl/action", cv.ActionMsg, LATCHED_QOS)
         marginals = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
-        pubs = {t: probe.publisher(f"/pearl/{t}", cv.TextMsg, INPUT_QOS) for t, _, _ in INPUTS}
+        pubs = {t: probe.publisher(f"/pearl/{t}", cv.RecognisedSpeechMsg if t == "speech" else cv.TextMsg, INPUT_QOS)
+                for t, _, _ in INPUTS}
         procs.append(Proc([str(BIN / "belief_tracker"), "--ros-args", "-p", f"domain:={DOMAIN}",
                            "-p", "step_timeout:=0.0"], env, tmp_path, "tracker"))
         procs.append(Proc([str(BIN / "pearl_bt"), "--ros-args", "-p", f"domain:={DOMAIN}"], env, tmp_path, "bt"))
@@ -61,20 +62,20 @@ def test_bt_node_drives_the_tracker_over_dds(tmp_path):
 
         reference = PearlBehaviourTree(actions=list(load_domain(DOMAIN).actions))
         expected = [reference.execute(None).action_name]
-        assert actions[0].data == expected[0] == "DoNothing"
+        assert actions[0].name == expected[0] == "DoNothing"
         first = cv.msg_to_marginals(marginals[0])
         assert (first["action"], first["observation"]) == (None, None)
         for topic, text, symbol in INPUTS:
             # The tracker has opened the step with the last action when its step count moved on.
             seen, seen_steps = len(actions), len(marginals)
-            pubs[topic].publish(cv.text_to_msg(text))
+            pubs[topic].publish(cv.speech_to_msg(text) if topic == "speech" else cv.text_to_msg(text))
             assert wait_for(lambda: len(actions) > seen and len(marginals) > seen_steps, DISCOVERY_TIMEOUT, executor), \
                 f"no action after {text!r}; tracker: {procs[0].stderr()[-400:]}"
             reference.observe(expected[-1], symbol)
             expected.append(reference.execute(None).action_name)
             last = cv.msg_to_marginals(marginals[-1])
             assert (last["action"], last["observation"]) == (expected[-2], symbol)
-        assert [m.data for m in actions] == expected
+        assert [m.name for m in actions] == expected
         assert expected == ["DoNothing", "GotoPatientRoom", "RingDoorBell", "RemindPhysioAppt", "GuideToPhysio",
                             "TerminateGuidance"]
         # A closed step without its action or observation is logged and counted; the node carries on.

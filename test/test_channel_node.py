@@ -61,12 +61,12 @@ def test_a_battery_level_over_dds_gives_the_core_filters_beliefs(ros_context, tm
         node = g.add_node(rclpy.create_node("probe", context=context))
         probe = Probe(node)
         probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
-        probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
+        probe.listen("/pearl/action", cv.ActionMsg, LATCHED_QOS)
         # A battery driver publishes best effort; the remapped input's QoS must match it.
         battery = probe.publisher("/base/battery", BatteryState,
                                   QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
                                              durability=DurabilityPolicy.VOLATILE))
-        speech = probe.publisher("/robot/speech", cv.TextMsg, EVENT_QOS)
+        speech = probe.publisher("/robot/speech", cv.RecognisedSpeechMsg, EVENT_QOS)   # a declared speech input's type
         assert g.spin_until(lambda: battery.get_subscription_count() >= 1 and speech.get_subscription_count() >= 1
                             and probe.received["/pearl/belief"], 15.0)
         assert g.tracker.get_parameter("inputs.charge.topic").value == "/base/battery"
@@ -89,7 +89,7 @@ def test_a_battery_level_over_dds_gives_the_core_filters_beliefs(ros_context, tm
             if key == "charge":
                 battery.publish(BatteryState(percentage=float(data)))
             else:
-                speech.publish(cv.text_to_msg(data))
+                speech.publish(cv.speech_to_msg(data))
             assert g.spin_until(lambda: g.tracker.core.counters() != before, 10.0), f"{key} {data} not taken"
         assert g.spin_until(lambda: len(probe.received["/pearl/belief"]) >= len(expected), 10.0)
         got = [cv.msg_to_belief(m) for m in probe.received["/pearl/belief"]]

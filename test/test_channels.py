@@ -104,7 +104,7 @@ def test_declared_inputs_and_the_generic_ones():
     assert (charge.name, charge.kind, charge.topic, charge.type, charge.range, charge.hysteresis, charge.report) == \
         ("charge", "number", "/robot/battery_state", "sensor_msgs/msg/BatteryState", (0.0, 1.0), 0.05, "change")
     assert [(b.symbol, b.low, b.high) for b in charge.bins] == [("battery_low", 0.0, 0.2), ("battery_ok", 0.2, 1.0)]
-    assert (voice.kind, voice.unknown, voice.silence, voice.type) == ("speech", "silent", "silent", "std_msgs/msg/String")
+    assert (voice.kind, voice.unknown, voice.silence, voice.type) == ("speech", "silent", "silent", "pearl_interfaces/msg/RecognisedSpeech")
     assert d.silence_symbol == "silent"
     # A modality written as a plain list gets the generic input (no names of any robot).
     table4 = load_domain(REPO / "config" / "table4.domain.yaml")

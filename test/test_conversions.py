@@ -154,3 +154,30 @@ def test_a_trackers_belief_carries_its_run_and_step_and_a_replays_carries_none()
     assert cv.msg_to_belief_key(cv.belief_to_msg([0.5, 0.5], step=3)) is None
     with pytest.raises(BeliefError, match="run"):
         cv.belief_to_msg([0.5, 0.5], run=-1)
+
+
+def test_action_speech_progress_and_guide_pace_round_trip_through_cdr():
+    """The typed forms of issue 39: what a node publishes is what a subscriber reads back."""
+    def through_cdr(msg):
+        return deserialize_message(serialize_message(msg), type(msg))
+
+    action = through_cdr(cv.action_to_msg(" GuideToPhysio ", 12.5))
+    assert cv.msg_to_action(action) == "GuideToPhysio" and cv.time_to_seconds(action.stamp) == 12.5
+    heard = cv.msg_to_speech(through_cdr(cv.speech_to_msg("what time is it", 0.62, stamp_s=3.0)))
+    assert (heard.text, heard.confidence, heard.symbol) == ("what time is it", pytest.approx(0.62), "")
+    assert cv.speech_to_msg("yes", 7.0).confidence == 1.0 and cv.speech_to_msg("yes", float("nan")).confidence == 1.0
+    # A simulated world's text: plain (confidence 1) or the JSON with its confidence, as the input's type needs.
+    assert cv.msg_to_speech(cv.input_to_msg("pearl_interfaces/msg/RecognisedSpeech",
+                                            json.dumps({"text": "yes", "confidence": 0.3}))).confidence == \
+        pytest.approx(0.3)
+    assert cv.input_to_msg("std_msgs/msg/String", "t_yes").data == "t_yes"
+    with pytest.raises(ValueError, match="std_msgs/msg/Float32 is not fed text"):
+        cv.input_to_msg("std_msgs/msg/Float32", "0.5")
+    progress = cv.msg_to_drive_progress(through_cdr(cv.drive_progress_to_msg("GoHome", "home", 3.5, 7.0, 2.0)))
+    assert progress == {"action": "GoHome", "place": "home", "distance_remaining": 3.5,
+                        "estimated_time_remaining": 7.0, "stamp": 2.0}
+    state = {"active": "GuideToPhysio", "state": "waiting", "speed": 0.0, "nav_speed": 0.4, "pace": 0.25,
+             "behind": 2.5, "waited": 1.5, "times_lost": 0}
+    assert cv.msg_to_guide_pace(through_cdr(cv.guide_pace_to_msg(state, 4.0))) == state
+    idle = {**state, "active": None, "behind": None}
+    assert cv.msg_to_guide_pace(through_cdr(cv.guide_pace_to_msg(idle))) == idle

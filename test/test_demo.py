@@ -46,6 +46,32 @@ def test_demo_transcript_shows_the_completed_guidance(demo):
     assert result.plot.stat().st_size > 10_000
 
 
+def test_every_pearl_message_of_the_demo_bag_decodes_with_mcap_ros2_support_alone(demo):
+    """Issue 39: a reader that imports nothing of this project reads the whole /pearl/* loop of a
+    recorded bag from the bag's own schemas — typed fields, not JSON inside strings."""
+    from pearl_pomdp.bags.reader import BagReader
+    from ros_helpers import decode_with_mcap_ros2_alone
+
+    result, _ = demo
+    topics = decode_with_mcap_ros2_alone(result.bag)
+    recorded = BagReader(result.bag).topics
+    pearl = {t for t in recorded if t.startswith("/pearl/")}
+    assert set(topics) == pearl and len(pearl) >= 10
+    assert {t: e["count"] for t, e in topics.items()} == {t: recorded[t].message_count for t in pearl}
+    types = {t: e["type"] for t, e in topics.items()}
+    assert {t: types[t] for t in ("/pearl/action", "/pearl/belief", "/pearl/decision", "/pearl/speech")} == {
+        "/pearl/action": "pearl_interfaces/msg/Action", "/pearl/belief": "pearl_interfaces/msg/Belief",
+        "/pearl/decision": "pearl_interfaces/msg/Decision", "/pearl/speech": "pearl_interfaces/msg/RecognisedSpeech"}
+    assert topics["/pearl/action"]["first"]["name"] == result.steps[0].action
+    b0 = topics["/pearl/belief"]["first"]
+    assert b0["step"] == 0 and [m["feature"] for m in b0["marginals"]][:2] == ["RobotLocation", "UserLocation"]
+    assert abs(sum(m for m in b0["marginals"][0]["probabilities"]) - 1.0) < 1e-9
+    decision = topics["/pearl/decision"]["first"]
+    assert decision["action"] == result.steps[0].action and decision["trace"][-1]["choice"] == decision["action"]
+    speech = topics["/pearl/speech"]["first"]
+    assert isinstance(speech["text"], str) and 0.0 <= speech["confidence"] <= 1.0 and not speech["text"].startswith("{")
+
+
 def test_demo_bag_replays_to_the_same_actions(demo):
     from pearl_pomdp.nodes.bag_replay import replay_bag
 

@@ -5,7 +5,6 @@ A probe publishes the navigation's command (/cmd_vel_nav, 20 Hz), the resident's
 """
 from __future__ import annotations
 
-import json
 import time
 
 import pytest
@@ -29,10 +28,10 @@ class Rig:
         self.probe = Probe(rclpy.create_node("guide_probe", context=context))
         self.out = self.probe.listen("/cmd_vel", cv.TwistMsg, CMD_QOS)
         self.laser = self.probe.listen("/pearl/laser", cv.TextMsg, EVENT_QOS)
-        self.state = self.probe.listen("/pearl/guide_pace", cv.TextMsg, EVENT_QOS)
+        self.state = self.probe.listen("/pearl/guide_pace", cv.GuidePaceMsg, EVENT_QOS)
         self.nav = self.probe.publisher("/cmd_vel_nav", cv.TwistMsg, CMD_QOS)
         self.person = self.probe.publisher("/pearl/resident_position", cv.PointMsg, POSE_QOS)
-        self.action = self.probe.publisher("/pearl/action", cv.TextMsg, LATCHED_QOS)
+        self.action = self.probe.publisher("/pearl/action", cv.ActionMsg, LATCHED_QOS)
         self.executor = SingleThreadedExecutor(context=context)
         for n in (self.node, self.probe.node):
             self.executor.add_node(n)
@@ -89,8 +88,9 @@ def test_during_a_guidance_the_robot_waits_for_her_and_reports_her_lost_once(rig
     assert stopped and all(t == {"linear_x": 0.0, "linear_y": 0.0, "angular_z": 0.0} for t in stopped)
     assert [m.data for m in rig.laser] == ["userLost"]
     assert rig.node.counts["lost"] == 1
-    states = [json.loads(m.data) for m in rig.state]
+    states = [cv.msg_to_guide_pace(m) for m in rig.state]
     assert states[-1]["state"] == "lost" and states[-1]["active"] == "GuideToPhysio"
+    assert states[-1]["behind"] == pytest.approx(4.0) and states[-1]["times_lost"] == 1
     # She catches up: the robot drives on; then the guidance ends and commands pass through again.
     rig.drive(1.0, behind=0.8)
     assert cv.msg_to_twist(rig.out[-1])["linear_x"] > 0.0

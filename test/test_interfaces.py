@@ -30,7 +30,8 @@ def test_every_interface_of_the_source_folder_is_installed_with_its_fields():
 
     msgs = importlib.import_module("pearl_interfaces.msg")
     srvs = importlib.import_module("pearl_interfaces.srv")
-    assert _interface_names("msg") == ["Belief", "Decision", "FeatureMarginal", "OperatorEvent", "OperatorProposal",
+    assert _interface_names("msg") == ["Action", "Belief", "Decision", "DriveProgress", "FeatureMarginal",
+                                       "GuidePace", "OperatorEvent", "OperatorProposal", "RecognisedSpeech",
                                        "SearchAction", "SearchBranch", "SearchStats", "TraceStep"]
     assert _interface_names("srv") == ["Command", "SetAutonomy", "Veto"]   # confirm: std_srvs/SetBool
     for name in _interface_names("msg"):
@@ -46,6 +47,15 @@ def test_every_interface_of_the_source_folder_is_installed_with_its_fields():
         "observation": "string", "marginals": "sequence<pearl_interfaces/FeatureMarginal>",
         "state_names": "sequence<string>", "probabilities": "sequence<double>"}
     assert msgs.OperatorEvent.get_fields_and_field_types()["step"] == "int32"   # -1: before the first belief
+    assert msgs.Action.get_fields_and_field_types() == {"stamp": "builtin_interfaces/Time", "name": "string"}
+    assert msgs.RecognisedSpeech.get_fields_and_field_types() == {
+        "stamp": "builtin_interfaces/Time", "text": "string", "confidence": "float", "symbol": "string"}
+    assert msgs.DriveProgress.get_fields_and_field_types() == {
+        "stamp": "builtin_interfaces/Time", "action": "string", "place": "string", "distance_remaining": "float",
+        "estimated_time_remaining": "float"}
+    assert msgs.GuidePace.get_fields_and_field_types() == {
+        "stamp": "builtin_interfaces/Time", "active": "string", "state": "string", "speed": "double",
+        "nav_speed": "double", "pace": "double", "behind": "double", "waited": "double", "times_lost": "uint32"}
     assert srvs.SetAutonomy.Request.get_fields_and_field_types() == {
         "level": "string", "confirm_categories": "sequence<string>", "confirm_timeout": "double"}
     assert srvs.Veto.Response.get_fields_and_field_types() == {"accepted": "boolean", "message": "string"}

@@ -97,9 +97,9 @@ def test_lifecycle_over_dds(tmp_path, pearl_policy):
     executor.add_node(node)
     try:
         probe = Probe(node)
-        actions = probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
+        actions = probe.listen("/pearl/action", cv.ActionMsg, LATCHED_QOS)
         beliefs = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
-        speech = probe.publisher("/pearl/speech", cv.TextMsg, INPUT_QOS)
+        speech = probe.publisher("/pearl/speech", cv.RecognisedSpeechMsg, INPUT_QOS)
         for name in ("belief_tracker", "hierarchical_policy"):
             assert state(node, executor, name) == "unconfigured"
             assert transition(node, executor, name, Transition.TRANSITION_CONFIGURE)
@@ -115,7 +115,7 @@ def test_lifecycle_over_dds(tmp_path, pearl_policy):
         assert wait_for(lambda: not probe.unmatched(), DISCOVERY_TIMEOUT, executor)
         # One step: the answer moves the belief away from b0.
         n = len(beliefs)
-        speech.publish(cv.TextMsg(data="what time is it"))
+        speech.publish(cv.speech_to_msg("what time is it"))
         assert wait_for(lambda: len(beliefs) > n and len(actions) >= 2, DISCOVERY_TIMEOUT, executor)
         stepped = cv.msg_to_belief(beliefs[-1])
         assert not np.allclose(stepped, model.b0)
@@ -123,7 +123,7 @@ def test_lifecycle_over_dds(tmp_path, pearl_policy):
         assert transition(node, executor, "hierarchical_policy", Transition.TRANSITION_DEACTIVATE)
         assert transition(node, executor, "belief_tracker", Transition.TRANSITION_DEACTIVATE)
         seen_actions, seen_beliefs = len(actions), len(beliefs)
-        speech.publish(cv.TextMsg(data="give me the weather forecast for tomorrow"))
+        speech.publish(cv.speech_to_msg("give me the weather forecast for tomorrow"))
         assert not wait_for(lambda: len(actions) > seen_actions or len(beliefs) > seen_beliefs, 1.5, executor)
         # Active again: the kept belief (not b0) is published and answered.
         assert transition(node, executor, "hierarchical_policy", Transition.TRANSITION_ACTIVATE)
@@ -172,11 +172,11 @@ def test_action_executor_lifecycle_over_dds(tmp_path):
         probe = Probe(node)
         said = probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
         goals = probe.listen("/goal_pose", cv.PoseMsg, LATCHED_QOS)
-        action = probe.publisher("/pearl/action", cv.TextMsg, EVENT_QOS)
+        action = probe.publisher("/pearl/action", cv.ActionMsg, EVENT_QOS)
 
         def act_and_count(text):
             before = (len(said), len(goals))
-            action.publish(cv.TextMsg(data=text))
+            action.publish(cv.action_to_msg(text))
             return before
 
         assert state(node, executor, name) == "unconfigured"

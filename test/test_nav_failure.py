@@ -82,6 +82,47 @@ def test_an_arrival_before_the_deadline_closes_the_drive_as_before(pearl):
     assert t.deadline() == pytest.approx(31.0 + 10.0 + 2.1 * HOME_TO_ROOM / 0.6)
 
 
+def test_progress_reports_move_the_drive_deadline_while_the_robot_gets_closer(pearl):
+    """Nav2's distance remaining (a path length: no path factor) times what is left of the drive."""
+    t = tracker(pearl)
+    t.on_action("GotoPatientRoom", 100.0)
+    assert t.deadline() == pytest.approx(100.0 + 10.0 + 2.1 * HOME_TO_ROOM / 0.6)   # 140.56: from home
+    # A detour: 20 m of path left at 105 s — later than the guess from the straight line.
+    out = t.on_drive_progress("GotoPatientRoom", 20.0, 105.0)
+    assert out.kind == "moved" and t.deadline() == pytest.approx(105.0 + 10.0 + 1.5 * 20.0 / 0.6)   # 165
+    # Closer: 4 m at 130 s — earlier.
+    assert t.on_drive_progress("GotoPatientRoom", 4.0, 130.0).kind == "moved"
+    assert t.deadline() == pytest.approx(130.0 + 10.0 + 1.5 * 4.0 / 0.6)                        # 150
+    # Standing still or backing off gains no time; a report for another action moves nothing.
+    assert t.on_drive_progress("GotoPatientRoom", 4.0, 140.0).kind == "idle"
+    assert t.on_drive_progress("GotoPatientRoom", 6.0, 141.0).kind == "idle"
+    assert t.on_drive_progress("GoHome", 0.5, 142.0).kind == "idle"
+    assert t.deadline() == pytest.approx(150.0)
+    assert t.counters()["drive_progress"] == 5 and t.counters()["deadline_moves"] == 2
+    assert t.warnings() == 0                                   # progress is no warning
+    # The moved deadline is the one the step closes at.
+    assert t.on_tick(149.9).closed is None
+    assert t.on_tick(150.0).closed.observation == "navFailed"
+    # No report once the step is closed, none without a timed drive.
+    assert t.on_drive_progress("GotoPatientRoom", 1.0, 151.0).kind == "idle" and t.deadline() is None
+    t.on_action("TellTime", 152.0)
+    assert t.on_drive_progress("TellTime", 1.0, 153.0).kind == "idle"
+
+
+def test_progress_never_moves_a_deadline_past_drive_max_seconds_and_resumes_from_the_journal(pearl):
+    t = tracker(pearl, drive_max_seconds=120.0)
+    t.on_action("GotoPatientRoom", 0.0)
+    t.on_drive_progress("GotoPatientRoom", 500.0, 60.0)       # 10 + 1250 s wanted: capped at 120 s from the start
+    assert t.deadline() == pytest.approx(120.0)
+    assert t.on_drive_progress("GotoPatientRoom", float("nan"), 61.0).kind == "idle"
+    assert t.on_drive_progress("GotoPatientRoom", -1.0, 61.0).kind == "idle"
+    t.on_drive_progress("GotoPatientRoom", 3.0, 62.0)
+    assert t.deadline() == pytest.approx(62.0 + 10.0 + 7.5)
+    resumed = tracker(pearl, drive_max_seconds=120.0)
+    resumed.resume(t.journal_state())
+    assert resumed.deadline() == pytest.approx(79.5)           # the moved deadline survives a restart
+
+
 def test_guidance_is_timed_at_the_slowest_residents_pace_and_speech_still_times_out(pearl):
     domain, model = pearl
     settings = step_settings(location_names=["home", "room", "physio"], **{
@@ -255,7 +296,7 @@ def test_over_dds_the_drive_closes_at_its_deadline_diagnostics_say_why_and_actio
         graph = PearlGraph(context=context, domain=domain, model=model, decider=decider, parameter_services=False,
                            overrides={"belief_tracker": {**scenario.tracker_parameters(), "diagnostics_period": 3600.0}})
         world = World(scenario, seed=3, domain=domain)
-        sim = SimulatedHardware(context, world)
+        sim = SimulatedHardware(context, world, domain)
         for node in sim.nodes:
             graph.add_node(node)
         beliefs, statuses = [], []

@@ -44,21 +44,26 @@ FLOOD = textwrap.dedent("""
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
     from std_msgs.msg import String
+    from pearl_interfaces.msg import Action, RecognisedSpeech
     duration, rate, seed = float(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3])
     rclpy.init()
     node = rclpy.create_node("flood_publisher")
     qos = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
     latched = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    pubs = {t: node.create_publisher(String, "/pearl/" + t, qos) for t in ("speech", "touchscreen", "laser")}
-    action = node.create_publisher(String, "/pearl/action", latched)
+    # Pearl's speech input is typed (text, confidence); the symbol inputs are strings.
+    pubs = {t: node.create_publisher(RecognisedSpeech if t == "speech" else String, "/pearl/" + t, qos)
+            for t in ("speech", "touchscreen", "laser")}
+    def message(topic, text):
+        return RecognisedSpeech(text=text, confidence=1.0) if topic == "speech" else String(data=text)
+    action = node.create_publisher(Action, "/pearl/action", latched)
     while any(p.get_subscription_count() == 0 for p in pubs.values()) or action.get_subscription_count() == 0:
         rclpy.spin_once(node, timeout_sec=0.02)
     # One start marker per topic while the tracker is idle: its first sequence number on each
     # topic is then 1, so every later gap is seen (3 messages, counted with the end markers).
     time.sleep(0.3)
-    for p in pubs.values():
-        p.publish(String(data="__start__"))
+    for t, p in pubs.items():
+        p.publish(message(t, "__start__"))
     time.sleep(0.5)
     VALID = {"speech": ["what time is it", "yes please", "no", "weather today?", "let's go", "blah blah"],
              "touchscreen": ["t_yes", "t_no", "t_time", " t_go "], "laser": ["atRoom", "atPhysio", "atHome"]}
@@ -79,13 +84,13 @@ FLOOD = textwrap.dedent("""
             continue
         nxt += period
         if rng.random() < 0.02:
-            action.publish(String(data=rng.choice(ACTIONS)))
+            action.publish(Action(name=rng.choice(ACTIONS)))
             sent["actions"] += 1
             continue
         topic = rng.choice(("speech", "touchscreen", "laser"))
         bad = bool(INVALID[topic]) and rng.random() < 0.5
         action_text = rng.choice(INVALID[topic] if bad else VALID[topic])
-        pubs[topic].publish(String(data=action_text))
+        pubs[topic].publish(message(topic, action_text))
         kind = "invalid" if bad else "valid"
         sent["total"] += 1
         sent[kind] += 1
@@ -105,8 +110,8 @@ FLOOD = textwrap.dedent("""
         time.sleep(0.1)
         if stopped:
             break
-        for p in pubs.values():
-            p.publish(String(data="__end__"))
+        for t, p in pubs.items():
+            p.publish(message(t, "__end__"))
         rounds += 1
         print("end", rounds, flush=True)
 """)
@@ -174,7 +179,7 @@ class Graph:
         self.executor.add_node(self.node)
         self.probe = Probe(self.node)
         self.beliefs = self.probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
-        self.actions = self.probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
+        self.actions = self.probe.listen("/pearl/action", cv.ActionMsg, LATCHED_QOS)
         self.diags = []
         self.node.create_subscription(cv.DiagnosticsMsg, "/diagnostics",
                                       lambda m: self.diags.append(cv.msg_to_diagnostics(m)), EVENT_QOS)
@@ -250,12 +255,12 @@ def test_flood_and_zero_likelihood(graph):
     assert pair is not None, "the Pearl domain should have an impossible (action, landmark/touch) pair at b0"
     if pair is not None:
         action, symbol = pair
-        pub_a = graph.probe.publisher("/pearl/action", cv.TextMsg, LATCHED_QOS)
+        pub_a = graph.probe.publisher("/pearl/action", cv.ActionMsg, LATCHED_QOS)
         topic = "laser" if symbol in domain.modalities.get("Laser", []) else "touchscreen"
         pub_o = graph.probe.publisher(f"/pearl/{topic}", cv.TextMsg, INPUT_QOS)
         assert graph.wait(lambda: pub_o.get_subscription_count() >= 1 and pub_a.get_subscription_count() >= 1)
         n = len(graph.beliefs)
-        pub_a.publish(cv.text_to_msg(action))
+        pub_a.publish(cv.action_to_msg(action))
         assert graph.wait(lambda: graph.counters().get("open_action") == action), graph.counters()
         pub_o.publish(cv.text_to_msg(symbol))
         assert graph.wait(lambda: len(graph.beliefs) > n), tracker.stderr()[-2000:]
@@ -335,12 +340,12 @@ def test_a_restarted_policy_does_not_act_again_on_the_belief_it_answered(graph, 
         proc.stop(5.0)
     tracker = graph.tracker()
     policy = graph.start("policy1", cmd)
-    speech = graph.probe.publisher("/pearl/speech", cv.TextMsg, INPUT_QOS)
+    speech = graph.probe.publisher("/pearl/speech", cv.RecognisedSpeechMsg, INPUT_QOS)
     assert graph.wait(lambda: graph.actions and graph.beliefs and speech.get_subscription_count() >= 1,
                       3 * DISCOVERY_TIMEOUT), policy.stderr()[-2000:] + tracker.stderr()[-2000:]
     for text in ("what time is it", "yes"):
         n, nb = len(graph.actions), len(graph.beliefs)
-        speech.publish(cv.text_to_msg(text))
+        speech.publish(cv.speech_to_msg(text))
         # Belief and answer come from two processes: wait for both (either may arrive first).
         assert graph.wait(lambda: len(graph.actions) > n and len(graph.beliefs) > nb), tracker.stderr()[-2000:]
     last = cv.msg_to_belief(graph.beliefs[-1])

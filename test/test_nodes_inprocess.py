@@ -20,7 +20,7 @@ pytestmark = pytest.mark.ros
 
 import rclpy
 
-from pearl_pomdp.channels import InputChannel  # noqa: E402
+from pearl_pomdp.channels import SPEECH_TYPE, TEXT_TYPE, InputChannel  # noqa: E402
 from pearl_pomdp.model.pomdp import Pomdp  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS  # noqa: E402
@@ -70,7 +70,8 @@ class ThresholdDecider:
 #: The tiger's inputs: four that each carry either symbol (a flat model alone has one input,
 #: ``observation``), so the tests can show which input a message came in on.
 TIGER_INPUTS = [InputChannel(name, name, "speech" if name == "speech" else "symbol", ("hear-left", "hear-right"),
-                             f"/pearl/{name}") for name in ("speech", "touchscreen", "laser", "reminder")]
+                             f"/pearl/{name}", type=SPEECH_TYPE if name == "speech" else TEXT_TYPE)
+                for name in ("speech", "touchscreen", "laser", "reminder")]
 
 
 def _graph(context, model, decider, tracker=None, executor_params=None):
@@ -88,7 +89,7 @@ def _graph(context, model, decider, tracker=None, executor_params=None):
 def _probe(graph):
     node = graph.add_node(rclpy.create_node("probe", context=graph.context))
     probe = Probe(node)
-    probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
+    probe.listen("/pearl/action", cv.ActionMsg, LATCHED_QOS)
     probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
     probe.listen("/pearl/decision", cv.DecisionMsg, EVENT_QOS)
     probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
@@ -96,7 +97,8 @@ def _probe(graph):
     probe.listen("/goal_pose", cv.PoseMsg, LATCHED_QOS)
     probe.listen("/diagnostics", cv.DiagnosticsMsg, EVENT_QOS)
     probe.publisher("/clock", cv.ClockMsg, 10)
-    for topic in ("speech", "touchscreen", "laser", "reminder"):
+    probe.publisher("/pearl/speech", cv.RecognisedSpeechMsg, EVENT_QOS)   # Pearl's domain declares it typed
+    for topic in ("touchscreen", "laser", "reminder"):
         probe.publisher(f"/pearl/{topic}", cv.TextMsg, EVENT_QOS)
     peers = [n for n in graph.nodes if n is not node]
     assert graph.spin_until(lambda: not probe.unmatched(peers), 15.0), f"not matched: {probe.unmatched(peers)}"
@@ -115,7 +117,7 @@ def _set_clock(graph, probe, t):
 def _say(probe, topic, text, graph):
     pub = probe.publishers[f"/pearl/{topic}"]
     assert graph.spin_until(lambda: pub.get_subscription_count() >= 1, 10.0), f"/pearl/{topic} not matched"
-    pub.publish(cv.text_to_msg(text))
+    pub.publish(cv.speech_to_msg(text) if topic == "speech" else cv.text_to_msg(text))
 
 
 def _steps(g, probe, n):

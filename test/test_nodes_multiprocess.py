@@ -64,11 +64,13 @@ class LaunchedGraph:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.probe = probe = Probe(self.node)
-        self.actions = probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS)
+        self.actions = probe.listen("/pearl/action", cv.ActionMsg, LATCHED_QOS)
         self.beliefs = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
         self.says = probe.listen("/pearl/say", cv.TextMsg, EVENT_QOS)
         self.marginals = self.beliefs   # each belief message carries its step's marginals
-        self.inputs = {t: probe.publisher(f"/pearl/{t}", cv.TextMsg, INPUT_QOS) for t in inputs}
+        # Pearl's speech input is typed (pearl_interfaces/RecognisedSpeech), the others are strings.
+        self.inputs = {t: probe.publisher(f"/pearl/{t}", cv.RecognisedSpeechMsg if t == "speech" else cv.TextMsg,
+                                          INPUT_QOS) for t in inputs}
         self.speech = self.inputs["speech"]
         # step_timeout:=0.0 so that no silence step can slip between the test's utterances.
         self.launch = Proc([PEARL, "launch", "launch/pearl.launch.xml", f"policy:={policy_dir}", "step_timeout:=0.0",
@@ -83,7 +85,7 @@ class LaunchedGraph:
         """Publish ``text`` on /pearl/<topic>; returns the policy's answer (recorded in :attr:`dialogue`)."""
         n_actions, n_beliefs = len(self.actions), len(self.beliefs)
         belief, action = cv.msg_to_belief(self.beliefs[-1]), cv.msg_to_action(self.actions[-1])
-        self.inputs[topic].publish(cv.text_to_msg(text))
+        self.inputs[topic].publish(cv.speech_to_msg(text) if topic == "speech" else cv.text_to_msg(text))
         assert self.wait(lambda: len(self.actions) > n_actions and len(self.beliefs) > n_beliefs), \
             f"no answer to {text!r}: {self.launch.stderr()[-3000:]}"
         answer = cv.msg_to_action(self.actions[-1])

@@ -76,7 +76,7 @@ def on_graph(domain, model, decider, scenario, seed, tmp_path):
         graph = PearlGraph(context=context, domain=domain, model=model, decider=decider, parameter_services=False,
                            overrides={"belief_tracker": scenario.tracker_parameters()})
         world = World(scenario, seed=seed, domain=domain)
-        sim = SimulatedHardware(context, world)
+        sim = SimulatedHardware(context, world, domain)
         for node in sim.nodes:
             graph.add_node(node)
         beliefs = []

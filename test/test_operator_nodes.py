@@ -103,7 +103,7 @@ def _probe(g, record=None):
     probe = Probe(node)
     # Latched like the writers, but a deep reader queue: two messages between spins are both kept.
     latched = QoSProfile(depth=100, reliability=LATCHED_QOS.reliability, durability=LATCHED_QOS.durability)
-    probe.listen("/pearl/action", String, latched)
+    probe.listen("/pearl/action", cv.ActionMsg, latched)
     probe.listen("/pearl/proposal", cv.OperatorProposalMsg, latched)
     probe.listen("/pearl/belief", cv.BeliefMsg, latched)
     probe.listen("/pearl/decision", cv.DecisionMsg, EVENT_QOS)
@@ -143,7 +143,7 @@ def _send(g, probe, topic, text):
 
 
 def _actions(probe):
-    return [m.data for m in probe.received["/pearl/action"]]
+    return [cv.msg_to_action(m) for m in probe.received["/pearl/action"]]
 
 
 def _events(probe):
@@ -255,13 +255,24 @@ def test_veto_re_decides_command_moves_the_belief_and_the_bag_records_it(ros_con
     recorded = {}
     for message in BagReader(tmp_path / "operator").read_messages():
         msg_type = {"/pearl/operator/events": cv.OperatorEventMsg, "/pearl/proposal": cv.OperatorProposalMsg,
-                    "/pearl/decision": cv.DecisionMsg}.get(message.topic, String)
+                    "/pearl/decision": cv.DecisionMsg, "/pearl/action": cv.ActionMsg}.get(message.topic, String)
         recorded.setdefault(message.topic, []).append(deserialize_message(message.data, msg_type))
-    recorded = {t: [m.data if isinstance(m, String) else m for m in ms] for t, ms in recorded.items()}
+    recorded = {t: [m.data if isinstance(m, String) else m.name if isinstance(m, cv.ActionMsg) else m for m in ms]
+                for t, ms in recorded.items()}
     assert recorded["/pearl/operator/veto"] == ["Ask"]
     assert recorded["/pearl/operator/command"] == ["Jump", "Ask"]
     assert [e.kind for e in recorded["/pearl/operator/events"]] == kinds
     assert recorded["/pearl/action"][-3:] == ["DoA", "Ask", _actions(probe)[-1]]
+    # A reader that imports nothing of this project reads the operator's loop too (issue 39).
+    from ros_helpers import decode_with_mcap_ros2_alone
+
+    alone = decode_with_mcap_ros2_alone(tmp_path / "operator")
+    assert {t: alone[t]["count"] for t in recorded} == {t: len(ms) for t, ms in recorded.items()}
+    assert {t: alone[t]["type"] for t in ("/pearl/operator/events", "/pearl/proposal", "/pearl/action")} == {
+        "/pearl/operator/events": "pearl_interfaces/msg/OperatorEvent",
+        "/pearl/proposal": "pearl_interfaces/msg/OperatorProposal", "/pearl/action": "pearl_interfaces/msg/Action"}
+    first = alone["/pearl/operator/events"]["first"]
+    assert (first["kind"], first["action"]) == (kinds[0], recorded["/pearl/operator/events"][0].action)
 
 
 def _call(g, probe, service: str, request):

@@ -53,7 +53,7 @@ def launched(tmp_path_factory):
     executor.add_node(node)
     probe = Probe(node)
     g = {"domain": domain, "model": domain.compile(), "policy": load_hierarchical_policy(policy_dir, domain),
-         "actions": probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS),
+         "actions": probe.listen("/pearl/action", cv.ActionMsg, LATCHED_QOS),
          "beliefs": probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS),
          "battery": node.create_publisher(BatteryState, "/battery_state", qos_profile("best_effort", 10)),
          "arrived": node.create_publisher(cv.TextMsg, "/reception/arrived", INPUT_QOS),

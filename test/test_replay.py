@@ -34,11 +34,29 @@ def test_bags_hold_the_two_paper_scenarios():
         assert len(expected) >= 5
 
 
-@pytest.mark.parametrize("bag", BAGS, ids=[b.name for b in BAGS])
+#: The Figure 4 bag as shipped before the typed interfaces (issue 39): action, decision and speech as
+#: std_msgs/String (JSON for the decision and the speech's confidence), the belief a Float64MultiArray
+#: plus /pearl/belief_marginals; its domain snapshot declares the speech input a String.
+BEFORE_TYPED = REPO / "test" / "data" / "bag_before_typed" / "figure4_guidance"
+
+
+def test_the_shipped_bags_are_typed():
+    for bag in BAGS:
+        types = {t: i.type for t, i in BagReader(bag).topics.items()}
+        assert (types["/pearl/action"], types["/pearl/belief"], types["/pearl/decision"], types["/pearl/speech"]) == (
+            "pearl_interfaces/msg/Action", "pearl_interfaces/msg/Belief", "pearl_interfaces/msg/Decision",
+            "pearl_interfaces/msg/RecognisedSpeech"), bag.name
+    old = {t: i.type for t, i in BagReader(BEFORE_TYPED).topics.items()}
+    assert (old["/pearl/action"], old["/pearl/belief"], old["/pearl/speech"]) == (
+        "std_msgs/msg/String", "std_msgs/msg/Float64MultiArray", "std_msgs/msg/String")
+
+
+@pytest.mark.parametrize("bag", [*BAGS, BEFORE_TYPED], ids=[*(b.name for b in BAGS), "before_typed"])
 def test_replay_matches_recorded_actions(bag, tmp_path):
+    """Every shipped bag, and one recorded before the typed interfaces: the same actions, the same beliefs."""
     configure_test_process(tmp_path)
     result = replay_bag(bag, domain_id=allocate_domain_id())
-    expected = json.loads((REPO / "bags" / f"{bag.name}.expected.json").read_text())["expected_actions"]
+    expected = json.loads((bag.parent / f"{bag.name}.expected.json").read_text())["expected_actions"]
     assert result.expected_actions == expected  # what the bag holds is what was seen live
     assert result.actions == expected and result.match and result.first_mismatch is None
     # Parity: the tracker publishes the beliefs it published when the bag was recorded (b0 and one per step).
@@ -71,7 +89,8 @@ def test_cli_replay_json(tmp_path, capsys):
 def _copy_bag(src: Path, dst: Path, *, action_override=None, custom=None, retype=None) -> Path:
     """Rewrite ``src`` to ``dst`` (absolute custom_data paths), optionally altering it."""
     from rclpy.serialization import serialize_message
-    from std_msgs.msg import String
+
+    from pearl_pomdp.nodes import conversions as cv
 
     reader = BagReader(src)
     data = dict((reader.metadata or {}).get("custom_data") or {})
@@ -87,10 +106,51 @@ def _copy_bag(src: Path, dst: Path, *, action_override=None, custom=None, retype
             payload = m.data
             if m.topic == "/pearl/action":
                 if action_override and k in action_override:
-                    payload = serialize_message(String(data=action_override[k]))
+                    payload = serialize_message(cv.action_to_msg(action_override[k]))
                 k += 1
             out.write(m.topic, payload, m.log_time, m.publish_time, m.sequence)
     return dst
+
+
+def _with_drive_progress(src: Path, dst: Path, at_s: float, distance: float) -> Path:
+    """``src`` (absolute custom_data paths) with one /pearl/drive_progress for GotoPatientRoom at ``at_s``
+    (log time), ``distance`` metres from the room, in its place in the file."""
+    from rclpy.serialization import serialize_message
+
+    from pearl_pomdp.nodes import conversions as cv
+
+    reader = BagReader(src)
+    data = dict((reader.metadata or {}).get("custom_data") or {})
+    for key in ("pearl.domain", "pearl.policy"):
+        data[key] = str((src / data[key]).resolve())
+    at_ns = int(at_s * 1e9)
+    progress = serialize_message(cv.drive_progress_to_msg("GotoPatientRoom", "room", distance, distance / 0.5, at_s))
+    with BagWriter(dst, custom_data=data) as out:
+        for name, t in reader.topics.items():
+            out.add_topic(name, t.type, qos=t.offered_qos_profiles)
+        out.add_topic("/pearl/drive_progress", "pearl_interfaces/msg/DriveProgress")
+        pending = True
+        for m in reader.messages:
+            if pending and m.log_time > at_ns:
+                out.write("/pearl/drive_progress", progress, at_ns)
+                pending = False
+            out.write(m.topic, m.data, m.log_time, m.publish_time, m.sequence)
+    return dst
+
+
+def test_replay_feeds_recorded_drive_progress_to_the_tracker(tmp_path):
+    """Figure 4's GotoPatientRoom opens at 5 s with a 62.5 s deadline (home → room, 15 m) and arrives at
+    30 s. A recorded progress report at 6 s moves the deadline: 12 m left → 46 s, the replay still
+    matches; 0.5 m left → 17.25 s, the drive closes with navFailed before the landmark and the replay
+    departs from the recording at the next action."""
+    configure_test_process(tmp_path)
+    src = REPO / "bags" / "figure4_guidance"
+    far = replay_bag(_with_drive_progress(src, tmp_path / "far", 6.0, 12.0), domain_id=allocate_domain_id())
+    assert far.match and far.counters["drive_progress"] == 1 and far.counters["deadline_moves"] == 1
+    assert far.counters["nav_failures"] == 0
+    near = replay_bag(_with_drive_progress(src, tmp_path / "near", 6.0, 0.5), domain_id=allocate_domain_id())
+    assert near.counters["drive_progress"] == 1 and near.counters["nav_failures"] == 1
+    assert not near.match and near.first_mismatch == 2 and near.expected_actions[2] == "RingDoorBell"
 
 
 def test_altered_recording_is_a_mismatch(tmp_path, capsys):
@@ -123,7 +183,7 @@ def test_broken_bags_are_errors_naming_file_and_problem(tmp_path, capsys):
     # wrong type on the action topic
     retyped = _copy_bag(src, tmp_path / "retyped", retype={"/pearl/action": "geometry_msgs/msg/PoseStamped"})
     with pytest.raises(BagError, match=r"retyped: topic /pearl/action: recorded as geometry_msgs/msg/PoseStamped, "
-                                       r"replay needs std_msgs/msg/String"):
+                                       r"replay needs pearl_interfaces/msg/Action or std_msgs/msg/String"):
         replay_bag(retyped)
     # no replay configuration
     bare = _copy_bag(src, tmp_path / "bare", custom={})

@@ -52,8 +52,8 @@ FLOOD = textwrap.dedent("""
         return QoSProfile(depth=1 if latched else 100, history=HistoryPolicy.KEEP_LAST,
                           reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
-    TYPES = {"text": String, "belief": cv.BeliefMsg, "amcl": PoseWithCovarianceStamped, "odom": Odometry,
-             "twist": Twist, "point": PointStamped}
+    TYPES = {"text": String, "speech": cv.RecognisedSpeechMsg, "action": cv.ActionMsg, "belief": cv.BeliefMsg,
+             "amcl": PoseWithCovarianceStamped, "odom": Odometry, "twist": Twist, "point": PointStamped}
     TEXTS = ["what time is it", "yes", "t_yes", "atRoom", "atPhysio", "g_physio", "TellTime", "GuideToPhysio",
              "", "nonsense \\u00e9", "x" * 300]
     pubs = [(t, kind, node.create_publisher(TYPES[kind], t, qos(latched))) for t, kind, latched in spec]
@@ -61,6 +61,10 @@ FLOOD = textwrap.dedent("""
     def message(kind, i):
         if kind == "text":
             return String(data=TEXTS[i % len(TEXTS)])
+        if kind == "speech":
+            return cv.speech_to_msg(TEXTS[i % len(TEXTS)], 0.8)
+        if kind == "action":
+            return cv.action_to_msg(TEXTS[i % len(TEXTS)])
         if kind == "belief":
             return belief
         if kind == "amcl":
@@ -137,8 +141,8 @@ def pearl_nodes(domain: Path, policy: Path) -> List[NodeUnderTest]:
 #: What the flood publishes: topic → (kind, latched QoS). /pearl/action and /pearl/belief are
 #: TRANSIENT_LOCAL subscriptions in the tracker and the policy, so their publisher must be too.
 FLOOD_TOPICS = {
-    "/pearl/speech": ("text", False), "/pearl/touchscreen": ("text", False), "/pearl/laser": ("text", False),
-    "/pearl/reminder": ("text", False), "/pearl/action": ("text", True), "/pearl/belief": ("belief", True),
+    "/pearl/speech": ("speech", False), "/pearl/touchscreen": ("text", False), "/pearl/laser": ("text", False),
+    "/pearl/reminder": ("text", False), "/pearl/action": ("action", True), "/pearl/belief": ("belief", True),
     "/amcl_pose": ("amcl", False), "/cmd_vel_nav": ("twist", False), "/pearl/resident_position": ("point", False),
 }
 

@@ -1,9 +1,9 @@
 """The speech nodes over DDS: synthesised audio → speech_recognizer → belief_tracker (issue 13).
 
 The acceptance round trip runs the recogniser and the belief tracker as separate processes on
-a test-unique domain. The recogniser publishes its JSON form (text + confidence) on
-/pearl/speech, which the tracker parses (:func:`pearl_pomdp.speech.parse_speech_message`;
-its ``confidence_floor`` turns a keyword heard below it into ``unknown``).
+a test-unique domain. The recogniser publishes pearl_interfaces/RecognisedSpeech (text + confidence)
+on /pearl/speech, the type Pearl's domain declares for its speech input (the tracker's
+``confidence_floor`` turns a keyword heard below it into ``unknown``).
 """
 from __future__ import annotations
 
@@ -27,7 +27,6 @@ from pearl_pomdp.asr.synthesizer import synthesize  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS, NodeSetupError  # noqa: E402
 from pearl_pomdp.nodes.speech_recognizer import AUDIO_QOS, AudioMsg, msg_to_pcm, pcm_to_msg  # noqa: E402
-from pearl_pomdp.speech import parse_speech_message  # noqa: E402
 
 BIN = Path(sys.executable).parent
 #: The issue's acceptance utterances and the symbols the tracker must observe.
@@ -81,8 +80,8 @@ def test_synthesised_speech_reaches_the_tracker_as_keywords(tmp_path, probe_cont
     try:
         probe = Probe(node)
         marginals = probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
-        speech = probe.listen("/pearl/speech", cv.TextMsg, EVENT_QOS)
-        action = probe.publisher("/pearl/action", cv.TextMsg, LATCHED_QOS)
+        speech = probe.listen("/pearl/speech", cv.RecognisedSpeechMsg, EVENT_QOS)
+        action = probe.publisher("/pearl/action", cv.ActionMsg, LATCHED_QOS)
         audio = probe.publisher("/pearl/audio_in", AudioMsg, AUDIO_QOS)
         ready = wait_for(lambda: not probe.unmatched() and marginals, 3 * DISCOVERY_TIMEOUT, executor)
         assert ready, f"not ready: {probe.unmatched()} {tracker.stderr()[-2000:]} {recognizer.stderr()[-2000:]}"
@@ -91,9 +90,9 @@ def test_synthesised_speech_reaches_the_tracker_as_keywords(tmp_path, probe_cont
             publish_audio(audio, noisy(text, 30.0, seed=step))
             closed = wait_for(lambda: cv.msg_to_marginals(marginals[-1])["step"] == step and len(speech) == step,
                               30.0, executor)
-            assert closed, f"{text!r}: no step closed; heard {[m.data for m in speech]}; {recognizer.stderr()[-2000:]}"
+            assert closed, f"{text!r}: no step closed; heard {[m.text for m in speech]}; {recognizer.stderr()[-2000:]}"
             last = cv.msg_to_marginals(marginals[-1])
-            assert (last["action"], last["observation"]) == ("DoNothing", symbol), (text, [m.data for m in speech])
+            assert (last["action"], last["observation"]) == ("DoNothing", symbol), (text, [m.text for m in speech])
         assert "lost" not in recognizer.stderr()
         heard = len(speech)
         action.publish(cv.action_to_msg("DoNothing"))
@@ -101,21 +100,21 @@ def test_synthesised_speech_reaches_the_tracker_as_keywords(tmp_path, probe_cont
         publish_audio(audio, np.zeros(16000, dtype=np.int16))                              # 1 s silence
         publish_audio(audio, (rng.standard_normal(24000) * 300).astype(np.int16))         # 1.5 s white noise
         wait_for(lambda: False, 3.0, executor)  # give a wrong keyword time to arrive
-        stray = [parse_speech_message(m.data)[0] for m in speech[heard:]]
+        stray = [m.text for m in speech[heard:]]
         from pearl_pomdp.model.factored import load_domain
         from pearl_pomdp.speech import KeywordFilter
 
         kf = KeywordFilter.from_domain(load_domain(DOMAIN))
-        assert all(kf.classify(t) == "unknown" for t in stray), ([m.data for m in speech], recognizer.stderr()[-3000:])
+        assert all(kf.classify(t) == "unknown" for t in stray), ([m.text for m in speech], recognizer.stderr()[-3000:])
         assert tracker.returncode is None and recognizer.returncode is None
     finally:
         assert recognizer.stop() == 0, recognizer.stderr()[-2000:]
         assert tracker.stop() == 0, tracker.stderr()[-2000:]
 
 
-def test_recognizer_node_publishes_json_and_counts_bad_audio(probe_context):
-    """In one process: JSON text+confidence out; a wrong-rate chunk and a malformed chunk are
-    counted drops; empty audio is nothing."""
+def test_recognizer_node_publishes_typed_speech_and_counts_bad_audio(probe_context):
+    """In one process: RecognisedSpeech (text, confidence, stamp) out; a wrong-rate chunk and a
+    malformed chunk are counted drops; empty audio is nothing; publish_format:=text is the bare words."""
     from pearl_pomdp.nodes.speech_recognizer import SpeechRecognizerNode
 
     context, _, node, executor = probe_context
@@ -123,7 +122,7 @@ def test_recognizer_node_publishes_json_and_counts_bad_audio(probe_context):
     executor.add_node(rec)
     try:
         probe = Probe(node)
-        speech = probe.listen("/pearl/speech", cv.TextMsg, EVENT_QOS)
+        speech = probe.listen("/pearl/speech", cv.RecognisedSpeechMsg, EVENT_QOS)
         audio = probe.publisher("/pearl/audio_in", AudioMsg, AUDIO_QOS)
         assert wait_for(lambda: not probe.unmatched([rec]), DISCOVERY_TIMEOUT, executor)
         publish_audio(audio, noisy("what time is it", 30.0, seed=1)[:8000], rate=44100)   # wrong rate
@@ -135,17 +134,31 @@ def test_recognizer_node_publishes_json_and_counts_bad_audio(probe_context):
             rec.counts
         publish_audio(audio, noisy("what time is it", 30.0, seed=1))
         assert wait_for(lambda: len(speech) == 1, 20.0, executor), rec.counts
-        text, confidence = parse_speech_message(speech[0].data)
-        assert speech[0].data.startswith("{") and "time" in text.split()
-        assert 0.0 < confidence <= 1.0
+        heard = speech[0]
+        assert "time" in heard.text.split() and 0.0 < heard.confidence <= 1.0 and heard.symbol == ""
+        assert heard.stamp.sec > 0                                  # the node's clock
         assert rec.counts["published"] == 1 and rec.counts["chunks"] >= 7
     finally:
         executor.remove_node(rec)
         rec.destroy_node()
+    plain = SpeechRecognizerNode(context=context, parameter_overrides={"domain": str(DOMAIN), "publish_format": "text",
+                                                                       "speech_topic": "/plain/speech"})
+    executor.add_node(plain)
+    try:
+        words = Probe(node).listen("/plain/speech", cv.TextMsg, EVENT_QOS)
+        feed = Probe(node).publisher("/pearl/audio_in", AudioMsg, AUDIO_QOS)
+        assert wait_for(lambda: feed.get_subscription_count() >= 1 and plain.speech_pub.get_subscription_count() >= 1,
+                        DISCOVERY_TIMEOUT, executor)
+        publish_audio(feed, noisy("what time is it", 30.0, seed=1))
+        assert wait_for(lambda: len(words) == 1, 20.0, executor), plain.counts
+        assert "time" in words[0].data.split() and not words[0].data.startswith("{")
+    finally:
+        executor.remove_node(plain)
+        plain.destroy_node()
 
 
 def test_synthesizer_speaks_to_the_recognizer(probe_context):
-    """/pearl/say "yes please" → synthesiser (topic output) → recogniser → JSON "yes" on /pearl/speech."""
+    """/pearl/say "yes please" → synthesiser (topic output) → recogniser → "yes" on /pearl/speech."""
     from pearl_pomdp.nodes.speech_recognizer import SpeechRecognizerNode
     from pearl_pomdp.nodes.speech_synthesizer import SpeechSynthesizerNode
 
@@ -157,7 +170,7 @@ def test_synthesizer_speaks_to_the_recognizer(probe_context):
         executor.add_node(n)
     try:
         probe = Probe(node)
-        speech = probe.listen("/pearl/speech", cv.TextMsg, EVENT_QOS)
+        speech = probe.listen("/pearl/speech", cv.RecognisedSpeechMsg, EVENT_QOS)
         audio = probe.listen("/robot/audio", AudioMsg, AUDIO_QOS)
         say = probe.publisher("/pearl/say", cv.TextMsg, EVENT_QOS)
         assert wait_for(lambda: not probe.unmatched([synth, rec]), DISCOVERY_TIMEOUT, executor)
@@ -167,7 +180,7 @@ def test_synthesizer_speaks_to_the_recognizer(probe_context):
         from pearl_pomdp.model.factored import load_domain
         from pearl_pomdp.speech import KeywordFilter
 
-        text = parse_speech_message(speech[0].data)[0]
+        text = speech[0].text
         assert KeywordFilter.from_domain(load_domain(DOMAIN)).classify(text) == "yes", text
         samples = sum(len(msg_to_pcm(m)[0]) for m in audio)
         assert samples == synth.counts["samples"] and all(msg_to_pcm(m)[1] == 16000 for m in audio)

@@ -57,12 +57,12 @@ def launched(request, tmp_path_factory, ward_domain):
     probe = Probe(node)
     policy = request.param
     g = {"domain": domain, "policy": policy,
-         "actions": probe.listen("/pearl/action", cv.TextMsg, LATCHED_QOS),
+         "actions": probe.listen("/pearl/action", cv.ActionMsg, LATCHED_QOS),
          "beliefs": probe.listen("/pearl/belief", cv.BeliefMsg, LATCHED_QOS),
          "decisions": probe.listen("/pearl/decision", cv.DecisionMsg, EVENT_QOS),
          "arrived": node.create_publisher(cv.TextMsg, "/ward/arrived", INPUT_QOS),
          "call": node.create_publisher(cv.TextMsg, "/ward/call_button", INPUT_QOS),
-         "speech": node.create_publisher(cv.TextMsg, "/ward/speech", INPUT_QOS)}
+         "speech": node.create_publisher(cv.RecognisedSpeechMsg, "/ward/speech", INPUT_QOS)}
     launch = Proc([PEARL, "launch", "launch/pearl.launch.xml", f"domain:={DOMAIN}",
                    f"policy:={policy if policy != 'hierarchical' else ''}",
                    f"hierarchy:={REPO / 'config' / 'ward.hierarchy.yaml'}",
@@ -97,7 +97,7 @@ def _feed(g, publisher, text, symbol):
     model = g["model"]
     n_actions, n_beliefs = len(g["actions"]), len(g["beliefs"])
     before, action = cv.msg_to_belief(g["beliefs"][-1]), cv.msg_to_action(g["actions"][-1])
-    g[publisher].publish(cv.text_to_msg(text))
+    g[publisher].publish(cv.speech_to_msg(text) if publisher == "speech" else cv.text_to_msg(text))
     assert g["wait"](lambda: len(g["actions"]) > n_actions and len(g["beliefs"]) > n_beliefs, 120.0), \
         f"no answer to {symbol}: {g['launch'].stderr()[-3000:]}"
     expected = g["filter"].update(before, model.actions.index(action), model.observations.index(symbol))

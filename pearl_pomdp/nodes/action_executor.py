@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import datetime
 import sys
+import time
 from typing import Any, Dict, List, Optional
 
 from rclpy.parameter import Parameter
@@ -57,7 +58,8 @@ class ActionExecutorNode(ManagedPearlNode):
         * ``actions.<Action>.display`` (str): text for the touchscreen (same fields); empty: none.
         * ``actions.<Action>.goal`` (str): a name from ``location_names``; empty: no motion.
         * ``location_names`` (str[]): named places; ``locations.<name>`` (double[3]) is x, y (m),
-          yaw (rad) in ``frame_id``.
+          yaw (rad) in ``frame_id``; ``landmarks.<name>`` (str, '' none): the symbol a drive that
+          Nav2 says arrived there is closed with on ``drive_result_topic`` (the landmark detector's table).
         * ``frame_id`` (str): frame of the goals (``map``).
         * ``action_topic``, ``say_topic``, ``display_topic``, ``goal_topic`` (str): topic names.
         * ``diagnostics_period`` (double, 0.01–3600 s).
@@ -66,7 +68,7 @@ class ActionExecutorNode(ManagedPearlNode):
           for ``ros2 lifecycle set /action_executor configure`` / ``activate``.
 
     Subscribers:
-        * ``/pearl/action`` (std_msgs/String, volatile — a restarted executor does not repeat an
+        * ``/pearl/action`` (pearl_interfaces/Action, volatile — a restarted executor does not repeat an
           old action).
 
     Publishers:
@@ -75,7 +77,11 @@ class ActionExecutorNode(ManagedPearlNode):
           depth 1: a navigator started late still gets the current goal; Nav2's volatile
           subscription matches it) — without nav2_msgs, or ``navigation:=topic``.
         * ``drive_result_topic`` (std_msgs/String, '' by default; Pearl: ``/pearl/laser``):
-          ``nav_failed_observation`` when Nav2 aborts a drive.
+          ``nav_failed_observation`` when Nav2 aborts a drive, ``landmarks.<place>`` when it arrives
+          (unless that landmark was heard there since the goal was sent: it subscribes to it too).
+        * ``drive_progress_topic`` (pearl_interfaces/DriveProgress, ``/pearl/drive_progress``): Nav2's
+          feedback on the running drive, at most every ``progress_period`` s — the tracker moves the
+          drive's deadline by it.
 
     Action client (where nav2_msgs is installed, ``navigation`` auto or action):
         * ``/navigate_to_pose`` (nav2_msgs/action/NavigateToPose): one goal per drive, cancelled
@@ -97,7 +103,7 @@ class ActionExecutorNode(ManagedPearlNode):
               type=Parameter.Type.STRING_ARRAY),
         Param("location_names", [], "Named navigation goals (see locations.<name>)", type=Parameter.Type.STRING_ARRAY),
         Param("frame_id", "map", "Frame of the navigation goals"),
-        Param("action_topic", "/pearl/action", "Primitive action input (std_msgs/String)"),
+        Param("action_topic", "/pearl/action", "Primitive action input (pearl_interfaces/Action)"),
         Param("say_topic", "/pearl/say", "Sentences to speak (std_msgs/String)"),
         Param("display_topic", "/pearl/display", "Touchscreen text (std_msgs/String)"),
         Param("goal_topic", "/goal_pose", "Navigation goals (geometry_msgs/PoseStamped, Nav2's goal topic)"),
@@ -107,6 +113,10 @@ class ActionExecutorNode(ManagedPearlNode):
         Param("drive_result_topic", "", "Where a drive that ended without arriving is reported as "
                                         "nav_failed_observation (std_msgs/String, the tracker's input); '': not"),
         Param("nav_failed_observation", "", "What is published on drive_result_topic when Nav2 aborts a drive"),
+        Param("drive_progress_topic", "/pearl/drive_progress", "Nav2's feedback on the running drive "
+              "(pearl_interfaces/DriveProgress; the tracker moves the drive's deadline by it); '': not published"),
+        Param("progress_period", 0.5, "Seconds between two drive progress messages of one goal (the first goes "
+                                      "at once)", range=(0.0, 60.0)),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
         AUTOSTART,
     )
@@ -117,9 +127,15 @@ class ActionExecutorNode(ManagedPearlNode):
         self._defaults = defaults = FileDefaults(self)
         self.params = p = self.declare_table(defaults.apply(self.PARAMETERS))
         self._poses: Dict[str, List[float]] = {}
+        #: place → the symbol an arrival there is closed with (``landmarks.<place>``; '' none).
+        self.landmarks: Dict[str, str] = {}
         for name in p["location_names"]:
-            table = [Param(f"locations.{name}", [0.0, 0.0, 0.0], f"Pose of {name}: x, y (m), yaw (rad) in frame_id")]
-            self._poses[name] = list(self.declare_table(defaults.apply(table))[f"locations.{name}"])
+            table = [Param(f"locations.{name}", [0.0, 0.0, 0.0], f"Pose of {name}: x, y (m), yaw (rad) in frame_id"),
+                     Param(f"landmarks.{name}", "", f"Symbol on drive_result_topic when Nav2 arrives at {name} "
+                                                    "('': none)")]
+            values = self.declare_table(defaults.apply(table))
+            self._poses[name] = list(values[f"locations.{name}"])
+            self.landmarks[name] = values[f"landmarks.{name}"]
         self._tables: Dict[str, Dict[str, str]] = {}
         for action in p["action_names"]:
             table = [Param(f"actions.{action}.say", "", f"What the robot says for {action}"),
@@ -136,6 +152,9 @@ class ActionExecutorNode(ManagedPearlNode):
         self.nav: Optional[Nav2Drive] = None
         self.goal_pub: Any = None
         self.result_pub: Any = None
+        self.progress_pub: Any = None
+        #: symbol → monotonic second it was last heard on drive_result_topic (an arrival's echo check).
+        self._results_heard: Dict[str, float] = {}
         self.drive_path = ""
         self.start(p["autostart"])
 
@@ -163,7 +182,7 @@ class ActionExecutorNode(ManagedPearlNode):
         self.say_pub = self.lifecycle_publisher(cv.TextMsg, p["say_topic"], EVENT_QOS)
         self.display_pub = self.lifecycle_publisher(cv.TextMsg, p["display_topic"], EVENT_QOS)
         self._configure_navigation()
-        self.managed_subscription(cv.TextMsg, p["action_topic"], self._on_action, EVENT_QOS)
+        self.managed_subscription(cv.ActionMsg, p["action_topic"], self._on_action, EVENT_QOS)
         self.managed_timer(p["diagnostics_period"], self.publish_diagnostics)
         if not self.behaviour:
             self.get_logger().warning("no action configured (action_names is empty): every action will be "
@@ -186,8 +205,15 @@ class ActionExecutorNode(ManagedPearlNode):
         # Only the action reports a failed drive (goal_topic has no answer to report).
         self.result_pub = (self.lifecycle_publisher(cv.TextMsg, p["drive_result_topic"], EVENT_QOS)
                            if p["drive_result_topic"] and action_type is not None else None)
+        self.progress_pub = (self.lifecycle_publisher(cv.DriveProgressMsg, p["drive_progress_topic"], EVENT_QOS)
+                             if p["drive_progress_topic"] and action_type is not None else None)
+        if self.result_pub is not None:
+            # A landmark detector beside Nav2 reports an arrival there too: heard, it is not said twice.
+            self.managed_subscription(cv.TextMsg, p["drive_result_topic"], self._on_drive_result, EVENT_QOS)
         if action_type is not None:
-            self.nav = Nav2Drive(self, action_type, p["navigate_action"], self._drive_failed)
+            self.nav = Nav2Drive(self, action_type, p["navigate_action"], self._drive_failed,
+                                 on_arrived=self._drive_arrived, on_progress=self._drive_progress,
+                                 progress_period=p["progress_period"])
             self.goal_pub = None
             self.drive_path = f"the NavigateToPose action {p['navigate_action']}"
         else:
@@ -208,6 +234,27 @@ class ActionExecutorNode(ManagedPearlNode):
         if self.result_pub is not None and self.active:
             self.result_pub.publish(cv.text_to_msg(self.params["nav_failed_observation"]))
         self.publish_diagnostics()
+
+    def _on_drive_result(self, msg) -> None:
+        self._results_heard[cv.msg_to_text(msg).strip()] = time.monotonic()
+
+    def _drive_arrived(self, action: str, place: str, sent_at: float) -> None:
+        """Nav2 says the drive arrived: its landmark goes on drive_result_topic, unless it was heard
+        there since the goal was sent (a landmark detector said it first)."""
+        symbol = self.landmarks.get(place, "")
+        if self.result_pub is None or not symbol or not self.active:
+            return
+        heard = self._results_heard.get(symbol)
+        if heard is not None and heard >= sent_at:
+            self.get_logger().info(f"drive to {place} arrived; {symbol} was already heard on "
+                                   f"{self.params['drive_result_topic']}, not said again")
+            return
+        self.get_logger().info(f"drive to {place} arrived: {symbol} on {self.params['drive_result_topic']}")
+        self.result_pub.publish(cv.text_to_msg(symbol))
+
+    def _drive_progress(self, action: str, place: str, distance: float, eta: float) -> None:
+        if self.progress_pub is not None and self.active:
+            self.progress_pub.publish(cv.drive_progress_to_msg(action, place, distance, eta, self.now_s()))
 
     def _fields(self, action: str) -> _Template:
         now = datetime.datetime.fromtimestamp(self.now_s(), tz=datetime.timezone.utc)
@@ -237,7 +284,7 @@ class ActionExecutorNode(ManagedPearlNode):
             x, y, yaw = self.locations[spec["goal"]]
             pose = cv.pose_to_msg(x, y, yaw, self.params["frame_id"], self.now_s())
             if self.nav is not None:
-                self.nav.drive(spec["goal"], pose)
+                self.nav.drive(action, spec["goal"], pose)
             else:
                 self.goal_pub.publish(pose)
         elif self.nav is not None:

@@ -6,8 +6,9 @@ receive, in file order,
 
 * every ``/clock`` message of the bag (``rosgraph_msgs/Clock``), and
 * every message of the tracker's input topics — the inputs its domain declares (Pearl's:
-  ``/pearl/speech``, ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder``, all
-  ``std_msgs/String``), each with its declared message type,
+  ``/pearl/speech``, ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder``), each with its
+  declared message type — and the drives' progress (``/pearl/drive_progress``, which moves a
+  drive's deadline, when the bag has it),
 
 published as the recorded bytes (``publish`` of raw CDR: nothing is re-serialised). The
 actions the policy publishes on ``/pearl/action`` are collected and compared with the
@@ -61,10 +62,15 @@ from pearl_pomdp.errors import PearlError
 from pearl_pomdp.operator import BY_SERVICE
 
 ACTION_TOPIC = "/pearl/action"
+#: The action's message type, and the types a replay reads it as (a bag recorded before the typed
+#: action holds the name in a std_msgs/String).
+ACTION_TYPE = "pearl_interfaces/msg/Action"
+ACTION_TYPES = (ACTION_TYPE, wk.STRING_TYPE)
 BELIEF_TOPIC = "/pearl/belief"
 #: Beliefs equal to this (max abs difference) count as the same in :attr:`ReplayResult.beliefs_match`.
 BELIEF_TOLERANCE = 1e-12
 DECISION_TOPIC = "/pearl/decision"
+DRIVE_PROGRESS_TYPE = "pearl_interfaces/msg/DriveProgress"
 #: custom_data keys of a replayable bag.
 KEY_DOMAIN, KEY_POLICY, KEY_TRACKER = "pearl.domain", "pearl.policy", "pearl.tracker_params"
 KEY_POLICY_PARAMS = "pearl.policy_params"
@@ -134,16 +140,18 @@ class ReplayResult:
         return out
 
 
-def _string_data(data: bytes) -> str:
-    """The ``data`` field of a CDR-encoded std_msgs/String (no ROS import needed)."""
+def _string_data(data: bytes, offset: int = 0) -> str:
+    """The ``data`` field of a CDR-encoded std_msgs/String (no ROS import needed); ``offset``: bytes
+    of the message before its string (8 for ``pearl_interfaces/Action``, whose stamp comes first)."""
     import struct
 
-    if len(data) < 8:
-        raise ValueError("shorter than a CDR String")
-    (n,) = struct.unpack_from("<I" if data[1] == 1 else ">I", data, 4)
-    if n == 0 or 8 + n > len(data):
+    start = 4 + offset
+    if len(data) < start + 4:
+        raise ValueError("shorter than its CDR string")
+    (n,) = struct.unpack_from("<I" if data[1] == 1 else ">I", data, start)
+    if n == 0 or start + 4 + n > len(data):
         raise ValueError(f"string length {n} does not fit in {len(data)} bytes")
-    return data[8:8 + n - 1].decode("utf-8")
+    return data[start + 4:start + 4 + n - 1].decode("utf-8")
 
 
 def _clock_ns(data: bytes) -> int:
@@ -180,26 +188,35 @@ def _belief_values(msg) -> List[float]:
 
 
 def expected_actions(reader: BagReader) -> List[str]:
-    """The recorded ``/pearl/action`` strings (BagError naming the offending message)."""
+    """The recorded ``/pearl/action`` names: ``pearl_interfaces/msg/Action``, or the ``std_msgs/msg/String``
+    of a bag recorded before the typed action (BagError naming the offending message)."""
+    recorded = reader.topics[ACTION_TOPIC].type if ACTION_TOPIC in reader.topics else ACTION_TYPE
+    if recorded not in ACTION_TYPES:
+        raise BagError(f"{reader.path}: topic {ACTION_TOPIC}: recorded as {recorded}, replay reads "
+                       f"{' or '.join(ACTION_TYPES)}")
+    offset = 8 if recorded == ACTION_TYPE else 0     # the Action's stamp comes before its name
     out = []
     for i, m in enumerate(reader.read_messages([ACTION_TOPIC])):
         try:
-            out.append(_string_data(m.data))
+            out.append(_string_data(m.data, offset).strip())
         except (ValueError, UnicodeDecodeError) as err:
             raise BagError(f"{reader.path}: topic {ACTION_TOPIC}: message {i} (log time {m.log_time}) "
-                           f"is not a std_msgs/String: {err}") from None
+                           f"is not a {recorded}: {err}") from None
     return out
 
 
 def _check_topics(reader: BagReader, inputs: Optional[Dict[str, str]] = None) -> None:
     """The recorded types of the action, clock and (given ``{topic: type}``) input topics."""
-    want = {ACTION_TOPIC: wk.STRING_TYPE, **(inputs or {})}
+    want = dict(inputs or {})
     want[wk.CLOCK_TOPIC] = wk.CLOCK_TYPE
     for name, info in reader.topics.items():
         if name in want and info.type != want[name]:
             raise BagError(f"{reader.path}: topic {name}: recorded as {info.type}, replay needs {want[name]}")
     if ACTION_TOPIC not in reader.topics:
         raise BagError(f"{reader.path}: topic {ACTION_TOPIC} was not recorded: nothing to compare the replay with")
+    if reader.topics[ACTION_TOPIC].type not in ACTION_TYPES:
+        raise BagError(f"{reader.path}: topic {ACTION_TOPIC}: recorded as {reader.topics[ACTION_TOPIC].type}, "
+                       f"replay needs {' or '.join(ACTION_TYPES)}")
 
 
 def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optional[str] = None) -> Dict[str, Any]:
@@ -450,6 +467,11 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
             topic = graph.tracker.resolve_topic_name(graph.tracker.get_parameter(f"inputs.{channel.name}.topic").value)
             input_types[topic] = (channel.type, reader_for(channel, cfg["domain"]).msg_type)
         _check_topics(reader, {t: type_name for t, (type_name, _) in input_types.items()})
+        if core.drive_timer is not None and graph.tracker.get_parameter("drive_progress_topic").value:
+            # The navigation's progress moves drive deadlines: fed like an input (a bag recorded
+            # through Nav2's action has it; one of the string era has not).
+            topic = graph.tracker.resolve_topic_name(graph.tracker.get_parameter("drive_progress_topic").value)
+            input_types.setdefault(topic, (DRIVE_PROGRESS_TYPE, cv.DriveProgressMsg))
         if explain:
             core.keep_history()
             node.create_subscription(cv.DecisionMsg, DECISION_TOPIC, lambda m: decisions.append(cv.msg_to_decision(m)),

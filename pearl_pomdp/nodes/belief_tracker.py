@@ -82,7 +82,7 @@ class BeliefTrackerNode(ManagedPearlNode):
           ``best_effort``), ``inputs.<name>.depth`` (int): one set per input of the domain
           (:func:`input_parameters`; ``<name>`` is the modality's name in lower case), declared at
           configure with the domain's declaration as default — a remap of an input's topic or QoS.
-        * ``action_topic``, ``belief_topic`` (str): topic names.
+        * ``action_topic``, ``belief_topic``, ``drive_progress_topic`` (str): topic names.
         * ``use_sim_time`` (bool): follow /clock (rclpy's own parameter).
         * ``journal`` (str, ``auto``), ``journal_max_age`` (double, s): the journal this node writes
           after every change and resumes from when restarted (:mod:`pearl_pomdp.nodes.journaling`:
@@ -95,7 +95,10 @@ class BeliefTrackerNode(ManagedPearlNode):
           ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder`` symbols; all
           ``std_msgs/String``). A number input reads its message's number and discretises it.
           A flat model (no domain) has one input, ``observation`` on ``/pearl/observation``.
-        * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL): the action that opens a step.
+        * ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL): the action that opens a step.
+        * ``/pearl/drive_progress`` (pearl_interfaces/DriveProgress; ``drive_progress_topic``), when
+          drives have deadlines: the open drive's remaining path moves its deadline
+          (:meth:`~pearl_pomdp.tracking.BeliefTracker.on_drive_progress`).
 
     Publishers:
         * ``/pearl/belief`` (pearl_interfaces/Belief, TRANSIENT_LOCAL depth 1): ``b`` after each
@@ -130,8 +133,11 @@ class BeliefTrackerNode(ManagedPearlNode):
         *step_parameters(),
         Param("location_names", EMPTY_STRINGS, "Named places (locations.<name> = [x, y, yaw] in the map frame)"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
-        Param("action_topic", "/pearl/action", "Primitive actions, which open steps (std_msgs/String)"),
+        Param("action_topic", "/pearl/action", "Primitive actions, which open steps (pearl_interfaces/Action)"),
         Param("belief_topic", "/pearl/belief", "Belief output (pearl_interfaces/Belief)"),
+        Param("drive_progress_topic", "/pearl/drive_progress", "A running drive's progress (pearl_interfaces/"
+              "DriveProgress, the action executor's from Nav2's feedback), which moves the drive's deadline; "
+              "read when drives have deadlines (drive_speed > 0); '': not read"),
         Param("reset_service", "/pearl/reset", "std_srvs/Trigger service that returns the belief to b0"),
         *JOURNAL_PARAMETERS,
         AUTOSTART,
@@ -194,7 +200,10 @@ class BeliefTrackerNode(ManagedPearlNode):
             key = reader.channel.name
             callback = self._on_speech(key) if reader.channel.kind == "speech" else self._input_callback(key)
             self.managed_subscription(reader.msg_type, topic, self._counted(key, callback, reader.read), qos)
-        self.managed_subscription(cv.TextMsg, p["action_topic"], self._on_action, LATCHED_QOS)
+        self.managed_subscription(cv.ActionMsg, p["action_topic"], self._on_action, LATCHED_QOS)
+        if core.drive_timer is not None and p["drive_progress_topic"]:
+            self.managed_subscription(cv.DriveProgressMsg, p["drive_progress_topic"], self._on_drive_progress,
+                                      EVENT_QOS)
         # One-shot timer for the open step's deadline (node clock, so sim time in replay and demo):
         # armed when a step opens, cancelled when it closes, so a step times out exactly
         # step_timeout after its action, as in the core loop the simulator runs.
@@ -337,6 +346,13 @@ class BeliefTrackerNode(ManagedPearlNode):
         assert self.core is not None  # _inactive() is True otherwise
         self._handle(self.core.on_action(cv.msg_to_action(msg), self.now_s()))
 
+    def _on_drive_progress(self, msg) -> None:
+        """The navigation's progress on a drive: the core moves that drive's deadline (and the timer follows)."""
+        if self._inactive():
+            return
+        assert self.core is not None
+        self._handle(self.core.on_drive_progress(msg.action, msg.distance_remaining, self.now_s()))
+
     def _on_speech(self, key: str) -> Callable:
         def callback(text: str) -> None:
             if self._inactive():
@@ -420,7 +436,8 @@ class BeliefTrackerNode(ManagedPearlNode):
         """Journal the core's state when it changed (after the belief went out)."""
         core = self.core
         if self.journal is not None and core is not None:
-            key = (core.run, core.step, core.open_action, core.opened_at, core.pending, core.counters()["queued"])
+            key = (core.run, core.step, core.open_action, core.opened_at, core.deadline(), core.pending,
+                   core.counters()["queued"])
             self.journal.write(key, core.journal_state)
 
     def _log(self, level: str, text: str) -> None:

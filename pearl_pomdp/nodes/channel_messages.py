@@ -3,7 +3,10 @@
 The core (:mod:`pearl_pomdp.channels`) knows a channel's kind, topic, type *name* and bins;
 this module turns that into an rclpy subscription the ``belief_tracker`` node can make:
 
-* ``speech`` and ``symbol`` channels read the text of ``std_msgs/msg/String``.
+* ``speech`` channels read ``pearl_interfaces/msg/RecognisedSpeech`` (text, confidence, symbol: an
+  :class:`~pearl_pomdp.speech.Utterance`; what the recogniser node publishes) or the text of a
+  ``std_msgs/msg/String`` (plain text, or the JSON of a bag recorded before the typed message);
+  ``symbol`` channels read the text of ``std_msgs/msg/String``.
 * ``number`` channels read one numeric field of any installed message type: the channel's
   ``field:`` (dots for nested fields), else the type's usual one — ``data`` for the
   ``std_msgs`` numbers (``Float32``, ``Float64``, ``Int32`` …), ``percentage`` for
@@ -25,8 +28,10 @@ from typing import Any, Callable, Union
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from pearl_pomdp.channels import TEXT_TYPE, InputChannel
+from pearl_pomdp.channels import SPEECH_TYPE, SPEECH_TYPES, TEXT_TYPE, InputChannel
 from pearl_pomdp.nodes.common import NodeSetupError
+from pearl_pomdp.nodes.conversions import msg_to_speech
+from pearl_pomdp.speech import Utterance
 
 __all__ = ["ChannelReader", "USUAL_FIELDS", "reader_for", "qos_profile"]
 
@@ -47,8 +52,8 @@ class ChannelReader:
 
     channel: InputChannel
     msg_type: Any
-    #: message → the core's input data (text for speech/symbol, a float for number).
-    read: Callable[[Any], Union[str, float]]
+    #: message → the core's input data (an Utterance or text for speech, text for symbol, a float for number).
+    read: Callable[[Any], Union[str, float, Utterance]]
     #: The message field read (``data``, ``percentage`` …).
     field: str
 
@@ -72,15 +77,19 @@ def reader_for(channel: InputChannel, source: str) -> ChannelReader:
     """The :class:`ChannelReader` of ``channel``, declared in the domain file ``source``.
 
     Raises:
-        NodeSetupError: a text channel on another type than ``std_msgs/msg/String``; a number
+        NodeSetupError: a speech channel on another type than ``pearl_interfaces/msg/RecognisedSpeech``
+            or ``std_msgs/msg/String``, a symbol channel on another than ``std_msgs/msg/String``; a number
             channel whose type is not installed, or lacks the field, or whose field is not a
             number (the message names ``source`` and ``modalities.<M>.input``).
     """
     where = f"{source}: modalities.{channel.modality}.input"
+    if channel.kind == "speech" and channel.type == SPEECH_TYPE:
+        cls = _message_class(channel.type, where)
+        return ChannelReader(channel, cls, msg_to_speech, "text")
     if channel.kind in ("speech", "symbol"):
         if channel.type != TEXT_TYPE:
-            raise NodeSetupError(f"{where}.type: a {channel.kind} input reads text, so its type is {TEXT_TYPE}, "
-                                 f"not {channel.type}")
+            wanted = " or ".join(SPEECH_TYPES) if channel.kind == "speech" else TEXT_TYPE
+            raise NodeSetupError(f"{where}.type: a {channel.kind} input reads {wanted}, not {channel.type}")
         cls = _message_class(channel.type, where)
         return ChannelReader(channel, cls, lambda msg: str(msg.data), "data")
     cls = _message_class(channel.type, where)

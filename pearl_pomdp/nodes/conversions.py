@@ -12,14 +12,23 @@ Wire formats (common_interfaces, and this project's pearl_interfaces):
   model without features reports one pseudo-feature ``"state"``), and the full belief
   ``probabilities[s] = b(s)`` in the model's state order (for a factored domain: mixed radix,
   first feature most significant), named in ``state_names`` up to :data:`MAX_NAMED_STATES` states.
-* **action** / **speech** / **touchscreen** / **laser** / **reminder** / **say** / **display** —
-  ``std_msgs/String``; the action is the primitive action's name.
+* **speech** — ``pearl_interfaces/RecognisedSpeech``: the recognised text, the recogniser's
+  confidence in [0, 1] and, when the recogniser mapped it, the speech symbol; stamped. (Bags recorded
+  before it hold the JSON ``{"text", "confidence"}`` in a ``std_msgs/String``.)
+* **action** — ``pearl_interfaces/Action``: the primitive action's name, stamped (bags recorded
+  before it hold the name in a ``std_msgs/String``).
+* **touchscreen** / **laser** / **reminder** / **say** / **display** / the operator's veto and
+  command — ``std_msgs/String``.
 * **decision** — ``pearl_interfaces/Decision`` (``pearl_interfaces/msg/Decision.msg``): the step,
   the belief step it answers, the action, the EXECUTE trace root → … → primitive (``TraceStep``:
   subtask, choice, value; NaN: no α-vector), the forward search's expansions, ``latency_s`` (belief
   received → action published, wall clock) and an online search's ``SearchStats`` (``has_search``);
   ``step`` counts the beliefs this policy node answered before (0 for ``b0``).
 * **nav goal** — ``geometry_msgs/PoseStamped`` (position x, y; orientation from yaw).
+* **guide pace** — ``pearl_interfaces/GuidePace``: the guide_pace node's filter state (the guidance,
+  the state, speeds, how far behind she is — NaN: not seen —, the wait, the times lost), stamped.
+* **drive progress** — ``pearl_interfaces/DriveProgress``: the drive's action and place, Nav2's
+  distance remaining (m) and estimated time remaining (s), stamped.
 * **localised pose** — ``geometry_msgs/PoseWithCovarianceStamped`` (``/amcl_pose``) or
   ``nav_msgs/Odometry`` (``/odom``): planar x, y, yaw and the x/y standard deviation.
 * **velocity** — ``geometry_msgs/Twist`` (``/cmd_vel_nav``, ``/cmd_vel``): linear.x, angular.z.
@@ -40,11 +49,15 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import Odometry
+from pearl_interfaces.msg import Action as ActionMsg
 from pearl_interfaces.msg import Belief as BeliefMsg
 from pearl_interfaces.msg import Decision as DecisionMsg
+from pearl_interfaces.msg import DriveProgress as DriveProgressMsg
 from pearl_interfaces.msg import FeatureMarginal as FeatureMarginalMsg
+from pearl_interfaces.msg import GuidePace as GuidePaceMsg
 from pearl_interfaces.msg import OperatorEvent as OperatorEventMsg
 from pearl_interfaces.msg import OperatorProposal as OperatorProposalMsg
+from pearl_interfaces.msg import RecognisedSpeech as RecognisedSpeechMsg
 from pearl_interfaces.msg import SearchAction as SearchActionMsg
 from pearl_interfaces.msg import SearchBranch as SearchBranchMsg
 from pearl_interfaces.msg import SearchStats as SearchStatsMsg
@@ -52,16 +65,21 @@ from pearl_interfaces.msg import TraceStep as TraceStepMsg
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
+from pearl_pomdp.channels import SPEECH_TYPE, TEXT_TYPE
 from pearl_pomdp.errors import BeliefError
+from pearl_pomdp.speech import Utterance, parse_speech_message, utterance
 
 __all__ = [
-    "MAX_NAMED_STATES", "BeliefMsg", "TextMsg", "DecisionMsg", "OperatorEventMsg", "OperatorProposalMsg",
+    "MAX_NAMED_STATES", "ActionMsg", "BeliefMsg", "TextMsg", "DecisionMsg", "OperatorEventMsg", "OperatorProposalMsg",
     "operator_event_to_msg", "msg_to_operator_event", "proposal_to_msg", "msg_to_proposal", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
     "belief_to_msg", "msg_to_belief", "msg_to_belief_key", "msg_to_marginals",
     "text_to_msg", "msg_to_text", "action_to_msg", "msg_to_action",
     "decision_to_msg", "msg_to_decision", "pose_to_msg", "msg_to_pose",
     "diagnostics_to_msg", "msg_to_diagnostics", "seconds_to_time", "time_to_seconds",
     "clock_to_msg", "DIAG_OK", "DIAG_WARN", "DIAG_ERROR",
+    "DriveProgressMsg", "drive_progress_to_msg", "msg_to_drive_progress",
+    "RecognisedSpeechMsg", "speech_to_msg", "msg_to_speech", "input_to_msg",
+    "GuidePaceMsg", "guide_pace_to_msg", "msg_to_guide_pace",
 ]
 
 #: Message classes used by the nodes (import them from here, not from the message packages).
@@ -165,14 +183,43 @@ def msg_to_text(msg: String) -> str:
     return msg.data
 
 
-def action_to_msg(action_name: str) -> String:
-    """The primitive action's name as a ``std_msgs/String``."""
-    return String(data=action_name)
+def action_to_msg(action_name: str, stamp_s: float = 0.0) -> ActionMsg:
+    """The primitive action as a ``pearl_interfaces/Action`` (its name, stamped ``stamp_s``)."""
+    return ActionMsg(stamp=seconds_to_time(max(0.0, stamp_s)), name=str(action_name))
 
 
-def msg_to_action(msg: String) -> str:
+def msg_to_action(msg: ActionMsg) -> str:
     """The action name of an ``/pearl/action`` message (surrounding blanks removed)."""
-    return msg.data.strip()
+    return msg.name.strip()
+
+
+# ---------------------------------------------------------------------- speech
+def speech_to_msg(text: str, confidence: float = 1.0, symbol: str = "", stamp_s: float = 0.0) -> RecognisedSpeechMsg:
+    """What the recogniser heard as a ``pearl_interfaces/RecognisedSpeech`` (confidence clamped to [0, 1])."""
+    conf = min(1.0, max(0.0, float(confidence))) if math.isfinite(float(confidence)) else 1.0
+    return RecognisedSpeechMsg(stamp=seconds_to_time(max(0.0, stamp_s)), text=str(text), confidence=conf,
+                               symbol=str(symbol))
+
+
+def msg_to_speech(msg: RecognisedSpeechMsg) -> Utterance:
+    """The :class:`~pearl_pomdp.speech.Utterance` of a ``pearl_interfaces/RecognisedSpeech``."""
+    return utterance(msg.text, msg.confidence, msg.symbol)
+
+
+def input_to_msg(type_name: str, data: str) -> Any:
+    """The message an input of message type ``type_name`` carries for ``data``, a simulated world's
+    text: a ``RecognisedSpeech`` for the typed speech input (``data`` plain text, or the JSON of
+    :func:`pearl_pomdp.speech.speech_message` with its confidence), a ``std_msgs/String`` otherwise.
+
+    Raises:
+        ValueError: ``type_name`` is neither (a number input is not fed text).
+    """
+    if type_name == SPEECH_TYPE:
+        text, confidence = parse_speech_message(data)
+        return speech_to_msg(text, confidence)
+    if type_name == TEXT_TYPE:
+        return String(data=str(data))
+    raise ValueError(f"an input of type {type_name} is not fed text (expected {SPEECH_TYPE} or {TEXT_TYPE})")
 
 
 def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: float, expansions: int = 0,
@@ -307,6 +354,42 @@ def msg_to_proposal(msg: OperatorProposalMsg) -> dict:
     return {"step": int(msg.step), "action": msg.action, "source": msg.source, "status": msg.status,
             "autonomy": msg.autonomy, "vetoed": list(msg.vetoed),
             "deadline": msg.deadline if math.isfinite(msg.deadline) else None}
+
+
+# ------------------------------------------------------------- drive progress
+def drive_progress_to_msg(action: str, place: str, distance_remaining: float, estimated_time_remaining: float,
+                          stamp_s: float) -> DriveProgressMsg:
+    """A running drive's progress (Nav2's feedback) as a ``pearl_interfaces/DriveProgress``."""
+    return DriveProgressMsg(stamp=seconds_to_time(max(0.0, stamp_s)), action=str(action), place=str(place),
+                            distance_remaining=float(distance_remaining),
+                            estimated_time_remaining=float(estimated_time_remaining))
+
+
+def msg_to_drive_progress(msg: DriveProgressMsg) -> Dict[str, Any]:
+    """The plain form of a drive progress message: ``action, place, distance_remaining,
+    estimated_time_remaining, stamp`` (seconds)."""
+    return {"action": msg.action, "place": msg.place, "distance_remaining": float(msg.distance_remaining),
+            "estimated_time_remaining": float(msg.estimated_time_remaining), "stamp": time_to_seconds(msg.stamp)}
+
+
+# ----------------------------------------------------------------- guide pace
+def guide_pace_to_msg(state: Mapping[str, Any], stamp_s: float = 0.0) -> GuidePaceMsg:
+    """The guide_pace node's state ``{"active", "state", "speed", "nav_speed", "pace", "behind",
+    "waited", "times_lost"}`` (``active``/``behind`` ``None``: no guidance / not seen) as a
+    ``pearl_interfaces/GuidePace``."""
+    behind = state.get("behind")
+    return GuidePaceMsg(stamp=seconds_to_time(max(0.0, stamp_s)), active=str(state.get("active") or ""),
+                        state=str(state["state"]), speed=float(state["speed"]), nav_speed=float(state["nav_speed"]),
+                        pace=float(state["pace"]), behind=math.nan if behind is None else float(behind),
+                        waited=float(state["waited"]), times_lost=int(state["times_lost"]))
+
+
+def msg_to_guide_pace(msg: GuidePaceMsg) -> Dict[str, Any]:
+    """The plain form of a ``pearl_interfaces/GuidePace`` (the JSON the topic carried before; what the
+    live view's ``/pearl/guide_pace`` channel takes)."""
+    return {"active": msg.active or None, "state": msg.state, "speed": msg.speed, "nav_speed": msg.nav_speed,
+            "pace": msg.pace, "behind": None if math.isnan(msg.behind) else msg.behind, "waited": msg.waited,
+            "times_lost": int(msg.times_lost)}
 
 
 # ------------------------------------------------------------------------ poses

@@ -11,7 +11,6 @@ she is lost it publishes ``lost_symbol`` on ``lost_topic`` once.
 """
 from __future__ import annotations
 
-import json
 import math
 import sys
 from typing import List, Optional
@@ -58,11 +57,11 @@ class GuidePaceNode(PearlNode):
           ``diagnostics_period`` (0.01–3600 s).
 
     Subscribers: ``/cmd_vel_nav`` (Twist), person topic (PointStamped, best effort),
-    ``/pearl/action`` (String, TRANSIENT_LOCAL: a restarted node resumes a running guidance).
+    ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL: a restarted node resumes a running guidance).
 
     Publishers: ``/cmd_vel`` (Twist), ``lost_topic`` (String), ``/pearl/guide_pace``
-    (String JSON ``{"active", "state", "speed", "nav_speed", "pace", "behind", "waited",
-    "times_lost"}``, at most 4 Hz during a guidance), ``/diagnostics``.
+    (pearl_interfaces/GuidePace: ``active``, ``state``, ``speed``, ``nav_speed``, ``pace``, ``behind``
+    — NaN: not seen —, ``waited``, ``times_lost``; at most 4 Hz during a guidance), ``/diagnostics``.
     """
 
     DEFAULT_NAME = "guide_pace"
@@ -87,8 +86,8 @@ class GuidePaceNode(PearlNode):
         Param("lost_topic", "/pearl/laser", "Where 'resident lost' is reported (String)"),
         Param("lost_symbol", "", "Observation published when she is lost, a symbol of the domain ('': none)"),
         Param("domain", "", "Domain whose observations lost_symbol should be ('': no check)"),
-        Param("action_topic", "/pearl/action", "Primitive actions (String)"),
-        Param("state_topic", "/pearl/guide_pace", "Filter state for viewers (JSON String)"),
+        Param("action_topic", "/pearl/action", "Primitive actions (pearl_interfaces/Action)"),
+        Param("state_topic", "/pearl/guide_pace", "Filter state for viewers (pearl_interfaces/GuidePace)"),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
     )
 
@@ -119,11 +118,11 @@ class GuidePaceNode(PearlNode):
                        "stops": 0}
         self.cmd_pub = self.create_publisher(cv.TwistMsg, p["cmd_out_topic"], CMD_QOS)
         self.lost_pub = self.create_publisher(cv.TextMsg, p["lost_topic"], EVENT_QOS)
-        self.state_pub = self.create_publisher(cv.TextMsg, p["state_topic"], EVENT_QOS)
+        self.state_pub = self.create_publisher(cv.GuidePaceMsg, p["state_topic"], EVENT_QOS)
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self.create_subscription(cv.TwistMsg, p["cmd_in_topic"], self._on_cmd, CMD_QOS)
         self.create_subscription(cv.PointMsg, p["person_topic"], self._on_person, POSE_QOS)
-        self.create_subscription(cv.TextMsg, p["action_topic"], self._on_action, LATCHED_QOS)
+        self.create_subscription(cv.ActionMsg, p["action_topic"], self._on_action, LATCHED_QOS)
         self.create_timer(1.0 / p["control_rate"], self._control)
         self.create_timer(p["diagnostics_period"], self.publish_diagnostics)
         self.get_logger().info(f"guide pace for {', '.join(p['guide_actions']) or 'no action'}: "
@@ -210,7 +209,7 @@ class GuidePaceNode(PearlNode):
                  "nav_speed": round(nav_speed, 4), "pace": round(self.pace.pace, 4),
                  "behind": None if behind is None else round(behind, 3), "waited": round(self.pace.waited, 2),
                  "times_lost": self.pace.times_lost}
-        self.state_pub.publish(cv.text_to_msg(json.dumps(state)))
+        self.state_pub.publish(cv.guide_pace_to_msg(state, now))
 
     def publish_diagnostics(self) -> None:
         """Publish guidance counters on /diagnostics (WARN while the resident is lost)."""

@@ -101,7 +101,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         * ``/pearl/belief`` (pearl_interfaces/Belief, TRANSIENT_LOCAL): the tracker's belief.
 
     Publishers:
-        * ``/pearl/action`` (std_msgs/String, TRANSIENT_LOCAL depth 1): the primitive action.
+        * ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL depth 1): the primitive action.
         * ``/pearl/decision`` (pearl_interfaces/Decision): the step, the belief step it answers, the
           action, the EXECUTE trace (subtask, choice, value), the decision's latency (belief message
           received → action published, wall clock), the beliefs its forward search expanded (0: the
@@ -143,7 +143,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                                                        "the budget is TRIALS); 0: no guard", range=(0.0, 3600.0)),
         Param("diagnostics_period", 1.0, "Seconds between /diagnostics summaries", range=(0.01, 3600.0)),
         Param("belief_topic", "/pearl/belief", "Belief input (pearl_interfaces/Belief)"),
-        Param("action_topic", "/pearl/action", "Primitive action output (std_msgs/String)"),
+        Param("action_topic", "/pearl/action", "Primitive action output (pearl_interfaces/Action)"),
         Param("decision_topic", "/pearl/decision", "EXECUTE trace output (pearl_interfaces/Decision)"),
         Param("autonomy", "full", f"Autonomy level: {' / '.join(AUTONOMY_LEVELS)} (full acts, confirm waits for "
                                   "the operator's yes, off only proposes); changeable at run time", read_only=False),
@@ -233,7 +233,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self.journal = NodeJournal(self, "hierarchical_policy", p, model,
                                    domain.source if domain is not None else p["domain"])
         self.journal.resume(self._resume)
-        self.action_pub = self.lifecycle_publisher(cv.TextMsg, p["action_topic"], LATCHED_QOS)
+        self.action_pub = self.lifecycle_publisher(cv.ActionMsg, p["action_topic"], LATCHED_QOS)
         self.decision_pub = self.lifecycle_publisher(cv.DecisionMsg, p["decision_topic"], EVENT_QOS)
         self.proposal_pub = self.lifecycle_publisher(cv.OperatorProposalMsg, p["proposal_topic"], LATCHED_QOS)
         # Depth 100: a burst of events (a veto re-deciding, a command withdrawing) reaches the recorder.
@@ -307,7 +307,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         """Publish what the gate decided: actions first (the loop waits on them), then the record."""
         assert self.gate is not None
         for action in out.publish:
-            self.action_pub.publish(cv.action_to_msg(action))
+            self.action_pub.publish(cv.action_to_msg(action, self.now_s()))
             self.actions_published += 1
             self._acted_key = self._belief_key
         latency = time.perf_counter() - start
@@ -356,7 +356,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
 
     def _operator_input(self, what: str):
         def callback(msg) -> None:
-            self.operator_request(what, cv.msg_to_action(msg), self.params[f"{what}_topic"])
+            self.operator_request(what, cv.msg_to_text(msg).strip(), self.params[f"{what}_topic"])
 
         return callback
 

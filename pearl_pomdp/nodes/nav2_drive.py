@@ -11,16 +11,22 @@ hands each drive to a :class:`Nav2Drive`:
 * an aborted goal, one cancelled by someone else, one the server rejects, or a drive with no
   server to take it closes the drive at once: the executor publishes ``nav_failed_observation`` on
   ``drive_result_topic`` (Pearl: ``navFailed`` on ``/pearl/laser``, what the tracker's deadline
-  would have said only at the deadline); a succeeded goal reports nothing (the landmark detector
-  says where the robot arrived);
-* the latest feedback (distance remaining, estimated time remaining) is kept and counted on
-  /diagnostics.
+  would have said only at the deadline);
+* a succeeded goal closes the drive with its place's arrival landmark (``landmarks.<place>``,
+  Pearl: ``atRoom`` on ``/pearl/laser``) — unless that landmark was heard on ``drive_result_topic``
+  since the goal was sent (a landmark detector beside Nav2 reports it first: its entry radius is
+  wider than Nav2's goal tolerance), so one arrival closes one step;
+* feedback (distance remaining, estimated time remaining) is kept, counted on /diagnostics, and
+  passed on (at most one every ``progress_period`` seconds per goal, the first at once) as a
+  ``pearl_interfaces/DriveProgress`` on ``drive_progress_topic``: the belief tracker moves the
+  drive's deadline by it.
 
 Without ``nav2_msgs`` (``navigation:=auto``) or with ``navigation:=topic`` the executor publishes the
 goal on ``/goal_pose`` as before.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, Optional
 
@@ -45,9 +51,12 @@ def navigate_to_pose_type() -> Any:
 
 @dataclass
 class _Goal:
+    action: str
     place: str
+    sent_at: float = 0.0       # monotonic seconds
     handle: Any = None
     wanted: bool = True        # False once a new decision cancelled it: its end is not reported
+    progress_at: Optional[float] = None   # monotonic seconds of the last progress passed on
 
 
 @dataclass
@@ -59,12 +68,20 @@ class Nav2Drive:
         action_type: the ``NavigateToPose`` class.
         action_name: the server's name (``/navigate_to_pose``).
         on_failed: called with ``(place, why)`` when a wanted drive ended without arriving.
+        on_arrived: called with ``(action, place, sent_at)`` when a wanted drive's goal succeeded
+            (``sent_at``: when the goal was sent, ``time.monotonic()`` seconds).
+        on_progress: called with ``(action, place, distance_remaining, estimated_time_remaining)``
+            for the feedback of a wanted drive, at most once every ``progress_period`` seconds per goal.
+        progress_period: seconds between two progress calls of one goal (the first comes at once).
     """
 
     node: Any
     action_type: Any
     action_name: str
     on_failed: Callable[[str, str], None]
+    on_arrived: Callable[[str, str, float], None] = lambda action, place, sent_at: None
+    on_progress: Callable[[str, str, float, float], None] = lambda action, place, distance, eta: None
+    progress_period: float = 0.5
     counts: Dict[str, int] = field(default_factory=lambda: {"sent": 0, "succeeded": 0, "failed": 0,
                                                             "cancelled": 0, "feedback": 0})
     #: The latest feedback: ``distance_remaining`` (m) and ``estimated_time_remaining`` (s).
@@ -79,12 +96,13 @@ class Nav2Drive:
     def destroy(self) -> None:
         self.client.destroy()
 
-    def drive(self, place: str, pose: Any) -> None:
-        """Drive to ``place`` (its ``PoseStamped`` ``pose``); see the module doc."""
+    def drive(self, action: str, place: str, pose: Any) -> None:
+        """Drive to ``place`` (its ``PoseStamped`` ``pose``) for ``action``; see the module doc."""
         if self.current is not None and self.current.wanted and self.current.place == place:
-            return                                    # the same drive goes on
+            self.current.action = action              # the same drive goes on (for this action now)
+            return
         self.stop(f"a new decision drives to {place}")
-        goal = _Goal(place)
+        goal = _Goal(action, place, time.monotonic())
         self.current = goal
         if not self.client.server_is_ready():
             self.current = None
@@ -92,7 +110,8 @@ class Nav2Drive:
             self.on_failed(place, f"no NavigateToPose server on {self.action_name}")
             return
         self.counts["sent"] += 1
-        future = self.client.send_goal_async(self.action_type.Goal(pose=pose), feedback_callback=self._on_feedback)
+        future = self.client.send_goal_async(self.action_type.Goal(pose=pose),
+                                             feedback_callback=lambda msg: self._on_feedback(goal, msg))
         future.add_done_callback(lambda f: self._on_response(goal, f))
 
     def stop(self, why: str) -> None:
@@ -122,9 +141,11 @@ class Nav2Drive:
         status = getattr(result, "status", None)
         if status == STATUS_SUCCEEDED:
             if goal.wanted:
+                goal.wanted = False
                 self.counts["succeeded"] += 1
                 if self.current is goal:
                     self.current = None
+                self.on_arrived(goal.action, goal.place, goal.sent_at)
             return
         error = getattr(getattr(result, "result", None), "error_msg", "") or ""
         what = {STATUS_ABORTED: "aborted", STATUS_CANCELED: "cancelled by the navigator"}.get(int(status or 0),
@@ -140,9 +161,14 @@ class Nav2Drive:
         self.counts["failed"] += 1
         self.on_failed(goal.place, why)
 
-    def _on_feedback(self, msg) -> None:
+    def _on_feedback(self, goal: _Goal, msg) -> None:
         fb = msg.feedback
         eta = fb.estimated_time_remaining
         self.feedback = {"distance_remaining": float(fb.distance_remaining),
                          "estimated_time_remaining": eta.sec + eta.nanosec * 1e-9}
         self.counts["feedback"] += 1
+        now = time.monotonic()
+        if goal.wanted and (goal.progress_at is None or now - goal.progress_at >= self.progress_period):
+            goal.progress_at = now
+            self.on_progress(goal.action, goal.place, self.feedback["distance_remaining"],
+                             self.feedback["estimated_time_remaining"])

@@ -43,8 +43,8 @@ class SimClockDriver:
                  action_topic: str = "/pearl/action"):
         import rclpy
         from rosgraph_msgs.msg import Clock
-        from std_msgs.msg import String
 
+        from pearl_pomdp.nodes import conversions as cv
         from pearl_pomdp.nodes.common import LATCHED_QOS
 
         self.graph = graph
@@ -52,7 +52,8 @@ class SimClockDriver:
         self.node = graph.add_node(rclpy.create_node("pearl_sim_clock", context=graph.context))
         self.clock_pub = self.node.create_publisher(Clock, clock_topic, 10)
         self.actions: List[str] = []
-        self.node.create_subscription(String, action_topic, lambda m: self.actions.append(m.data), LATCHED_QOS)
+        self.node.create_subscription(cv.ActionMsg, action_topic, lambda m: self.actions.append(cv.msg_to_action(m)),
+                                      LATCHED_QOS)
         self._clocks = [n.get_clock() for n in graph.nodes if n is not self.node]
         self._clock_type = Clock
 

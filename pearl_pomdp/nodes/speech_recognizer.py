@@ -12,10 +12,11 @@ samples, any chunk length (20–100 ms is usual). The rate may be declared in
 declares another rate is dropped and counted (``wrong_rate``). An empty layout means
 16 kHz. The utterance boundary is decided by voice activity, not by the chunking.
 
-Output: ``std_msgs/String`` whose data is ``{"text": "...", "confidence": 0.83}``
-(``publish_format:=json``, the default; parse it with
-:func:`pearl_pomdp.speech.parse_speech_message`) or the bare text
-(``publish_format:=text``, for consumers that read plain text).
+Output: ``pearl_interfaces/msg/RecognisedSpeech`` (text, confidence, stamp; ``publish_format:=typed``,
+the default, what a domain's speech input reads) or a ``std_msgs/String`` of the bare text
+(``publish_format:=text``, for consumers that read plain text; the confidence is lost). The JSON
+``{"text", "confidence"}`` String of earlier versions is gone (bags that hold it still replay:
+:func:`pearl_pomdp.speech.parse_speech_message`).
 
 Parameters (read-only): see :attr:`SpeechRecognizerNode.PARAMETERS` (``ros2 param describe``).
 
@@ -103,8 +104,9 @@ class SpeechRecognizerNode(PearlNode):
         Param("source", "topic", "'topic' (audio_topic) or 'microphone' (default input device via sounddevice)"),
         Param("device", "", "Input device name or index for source:=microphone ('' = system default)"),
         Param("audio_topic", "/pearl/audio_in", "Audio input (std_msgs/Int16MultiArray, 16 kHz mono PCM)"),
-        Param("speech_topic", "/pearl/speech", "Recognised speech output (std_msgs/String)"),
-        Param("publish_format", "json", "'json' ({text, confidence}) or 'text' (bare recognised text)"),
+        Param("speech_topic", "/pearl/speech", "Recognised speech output (pearl_interfaces/RecognisedSpeech)"),
+        Param("publish_format", "typed", "'typed' (pearl_interfaces/RecognisedSpeech: text, confidence) or "
+                                         "'text' (std_msgs/String of the bare text)"),
         Param("publish_empty", False, "Publish utterances that decode to no words (as empty text, confidence 0)"),
         Param("max_utterance_seconds", 20.0, "Longer utterances are dropped (counted), not decoded",
               range=(0.5, 600.0)),
@@ -122,7 +124,7 @@ class SpeechRecognizerNode(PearlNode):
         p = self.declare_table(self.PARAMETERS)
         self.params = p
         for name, allowed in (("language_model", ("domain", "default")), ("source", ("topic", "microphone")),
-                              ("publish_format", ("json", "text"))):
+                              ("publish_format", ("typed", "text"))):
             if p[name] not in allowed:
                 raise NodeSetupError(f"parameter {name}: {p[name]!r} is not one of {', '.join(allowed)}")
         from pearl_pomdp.asr.recognizer import Recognizer, UtteranceSegmenter
@@ -147,7 +149,8 @@ class SpeechRecognizerNode(PearlNode):
         self.last: List[dict] = []
         self._queue: "queue.Queue[Optional[np.ndarray]]" = queue.Queue(maxsize=p["max_queue"])
         self._feed_lock = threading.Lock()
-        self.speech_pub = self.create_publisher(cv.TextMsg, p["speech_topic"], EVENT_QOS)
+        self.speech_pub = self.create_publisher(cv.RecognisedSpeechMsg if p["publish_format"] == "typed" else cv.TextMsg,
+                                                p["speech_topic"], EVENT_QOS)
         self.diag_pub = self.create_publisher(cv.DiagnosticsMsg, "/diagnostics", EVENT_QOS)
         self._stream = None
         if p["source"] == "microphone":
@@ -232,7 +235,6 @@ class SpeechRecognizerNode(PearlNode):
     # ----------------------------------------------------------- decode
     def _decode_loop(self) -> None:
         from pearl_pomdp.asr.audio import AudioError
-        from pearl_pomdp.speech import speech_message
 
         while True:
             pcm = self._queue.get()
@@ -258,11 +260,12 @@ class SpeechRecognizerNode(PearlNode):
                 self.counts["empty"] += 1
                 if not self.params["publish_empty"]:
                     continue
-            data = speech_message(rec.text, rec.confidence) if self.params["publish_format"] == "json" else rec.text
+            msg = (cv.speech_to_msg(rec.text, rec.confidence, stamp_s=self.now_s())
+                   if self.params["publish_format"] == "typed" else cv.text_to_msg(rec.text))
             if self._closing or not self.context.ok():
                 return
             try:
-                self.speech_pub.publish(cv.text_to_msg(data))
+                self.speech_pub.publish(msg)
             except Exception:  # noqa: BLE001 - the node is being destroyed under us: stop quietly
                 if self._closing or not self.context.ok():
                     return

@@ -58,12 +58,14 @@ class ReceptionHardware:
 
     def outgoing(self, message: Message) -> Tuple[Any, Any]:
         """``(publisher, ROS message)`` carrying ``message`` on its modality's input."""
+        from pearl_pomdp.nodes.conversions import input_to_msg
+
         reader = self._readers[message.modality]
-        msg = reader.msg_type()
         if reader.channel.kind == "number":
+            msg = reader.msg_type()
             _set(msg, reader.field, float(message.text))
         else:
-            msg.data = message.text
+            msg = input_to_msg(reader.channel.type, message.text)
         return self.publishers[message.modality], msg
 
     def publish_said(self, said: str) -> None:

@@ -32,9 +32,11 @@ import launch  # noqa: E402
 import launch_testing.actions  # noqa: E402
 import launch_testing.asserts  # noqa: E402
 import rclpy  # noqa: E402
+from pearl_interfaces.msg import Action  # noqa: E402
 import yaml  # noqa: E402
 from ament_index_python.packages import get_package_share_directory  # noqa: E402
 from geometry_msgs.msg import PoseWithCovarianceStamped  # noqa: E402
+from pearl_interfaces.msg import RecognisedSpeech  # noqa: E402
 from launch.actions import IncludeLaunchDescription  # noqa: E402
 from launch.launch_description_sources import AnyLaunchDescriptionSource  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
@@ -90,13 +92,13 @@ class TestPearlGraph(unittest.TestCase):
     def test_2_an_utterance_gets_an_action(self, proc_output):
         proc_output.assertWaitFor("policy ready", timeout=READY_TIMEOUT, stream="stderr")
         actions = []
-        self.node.create_subscription(String, "/pearl/action", lambda m: actions.append(m.data), LATCHED)
-        speech = self.node.create_publisher(String, "/pearl/speech", RELIABLE)
+        self.node.create_subscription(Action, "/pearl/action", lambda m: actions.append(m.name), LATCHED)
+        speech = self.node.create_publisher(RecognisedSpeech, "/pearl/speech", RELIABLE)   # the domain's type
         # The policy's answer to b0 (latched) opens the first step; the tracker must hear us.
         self.assertTrue(self.spin_until(lambda: actions and speech.get_subscription_count() > 0, 30.0),
                         "no action on /pearl/action, or nobody subscribes /pearl/speech")
         first = len(actions)
-        speech.publish(String(data="what time is it"))
+        speech.publish(RecognisedSpeech(text="what time is it", confidence=1.0))
         self.assertTrue(self.spin_until(lambda: len(actions) > first, 30.0), "no action after the utterance")
         self.assertIn(actions[-1], _domain_actions())
 

@@ -30,12 +30,12 @@ import launch  # noqa: E402
 import launch_testing.actions  # noqa: E402
 import launch_testing.asserts  # noqa: E402
 import rclpy  # noqa: E402
+from pearl_interfaces.msg import Action  # noqa: E402
 from ament_index_python.packages import get_package_share_directory  # noqa: E402
 from launch.actions import IncludeLaunchDescription  # noqa: E402
 from launch.launch_description_sources import AnyLaunchDescriptionSource  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import BatteryState  # noqa: E402
-from std_msgs.msg import String  # noqa: E402
 
 SHARE = get_package_share_directory("pearl_pomdp")
 #: Start-up, planning included, on a slow CI machine.
@@ -85,7 +85,7 @@ class TestReceptionGraph(unittest.TestCase):
     def test_2_a_low_battery_docks(self, proc_output):
         proc_output.assertWaitFor("policy ready", timeout=READY_TIMEOUT, stream="stderr")
         actions = []
-        self.node.create_subscription(String, "/pearl/action", lambda m: actions.append(m.data), LATCHED)
+        self.node.create_subscription(Action, "/pearl/action", lambda m: actions.append(m.name), LATCHED)
         battery = self.node.create_publisher(BatteryState, "/battery_state", BEST_EFFORT)
         self.assertTrue(self.spin_until(lambda: actions and battery.get_subscription_count() > 0, 30.0),
                         "no action on /pearl/action, or nobody subscribes /battery_state")
