@@ -67,3 +67,26 @@ def test_the_measurements_are_taken(day):
     assert hour["steps"] == len(day["timeline"]) and 0 < hour["p50_ms"] <= hour["p99_ms"]
     assert day["rss_mb"][0]["hour"] == 0 and day["rss_mb"][-1]["hour"] == "end"
     assert all(m["rss_mb"] > 50 for m in day["rss_mb"])
+
+
+def test_the_demo_ends_when_pearl_has_left_for_its_station(tmp_path, day_policy):
+    """Figure 4(f), "Pearl leaves": with a policy that goes home after its work (the day domain's), the
+    episode ends once the robot is back at its station with nothing wanted, before the scenario's
+    max_steps; the outcome line says so."""
+    from pearl_sim.demo import run_demo
+
+    configure_test_process(tmp_path)
+    # Figure 4 with twice its step budget: the episode must end by Pearl leaving, not by the budget.
+    scenario = tmp_path / "figure4_long.yaml"
+    text = (REPO / "config/scenarios/figure4.yaml").read_text()
+    assert "max_steps: 30 " in text
+    scenario.write_text(text.replace("max_steps: 30 ", "max_steps: 60 "))
+    result = run_demo(scenario, tmp_path / "out",
+                      domain_path=REPO / "config/pearl_day.domain.yaml",
+                      hierarchy_path=REPO / "config/pearl.hierarchy.yaml", policy=str(day_policy), seed=4,
+                      domain_id=allocate_domain_id())
+    actions = [s.action for s in result.steps]
+    assert actions[-1] == "GoHome" and len(actions) < 60
+    assert result.metrics["guidances_completed"] == 1
+    assert result.transcript.read_text().splitlines()[-1].startswith("outcome: guidance completed")
+    assert "ended at home" in result.outcome()
