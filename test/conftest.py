@@ -118,6 +118,18 @@ def pytest_cmdline_main(config):
         option.numprocesses = workers if workers > 1 else 0
         if workers > 1:
             option.dist = "loadfile"
+            # Hand out the files in collection order, which pytest_collection_modifyitems puts the
+            # slow ones first in (xdist's default orders them by their number of tests, so a
+            # one-test file that takes 90 s could start last and run alone at the end).
+            option.loadscopereorder = False
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """The files with a ``slow`` test first, the rest after, each group in its collection order: with
+    a file per worker at a time, the longest work starts first and the short files fill in around
+    it (longest-first packing). The same order on every worker, as xdist requires."""
+    slow_files = {item.path for item in items if item.get_closest_marker("slow") is not None}
+    items[:] = sorted(items, key=lambda item: item.path not in slow_files)
 
 
 def pytest_sessionfinish(session, exitstatus):

@@ -26,6 +26,7 @@ from pearl_pomdp.cli import _command_modules
 from ros_helpers import Proc, allocate_domain_id, ros_env, wait_for
 
 REPO = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.slow   # every command's help examples, run as written (~2 min together)
 
 _HEADING = re.compile(r"^Examples?\b.*:$")
 
