@@ -91,6 +91,35 @@ def test_pearl_experiment_day_refuses_what_it_cannot_run(capsys):
     assert "--residents" in capsys.readouterr().err
     assert main(["experiment", "--day", "--domain", "config/pearl.domain.yaml", "--days", "0"]) == 2
     assert "--days" in capsys.readouterr().err
+    assert main(["experiment", "--day", "--snr", "20", "--noise", "0.5"]) == 2
+    assert "--snr: give --snr or --noise, not both" in capsys.readouterr().err
+    assert main(["experiment", "--day", "--snr", "20", "--noise-kind", "white,babble"]) == 2
+    err = capsys.readouterr().err
+    assert "--noise-kind" in err and "one kind per run" in err
+    assert main(["experiment", "--day", "--snr", "90"]) == 2
+    assert "SNRs in dB within [-20, 60]" in capsys.readouterr().err
+    assert main(["experiment", "--day", "--noise-kind", "babble"]) == 2
+    assert "--noise-kind: needs --snr" in capsys.readouterr().err
+
+
+def test_the_day_study_hears_her_through_the_measured_channel_at_each_snr(tmp_path, capsys):
+    """`pearl experiment --day --snr`: the SNR axis of the paper's conjecture on days. The same two days of
+    the tree at 60 dB and at -5 dB of white noise through the measured recogniser channel: the noisy ones
+    take more clarification questions (deterministic for these seeds), so her speech really went through
+    the channel at each level."""
+    from pearl_pomdp.cli import main
+
+    assert main(["experiment", "--day", "--policies", "day_tree", "--residents", "generated:1", "--seed", "11",
+                 "--days", "2", "--snr", "60,-5", "--noise-kind", "white", "--out", str(tmp_path), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    protocol = report["protocol"]
+    assert (protocol["noise_axis"], protocol["noise_kind"], protocol["noise_levels"]) == ("snr_db", "white", [-5.0, 60.0])
+    assert protocol["channel"].endswith("config/speech/pearl_channel.json")
+    by_level = {level: [d for d in report["days"] if d["noise"] == level] for level in (-5.0, 60.0)}
+    assert [len(v) for v in by_level.values()] == [2, 2]
+    asked = {level: sum(d["checklist"]["clarifications"] for d in days) for level, days in by_level.items()}
+    assert asked[-5.0] > asked[60.0]
+    assert set(report["per_policy"][BASELINE]) == {"-5.0", "60.0"}
 
 
 def test_the_days_picture_is_drawn(tmp_path):

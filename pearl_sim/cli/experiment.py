@@ -83,7 +83,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the study on working days (docs/day.md): controllers × generated residents × --days "
                              "× --noise on DayWorld, scored by the nurse's checklist; default domain "
                              "config/pearl_day.domain.yaml (fitted on training days), --residents generated:6, "
-                             "--seed 29, --noise 0.25,0.5, policies hierarchical,flat_pointbased,qmdp,day_tree")
+                             "--seed 29, --noise 0.25,0.5, policies hierarchical,flat_pointbased,qmdp,day_tree; "
+                             "or --snr DB,… --noise-kind white|babble (one kind per run): her speech through the "
+                             "measured recogniser channel")
     parser.add_argument("--days", type=int, default=None, metavar="N",
                         help="with --day: days per resident (default 4; bench/study_power.py --days decides it)")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes for the episodes (default 1)")

@@ -134,9 +134,11 @@ def plan_day(seed: int) -> DayPlan:
 
 
 def day_scenario(resident: Optional[dict] = None, word_error_rate: float = 0.25, seed: int = 0,
-                 name: str = "day", plan: Optional[DayPlan] = None):
+                 name: str = "day", plan: Optional[DayPlan] = None, speech: Optional[dict] = None):
     """The episode-world scenario of one day: the shipped map, robot and timeout, her profile
-    (``resident:`` fields), the recogniser's word error rate and the plan's three reminders."""
+    (``resident:`` fields), the recogniser's word error rate and the plan's three reminders.
+    ``speech``: a scenario ``speech:`` mapping instead (e.g. the measured recogniser channel at an
+    SNR, docs/speech.md), which ``word_error_rate`` then does not enter."""
     from pearl_sim.nursing_home.scenario import _build
 
     plan = plan if plan is not None else plan_day(seed)
@@ -145,7 +147,7 @@ def day_scenario(resident: Optional[dict] = None, word_error_rate: float = 0.25,
         "name": name, "seed": int(seed), "step_timeout": 8.0, "max_steps": 100_000,
         "map": {"home": [0, 0], "room": [15, 0], "physio": [15, 30]},
         "robot": {"speed": 0.6, "pace_adaptation": True},
-        "speech": {"word_error_rate": float(word_error_rate)},
+        "speech": dict(speech) if speech else {"word_error_rate": float(word_error_rate)},
         "resident": dict(resident or {"name": "Mrs B"}),
         "appointments": [{"at": at, "kind": kind} for at, kind in reminders],
         "questions": ([{"ask": plan.arrival_question, "when": "at_physio"}] if plan.arrival_question else []),

@@ -58,8 +58,12 @@ def day_agents(domain, hierarchy_path, policies: Sequence[str], flat_trials: int
 
 
 def run_day(controller, domain, case: DayCase, noise: float, model=None, record: bool = False,
-            timeline: bool = False, until: Optional[float] = None, plan: Optional[DayPlan] = None) -> Dict[str, Any]:
-    """One day of ``controller`` for ``case`` at recogniser word error rate ``noise``.
+            timeline: bool = False, until: Optional[float] = None, plan: Optional[DayPlan] = None,
+            channel: Optional[str] = None) -> Dict[str, Any]:
+    """One day of ``controller`` for ``case`` at recogniser word error rate ``noise`` — or, with
+    ``channel`` (a measured recogniser channel, ``pearl calibrate-speech --out``), with her speech
+    heard through that channel at ``noise`` dB SNR (her articulation is not applied on this axis, as
+    in the episode study's).
 
     Returns ``policy, resident, day, seed, noise, score, checklist, seconds`` and, with ``record``,
     ``episode`` (``pearl fit``'s ``.jsonl`` fields; the day then ends early if the battery runs
@@ -73,8 +77,9 @@ def run_day(controller, domain, case: DayCase, noise: float, model=None, record:
     t0 = time.perf_counter()
     plan = plan if plan is not None else plan_day(case.seed)
     fields = dict(case.fields)
-    scenario = day_scenario(fields, effective_word_error_rate(noise, case.articulation_wer), case.seed,
-                            name=f"{case.resident}-day{case.day}", plan=plan)
+    speech = ({"channel": "measured", "snr_db": float(noise), "measured": str(channel)} if channel else None)
+    scenario = day_scenario(fields, effective_word_error_rate(noise, case.articulation_wer) if not channel else 0.0,
+                            case.seed, name=f"{case.resident}-day{case.day}", plan=plan, speech=speech)
     world = DayWorld(scenario, plan, domain=domain)
     executive = episode_executive(controller, domain, scenario, model)
     states: List[Dict[str, str]] = []
@@ -113,6 +118,7 @@ class _Job:
     case: DayCase
     noise: float
     record: bool = False
+    channel: Optional[str] = None
 
 
 _WORKER: Dict[str, Any] = {}
@@ -127,17 +133,20 @@ def _run_job(job: _Job) -> Dict[str, Any]:
 
     logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
     return run_day(_WORKER["agents"][job.policy], _WORKER["domain"], job.case, job.noise, model=_WORKER["model"],
-                   record=job.record)
+                   record=job.record, channel=job.channel)
 
 
 def run_days(domain, agents, cases: Sequence[DayCase], noise_levels: Sequence[float], jobs: int = 1,
              record: bool = False, progress: bool = False,
-             each: Optional[Callable[[Dict[str, Any]], None]] = None) -> List[Dict[str, Any]]:
+             each: Optional[Callable[[Dict[str, Any]], None]] = None,
+             channel: Optional[str] = None) -> List[Dict[str, Any]]:
     """Every controller × case × noise level; the results in a fixed order whatever ``jobs`` is.
+    ``channel``: the noise levels are SNRs (dB) through this measured recogniser channel (:func:`run_day`).
 
     ``each`` is called with every day's result as soon as it is in (in that order): a long study
     keeps what it has done (``pearl experiment --day`` appends each day to ``days.jsonl``)."""
-    work = [_Job(name, case, float(level), record) for level in noise_levels for case in cases for name in agents]
+    work = [_Job(name, case, float(level), record, channel) for level in noise_levels for case in cases
+            for name in agents]
     iterator: Any
     if jobs <= 1:
         _init_worker(domain, agents)
@@ -297,16 +306,34 @@ def run_cli(args) -> int:
         raise SpecError("<command line>", "--days", f"{days}: at least 1 day per resident")
     if args.jobs < 1:
         raise SpecError("<command line>", "--jobs", f"{args.jobs}: at least 1 process")
-    if args.snr is not None or args.noise_kind is not None or args.speech_rows is not None or args.cluster is not None:
-        raise SpecError("<command line>", "--day", "runs on --noise word error rates with --jobs (the SNR arm, "
-                                                  "--speech-rows and --cluster are the episode study's)")
-    text = "0.25,0.5" if args.noise is None else args.noise
+    if args.speech_rows is not None or args.cluster is not None:
+        raise SpecError("<command line>", "--day", "runs with --jobs on --noise word error rates or --snr "
+                                                  "(--speech-rows and --cluster are the episode study's)")
+    channel: Optional[str] = None
+    kind: Optional[str] = None
+    if args.snr is not None:
+        # The SNR axis: her speech through the measured recogniser channel of one noise kind per run.
+        if args.noise is not None:
+            raise SpecError("<command line>", "--snr", "give --snr or --noise, not both")
+        kinds = [k.strip() for k in (args.noise_kind or "white").split(",") if k.strip()]
+        if len(kinds) != 1 or kinds[0] not in ("white", "babble"):
+            raise SpecError("<command line>", "--noise-kind", f"{args.noise_kind!r}: --day takes one kind per run, "
+                                                               "white or babble")
+        kind = kinds[0]
+        channel = str(Path(args.channel if kind == "white" else args.babble_channel).resolve())
+        require_file(channel, f"{kind} speech channel file (--{'channel' if kind == 'white' else 'babble-channel'})")
+        option, text, low, high, what = "--snr", args.snr, -20.0, 60.0, "SNRs in dB within [-20, 60]"
+    else:
+        if args.noise_kind is not None:
+            raise SpecError("<command line>", "--noise-kind", "needs --snr (the kinds are heard at SNRs)")
+        option, text, low, high, what = "--noise", ("0.25,0.5" if args.noise is None else args.noise), 0.0, 1.0, \
+            "word error rates in [0, 1]"
     try:
         noise = sorted({float(x) for x in text.split(",") if x.strip()})
     except ValueError:
-        raise SpecError("<command line>", "--noise", f"{text!r}: expected comma-separated numbers") from None
-    if not noise or any(not 0.0 <= x <= 1.0 for x in noise):
-        raise SpecError("<command line>", "--noise", f"{text!r}: word error rates in [0, 1]")
+        raise SpecError("<command line>", option, f"{text!r}: expected comma-separated numbers") from None
+    if not noise or any(not low <= x <= high for x in noise):
+        raise SpecError("<command line>", option, f"{text!r}: {what}")
     policies = [p.strip() for p in (args.policies or ",".join(DAY_POLICIES)).split(",") if p.strip()]
     bad = [p for p in policies if p not in DAY_POLICY_NAMES]
     if bad or not policies:
@@ -334,13 +361,14 @@ def run_cli(args) -> int:
             sink.write(json.dumps(day) + "\n")
             sink.flush()
 
-        results = run_days(domain, agents, cases, noise, jobs=args.jobs, progress=terminal, each=keep)
+        results = run_days(domain, agents, cases, noise, jobs=args.jobs, progress=terminal, each=keep, channel=channel)
     day_seconds = time.perf_counter() - t0
     summary = summarize(results)
-    png = plot_study(summary, out / "day-study.png")
+    png = plot_study(summary, out / "day-study.png", snr_kind=kind)
     report = {
         "protocol": {"domain": str(args.domain), "hierarchy": str(hierarchy), "residents": [p.name for p in profiles],
                      "resident_spec": spec, "resident_seed": seed, "days_per_resident": days, "noise_levels": noise,
+                     "noise_axis": "snr_db" if channel else "word_error_rate", "noise_kind": kind, "channel": channel,
                      "policies": policies, "baseline": BASELINE, "jobs": args.jobs, "days": len(results)},
         "plan_seconds": {k: round(v, 1) for k, v in agents.timings.items()},
         **summary,
@@ -374,8 +402,9 @@ def print_table(summary: Dict[str, Any]) -> None:
                   f"{p['days_battery_empty']:>5} {p['days_docked_at_end']:>6} {s['rows']['station_share']['mean']:>7.2f}")
 
 
-def plot_study(summary: Dict[str, Any], path) -> Any:
-    """Day score per controller and noise level with 95 % intervals, and the paired difference to the tree."""
+def plot_study(summary: Dict[str, Any], path, snr_kind: Optional[str] = None) -> Any:
+    """Day score per controller and noise level with 95 % intervals, and the paired difference to the tree
+    (``snr_kind``: the levels are SNRs in dB of that noise kind, through the measured channel)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -390,7 +419,8 @@ def plot_study(summary: Dict[str, Any], path) -> Any:
         ys = [by[lvl]["score"]["mean"] for lvl in levels if lvl in by]
         es = [by[lvl]["score"]["ci95"] for lvl in levels if lvl in by]
         ax.bar(xs, ys, width, yerr=es, capsize=3, label=policy)
-    ax.set_xticks([j + 0.4 - width / 2 for j in range(len(levels))], [f"noise {lvl}" for lvl in levels])
+    names = [f"{snr_kind} {lvl} dB" if snr_kind else f"noise {lvl}" for lvl in levels]
+    ax.set_xticks([j + 0.4 - width / 2 for j in range(len(levels))], names)
     ax.set_ylabel("day score (100 = perfect day)")
     ax.set_title("Day score, mean ± 95 % CI")
     ax.legend(fontsize=8)
@@ -400,9 +430,10 @@ def plot_study(summary: Dict[str, Any], path) -> Any:
                     yerr=[[d["mean"] - d["low"] for _, d in pts], [d["high"] - d["mean"] for _, d in pts]],
                     fmt="o", capsize=3, label=policy)
     bx.axhline(0, color="k", lw=0.8)
-    bx.set_xticks(range(len(levels)), [f"noise {lvl}" for lvl in levels])
+    bx.set_xticks(range(len(levels)), names)
     bx.set_title(f"Paired day score − {BASELINE} (95 % CI)")
-    bx.legend(fontsize=8)
+    if summary["paired_vs_baseline"]:
+        bx.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
