@@ -294,15 +294,25 @@ subtasks:
 """
 
 
-def test_a_group_passes_its_childrens_offers_up_and_the_parent_chooses_by_its_own_value():
+@pytest.fixture(scope="module")
+def grouped():
+    """The probe domain planned with the group hierarchy (Top → Act → {Ask, Do → {DoA, DoB}})."""
     domain = parse_domain(PROBE_DOMAIN)
-    model = domain.compile()
-    hp = plan(domain, parse_hierarchy(GROUP_HIERARCHY, domain.actions))
+    return domain.compile(), plan(domain, parse_hierarchy(GROUP_HIERARCHY, domain.actions))
+
+
+def probe_beliefs(model, seed):
+    """The corners of the probe's belief simplex that matter, then 20 drawn with ``seed``."""
+    rng = np.random.default_rng(seed)
+    for p in np.concatenate([[0.5, 0.85, 0.98, 0.02], rng.uniform(size=20)]):
+        yield belief(model, a=float(p), b=float(1 - p))
+
+
+def test_a_group_passes_its_childrens_offers_up_and_the_parent_chooses_by_its_own_value(grouped):
+    model, hp = grouped
     top, act = hp.subtasks["Top"], hp.subtasks["Act"]
 
-    rng = np.random.default_rng(5)
-    for p in np.concatenate([[0.5, 0.85, 0.98, 0.02], rng.uniform(size=20)]):
-        b = belief(model, a=float(p), b=float(1 - p))
+    for b in probe_beliefs(model, 5):
         do_pick = hp.action_names[hp._pick("Do", b, {})[0]]
         offers = [(hp.action_names[prim], path) for prim, path in hp.offers(top.actions, b, {})]
         assert offers == [("Ask", (0, 0)), (do_pick, (0, 1))]       # Act's children, not Act's pick
@@ -318,16 +328,12 @@ def test_a_group_passes_its_childrens_offers_up_and_the_parent_chooses_by_its_ow
         assert hp.actions_batch(b[None, :])[0] == d.action
 
 
-def test_each_choosing_level_names_its_runner_up_and_the_runner_ups_value():
+def test_each_choosing_level_names_its_runner_up_and_the_runner_ups_value(grouped):
     """The trace shows, beside each choice, the best offer the level did not take and its value by
     the same one-step measure (computed here by hand); a group that only passed offers up has none."""
-    domain = parse_domain(PROBE_DOMAIN)
-    model = domain.compile()
-    hp = plan(domain, parse_hierarchy(GROUP_HIERARCHY, domain.actions))
+    model, hp = grouped
     top, do = hp.subtasks["Top"], hp.subtasks["Do"]
-    rng = np.random.default_rng(8)
-    for p in np.concatenate([[0.5, 0.85, 0.98, 0.02], rng.uniform(size=20)]):
-        b = belief(model, a=float(p), b=float(1 - p))
+    for b in probe_beliefs(model, 8):
         do_pick = hp.action_names[hp._pick("Do", b, {})[0]]
         d = hp.execute(b)
         rival, label = ("Ask", "Act→Ask") if d.action_name != "Ask" else (do_pick, f"Act→Do→{do_pick}")

@@ -420,19 +420,33 @@ class HierarchicalPolicy:
         q = sub.one_step.q(bh)
         table = self._to_model[name]
         best: Optional[tuple] = None
+        second: Optional[tuple] = None
         for k, child in enumerate(sub.actions):
             prim = self._index[child]
             if prim in banned:
                 continue
             value = float(q[table[prim]])
             if best is None or value > best[2]:
+                if best is not None:
+                    second = (best[0], best[3], best[2])
                 best = (prim, k, value, (k,))
+            elif second is None or value > second[2]:
+                second = (prim, (k,), value)
         if banned or best is None:
             return best
+        self._remember(key, best, second)
+        return best
+
+    def _remember(self, key: tuple, best: Optional[tuple], second: Optional[tuple]) -> None:
+        """Cache a pick and its runner-up under the same key (emptied together when full); no pick
+        (nothing left below) is not cached: a miss values it again, as a cached ``None`` did."""
+        if best is None:
+            return
         if len(self._pick_cache) >= self.PICK_CACHE:
             self._pick_cache.clear()
+            self._rival_cache.clear()
         self._pick_cache[key] = best
-        return best
+        self._rival_cache[key] = second
 
     def _pick(self, name: str, b: np.ndarray, memo: Dict[str, Any], banned: FrozenSet[int] = frozenset()) -> Any:
         """``(primitive index, child index, value, path)`` subtask ``name`` chooses at the full belief ``b``.
@@ -454,8 +468,7 @@ class HierarchicalPolicy:
         got = None if banned else self._pick_cache.get(key)
         if got is not None:
             memo[name] = got
-            if key in self._rival_cache:   # (a pick_projected entry has none: valued again if asked)
-                memo[name + RUNNER_UP] = self._rival_cache[key]
+            memo[name + RUNNER_UP] = self._rival_cache[key]
             return got
         q = sub.one_step.q(bh)
         table = self._to_model[name]
@@ -473,12 +486,8 @@ class HierarchicalPolicy:
         memo[name + RUNNER_UP] = second
         if banned:
             return best   # a masked pick is for this decision only: not cached
-        if len(self._pick_cache) >= self.PICK_CACHE:
-            self._pick_cache.clear()
-            self._rival_cache.clear()
-        self._pick_cache[key] = memo[name]
-        self._rival_cache[key] = second
-        return memo[name]
+        self._remember(key, best, second)
+        return best
 
     def _search_value(self, name: str, b: np.ndarray, depth: int, budget: List[int],
                       banned: FrozenSet[int] = frozenset()) -> Any:
