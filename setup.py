@@ -128,5 +128,9 @@ setup(
         # Subcommands other packages add to `pearl` (the core never imports the simulator).
         "pearl.commands": ["demo = pearl_sim.cli.demo", "experiment = pearl_sim.cli.experiment", "day = pearl_sim.cli.day",
                            "calibrate-speech = pearl_sim.cli.calibrate_speech"],
+        # The simulated worlds, by the domain name they simulate (pearl_sim/worlds.py); a world outside
+        # this repository registers the same way.
+        "pearl.worlds": ["pearl = pearl_sim.nursing_home:WORLD", "reception = pearl_sim.reception:WORLD",
+                         "ward = pearl_sim.ward:WORLD"],
     },
 )

@@ -180,7 +180,7 @@ class GraphBackend:
 
     ``hardware`` is any simulated hardware with ``publishers`` (to wait for), ``outgoing(message)``
     → ``(publisher, ROS message)`` and ``publish_said(text)``: :class:`SimulatedHardware` (the
-    nursing home), :class:`pearl_sim.reception.hardware.ReceptionHardware` (the reception hall).
+    nursing home), :class:`pearl_sim.world_hardware.WorldHardware` (every world of the frame).
     Each world message is published by the simulated node of its modality at its time
     (the :class:`~pearl_pomdp.nodes.sim_clock.SimClockDriver` moves ``/clock`` there first
     and waits for the graph's answer); a deadline is reached by moving ``/clock`` to it, so

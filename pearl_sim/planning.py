@@ -61,7 +61,8 @@ def plan_controller(name: str, domain, model, hierarchy_path, seed: int = 0, fla
                     flat_time_limit: Optional[float] = None) -> Controller:
     """Plan the POMDP controller ``name`` (one of :data:`POMDP_POLICIES`) for ``domain`` (``model`` its compiled POMDP).
 
-    ``hierarchical``: :func:`pearl_pomdp.hierarchy.plan` of ``hierarchy_path``; ``flat_pointbased``:
+    ``hierarchical``: :func:`pearl_pomdp.hierarchy.plan` of ``hierarchy_path`` (``None``: the flat
+    hierarchy); ``flat_pointbased``:
     one point-based solve of the whole model with ``flat_trials`` trials (or ``flat_time_limit``
     seconds), executed with one step of look-ahead (:data:`pearl_sim.policies.FLAT_LOOKAHEAD`).
     """
@@ -71,9 +72,11 @@ def plan_controller(name: str, domain, model, hierarchy_path, seed: int = 0, fla
 
     decider: Decider
     if name == "hierarchical":
-        from pearl_pomdp.hierarchy import load_hierarchy, plan
+        from pearl_pomdp.hierarchy import flat_hierarchy, load_hierarchy, plan
 
-        decider = plan(domain, load_hierarchy(hierarchy_path, domain), seed=seed)
+        # No hierarchy file: the flat hierarchy (one root over every primitive), as `pearl plan` does.
+        hierarchy = flat_hierarchy(list(domain.actions)) if hierarchy_path is None else load_hierarchy(hierarchy_path, domain)
+        decider = plan(domain, hierarchy, seed=seed)
     elif name == "flat_pointbased":
         budget = {"trials": flat_trials} if flat_time_limit is None else {"time_limit": flat_time_limit}
         decider = FlatPolicyDecider(solve(model, "pointbased", seed=seed, **budget).policy, model,

@@ -21,9 +21,12 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
-__all__ = ["WorldExperiment", "run_world_experiment", "episode_settings", "run_scored_episode",
+if TYPE_CHECKING:  # pragma: no cover
+    from pearl_sim.worlds import SimWorld
+
+__all__ = ["WorldExperiment", "run_world_experiment", "StandardStudy", "WorldEpisode", "episode_settings", "run_scored_episode",
            "per_policy_rows", "paired_differences"]
 
 #: ``pearl experiment --residents``' default: these worlds' people are in their study file, so any other
@@ -36,8 +39,6 @@ class WorldExperiment:
     """What one world brings to :func:`run_world_experiment`.
 
     Attributes:
-        name: the world's name (``pearl_sim/worlds.py``): the report's ``world``, the default output
-            folder ``out/NAME-study-…`` and the progress bar's ``NAME study``.
         default_noise: the protocol's word error rates when ``--noise`` is not given (comma-separated).
         default_seeds: seeds per cell when ``--episodes`` is not given.
         refused: ``pearl experiment`` options (as typed, e.g. ``--cluster``) this world refuses, in the
@@ -55,7 +56,6 @@ class WorldExperiment:
         chunksize: episodes handed to a process at a time with ``--jobs`` > 1.
     """
 
-    name: str
     default_noise: str
     default_seeds: int
     refused: Tuple[str, ...]
@@ -81,8 +81,9 @@ def _one(item):
                             word_error_rate=noise, model=w["model"])
 
 
-def run_world_experiment(args: argparse.Namespace, world: WorldExperiment) -> int:
-    """Run ``world``'s study from ``pearl experiment``'s arguments; print the table or (``--json``) the report.
+def run_world_experiment(args: argparse.Namespace, files: "SimWorld", world: WorldExperiment) -> int:
+    """Run the study of ``files`` (the registered world: its name, study file, node parameters) as
+    ``world`` says, from ``pearl experiment``'s arguments; print the table or (``--json``) the report.
 
     Writes ``study.json`` (the report and every episode) into ``--out`` (default
     ``out/NAME-study-DATE-TIME``).
@@ -92,7 +93,7 @@ def run_world_experiment(args: argparse.Namespace, world: WorldExperiment) -> in
 
     Raises:
         SpecError: an option the world refuses, a bad ``--episodes``, ``--jobs``, ``--noise`` or
-            ``--policies``, a missing study file, or no hierarchy for the hierarchical policy.
+            ``--policies``, or a missing study file.
     """
     from pearl_pomdp.cli import print_json
     from pearl_pomdp.cli._inputs import require_file
@@ -100,13 +101,10 @@ def run_world_experiment(args: argparse.Namespace, world: WorldExperiment) -> in
     from pearl_pomdp.cli.plan import resolve_hierarchy_path
     from pearl_pomdp.errors import SpecError
     from pearl_pomdp.model.factored import load_domain
-    from pearl_sim.cli.demo import _share
-    from pearl_sim.worlds import WORLDS
-
-    files = WORLDS[world.name]
     study = world.study
+    name = files.name
     if args.snr is not None:
-        raise SpecError("<command line>", "--snr", f"the {world.name} world has the word-error recogniser only; "
+        raise SpecError("<command line>", "--snr", f"the {name} world has the word-error recogniser only; "
                                                    "use --noise")
     for option in world.refused:
         if getattr(args, option[2:].replace("-", "_"), None) is not None:
@@ -131,13 +129,12 @@ def run_world_experiment(args: argparse.Namespace, world: WorldExperiment) -> in
     policies = list(study.DEFAULT_POLICIES) if args.policies is None else [
         p.strip() for p in args.policies.split(",") if p.strip()]
     world.check_policies(policies)
-    study_path = args.study or _share(files.study)
+    study_path = args.study or files.path(files.study)
     require_file(study_path, "study file (--study)")
-    params = _share(files.params_file)
+    params = files.path(files.params_file) if files.params_file else None
     scenarios = world.load_scenarios(study_path)
+    # No hierarchy beside the domain: the hierarchical controller plans the flat hierarchy (as `pearl plan`).
     hierarchy = resolve_hierarchy_path(args.domain, args.hierarchy) if "hierarchical" in policies else None
-    if "hierarchical" in policies and hierarchy is None:
-        raise SpecError(args.domain, "", "no hierarchy beside the domain for the hierarchical policy (--hierarchy)")
     started = time.perf_counter()
     terminal = show_progress(args)
     log = (lambda t: print(t, file=sys.stderr, flush=True)) if terminal else None  # noqa: E731
@@ -155,19 +152,20 @@ def run_world_experiment(args: argparse.Namespace, world: WorldExperiment) -> in
         else:
             from tqdm import tqdm
 
-            episodes = [_one(i) for i in tqdm(items, desc=f"{world.name} study", disable=not terminal, leave=False)]
+            episodes = [_one(i) for i in tqdm(items, desc=f"{name} study", disable=not terminal, leave=False)]
     finally:
         _jobs.clear()
     episode_seconds = time.perf_counter() - t0
     summary = study.summarise(episodes)
-    out = Path(args.out) if args.out else Path("out") / f"{world.name}-study-{time.strftime('%Y%m%d-%H%M%S')}"
+    out = Path(args.out) if args.out else Path("out") / f"{name}-study-{time.strftime('%Y%m%d-%H%M%S')}"
     out.mkdir(parents=True, exist_ok=True)
     report = {
-        "world": world.name,
+        "world": name,
         "protocol": {"study": str(study_path), "episodes_per_cell": [s.name for s in scenarios], "noise_levels": noise,
                      "noise_axis": "word_error_rate", "seeds_per_cell": seeds, "policies": policies,
                      "baseline": study.BASELINE, "episodes": len(episodes), "jobs": args.jobs,
-                     "params_file": str(params), "hierarchy": str(hierarchy) if hierarchy else None},
+                     "params_file": str(params) if params else None,
+                     "hierarchy": str(hierarchy) if hierarchy else ("flat" if "hierarchical" in policies else None)},
         "plan_seconds": dict(agents.timings),
         **summary,
         "episode_seconds": round(episode_seconds, 1),
@@ -184,11 +182,14 @@ def run_world_experiment(args: argparse.Namespace, world: WorldExperiment) -> in
     return 0
 
 
-def episode_settings(scenario, params_file: Union[str, Path]):
-    """The belief tracker's step rules for ``scenario``: the params file's, then the scenario's step timeout
-    (``scenario.tracker_parameters()``)."""
+def episode_settings(scenario, params_file: Union[str, Path, None]):
+    """The belief tracker's step rules for ``scenario``: the params file's (``None``: the code's defaults,
+    as the nodes run without one), then the scenario's (``scenario.tracker_parameters()``)."""
     from pearl_pomdp.params import step_settings
+    from pearl_pomdp.tracking import StepSettings
 
+    if params_file is None:
+        return StepSettings.from_params(dict(scenario.tracker_parameters()))
     return step_settings(params_file, **scenario.tracker_parameters())
 
 
@@ -269,3 +270,166 @@ def paired_differences(episodes: Sequence[Any], scores: Sequence[str], policy: s
                 diffs[s].append(float(getattr(e, s)) - float(getattr(base, s)))
         out[f"{noise:g}"] = {s: t_ci(v) for s, v in diffs.items()}
     return out
+
+
+@dataclass
+class WorldEpisode:
+    """One episode of a :class:`StandardStudy`: the cell it ran in and its scores."""
+
+    policy: str
+    scenario: str
+    noise: float
+    seed: int
+    discounted_return: float
+    success: bool
+    wrong_actions: int
+    steps: int
+    seconds: float
+    #: The world's own scores (``StandardStudy.score``), by name.
+    scores: Dict[str, float]
+    actions: List[str]
+    wrong: List[str]
+
+    def __getattr__(self, name: str):
+        # The world's scores read like fields (per_policy_rows and paired_differences use getattr).
+        scores = self.__dict__.get("scores", {})
+        if name in scores:
+            return scores[name]
+        raise AttributeError(name)
+
+
+@dataclass(frozen=True)
+class StandardStudy:
+    """A world's study that the frame runs whole: a world that brings these needs no study module.
+
+    Every controller meets every cell; an episode runs through the one step loop
+    (:func:`run_scored_episode`), scored by its discounted return, ``success``, ``wrong_actions``
+    and the world's own scores; the summary, the paired differences against :attr:`baseline`, the
+    episodes' JSON and the table are the frame's. It answers what :class:`WorldExperiment` asks of
+    a ``study`` (``DEFAULT_POLICIES``, ``BASELINE``, ``summarise``, ``episodes_json``, ``format_table``)
+    and gives ``run_episode`` and ``build_agents``.
+
+    Attributes:
+        make_world: ``(scenario, seed, word_error_rate)`` -> a fresh world (``metrics.wrong_actions``,
+            ``metrics.wrong``, ``time``, ``seed``, ``word_error_rate``).
+        score: the world after its episode -> ``{"success": bool, name: number, …}``.
+        tree: the world's behaviour tree (a controller with ``name`` and ``decider``), given the
+            domain's actions.
+        policies: the compared controllers (POMDP ones planned by :func:`pearl_sim.planning.plan_controller`,
+            ``online`` / ``online:N`` by DESPOT, and ``behaviour_tree``).
+        baseline: the controller the others are paired against.
+    """
+
+    make_world: Callable[[Any, Optional[int], Optional[float]], Any]
+    score: Callable[[Any], Dict[str, Any]]
+    tree: Callable[[List[str]], Any]
+    policies: Tuple[str, ...] = ("hierarchical", "qmdp", "behaviour_tree")
+    baseline: str = "behaviour_tree"
+
+    @property
+    def DEFAULT_POLICIES(self) -> Tuple[str, ...]:  # noqa: N802 (the study-module attribute WorldExperiment reads)
+        return self.policies
+
+    @property
+    def BASELINE(self) -> str:  # noqa: N802
+        return self.baseline
+
+    def run_episode(self, scenario, agent, domain, params_file, seed: Optional[int] = None,
+                    word_error_rate: Optional[float] = None, model=None) -> WorldEpisode:
+        """Run ``agent`` in a fresh world of ``scenario`` through the one step loop, and score it."""
+        from pearl_pomdp.executive import Executive
+
+        model = model if model is not None else domain.compile()
+        world = self.make_world(scenario, seed, word_error_rate)
+        if hasattr(agent.decider, "reset"):
+            agent.decider.reset()
+        executive = Executive(model, agent.decider, domain=domain, settings=episode_settings(scenario, params_file))
+        trace, total = run_scored_episode(world, executive, domain, model)
+        scores = dict(self.score(world))
+        success = bool(scores.pop("success"))
+        return WorldEpisode(policy=agent.name, scenario=scenario.name, noise=float(world.word_error_rate),
+                            seed=world.seed, discounted_return=total, success=success,
+                            wrong_actions=world.metrics.wrong_actions, steps=len(trace.actions),
+                            seconds=float(world.time), scores=scores, actions=list(trace.actions),
+                            wrong=list(world.metrics.wrong))
+
+    def build_agents(self, domain, hierarchy, policies: List[str], args: argparse.Namespace, log):
+        """The controllers by name, planned once (``.timings``): the tree, ``online[:N]``, or a POMDP one."""
+        from pearl_pomdp.online.decider import OnlineDecider, online_settings, online_trials
+        from pearl_sim.planning import Controller, plan_controller, plan_each
+
+        model = domain.compile()
+
+        def build(name: str):
+            if name == self.baseline:
+                return self.tree(list(model.actions))
+            trials = online_trials(name, "--policies")
+            if trials is not None:
+                return Controller(name, OnlineDecider(model, settings=online_settings(trials, None, "--policies"),
+                                                      seed=args.seed))
+            return plan_controller(name, domain, model, hierarchy, seed=args.seed, flat_trials=args.flat_trials,
+                                   flat_time_limit=args.flat_time_limit)
+
+        return plan_each(policies, build, log)
+
+    def check_policies(self, policies: List[str]) -> None:
+        """Raises ``SpecError`` naming ``--policies`` for a controller this study cannot build."""
+        from pearl_pomdp.errors import SpecError
+        from pearl_pomdp.online.decider import online_trials
+        from pearl_sim.planning import POMDP_POLICIES
+
+        known = set(POMDP_POLICIES) | {self.baseline}
+        bad = [p for p in policies if p not in known and online_trials(p, "--policies") is None]
+        if bad or not policies:
+            raise SpecError("<command line>", "--policies", f"{bad[0] if bad else ''!r}: this world compares "
+                            f"{', '.join(sorted(known))} and online[:TRIALS]")
+
+    def _score_names(self, episodes: Sequence[WorldEpisode]) -> Tuple[str, ...]:
+        own = sorted({k for e in episodes for k in e.scores})
+        return ("discounted_return", "success", "wrong_actions", *own)
+
+    def summarise(self, episodes: Sequence[WorldEpisode]) -> dict:
+        """``per_policy`` (policy → noise → score → mean and 95 % t CI; success with a Wilson CI) and
+        ``paired_vs_baseline`` (policy → noise → score → policy − baseline over the same cells)."""
+        scores = self._score_names(episodes)
+        per_policy = per_policy_rows(episodes, scores, lambda es: {})
+        return {"per_policy": per_policy,
+                "paired_vs_baseline": {p: paired_differences(episodes, scores, p, self.baseline) for p in per_policy
+                                       if p != self.baseline and self.baseline in per_policy}}
+
+    @staticmethod
+    def episodes_json(episodes: Sequence[WorldEpisode]) -> List[dict]:
+        """JSON-ready rows, one per episode (the world's scores beside the frame's)."""
+        from dataclasses import asdict
+
+        return [{**{k: v for k, v in asdict(e).items() if k != "scores"}, **e.scores} for e in episodes]
+
+    def format_table(self, summary: dict) -> str:
+        """The study's table: return ± CI, its paired difference to the baseline, success, wrong actions."""
+        lines = [f"{'policy':<16} {'noise':>5} {'return':>14} {'Δreturn vs ' + self.baseline + ' [95% CI]':>34} "
+                 f"{'success':>18} {'wrong/ep':>9}"]
+        for policy, by_noise in summary["per_policy"].items():
+            for level, row in by_noise.items():
+                r, s = row["discounted_return"], row["success_rate"]
+                d = "-"
+                if policy in summary["paired_vs_baseline"]:
+                    p = summary["paired_vs_baseline"][policy][level]["discounted_return"]
+                    d = f"{p['mean']:+.2f} [{p['low']:+.2f}, {p['high']:+.2f}]"
+                lines.append(f"{policy:<16} {level:>5} {r['mean']:>7.2f} ± {r['ci95']:<5.2f} {d:>34} "
+                             f"{s['successes']:>3}/{s['n']:<3} [{s['low']:.2f},{s['high']:.2f}] "
+                             f"{row['wrong_actions']['mean']:>9.2f}")
+        return "\n".join(lines)
+
+    def experiment(self, load_scenarios: Callable[[Any], Sequence[Any]], default_noise: str = "0,0.2",
+                   default_seeds: int = 5, chunksize: int = 4) -> WorldExperiment:
+        """This study as the :class:`WorldExperiment` a :class:`~pearl_sim.worlds.SimWorld` names; the
+        nursing-home-only options (``--noise-kind``, ``--speech-rows``, ``--measured-policies``,
+        ``--cluster``) are refused."""
+        return WorldExperiment(
+            default_noise=default_noise, default_seeds=default_seeds,
+            refused=("--noise-kind", "--speech-rows", "--measured-policies", "--cluster"),
+            refused_reason="is for the nursing-home study; this world's study runs on this machine's processes "
+                           "(--jobs) with word error rates",
+            residents_reason="this world's people are in its study file (--study)",
+            study=self, load_scenarios=load_scenarios, run_episode=self.run_episode,
+            check_policies=self.check_policies, build_agents=self.build_agents, chunksize=chunksize)

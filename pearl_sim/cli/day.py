@@ -27,7 +27,7 @@ HELP = "run one working day (08:00-20:00) and print the nurse's checklist and a 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from pearl_sim.cli.demo import _share
+    from pearl_sim.worlds import share_path
 
     parser.add_argument("--seed", type=int, default=0, help="the day's seed: her routine, the appointment, every draw")
     parser.add_argument("--resident-seed", type=int, default=29,
@@ -36,9 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise", type=float, default=0.25, help="recogniser word error rate (default 0.25)")
     parser.add_argument("--policy", default="hierarchical",
                         help="hierarchical (default), flat_pointbased, qmdp or day_tree")
-    parser.add_argument("--domain", default=_share("config/pearl_day.domain.yaml"),
+    parser.add_argument("--domain", default=share_path("config/pearl_day.domain.yaml"),
                         help="the domain the POMDPs are planned on (default: Pearl's domain fitted on training days)")
-    parser.add_argument("--hierarchy", default=_share("config/pearl.hierarchy.yaml"),
+    parser.add_argument("--hierarchy", default=share_path("config/pearl.hierarchy.yaml"),
                         help="the action hierarchy of the hierarchical policy (default: Pearl's)")
     parser.add_argument("--nodes", action="store_true",
                         help="run through the ROS 2 nodes over DDS (hierarchical policy), recording a bag split by "

@@ -22,22 +22,16 @@ import sys
 import time
 from pathlib import Path
 
+from pearl_sim.worlds import share_path
+
 COMMAND = "demo"
 HELP = "run a scenario through the full graph (Pearl nodes + simulated hardware) and print the transcript"
-
-
-def _share(relative: str) -> str:
-    """A file from the source tree, or the installed share/pearl_pomdp."""
-    here = Path(__file__).resolve().parents[2] / relative
-    if here.exists():
-        return str(here)
-    return str(Path(sys.prefix) / "share" / "pearl_pomdp" / relative)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", default=None,
                         help="scenario file (default: the domain's world's, config/scenarios/figure4.yaml for Pearl)")
-    parser.add_argument("--domain", default=_share("config/pearl.domain.yaml"),
+    parser.add_argument("--domain", default=share_path("config/pearl.domain.yaml"),
                         help="factored domain; its name chooses the simulated world (pearl_sim/worlds.py: pearl, "
                              "reception)")
     parser.add_argument("--hierarchy", default=None, help="action hierarchy (default: NAME.hierarchy.yaml beside the domain)")
@@ -87,19 +81,33 @@ def _saved_policy(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pearl_pomdp.cli._inputs import require_dir, require_file
-    from pearl_pomdp.errors import PearlError
-    from pearl_sim.worlds import runner, world_for
+    from pearl_pomdp.cli._inputs import require_file
+    from pearl_pomdp.errors import SpecError
+    from pearl_sim.world_demo import WorldDemo, run_demo_cli
+    from pearl_sim.worlds import load_attribute, world_for
 
     # Check every input before planning or starting the graph (a typo fails at once).
     require_file(args.domain, "domain file (--domain)")
     world = world_for(args.domain)
-    if world.demo is not None:
-        return int(runner(world.demo)(args))
+    if world.demo is None:
+        raise SpecError(args.domain, "name", f"the {world.name} world has no `pearl demo`: run "
+                                             f"`pearl experiment --domain {args.domain}`")
+    target = load_attribute(world.demo)
+    if isinstance(target, WorldDemo):
+        return run_demo_cli(args, world, target)
+    return int(target(args))
+
+
+def run_nursing_home(args: argparse.Namespace) -> int:
+    """``pearl demo`` in the nursing home: Figure 4 through the graph (the world's own runner: the
+    resident, the live view and the belief plot are the nursing home's)."""
+    from pearl_pomdp.cli._inputs import require_dir, require_file
+    from pearl_pomdp.errors import PearlError
+    from pearl_sim.nursing_home import WORLD as world
     from pearl_sim.nursing_home.scenario import load_scenarios
 
-    args.scenario = args.scenario or _share(world.demo_scenario)
-    args.hierarchy = args.hierarchy or _share("config/pearl.hierarchy.yaml")
+    args.scenario = args.scenario or world.path(world.demo_scenario)
+    args.hierarchy = args.hierarchy or share_path("config/pearl.hierarchy.yaml")
     require_file(args.scenario, "scenario file (--scenario)")
     if args.policy:
         require_dir(args.policy, "policy directory (--policy, from `pearl plan`)")

@@ -32,13 +32,13 @@ HELP = "run the guidance study (policies × residents × speech noise) on the co
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from pearl_sim.cli.demo import _share
+    from pearl_sim.worlds import share_path
     from pearl_sim.policies import DEFAULT_FLAT_TRIALS, DEFAULT_POLICIES, POLICY_NAMES
 
     parser.add_argument("--study", default=None,
                         help="study file (default: the domain's world's, config/scenarios/study.yaml for the Pearl "
                              "domain: the paper's residents and the shared scenario fields)")
-    parser.add_argument("--domain", default=_share("config/pearl.domain.yaml"),
+    parser.add_argument("--domain", default=share_path("config/pearl.domain.yaml"),
                         help="factored domain the policies are planned for (default: the Pearl domain); its name "
                              "chooses the simulated world (pearl_sim/worlds.py: pearl, reception)")
     parser.add_argument("--hierarchy", default=None,
@@ -56,13 +56,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--snr", default=None, metavar="DB,…",
                         help="noise axis in SNR (dB) through the measured recogniser channel (--channel) instead "
                              "of word error rates, e.g. 30,20,10,5")
-    parser.add_argument("--channel", default=_share("config/speech/pearl_channel.json"),
+    parser.add_argument("--channel", default=share_path("config/speech/pearl_channel.json"),
                         help="calibrated speech channel for --snr (`pearl calibrate-speech --out`); white noise "
                              "with --noise-kind")
     parser.add_argument("--noise-kind", default=None, metavar="KIND,…",
                         help="with --snr: the noise axis is (kind, SNR), kinds of white,babble, each heard through "
                              "its own measured channel (--channel, --babble-channel)")
-    parser.add_argument("--babble-channel", default=_share("config/speech/pearl_channel_babble.json"),
+    parser.add_argument("--babble-channel", default=share_path("config/speech/pearl_channel_babble.json"),
                         help="calibrated speech channel of babble noise (`pearl calibrate-speech --noise babble`)")
     parser.add_argument("--speech-rows", default=None, metavar="FITTED.yaml",
                         help="also run each POMDP policy planned with this domain's observation rows (e.g. from "
@@ -180,18 +180,20 @@ def _validate(args):
 
 def _pearl_defaults(args: argparse.Namespace) -> None:
     """The nursing-home study's defaults for what the command line left out."""
-    from pearl_sim.cli.demo import _share
+    from pearl_sim.worlds import share_path
     from pearl_sim.policies import DEFAULT_POLICIES
 
-    args.study = args.study or _share("config/scenarios/study.yaml")
-    args.hierarchy = args.hierarchy or _share("config/pearl.hierarchy.yaml")
+    args.study = args.study or share_path("config/scenarios/study.yaml")
+    args.hierarchy = args.hierarchy or share_path("config/pearl.hierarchy.yaml")
     args.episodes = 2 if args.episodes is None else args.episodes
     args.noise = "0,0.2,0.4,0.6" if args.noise is None else args.noise
     args.policies = ",".join(DEFAULT_POLICIES) if args.policies is None else args.policies
 
 
 def run(args: argparse.Namespace) -> int:
-    from pearl_sim.worlds import runner, world_for
+    from pearl_pomdp.errors import SpecError
+    from pearl_sim.world_study import WorldExperiment, run_world_experiment
+    from pearl_sim.worlds import load_attribute, world_for
 
     if args.day:
         from pearl_sim.nursing_home.day_study import run_cli as run_day_study
@@ -200,8 +202,16 @@ def run(args: argparse.Namespace) -> int:
     require_file(args.domain, "domain file (--domain)")
     world = world_for(args.domain)
     args.seed = 0 if args.seed is None else args.seed
-    if world.experiment is not None:
-        return int(runner(world.experiment)(args))
+    if world.experiment is None:
+        raise SpecError(args.domain, "name", f"the {world.name} world has no `pearl experiment`")
+    target = load_attribute(world.experiment)
+    if isinstance(target, WorldExperiment):
+        return run_world_experiment(args, world, target)
+    return int(target(args))
+
+
+def run_nursing_home(args: argparse.Namespace) -> int:
+    """``pearl experiment`` in the nursing home (the world's own runner: residents, SNR axes, the cluster)."""
     _pearl_defaults(args)
     return _run_pearl(args)
 

@@ -294,13 +294,13 @@ def run_cli(args) -> int:
     from pearl_pomdp.cli._progress import show_progress
     from pearl_pomdp.errors import SpecError
     from pearl_pomdp.model.factored import load_domain
-    from pearl_sim.cli.demo import _share
+    from pearl_sim.worlds import share_path
     from pearl_sim.nursing_home.residents import parse_population
 
     started = time.perf_counter()
-    if args.domain == _share("config/pearl.domain.yaml"):
-        args.domain = _share("config/pearl_day.domain.yaml")
-    hierarchy = args.hierarchy or _share("config/pearl.hierarchy.yaml")
+    if args.domain == share_path("config/pearl.domain.yaml"):
+        args.domain = share_path("config/pearl_day.domain.yaml")
+    hierarchy = args.hierarchy or share_path("config/pearl.hierarchy.yaml")
     days = 4 if args.days is None else int(args.days)
     if days < 1:
         raise SpecError("<command line>", "--days", f"{days}: at least 1 day per resident")

@@ -12,7 +12,11 @@ from __future__ import annotations
 import argparse
 from typing import List
 
-__all__ = ["run_cli", "DEFAULT_NOISE", "DEFAULT_SEEDS"]
+from pearl_sim.reception import study
+from pearl_sim.reception.scenario import load_reception_scenarios
+from pearl_sim.world_study import WorldExperiment
+
+__all__ = ["EXPERIMENT", "DEFAULT_NOISE", "DEFAULT_SEEDS"]
 
 #: The protocol's noise levels (recogniser word error rates) and seeds per episode and level.
 DEFAULT_NOISE = "0,0.2,0.4"
@@ -21,8 +25,6 @@ DEFAULT_SEEDS = 20
 
 def _check_policies(policies: List[str]) -> None:
     from pearl_pomdp.errors import SpecError
-    from pearl_sim.reception import study
-
     known = set(study.DEFAULT_POLICIES) | {"most_likely_state"}
     bad = [p for p in policies if p not in known]
     if bad or not policies:
@@ -31,23 +33,16 @@ def _check_policies(policies: List[str]) -> None:
 
 
 def _agents(domain, hierarchy, policies: List[str], args: argparse.Namespace, log):
-    from pearl_sim.reception import study
-
     return study.reception_agents(domain, hierarchy, policies=policies, seed=args.seed, flat_trials=args.flat_trials,
                                   flat_time_limit=args.flat_time_limit, log=log)
 
 
-def run_cli(args: argparse.Namespace) -> int:
-    """Run the reception study from ``pearl experiment``'s arguments (the Pearl-only ones refused)."""
-    from pearl_sim.reception import study
-    from pearl_sim.reception.scenario import load_reception_scenarios
-    from pearl_sim.world_study import WorldExperiment, run_world_experiment
-
-    return run_world_experiment(args, WorldExperiment(
-        name="reception", default_noise=DEFAULT_NOISE, default_seeds=DEFAULT_SEEDS,
-        refused=("--noise-kind", "--speech-rows", "--measured-policies", "--cluster"),
-        refused_reason="is for the nursing-home study; the reception study runs on this machine's processes "
-                       "(--jobs) with word error rates",
-        residents_reason="the reception world's visitors are in its study file (--study)",
-        study=study, load_scenarios=load_reception_scenarios, run_episode=study.run_reception_episode,
-        check_policies=_check_policies, build_agents=_agents, chunksize=8))
+#: What the reception brings to the frame's study runner (:func:`pearl_sim.world_study.run_world_experiment`).
+EXPERIMENT = WorldExperiment(
+    default_noise=DEFAULT_NOISE, default_seeds=DEFAULT_SEEDS,
+    refused=("--noise-kind", "--speech-rows", "--measured-policies", "--cluster"),
+    refused_reason="is for the nursing-home study; the reception study runs on this machine's processes "
+                   "(--jobs) with word error rates",
+    residents_reason="the reception world's visitors are in its study file (--study)",
+    study=study, load_scenarios=load_reception_scenarios, run_episode=study.run_reception_episode,
+    check_policies=_check_policies, build_agents=_agents, chunksize=8)

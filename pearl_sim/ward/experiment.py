@@ -12,7 +12,11 @@ from __future__ import annotations
 import argparse
 from typing import List
 
-__all__ = ["run_cli", "run_demo_cli", "DEFAULT_NOISE", "DEFAULT_SEEDS"]
+from pearl_sim.ward import study
+from pearl_sim.ward.scenario import load_ward_scenarios
+from pearl_sim.world_study import WorldExperiment
+
+__all__ = ["EXPERIMENT", "DEFAULT_NOISE", "DEFAULT_SEEDS"]
 
 #: The protocol's noise levels (recogniser word error rates) and seeds per episode and level.
 DEFAULT_NOISE = "0.1,0.3"
@@ -33,36 +37,17 @@ def _check_policies(policies: List[str]) -> None:
 
 
 def _agents(domain, hierarchy, policies: List[str], args: argparse.Namespace, log):
-    from pearl_sim.ward import study
-
     return study.ward_agents(domain, hierarchy, policies=policies, seed=args.seed, log=log)
 
 
-def run_cli(args: argparse.Namespace) -> int:
-    """Run the ward study from ``pearl experiment``'s arguments (the nursing-home-only ones refused)."""
-    from pearl_sim.ward import study
-    from pearl_sim.ward.scenario import load_ward_scenarios
-    from pearl_sim.world_study import WorldExperiment, run_world_experiment
+#: What the ward brings to the frame's study runner (:func:`pearl_sim.world_study.run_world_experiment`).
+EXPERIMENT = WorldExperiment(
+    default_noise=DEFAULT_NOISE, default_seeds=DEFAULT_SEEDS,
+    refused=("--noise-kind", "--speech-rows", "--measured-policies", "--cluster", "--flat-trials",
+             "--flat-time-limit"),
+    refused_reason="is not for the ward study (docs/ward.md: the flat solve does not close at this size; "
+                   "online and the hierarchy are compared)",
+    residents_reason="the ward's residents are in its study file (--study)",
+    study=study, load_scenarios=load_ward_scenarios, run_episode=study.run_ward_episode,
+    check_policies=_check_policies, build_agents=_agents, chunksize=4)
 
-    return run_world_experiment(args, WorldExperiment(
-        name="ward", default_noise=DEFAULT_NOISE, default_seeds=DEFAULT_SEEDS,
-        refused=("--noise-kind", "--speech-rows", "--measured-policies", "--cluster", "--flat-trials",
-                 "--flat-time-limit"),
-        refused_reason="is not for the ward study (docs/ward.md: the flat solve does not close at this size; "
-                       "online and the hierarchy are compared)",
-        residents_reason="the ward's residents are in its study file (--study)",
-        study=study, load_scenarios=load_ward_scenarios, run_episode=study.run_ward_episode,
-        check_policies=_check_policies, build_agents=_agents, chunksize=4))
-
-
-def run_demo_cli(args: argparse.Namespace) -> int:
-    """``pearl demo --domain config/ward.domain.yaml``: not built for the ward (a one-line error).
-
-    Raises:
-        SpecError: always; names the domain and what to run instead.
-    """
-    from pearl_pomdp.errors import SpecError
-
-    raise SpecError(args.domain, "name", "'ward' has no `pearl demo` (docs/ward.md): run the study with "
-                                         "`pearl experiment --domain config/ward.domain.yaml` or the nodes with "
-                                         "`pearl launch ... params_file:=config/ward_nodes.yaml policy:=online:5`")

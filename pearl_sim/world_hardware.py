@@ -1,10 +1,13 @@
-"""The reception robot's simulated hardware over DDS: one publisher per input the domain declares.
+"""A world's simulated robot hardware over DDS: one publisher per input the domain declares.
 
 Nothing here names a topic or a message type: every input of the domain (``modalities.<M>.input``)
 gets a publisher on its topic with its type, and a world message of modality ``M`` goes out on it —
 text as ``std_msgs/String``, a number channel's reading in the field the tracker reads
-(``BatteryState.percentage`` …). What a visitor actually said and the true state go to
-``/reception/sim/said`` and ``/reception/sim/truth`` (JSON) for the bag and transcripts.
+(``BatteryState.percentage`` …). What a person actually said and the true state go to
+``/WORLD/sim/said`` and ``/WORLD/sim/truth`` (JSON; ``WORLD`` the world's name, e.g.
+``/reception/sim/truth``) for the bag and transcripts. Every world of the frame's ``pearl demo``
+(:mod:`pearl_sim.world_demo`) uses it; the nursing home has its own (:mod:`pearl_sim.nodes`: a
+resident, a scheduler and a navigation stack with their own topics).
 """
 from __future__ import annotations
 
@@ -16,11 +19,19 @@ from std_msgs.msg import String
 
 from pearl_sim.messages import Message, StepResult
 
-__all__ = ["ReceptionHardware", "SAID_TOPIC", "TRUTH_TOPIC"]
+__all__ = ["WorldHardware", "said_topic", "truth_topic"]
 
-SAID_TOPIC = "/reception/sim/said"
-TRUTH_TOPIC = "/reception/sim/truth"
 RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+
+def said_topic(world_name: str) -> str:
+    """Where what a person actually said goes (JSON-free text)."""
+    return f"/{world_name}/sim/said"
+
+
+def truth_topic(world_name: str) -> str:
+    """Where the world's true state goes (JSON, :meth:`StudyWorld.truth_record`)."""
+    return f"/{world_name}/sim/truth"
 
 
 def _set(msg: Any, path: str, value: float) -> None:
@@ -30,22 +41,26 @@ def _set(msg: Any, path: str, value: float) -> None:
     setattr(msg, last, value)
 
 
-class ReceptionHardware:
-    """The sensors of the reception robot as one rclpy node (``sim_reception``) on ``context``.
+class WorldHardware:
+    """The sensors of a world's robot as one rclpy node (``sim_NAME``) on ``context``.
 
     Args:
         context: an initialised rclpy context (the graph's).
-        world: the :class:`~pearl_sim.reception.world.ReceptionWorld` whose messages go out.
+        world: the simulated world (a :class:`~pearl_sim.world_base.StudyWorld`) whose messages go out.
         domain: the FactoredDomain whose inputs (topics, types) the publishers follow.
+        name: the world's name (the node's and the said/truth topics').
+
+    Raises:
+        PearlError: a world message of a modality the domain declares no input for (names both).
     """
 
-    def __init__(self, context, world, domain):
+    def __init__(self, context, world, domain, name: str):
         import rclpy
 
         from pearl_pomdp.nodes.channel_messages import reader_for
 
         self.world = world
-        self.node = rclpy.create_node("sim_reception", context=context)
+        self.node = rclpy.create_node(f"sim_{name}", context=context)
         self.nodes = [self.node]
         self.publishers: Dict[str, Any] = {}
         self._readers: Dict[str, Any] = {}
@@ -53,14 +68,20 @@ class ReceptionHardware:
             reader = reader_for(channel, domain.source)
             self._readers[channel.modality] = reader
             self.publishers[channel.modality] = self.node.create_publisher(reader.msg_type, channel.topic, RELIABLE)
-        self.said = self.node.create_publisher(String, SAID_TOPIC, RELIABLE)
-        self.truth = self.node.create_publisher(String, TRUTH_TOPIC, RELIABLE)
+        self.said = self.node.create_publisher(String, said_topic(name), RELIABLE)
+        self.truth = self.node.create_publisher(String, truth_topic(name), RELIABLE)
+        self._domain_file = domain.source
 
     def outgoing(self, message: Message) -> Tuple[Any, Any]:
         """``(publisher, ROS message)`` carrying ``message`` on its modality's input."""
         from pearl_pomdp.nodes.conversions import input_to_msg
 
-        reader = self._readers[message.modality]
+        from pearl_pomdp.errors import PearlError
+
+        reader = self._readers.get(message.modality)
+        if reader is None:
+            raise PearlError(f"{self._domain_file}: the world sent a {message.modality!r} message and the domain "
+                             f"declares no input for it (inputs: {', '.join(sorted(self._readers)) or 'none'})")
         if reader.channel.kind == "number":
             msg = reader.msg_type()
             _set(msg, reader.field, float(message.text))
@@ -69,7 +90,7 @@ class ReceptionHardware:
         return self.publishers[message.modality], msg
 
     def publish_said(self, said: str) -> None:
-        """What the visitor actually said (for transcripts)."""
+        """What the person actually said (for transcripts)."""
         self.said.publish(String(data=said))
 
     def publish_truth(self, t: float, phase: str, action: str = "", result: Optional[StepResult] = None) -> None:
