@@ -109,7 +109,7 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
 
 
 # ----------------------------------------------------------------- statistics
-from pearl_sim.stats import mean_ci, proportion_ci  # noqa: E402,F401  (re-exported: one source)
+from pearl_sim.stats import proportion_ci, t_ci  # noqa: E402,F401  (re-exported: one source)
 
 
 def with_word_error_rate(scenario: Scenario, wer: float) -> Scenario:

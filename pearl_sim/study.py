@@ -19,7 +19,7 @@ import multiprocessing
 from dataclasses import dataclass, replace
 from typing import Dict, List, Optional, Sequence
 
-from pearl_sim.experiment import EpisodeResult, mean_ci, proportion_ci, run_episode
+from pearl_sim.experiment import EpisodeResult, proportion_ci, run_episode, t_ci
 from pearl_sim.nursing_home.residents import StudyCase, effective_word_error_rate
 
 __all__ = ["Cell", "StudyEpisode", "cells", "run_cells", "per_policy", "paired", "acceptance", "write_csv",
@@ -197,13 +197,13 @@ def per_policy(episodes: Sequence[StudyEpisode]) -> Dict[str, Dict[str, dict]]:
                 # Of the episodes where she wanted the walk (she may decline the reminder's offer).
                 "wanted_guidance_success": proportion_ci(sum(r.guidance_completed for r in rs if r.guidance_wanted),
                                                          sum(r.guidance_wanted for r in rs)),
-                "time_to_goal_s": mean_ci([r.time_to_goal for r in rs if r.time_to_goal is not None]),
+                "time_to_goal_s": t_ci([r.time_to_goal for r in rs if r.time_to_goal is not None]),
                 "clarifications_per_goal": (sum(r.clarifications for r in rs) / goals) if goals else None,
-                "clarifications_per_episode": mean_ci([r.clarifications for r in rs]),
-                "unprompted_questions_per_episode": mean_ci([r.unprompted_questions for r in rs]),
-                "wrong_actions_per_episode": mean_ci([r.wrong_actions for r in rs]),
+                "clarifications_per_episode": t_ci([r.clarifications for r in rs]),
+                "unprompted_questions_per_episode": t_ci([r.unprompted_questions for r in rs]),
+                "wrong_actions_per_episode": t_ci([r.wrong_actions for r in rs]),
                 "residents_lost": int(sum(r.residents_lost for r in rs)),
-                "discounted_return": mean_ci([r.discounted_return for r in rs]),
+                "discounted_return": t_ci([r.discounted_return for r in rs]),
             }
     return out
 

@@ -6,7 +6,7 @@ import pytest
 from pearl_pomdp.model.factored import load_domain
 from pearl_pomdp.speech import KeywordFilter
 from pearl_sim.agents import ScriptedAgent
-from pearl_sim.experiment import mean_ci, proportion_ci, run_episode, with_word_error_rate
+from pearl_sim.experiment import proportion_ci, run_episode, t_ci, with_word_error_rate
 from pearl_sim.nursing_home.scenario import load_scenarios, parse_scenarios
 from pearl_sim.nursing_home.world import Message
 
@@ -21,10 +21,14 @@ def test_wilson_interval_matches_hand_computation():
     assert proportion_ci(0, 0)["rate"] is None
 
 
-def test_mean_ci_matches_hand_computation():
-    # values 1..5: mean 3, sd 1.5811, half-width 1.96 * 1.5811 / sqrt(5) = 1.3859
-    out = mean_ci([1, 2, 3, 4, 5])
-    assert out["mean"] == 3 and out["ci95"] == pytest.approx(1.3859, abs=1e-4)
+def test_t_interval_matches_hand_computation():
+    # values 1..5: mean 3, sd 1.5811, t(0.975, 4 df) = 2.7764, half-width 2.7764 * 1.5811 / sqrt(5) = 1.9632
+    out = t_ci([1, 2, 3, 4, 5])
+    assert out["mean"] == 3 and out["ci95"] == pytest.approx(1.9632, abs=1e-4)
+    assert out["low"] == pytest.approx(3 - 1.9632, abs=1e-4) and out["high"] == pytest.approx(3 + 1.9632, abs=1e-4)
+    # One value, or values all equal: the mean exactly (scipy's own interval is NaN there); none: no mean.
+    assert t_ci([4.0])["ci95"] == 0 and t_ci([2, 2, 2])["low"] == t_ci([2, 2, 2])["high"] == 2
+    assert t_ci([None])["mean"] is None and t_ci([1, None, 3])["n"] == 2
 
 
 def test_message_symbols_follow_the_tracker_rules():
