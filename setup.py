@@ -122,9 +122,9 @@ setup(
         "console_scripts": ["pearl = pearl_pomdp.cli:main"]
         + [f"{name} = {target}" for name, target in NODES.items()]
         # The behaviour-tree baseline, in place of hierarchical_policy (the core never imports pearl_sim).
-        + ["pearl_bt = pearl_sim.bt_node:main"]
+        + ["pearl_bt = pearl_sim.nursing_home.bt_node:main"]
         # The simulated nursing home as one node (launch/pearl_sim.launch.xml).
-        + ["pearl_sim_world = pearl_sim.world_node:main"],
+        + ["pearl_sim_world = pearl_sim.nursing_home.world_node:main"],
         # Subcommands other packages add to `pearl` (the core never imports the simulator).
         "pearl.commands": ["demo = pearl_sim.cli.demo", "experiment = pearl_sim.cli.experiment", "day = pearl_sim.cli.day",
                            "calibrate-speech = pearl_sim.cli.calibrate_speech"],

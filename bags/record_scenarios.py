@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Regenerate the recorded scenarios in bags/ from the simulated world through the Pearl nodes.
 
-For each scenario this script runs ``pearl demo`` (pearl_sim/demo.py): the belief tracker,
+For each scenario this script runs ``pearl demo`` (pearl_sim/nursing_home/demo.py): the belief tracker,
 hierarchical policy and action executor as real rclpy nodes over DDS with the simulated
 hardware nodes, in one process under sim time, the world of ``pearl_sim`` answering every
 action. The demo's bag carries every input, action, decision and belief, and the world's
@@ -86,7 +86,7 @@ def rewrite_bag(src: Path, dst: Path, name: str) -> None:
 
 def record(name: str, scenario: str, domain_id: Optional[int]) -> List[str]:
     """Run the demo of ``scenario`` with bags/pearl's policy; write bags/<name>; return its actions."""
-    from pearl_sim.demo import run_demo
+    from pearl_sim.nursing_home.demo import run_demo
 
     with tempfile.TemporaryDirectory(prefix=f"pearl_{name}_") as tmp:
         result = run_demo(REPO / scenario, Path(tmp) / "out", domain_path=PEARL / "domain.yaml",

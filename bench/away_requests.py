@@ -42,7 +42,7 @@ def mean_ci(xs):
 
 def main() -> int:
     from pearl_pomdp.model.factored import load_domain
-    from pearl_sim.experiment import build_agents, run_episode
+    from pearl_sim.nursing_home.experiment import build_agents, run_episode
     from pearl_sim.nursing_home.scenario import load_scenarios
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

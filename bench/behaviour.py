@@ -1,7 +1,7 @@
 """Behaviour habits of a planned Pearl policy in the simulated world (issue 11), one JSON object.
 
 Per scenario file and seed, runs the hierarchical policy through the study's step loop
-(:func:`pearl_sim.experiment.run_episode`) and counts the habits a nurse would object to:
+(:func:`pearl_sim.nursing_home.experiment.run_episode`) and counts the habits a nurse would object to:
 unprompted questions (offers/confirmations about a goal the resident does not have),
 ConfirmGuideToPhysio offers when no guidance is wanted, RingDoorBell away from the
 resident, whether the robot ends the episode at home, wrong actions, guidance success.
@@ -23,8 +23,8 @@ sys.path.insert(0, str(REPO))
 def main() -> int:
     from pearl_pomdp.hierarchy import load_hierarchical_policy, load_hierarchy, plan
     from pearl_pomdp.model.factored import load_domain
-    from pearl_sim.agents import Controller
-    from pearl_sim.experiment import run_episode
+    from pearl_sim.nursing_home.agents import Controller
+    from pearl_sim.nursing_home.experiment import run_episode
     from pearl_sim.nursing_home.scenario import load_scenarios
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

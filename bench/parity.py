@@ -38,8 +38,12 @@ except ImportError:  # a tree from before the policies package
 from pearl_pomdp.hierarchy import load_hierarchical_policy
 from pearl_pomdp.model.factored import load_domain
 from pearl_pomdp.solvers.registry import solve
-from pearl_sim.agents import Controller
-from pearl_sim.experiment import episode_executive
+try:
+    from pearl_sim.nursing_home.agents import Controller
+    from pearl_sim.nursing_home.experiment import episode_executive
+except ImportError:  # a tree from before the nursing home's study moved into its package
+    from pearl_sim.agents import Controller
+    from pearl_sim.experiment import episode_executive
 from pearl_sim.loop import ExecutiveBackend, run_episode
 try:
     from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree

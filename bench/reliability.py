@@ -59,7 +59,7 @@ def flood(rate: float, seconds: float) -> dict:
 
 
 def sigkill(trials: int, seed: int = 0) -> dict:
-    from test_data_safety import sigkill_trial
+    from test_crash_safe_writes import sigkill_trial
 
     rng = np.random.default_rng(seed)
     readable, reported, read, failures = 0, 0, 0, []

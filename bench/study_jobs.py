@@ -29,8 +29,8 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, default=1)
     args = parser.parse_args()
     logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
-    from pearl_sim import study
-    from pearl_sim.experiment import build_agents
+    from pearl_sim.nursing_home import study
+    from pearl_sim.nursing_home.experiment import build_agents
     from pearl_sim.nursing_home.residents import paper_residents, resident_scenarios, study_template
     from pearl_sim.nursing_home.scenario import default_domain
 

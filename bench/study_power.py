@@ -5,7 +5,7 @@ the standard deviation ``s`` of the per-cell quantity a claim tests:
 
 * ``paired``: the paired difference (policy − tree) of the return / wrong actions at a level;
 * ``growth``: the difference of those differences between two levels
-  (:func:`pearl_sim.study.growth`, e.g. ``white:10`` against ``white:30``).
+  (:func:`pearl_sim.nursing_home.study.growth`, e.g. ``white:10`` against ``white:30``).
 
 A two-sided test at α = 0.05 with power 1 − β = 0.8 needs ``n = ((z_.975 + z_.8) · s / δ)²``
 matched cells to detect a true mean ``δ``; with ``cases`` resident-task cases per seed that is
@@ -32,8 +32,8 @@ sys.path.insert(0, str(REPO))
 def main(argv=None) -> int:
     from scipy import stats
 
-    from pearl_sim.experiment import EpisodeResult
-    from pearl_sim.study import BASELINE, StudyEpisode, growth, paired
+    from pearl_sim.nursing_home.experiment import EpisodeResult
+    from pearl_sim.nursing_home.study import BASELINE, StudyEpisode, growth, paired
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("study", help="a pilot's study.json (pearl experiment --out)")

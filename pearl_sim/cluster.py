@@ -59,7 +59,7 @@ def _run_batch(payload: dict, batch: Sequence[Any]) -> list:
     """On a worker: the episodes of ``batch`` in order (one at a time per process)."""
     import logging
 
-    from pearl_sim.study import run_job
+    from pearl_sim.nursing_home.study import run_job
 
     # As in the parent: the tracker's per-step recovery messages would flood the worker's log.
     logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
@@ -73,7 +73,7 @@ def run_on_cluster(address: str, payload: dict, work: Sequence[Any], progress: b
 
     Args:
         address: the scheduler, e.g. ``tcp://10.0.0.5:8786``.
-        payload: what every episode needs (:func:`pearl_sim.study.run_job`'s ``work``).
+        payload: what every episode needs (:func:`pearl_sim.nursing_home.study.run_job`'s ``work``).
         work: the jobs.
         progress: a bar on stderr as batches finish.
         timeout: seconds to wait for the scheduler (default :data:`DEFAULT_TIMEOUT`).

@@ -2,7 +2,7 @@
 
 :func:`plan_controller` plans one of the POMDP controllers by name — the hierarchy, a flat
 point-based solve, QMDP, the most-likely-state policy — as a :class:`Controller`;
-:func:`pearl_sim.experiment.build_agents` (the nursing home) and
+:func:`pearl_sim.nursing_home.experiment.build_agents` (the nursing home) and
 :func:`pearl_sim.reception.study.reception_agents` (the reception hall) add their own behaviour trees.
 """
 from __future__ import annotations

@@ -10,7 +10,7 @@ The pieces of their study modules that are the same are here too: the tracker's 
 scenario (:func:`episode_settings`), one episode through the one step loop scored by its discounted
 return (:func:`run_scored_episode`), the per-policy rows (:func:`per_policy_rows`) and the paired
 differences over the same cells (:func:`paired_differences`).
-The nursing-home study (``pearl_sim/experiment.py``) has its own runner: residents, SNR axes and a
+The nursing-home study (``pearl_sim/nursing_home/experiment.py``) has its own runner: residents, SNR axes and a
 cluster this one does not have.
 """
 from __future__ import annotations

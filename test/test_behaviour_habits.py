@@ -24,8 +24,8 @@ import pytest
 
 from pearl_pomdp.hierarchy import load_hierarchical_policy
 from pearl_pomdp.model.factored import load_domain
-from pearl_sim.agents import Controller
-from pearl_sim.experiment import run_episode
+from pearl_sim.nursing_home.agents import Controller
+from pearl_sim.nursing_home.experiment import run_episode
 from pearl_sim.nursing_home.scenario import load_scenarios
 
 REPO = Path(__file__).resolve().parents[1]

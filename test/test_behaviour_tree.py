@@ -132,7 +132,7 @@ def test_tick_timeout_counts_ticks():
 
 
 def test_figure4_completes_at_zero_noise():
-    from pearl_sim.experiment import run_episode, with_word_error_rate
+    from pearl_sim.nursing_home.experiment import run_episode, with_word_error_rate
     from pearl_sim.nursing_home.scenario import default_domain, load_scenarios
     from pearl_pomdp.launch_xml import package_share_dir
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 #: The ROS layer: only these may import rclpy or ROS message packages.
-ROS_LAYER = ("pearl_pomdp/nodes/", "pearl_sim/nodes.py", "pearl_sim/bt_node.py", "pearl_sim/world_hardware.py")
+ROS_LAYER = ("pearl_pomdp/nodes/", "pearl_sim/nodes.py", "pearl_sim/nursing_home/bt_node.py", "pearl_sim/world_hardware.py")
 ROS_PACKAGES = ("rclpy", "rcl_interfaces", "std_msgs", "rosgraph_msgs", "geometry_msgs", "builtin_interfaces",
                 "diagnostic_msgs", "nav_msgs", "lifecycle_msgs", "std_srvs", "sensor_msgs", "pearl_interfaces")
 

@@ -6,9 +6,9 @@ import time
 
 import pytest
 
-from pearl_sim import study
+from pearl_sim.nursing_home import study
 from pearl_sim.cluster import ClusterError, run_on_cluster
-from pearl_sim.experiment import build_agents
+from pearl_sim.nursing_home.experiment import build_agents
 from pearl_sim.nursing_home.residents import paper_residents, resident_scenarios, study_template
 from pearl_sim.nursing_home.scenario import default_domain
 

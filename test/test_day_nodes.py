@@ -73,7 +73,7 @@ def test_the_demo_ends_when_pearl_has_left_for_its_station(tmp_path, day_policy)
     """Figure 4(f), "Pearl leaves": with a policy that goes home after its work (the day domain's), the
     episode ends once the robot is back at its station with nothing wanted, before the scenario's
     max_steps; the outcome line says so."""
-    from pearl_sim.demo import run_demo
+    from pearl_sim.nursing_home.demo import run_demo
 
     configure_test_process(tmp_path)
     # Figure 4 with twice its step budget: the episode must end by Pearl leaving, not by the budget.

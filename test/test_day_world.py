@@ -217,7 +217,7 @@ def test_day_score_weights_are_the_protocols():
 
 
 def _run_tree_day(seed, day_rules):
-    from pearl_sim.experiment import episode_executive
+    from pearl_sim.nursing_home.experiment import episode_executive
     from pearl_sim.loop import ExecutiveBackend, run_episode
     from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree
     from pearl_sim.nursing_home.scenario import default_domain

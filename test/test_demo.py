@@ -12,7 +12,7 @@ pytestmark = pytest.mark.ros
 
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory, pearl_policy):
-    from pearl_sim.demo import run_demo
+    from pearl_sim.nursing_home.demo import run_demo
 
     tmp = tmp_path_factory.mktemp("demo")
     configure_test_process(tmp)
@@ -94,7 +94,7 @@ def test_demo_bag_replays_to_the_same_actions(demo):
 def test_plotted_features_follow_the_scenario():
     """The belief plot draws what the scenario involves (issue 16): table4's checklist reminder and
     both questions, no walk; figure4's physio reminder, the walk and arrival, the weather."""
-    from pearl_sim.demo import plotted_features
+    from pearl_sim.nursing_home.demo import plotted_features
     from pearl_sim.nursing_home.scenario import load_scenarios
 
     (table4,) = load_scenarios(REPO / "config/scenarios/table4_dialog.yaml")
@@ -108,7 +108,7 @@ def test_plotted_features_follow_the_scenario():
 
 
 def test_outcome_scores_only_what_the_scenario_asked_for():
-    from pearl_sim.demo import DemoResult
+    from pearl_sim.nursing_home.demo import DemoResult
 
     metrics = {"guidances_completed": 0, "guidances_started": 0, "time_to_goal": [], "reminders_delivered": 1,
                "reminders_due": 1, "questions_answered": 1, "questions_raised": 2, "clarifications": 3,

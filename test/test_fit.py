@@ -152,9 +152,9 @@ def test_cli_fit_writes_a_loadable_domain(tmp_path, capsys):
 
 
 def test_world_episodes_round_trip_into_the_fit(tmp_path):
-    """pearl_sim.episodes records the study loop's steps with the world's truth; the fit reads them."""
-    from pearl_sim.agents import ScriptedAgent
-    from pearl_sim.episodes import record_episodes
+    """pearl_sim.nursing_home.episodes records the study loop's steps with the world's truth; the fit reads them."""
+    from pearl_sim.nursing_home.agents import ScriptedAgent
+    from pearl_sim.nursing_home.episodes import record_episodes
     from pearl_sim.nursing_home.scenario import load_scenarios
 
     designer = load_domain(PEARL)

@@ -222,8 +222,8 @@ def test_a_blocked_drive_reports_nothing_and_the_scheduler_waits():
 
 
 def run_fast(scenario, seed, decider, pearl):
-    from pearl_sim.agents import Controller
-    from pearl_sim.experiment import episode_executive
+    from pearl_sim.nursing_home.agents import Controller
+    from pearl_sim.nursing_home.experiment import episode_executive
     from pearl_sim.loop import ExecutiveBackend, run_episode
 
     domain, model = pearl

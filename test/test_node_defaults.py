@@ -35,8 +35,8 @@ def _node_classes():
     from pearl_pomdp.nodes.speech_recognizer import SpeechRecognizerNode
     from pearl_pomdp.nodes.speech_synthesizer import SpeechSynthesizerNode
     from pearl_pomdp.nodes.supervisor import LifecycleSupervisorNode
-    from pearl_sim.bt_node import BehaviourTreeNode
-    from pearl_sim.world_node import _make_node_class
+    from pearl_sim.nursing_home.bt_node import BehaviourTreeNode
+    from pearl_sim.nursing_home.world_node import _make_node_class
 
     return {"belief_tracker": BeliefTrackerNode, "hierarchical_policy": HierarchicalPolicyNode,
             "action_executor": ActionExecutorNode, "landmark_detector": LandmarkDetectorNode,
@@ -50,7 +50,7 @@ def test_every_console_script_node_is_covered():
     """setup.py's node scripts are the nodes checked here (a new node joins the check)."""
     text = (REPO / "setup.py").read_text(encoding="utf-8")
     scripts = set(re.findall(r'"(\w+)": "pearl_pomdp\.nodes\.\w+:main"', text))
-    scripts |= set(re.findall(r'"(pearl_\w+) = pearl_sim\.\w+:main"', text))
+    scripts |= set(re.findall(r'"(pearl_\w+) = pearl_sim\.[\w.]+:main"', text))
     assert scripts == set(_node_classes())
 
 

@@ -26,7 +26,7 @@ SCENARIO = REPO / "config" / "scenarios" / "reception" / "one_visitor.yaml"
 GENERIC = {"home", "room", "time", "weather", "go", "unknown", "yes", "no", "none", "ok", "low", "Battery"}
 #: The nursing home's modules: a reception run must not need them.
 PEARL_MODULES = ("pearl_sim.nursing_home.world", "pearl_sim.nursing_home.scenario", "pearl_sim.nursing_home.residents", "pearl_sim.nursing_home.behaviour_tree",
-                 "pearl_sim.agents", "pearl_sim.experiment", "pearl_sim.study", "pearl_sim.demo")
+                 "pearl_sim.nursing_home.agents", "pearl_sim.nursing_home.experiment", "pearl_sim.nursing_home.study", "pearl_sim.nursing_home.demo")
 PEARL_FILES = ("pearl.domain.yaml", "pearl.hierarchy.yaml", "pearl_nodes.yaml", "scenarios/study.yaml",
                "scenarios/figure4.yaml")
 

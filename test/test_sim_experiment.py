@@ -5,8 +5,8 @@ import pytest
 
 from pearl_pomdp.model.factored import load_domain
 from pearl_pomdp.speech import KeywordFilter
-from pearl_sim.agents import ScriptedAgent
-from pearl_sim.experiment import proportion_ci, run_episode, t_ci, with_word_error_rate
+from pearl_sim.nursing_home.agents import ScriptedAgent
+from pearl_sim.nursing_home.experiment import proportion_ci, run_episode, t_ci, with_word_error_rate
 from pearl_sim.nursing_home.scenario import load_scenarios, parse_scenarios
 from pearl_sim.nursing_home.world import Message
 

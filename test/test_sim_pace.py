@@ -103,8 +103,8 @@ def test_in_the_full_loop_guide_pace_completes_the_slow_residents_guidances(pear
     """The study's slow residents (5–35 cm/s, with rests) through the whole episode loop:
     ≥ 95 % of the guidances complete with guide_pace; at fixed pace the three slowest never do."""
     from pearl_pomdp.hierarchy import load_hierarchical_policy
-    from pearl_sim.agents import Controller
-    from pearl_sim.experiment import run_episode
+    from pearl_sim.nursing_home.agents import Controller
+    from pearl_sim.nursing_home.experiment import run_episode
 
     domain = load_domain(DOMAIN)
     agent = Controller("hierarchical", load_hierarchical_policy(pearl_policy, domain))

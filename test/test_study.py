@@ -1,8 +1,8 @@
 """The study grid: paired statistics, jobs-independence and the acceptance check."""
 import pytest
 
-from pearl_sim import study
-from pearl_sim.experiment import EpisodeResult, build_agents
+from pearl_sim.nursing_home import study
+from pearl_sim.nursing_home.experiment import EpisodeResult, build_agents
 from pearl_sim.nursing_home.residents import paper_residents, resident_scenarios, study_template
 from pearl_sim.nursing_home.scenario import default_domain
 
@@ -127,8 +127,8 @@ def test_a_policy_planned_with_measured_speech_rows_tracks_its_belief_in_them(tm
     from pearl_pomdp.cli import main
     from pearl_pomdp.fit_speech import write_speech_fitted
     from pearl_pomdp.model.factored import load_domain
-    from pearl_sim.agents import Controller
-    from pearl_sim.experiment import run_episode
+    from pearl_sim.nursing_home.agents import Controller
+    from pearl_sim.nursing_home.experiment import run_episode
 
     table = ChannelTable.load("config/speech/pearl_channel_babble.json")
     path, _ = write_speech_fitted("config/pearl.domain.yaml", table, 10, tmp_path / "b10.yaml")

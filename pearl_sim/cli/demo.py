@@ -158,7 +158,7 @@ def _start_live_view(args: argparse.Namespace):
 
 def _run(args: argparse.Namespace, out: Path, echo, view) -> int:
     from pearl_pomdp.cli import print_json
-    from pearl_sim.demo import run_demo, summary_dict
+    from pearl_sim.nursing_home.demo import run_demo, summary_dict
 
     if not args.json:
         what = "starting the graph" if args.policy else "planning the policy and starting the graph"

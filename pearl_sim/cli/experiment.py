@@ -223,8 +223,8 @@ def _run_pearl(args: argparse.Namespace) -> int:
     from pearl_pomdp.cli import print_json
     from pearl_sim.policies import DEFAULT_FLAT_TRIALS
     from pearl_pomdp.model.factored import load_domain
-    from pearl_sim import study
-    from pearl_sim.experiment import build_agents
+    from pearl_sim.nursing_home import study
+    from pearl_sim.nursing_home.experiment import build_agents
 
     policies, noise, profiles, cases = _validate(args)
     if args.cluster is not None:
@@ -242,7 +242,7 @@ def _run_pearl(args: argparse.Namespace) -> int:
                           policies=policies,
                           log=log if terminal else None)
     if args.measured:
-        from pearl_sim.agents import Controller
+        from pearl_sim.nursing_home.agents import Controller
 
         measured_domain = load_domain(args.speech_rows)
         twins = build_agents(measured_domain, args.hierarchy, flat_time_limit=args.flat_time_limit,
@@ -316,7 +316,7 @@ def _run_pearl(args: argparse.Namespace) -> int:
 
 
 def _print_table(table, diffs, goal) -> None:
-    from pearl_sim.study import BASELINE
+    from pearl_sim.nursing_home.study import BASELINE
 
     print(f"{'policy':<18} {'noise':>5} {'success':>20} {'ttg s':>10} {'clar/goal':>9} {'unprompt':>8} "
           f"{'wrong/ep':>12} {'return':>14} {'Δwrong vs BT':>18} {'Δsuccess vs BT':>18}")

@@ -366,7 +366,7 @@ def build_tree(namespace: str, day_rules: bool = False) -> py_trees.behaviour.Be
 
 class PearlBehaviourTree:
     """The tree as an :class:`~pearl_pomdp.interfaces.ObservingDecider` (and a Controller:
-    ``name`` and ``decider``), for the study, the demo and :mod:`pearl_sim.bt_node`.
+    ``name`` and ``decider``), for the study, the demo and :mod:`pearl_sim.nursing_home.bt_node`.
 
     Args:
         name: the controller's name in the study (``behaviour_tree``).

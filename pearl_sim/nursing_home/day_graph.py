@@ -102,7 +102,7 @@ def run_day_graph(domain_path, policy_dir, resident: Dict[str, Any], articulatio
     from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.nodes.graph import PearlGraph
     from pearl_pomdp.nodes.sim_clock import SimClockDriver
-    from pearl_sim.demo import RECORDED_TOPICS
+    from pearl_sim.nursing_home.demo import RECORDED_TOPICS
     from pearl_sim.loop import run_episode
     from pearl_sim.nodes import GraphBackend, SimulatedHardware
     from pearl_sim.nursing_home.residents import effective_word_error_rate

@@ -70,7 +70,7 @@ def run_day(controller, domain, case: DayCase, noise: float, model=None, record:
     empty) and, with ``timeline``, one row per action:
     ``t, action, robot, resident, battery``.
     """
-    from pearl_sim.experiment import episode_executive
+    from pearl_sim.nursing_home.experiment import episode_executive
     from pearl_sim.loop import ExecutiveBackend, run_episode
     from pearl_sim.nursing_home.residents import effective_word_error_rate
 

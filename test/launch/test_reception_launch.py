@@ -9,18 +9,18 @@ waits until the three nodes are ready, then, from a test node:
 
 * publishes a ``sensor_msgs/BatteryState`` at 10 % on ``/battery_state`` (best effort, as battery
   drivers publish) and expects ``Dock`` on ``/pearl/action`` (the reception policy docks on a low
-  battery with nobody at the desk: checked against the core in ``test/test_reception_launch.py``);
+  battery with nobody at the desk: checked against the core in ``test/test_reception_graph.py``);
 * after shutdown, checks every process exited with code 0.
 
 launch_testing is not on PyPI, so in a pip-only venv this module is skipped at import; the same
-graph is tested there by ``test/test_reception_launch.py`` with ``pearl launch``.
+graph is tested there by ``test/test_reception_graph.py`` with ``pearl launch``.
 """
 import pytest
 
 launch_testing = pytest.importorskip(
     "launch_testing",
     reason="launch_testing is not on PyPI: run this file with `launch_test` on a ROS 2 install "
-           "(the pip-only equivalent is test/test_reception_launch.py)")
+           "(the pip-only equivalent is test/test_reception_graph.py)")
 pytest.importorskip("launch_ros", reason="launch_ros is needed for $(find-pkg-share) in the launch file")
 
 import time  # noqa: E402

@@ -1,4 +1,4 @@
-"""Every example in every subcommand's --help runs as written (issue 16 item 3).
+"""Every example in every subcommand's --help runs as written.
 
 The examples are the ``pearl …`` lines of the "Example(s)" section of each command's help
 (its module docstring, which `pearl CMD --help` prints). Each runs through ``bash -c``, so

@@ -1,4 +1,4 @@
-"""Error texts a newcomer meets first (issue 16 items 6 and 7): each names the right file,
+"""Error texts a newcomer meets first: each names the right file,
 line and field, once."""
 import pytest
 

@@ -25,7 +25,7 @@ def record_episodes(scenarios: Sequence[Scenario], controller, domain, seeds: It
     The seed of an episode is ``scenario.seed + 1000 * k`` for each ``k`` in ``seeds`` (the
     study's rule). Returns the episode objects written.
     """
-    from pearl_sim.experiment import episode_executive
+    from pearl_sim.nursing_home.experiment import episode_executive
 
     model = domain.compile()
     out = []

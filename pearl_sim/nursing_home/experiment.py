@@ -5,7 +5,7 @@ rules from ``config/pearl_nodes.yaml`` (the same object the ``belief_tracker`` n
 wraps; ``test/test_one_loop.py`` checks that the nodes over DDS give the same actions).
 
 Reproduces the shape of the paper's evaluation (12 guidances, 6 residents) and goes
-past it: every controller of :mod:`pearl_sim.agents` meets the same seeded
+past it: every controller of :mod:`pearl_sim.nursing_home.agents` meets the same seeded
 residents; we score guidance success, time to goal, clarification questions per
 goal achieved, wrong actions and the discounted return (the Pearl domain's own
 reward rules applied to the *true* state), each with a 95% confidence interval,
@@ -65,7 +65,7 @@ def episode_executive(controller, domain, scenario: Scenario, model=None):
 
 def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Optional[int] = None,
                 pace_adaptation: Optional[bool] = None, on_step: Optional[Callable] = None) -> EpisodeResult:
-    """Run ``agent`` (a :class:`~pearl_sim.agents.Controller`) in a fresh :class:`World` through the step loop.
+    """Run ``agent`` (a :class:`~pearl_sim.nursing_home.agents.Controller`) in a fresh :class:`World` through the step loop.
 
     The loop is :func:`pearl_sim.loop.run_episode` with the core executive as the robot —
     the tracker rules of the ``belief_tracker`` node. The return is Σ_t γ^t R[s_t, a_t] with
@@ -142,7 +142,7 @@ def build_agents(domain, hierarchy_path, flat_time_limit: Optional[float] = None
     """
     import time as _time
 
-    from pearl_sim.agents import ScriptedAgent
+    from pearl_sim.nursing_home.agents import ScriptedAgent
 
     unknown = sorted(set(policies) - set(POLICY_NAMES))
     if unknown:

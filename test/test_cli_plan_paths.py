@@ -1,4 +1,4 @@
-"""A newcomer's path through the commands (issue 16 items 2-6): plan warns before planning
+"""The commands a first run goes through: plan warns before planning
 flat, saves where explain and hierarchy look, the hierarchy PNG lands under out/ and can be
 read, help texts print as written, and bad inputs fail before any work starts."""
 import argparse

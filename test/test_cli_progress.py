@@ -1,4 +1,4 @@
-"""Progress bars only on a terminal unless asked (issue 16 item 1).
+"""Progress bars only on a terminal unless asked.
 
 `pearl solve tiger` used to write ~500 tqdm updates (38 KB) into a CI log. Now stderr that is
 not a terminal gets no progress bytes at all; a terminal (a pty here) gets the bar, and

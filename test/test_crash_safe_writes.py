@@ -1,4 +1,4 @@
-"""Data safety (issue 7): a killed recorder loses nothing it wrote; files are replaced atomically.
+"""Crash-safe writes: a killed recorder loses nothing it wrote; files are replaced atomically.
 
 * The bag writer in a forked child writes numbered messages and reports each one after
   ``write`` returns; the parent SIGKILLs it at a random moment. ``BagReader`` (what

@@ -5,7 +5,7 @@ Protocol (``docs/study.md``): every policy meets every *cell* — a resident
 rate, combined with the resident's articulation), with a seed — and the same cell gives the
 same world (same seed, same resident, same noise) to every policy, so the per-episode
 differences against the behaviour tree are **paired**. Each episode runs through
-:func:`pearl_sim.experiment.run_episode` (the core executive: the robot's step loop).
+:func:`pearl_sim.nursing_home.experiment.run_episode` (the core executive: the robot's step loop).
 
 Episodes are spread over processes with ``jobs`` (``multiprocessing`` with the *fork*
 start method: the planned policies are built once in the parent and inherited). Every
@@ -19,7 +19,7 @@ import multiprocessing
 from dataclasses import dataclass, replace
 from typing import Dict, List, Optional, Sequence
 
-from pearl_sim.experiment import EpisodeResult, proportion_ci, run_episode, t_ci
+from pearl_sim.nursing_home.experiment import EpisodeResult, proportion_ci, run_episode, t_ci
 from pearl_sim.nursing_home.residents import StudyCase, effective_word_error_rate
 
 __all__ = ["Cell", "StudyEpisode", "cells", "run_cells", "per_policy", "paired", "acceptance", "write_csv",
