@@ -58,6 +58,7 @@ def _scratch_repo(root: Path, setup_py: str) -> Path:
     return repo
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("bash") is None or shutil.which("git") is None, reason="needs bash and git")
 def test_ci_run_tests_a_clone_out_of_reach_of_shared_and_fails_on_a_broken_install(tmp_path):
     from concurrent.futures import ThreadPoolExecutor

@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 PEARL = str(Path(sys.executable).parent / "pearl")
 DOMAIN = str(REPO / "config" / "ward.domain.yaml")
@@ -14,6 +16,7 @@ def _pearl(*args, cwd):
     return subprocess.run([PEARL, *args], capture_output=True, text=True, cwd=cwd, timeout=300)
 
 
+@pytest.mark.slow
 def test_the_ward_study_runs_the_tree_in_every_cell_and_writes_study_json(tmp_path):
     out = tmp_path / "study"
     run = _pearl("experiment", "--domain", DOMAIN, "--policies", "behaviour_tree", "--episodes", "1", "--noise", "0.1",
