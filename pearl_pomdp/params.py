@@ -16,6 +16,8 @@ It is read with the one YAML loader (:mod:`pearl_pomdp.yaml_lines`: errors name 
 """
 from __future__ import annotations
 
+import copy
+import functools
 from pathlib import Path
 from typing import Any, Dict, Union
 
@@ -60,14 +62,14 @@ def node_parameters(node_name: str, path: Union[str, Path, None] = None) -> Dict
         SpecError: the file is missing, not YAML, or a section has no ``ros__parameters``
             mapping (the message names the file, the section and the line).
     """
-    from pearl_pomdp.yaml_lines import line_of, parse_yaml
+    from pearl_pomdp.yaml_lines import line_of
 
     p = Path(path) if path is not None else default_params_file()
     try:
         text = p.read_text(encoding="utf-8")
     except OSError as err:
         raise SpecError(p, "", f"cannot read: {err.strerror or err}") from None
-    data = parse_yaml(text, str(p))
+    data = _parsed(text, str(p))
     if data is None:
         return {}
     if not isinstance(data, dict):
@@ -80,7 +82,17 @@ def node_parameters(node_name: str, path: Union[str, Path, None] = None) -> Dict
         if not isinstance(body, dict) or not isinstance(body.get("ros__parameters", {}), dict):
             raise SpecError(p, section, "expected {ros__parameters: {name: value, ...}}", line=line_of(data, section))
         out.update(flatten(body.get("ros__parameters") or {}))
-    return out
+    return copy.deepcopy(out)   # the parsed file is shared (_parsed): the caller gets its own values
+
+
+@functools.lru_cache(maxsize=16)
+def _parsed(text: str, source: str) -> Any:
+    """The YAML ``text`` of the params file ``source``, parsed once per content: a study reads the file
+    for every episode (:func:`step_settings`), ~30 ms a parse. Keyed by the text read, so an edited
+    file is parsed again. Nobody may change what it returns (:func:`node_parameters` copies out)."""
+    from pearl_pomdp.yaml_lines import parse_yaml
+
+    return parse_yaml(text, source)
 
 
 def step_settings(path: Union[str, Path, None] = None, **overrides: Any):

@@ -29,6 +29,7 @@ from pearl_sim.nursing_home.experiment import run_episode
 from pearl_sim.nursing_home.scenario import load_scenarios
 
 REPO = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.slow   # 340 episodes of the planned policy (~30-45 s)
 #: Seeds per scenario: the bounds below were set over 50 seeds (issue 11); fewer seeds would
 #: make a different test (a walk offer in 4 of the first 20 seeds of walk_then_time), not a faster one.
 SEEDS = 50

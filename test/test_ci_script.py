@@ -37,10 +37,11 @@ NO_SHARED_TEST = ("from pathlib import Path\n\n"
                   "    assert 1 + 1 == 2\n")
 
 
-@pytest.mark.skipif(shutil.which("bash") is None or shutil.which("git") is None, reason="needs bash and git")
-def test_ci_run_tests_a_clone_out_of_reach_of_shared_and_fails_on_a_broken_install(tmp_path):
-    repo = tmp_path / "scratch"
-    (tmp_path / "shared").mkdir()          # what the project's machine has beside a checkout
+def _scratch_repo(root: Path, setup_py: str) -> Path:
+    """A git repository under ``root`` (a ``shared/`` folder beside it, as on the project's machine)
+    with a tiny package, its one test, ``.ci/run`` and the given setup.py, committed."""
+    repo = root / "scratch"
+    (root / "shared").mkdir(parents=True)   # what the project's machine has beside a checkout
     (repo / ".ci").mkdir(parents=True)
     shutil.copy(REPO / ".ci" / "run", repo / ".ci" / "run")
     (repo / "ci_scratch_pkg").mkdir()
@@ -51,16 +52,30 @@ def test_ci_run_tests_a_clone_out_of_reach_of_shared_and_fails_on_a_broken_insta
     (repo / "mypy.ini").write_text("[mypy]\nfiles = ci_scratch_pkg\n")   # .ci/run type-checks what mypy.ini names
     subprocess.run(["git", "init", "-q", str(repo)], check=True)
     _commit(repo, "scratch")
+    if setup_py != GOOD_SETUP:
+        (repo / "setup.py").write_text(setup_py)
+        _commit(repo, "broken")
+    return repo
 
-    good = _ci(repo)
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("bash") is None or shutil.which("git") is None, reason="needs bash and git")
+def test_ci_run_tests_a_clone_out_of_reach_of_shared_and_fails_on_a_broken_install(tmp_path):
+    from concurrent.futures import ThreadPoolExecutor
+
+    # The good and the broken checkout side by side, their two CI runs at once (each ~12 s, mostly
+    # creating a venv and waiting on pip): the broken one is the good one with setup.py broken on
+    # purpose and committed.
+    good_repo = _scratch_repo(tmp_path / "good", GOOD_SETUP)
+    broken_repo = _scratch_repo(tmp_path / "broken", 'raise SystemExit("deliberately broken setup.py")\n')
+    with ThreadPoolExecutor(2) as pool:
+        good, broken = pool.map(_ci, (good_repo, broken_repo))
+
     assert good.returncode == 0, good.stdout + good.stderr
     assert "1 passed" in good.stdout
     assert "WARNING: Location" not in good.stdout + good.stderr
-    assert not (repo / ".venv").exists()   # the run happened in the clone, not in the checkout
+    assert not (good_repo / ".venv").exists()   # the run happened in the clone, not in the checkout
 
-    (repo / "setup.py").write_text('raise SystemExit("deliberately broken setup.py")\n')
-    _commit(repo, "broken")
-    broken = _ci(repo)
     output = broken.stdout + broken.stderr
     assert broken.returncode != 0, output
     assert "deliberately broken setup.py" in output   # pip's error reaches the log

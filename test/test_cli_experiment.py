@@ -7,6 +7,7 @@ import pytest
 from pearl_pomdp.cli import main
 
 
+@pytest.mark.slow
 def test_experiment_json_reports_policies_pairs_and_files(tmp_path, capsys):
     code = main(["experiment", "--policies", "qmdp,most_likely_state,behaviour_tree", "--residents", "generated:1",
                  "--episodes", "1", "--noise", "0,0.6", "--out", str(tmp_path), "--json"])
@@ -48,6 +49,7 @@ def _pearl_actions():
     return load_domain(Path(__file__).resolve().parents[1] / "config" / "pearl.domain.yaml").actions
 
 
+@pytest.mark.slow
 def test_flat_policy_budget_gives_the_same_study_beside_a_cpu_burner(tmp_path, capsys):
     """The flat point-based policy is planned with a trial budget, not the clock: the same seed
     gives the same episodes on a quiet machine and beside a busy process (one of the two cores)."""

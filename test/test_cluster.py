@@ -29,6 +29,7 @@ def cluster():
         yield local.scheduler_address
 
 
+@pytest.mark.slow
 def test_cluster_gives_the_episodes_of_jobs_2_on_the_kind_snr_axis(cluster):
     """A small (kind, SNR) grid: 2 cases x 2 kinds x 2 SNRs x 1 seed x 2 policies = 16 episodes."""
     domain = default_domain()
@@ -54,6 +55,7 @@ def test_an_address_that_does_not_answer_is_one_clear_error():
     assert time.perf_counter() - t0 < 15
 
 
+@pytest.mark.slow
 def test_experiment_cli_on_the_cluster_and_its_error(cluster, tmp_path, capsys):
     from pearl_pomdp.cli import main
 

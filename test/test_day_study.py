@@ -102,6 +102,7 @@ def test_pearl_experiment_day_refuses_what_it_cannot_run(capsys):
     assert "--noise-kind: needs --snr" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_the_day_study_hears_her_through_the_measured_channel_at_each_snr(tmp_path, capsys):
     """`pearl experiment --day --snr`: the SNR axis of the paper's conjecture on days. The same two days of
     the tree at 60 dB and at -5 dB of white noise through the measured recogniser channel: the noisy ones

@@ -16,6 +16,9 @@ import pytest
 from ros_helpers import allocate_domain_id, configure_test_process
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
+#: Sim seconds per wall second. The bench runs at 20; the test at twice that, so the episode (~1,290 sim
+#: seconds, 30 actions) takes ~35 s instead of ~70 s, and the kill falls on the same sim moments.
+RATE = 40.0
 
 @pytest.fixture(scope="module")
 def bench(load_bench):
@@ -24,8 +27,9 @@ def bench(load_bench):
 
 def test_a_tracker_killed_mid_episode_comes_back_and_the_episode_and_its_bag_complete(bench, tmp_path, pearl_policy):
     configure_test_process(tmp_path)
-    kill_after = float(np.random.default_rng(41).uniform(3.0, 9.0))   # within the reminder and the walk
-    result = bench.trial(0, "belief_tracker", kill_after, 20.0, Path(pearl_policy), True, tmp_path, 240.0,
+    # 60-180 sim seconds after the clock starts: within the reminder and the walk.
+    kill_after = float(np.random.default_rng(41).uniform(60.0, 180.0)) / RATE
+    result = bench.trial(0, "belief_tracker", kill_after, RATE, Path(pearl_policy), True, tmp_path, 240.0,
                          domain_ids=(allocate_domain_id(), allocate_domain_id()))
     assert "error" not in result, result
     assert result["completed"] and result["guidance_closed"], result["scores"]

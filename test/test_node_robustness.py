@@ -243,6 +243,7 @@ def _zero_likelihood_pair(model, domain):
     return None
 
 
+@pytest.mark.slow
 def test_flood_and_zero_likelihood(graph):
     domain = load_domain(DOMAIN)
     model = domain.compile()
@@ -326,6 +327,7 @@ def test_nodes_exit_zero_within_2s_on_sigint_and_sigterm(graph, flat_policy):
         assert "Traceback" not in procs[key].stderr()
 
 
+@pytest.mark.slow
 def test_a_restarted_policy_does_not_act_again_on_the_belief_it_answered(graph, flat_policy):
     """A restarted policy gets the tracker's latched belief. Its journal (the default) says it acted
     on that belief's step: it publishes nothing (no repeated action; without a journal it would

@@ -240,6 +240,7 @@ def failures(results: Sequence[dict]) -> List[dict]:
             or r["traceback"]]
 
 
+@pytest.mark.slow
 def test_every_node_exits_within_2s_of_sigint_and_sigterm_under_a_flood(tmp_path, pearl_policy):
     results = shutdown_trials(tmp_path, pearl_nodes(DOMAIN, pearl_policy), ("SIGINT", "SIGTERM"), 1)
     assert len(results) == 2 * 1 * 5
@@ -425,6 +426,7 @@ START_UP_POINTS = 20
 BATCHES = 5
 
 
+@pytest.mark.slow
 def test_a_stop_signal_anywhere_in_start_up_ends_the_node_beside_a_cpu_burner(tmp_path, pearl_policy):
     """SIGINT at 20 points spread evenly over a node's start-up — from the exec to the first line
     after its policy is loaded — with a CPU burner on one core: the process is gone within 2 s every

@@ -17,6 +17,7 @@ PEARL = Path(sys.executable).with_name("pearl")
 pytestmark = pytest.mark.ros
 
 
+@pytest.mark.slow
 def test_the_sim_launch_runs_nav_blocked_to_the_end_and_exits(tmp_path, pearl_policy):
     cmd = [str(PEARL), "launch", str(REPO / "launch" / "pearl_sim.launch.xml"),
            f"scenario:={REPO / 'config' / 'scenarios' / 'nav_blocked.yaml'}", "rate:=50.0", f"policy:={pearl_policy}"]

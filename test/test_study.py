@@ -118,6 +118,7 @@ def test_snr_axis_runs_through_the_measured_recogniser_channel(tmp_path, capsys)
     assert "--snr: 99.0 dB is outside [-20, 60]" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_policy_planned_with_measured_speech_rows_tracks_its_belief_in_them(tmp_path):
     """`--speech-rows`: the @measured twin's executive runs on the fitted domain (its O), the
     world and the score on the designer's; the study's CLI adds the twin beside its policy."""

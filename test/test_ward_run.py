@@ -24,6 +24,7 @@ def _pearl(*args, cwd):
                           env={**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
 
 
+@pytest.mark.slow
 def test_the_ward_study_runs_the_tree_in_every_cell_and_writes_study_json(tmp_path):
     out = tmp_path / "study"
     run = _pearl("experiment", "--domain", DOMAIN, "--policies", "behaviour_tree", "--episodes", "1", "--noise", "0.1",
