@@ -2,9 +2,11 @@
 
 Each trial runs the Figure 4 scenario through ``pearl launch launch/pearl_sim.launch.xml
 rate:=RATE policy:=DIR`` (tracker, policy, executor, lifecycle supervisor and the simulated world
-as processes over Fast DDS) and SIGKILLs one manager node — the tracker, the policy node or the
-executor, in turn — at a random moment (seeded) of the episode's first ``--window`` wall
-seconds. The launcher respawns it and the supervisor re-activates it. Per trial: whether the
+as processes over Fast DDS) and SIGKILLs one node — the tracker, the policy node, the executor or
+the simulated hardware (``pearl_sim_world``: the resident, the scheduler, the base and the clock),
+in turn — at a random moment (seeded) of the episode's first ``--window`` wall seconds. The
+launcher respawns it; the supervisor re-activates a manager node, the simulator resumes its world
+from its journal and starts its clock again. Per trial: whether the
 episode still delivered the reminder, completed the walk and answered the question (the world's
 scores), whether the guidance was closed (``TerminateGuidance``: "We have arrived"), the time
 from the kill to the node being active again (the supervisor's line), and the
@@ -18,9 +20,6 @@ recorder was still running at the episode's end (it survived the kill), whether 
 reads the bag and it holds messages logged after the kill, and what ``pearl replay`` makes of it
 (exit code, whether its actions match the recorded ones: reported, not asserted, since the
 recorded run had a crash and the replay has none).
-
-The simulated world itself (``pearl_sim_world``) is not killed: it is the world of this
-simulation (resident, clock, robot base) and keeps no journal; killing it ends the episode.
 
     .venv/bin/python bench/fault_injection.py [--trials 30] [--no-journal-trials 6] [--seed 0] [--rate 20.0]
 """
@@ -43,7 +42,9 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
-KINDS = ("belief_tracker", "hierarchical_policy", "action_executor")
+KINDS = ("belief_tracker", "hierarchical_policy", "action_executor", "pearl_sim_world")
+#: The simulator is not a managed node: it is back when it starts its clock again.
+BACK = {"pearl_sim_world": "the manager is up: starting the clock"}
 FINISHED = re.compile(r"pearl_sim_world: finished \S+: (\{.*\})")
 
 
@@ -153,7 +154,7 @@ def trial(index: int, kind: str, kill_after: float, rate: float, policy: Path, j
             executor.spin_once(timeout_sec=0.05)
         if proc.poll() is None:
             out["error"] = f"the episode did not end within {timeout:g} s"
-        active = lines.first(f"{kind} is active", after=killed)
+        active = lines.first(BACK.get(kind, f"{kind} is active"), after=killed)
         out["recover_s"] = None if active is None else round(active - killed, 3)
         scores = next((json.loads(m.group(1)) for _, line in lines.lines if (m := FINISHED.search(line))), None)
         out["scores"] = scores
@@ -171,7 +172,7 @@ def trial(index: int, kind: str, kill_after: float, rate: float, policy: Path, j
         out["actions"], out["beliefs"] = max(len(actions), world), sum(n + 1 for n in steps.values())
         out["actions_seen"], out["beliefs_seen"] = len(actions), len(keys)
         out["repeated_actions"] = max(0, out["actions"] - out["beliefs"])
-        out["resumed"] = "resuming from journal" in lines.text()
+        out["resumed"] = (f"{kind}: resuming from journal" if kind in BACK else "resuming from journal") in lines.text()
         # What a tracker that forgot loses: the guidance's end ("We have arrived") is never said.
         out["guidance_closed"] = "TerminateGuidance" in actions + (scores or {}).get("first_actions", [])
         out.update(_bag_check(recorder, bag, killed_ns, policy, env, replay_domain_id))
@@ -265,7 +266,8 @@ def main() -> int:
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="pearl-faults-") as tmpdir:
         tmp = Path(tmpdir)
-        policy = args.policy or _policy(tmp)
+        # Absolute: the recorder writes it into the bag, and a relative one would be read against the bag.
+        policy = args.policy.resolve() if args.policy else _policy(tmp)
         runs = {True: [], False: []}
         for journal, n in ((True, args.trials), (False, args.no_journal_trials)):
             for i in range(n):

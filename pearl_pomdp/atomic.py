@@ -41,12 +41,14 @@ def file_mode_for(path: Path) -> int:
         return 0o666 & ~_umask()
 
 
-def atomic_write(path: Union[str, Path], data: Union[bytes, str], encoding: str = "utf-8") -> Path:
+def atomic_write(path: Union[str, Path], data: Union[bytes, str], encoding: str = "utf-8", sync: bool = True) -> Path:
     """Replace ``path`` with ``data`` (bytes, or text encoded with ``encoding``) atomically.
 
     Creates the parent directory if needed. On any error the temporary file is removed and
     ``path`` is left as it was. The file's mode is that of a plain write (see the module
-    doc). Returns ``path``.
+    doc). Returns ``path``. ``sync`` False skips the two fsyncs: the replace is still atomic
+    against the writer's own death (SIGKILL), not against a power loss — for a file rewritten
+    many times a second whose loss a restart survives.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -58,7 +60,8 @@ def atomic_write(path: Union[str, Path], data: Union[bytes, str], encoding: str 
             os.fchmod(fh.fileno(), mode)
             fh.write(payload)
             fh.flush()
-            os.fsync(fh.fileno())
+            if sync:
+                os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -66,6 +69,8 @@ def atomic_write(path: Union[str, Path], data: Union[bytes, str], encoding: str 
         except FileNotFoundError:
             pass
         raise
+    if not sync:
+        return path
     try:
         dfd = os.open(path.parent, os.O_RDONLY)
         try:

@@ -100,14 +100,17 @@ class Journal:
         domain: the domain file's name, for the record and the messages.
         domain_hash: :func:`domain_hash` of the domain file; a journal with another is refused.
         max_age: seconds after which a journal is too old to resume from (> 0).
+        sync: each write reaches the disk (fsync) before it counts; False: atomic against the
+            writer's death only (:func:`~pearl_pomdp.atomic.atomic_write`).
     """
 
     def __init__(self, path: Union[str, Path], kind: str, domain: str, domain_hash: str,
-                 max_age: float = DEFAULT_MAX_AGE):
+                 max_age: float = DEFAULT_MAX_AGE, sync: bool = True):
         if not max_age > 0:
             raise ValueError(f"journal_max_age: must be > 0 s, got {max_age}")
         self.path = Path(path)
         self.kind, self.domain, self.domain_hash, self.max_age = kind, domain, domain_hash, float(max_age)
+        self.sync = sync
         self.writes = 0
 
     def write(self, state: Mapping[str, Any], now: Optional[float] = None) -> None:
@@ -118,7 +121,7 @@ class Journal:
         """
         body = {"format": FORMAT, "kind": self.kind, "domain": self.domain, "domain_hash": self.domain_hash,
                 "written_at": time.time() if now is None else float(now), "state": dict(state)}
-        atomic_write(self.path, json.dumps(body, separators=(",", ":")))
+        atomic_write(self.path, json.dumps(body, separators=(",", ":")), sync=self.sync)
         self.writes += 1
 
     def load(self, now: Optional[float] = None) -> Resumed:

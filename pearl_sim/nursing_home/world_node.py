@@ -20,7 +20,20 @@ Parameters: ``scenario`` (str, a scenario file; relative paths also in the packa
 directory), ``seed`` (int, −1: the scenario's), ``rate`` (double, 1–1000, default 10),
 ``clock_period`` (double, 0.005–1 s, default 0.02), ``start_timeout`` (double, s, default 120:
 the manager must publish its first action within this, or the node exits 1),
-``wall_timeout`` (double, s, default 600: the episode must end within this, else exit 1).
+``wall_timeout`` (double, s, default 600: the episode must end within this, else exit 1),
+``journal`` (str, ``auto``: ``$ROS_HOME/pearl/journal/domain<ID>/pearl_sim_world.json``; ``''``: none)
+and ``journal_max_age`` (double, s, default 120).
+
+A simulator that dies loses nothing (docs/reliability.md, "Crashes"): the node journals what it did
+to the world — every ``act`` and ``wait`` call in order, the clock, how many of the actions' messages
+are still due, the last action's stamp — after every tick that changed any of it (atomic against its
+own death; no fsync, since a restart of the simulator, not a power loss, is what it survives). The
+world is seeded, so a node started again within ``journal_max_age`` on the same scenario and seed
+replays those calls on a fresh world and has the very state that died (the resident, the scheduler,
+the base, every random stream; nothing is unpickled — plain JSON); its clock goes on one tick after
+the journal's, the latched last action is not carried out twice, and the manager's nodes see only a
+pause. The journal is removed when the episode ends or the node is stopped cleanly, so a new launch
+starts afresh.
 
 Publishers: ``/clock`` (rosgraph_msgs/Clock), ``/pearl/speech`` (pearl_interfaces/RecognisedSpeech,
 as Pearl's domain declares it), ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder``
@@ -67,6 +80,8 @@ def _make_node_class():
             self.clock_period = float(declare("clock_period", 0.02).value)
             self.start_timeout = float(declare("start_timeout", 120.0).value)
             self.wall_timeout = float(declare("wall_timeout", 600.0).value)
+            journal_path = str(declare("journal", "auto").value).strip()
+            journal_max_age = float(declare("journal_max_age", 120.0).value)
             for name, value, lo, hi in (("rate", self.rate, 1.0, 1000.0), ("clock_period", self.clock_period, 0.005, 1.0),
                                         ("start_timeout", self.start_timeout, 1.0, 86400.0),
                                         ("wall_timeout", self.wall_timeout, 1.0, 86400.0)):
@@ -75,6 +90,19 @@ def _make_node_class():
             path = resolve_path(scenario_path, "scenario")
             self.scenario = load_scenarios(path)[0]
             self.world = World(self.scenario, seed=None if seed < 0 else seed)
+            self.journal = None
+            if journal_path:
+                import os
+                from pathlib import Path
+
+                from pearl_pomdp.journal import Journal, default_path, domain_hash
+
+                where = (default_path("pearl_sim_world", int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))
+                         if journal_path == "auto" else Path(journal_path))
+                # Tied to the scenario file's bytes and the seed: another episode's journal is refused.
+                ident = Path(path).read_bytes() + f"\nseed={self.world.seed}".encode()
+                self.journal = Journal(where, "pearl_sim_world", str(path), domain_hash(ident),
+                                       max_age=journal_max_age, sync=False)
             self._String, self._Clock, self._Pose = String, Clock, PoseStamped
             self.clock_pub = self.create_publisher(Clock, "/clock", 10)
             self.types_by_modality = {m: SPEECH_TYPE if m == "Speech" else "std_msgs/msg/String"
@@ -96,21 +124,69 @@ def _make_node_class():
 
             self.create_subscription(Belief, "/pearl/belief", self._on_belief, LATCHED_QOS)
             self.closed_steps = 0
-            self.actions: Deque[str] = deque()
+            self.actions: Deque = deque()    # (stamp, name) as published
             self.pending: Deque = deque()    # world messages not yet due
             self.taken: List[str] = []
+            self.calls: List[list] = []       # every act/wait call on the world, in order (the journal)
+            self.last_taken_stamp: Optional[List[int]] = None
             self.now = 0.0
             self.started = False
+            self.resumed = False
             self.finished = False
             self.failed: Optional[str] = None
             self.t0 = time.monotonic()
+            if self.journal is not None:
+                state = self.journal.load()
+                self.get_logger().info(f"pearl_sim_world: {state.reason}")
+                if state.state is not None:
+                    self._restore(state.state)
             self.create_timer(self.clock_period, self._tick)
             self.get_logger().info(f"simulating {self.scenario.name} (seed {self.world.seed}) at {self.rate:g}x; "
-                                   f"waiting for the manager's first action")
+                                   + (f"resumed at {self.now:.1f} s after {len(self.taken)} actions"
+                                      if self.resumed else "waiting for the manager's first action"))
+
+        # -------------------------------------------------------------- journal
+        def _save(self) -> None:
+            """The world's state, for a restart (see the module doc); a failed write is logged, never fatal."""
+            if self.journal is None:
+                return
+            state = {"calls": self.calls, "pending": len(self.pending), "taken": self.taken,
+                     "last_taken_stamp": self.last_taken_stamp, "now": self.now}
+            try:
+                self.journal.write(state)
+            except OSError as err:
+                self.get_logger().warning(f"journal {self.journal.path}: {err}", once=True)
+
+        def _restore(self, state: dict) -> None:
+            """Replay the journal's calls on the fresh world (seeded: the same draws, the same state)."""
+            produced: List = []
+            for call, arg in state["calls"]:
+                if call == "act":
+                    produced.extend(self.world.act(str(arg)).messages)
+                else:
+                    self.world.wait(float(arg))      # its messages went out when it ran
+            self.calls = [list(c) for c in state["calls"]]
+            due = int(state["pending"])
+            self.pending = deque(produced[len(produced) - due:] if due else [])
+            self.taken = list(state["taken"])
+            self.last_taken_stamp = state["last_taken_stamp"]
+            # One tick on: the clock never goes back (the last tick may have been published unjournaled).
+            self.now = float(state["now"]) + self.rate * self.clock_period
+            self.resumed = True
+
+        def _drop_journal(self) -> None:
+            if self.journal is not None:
+                try:
+                    self.journal.path.unlink()
+                except OSError:
+                    pass
 
         # --------------------------------------------------------------- inputs
         def _on_action(self, msg) -> None:
-            self.actions.append(msg.name.strip())
+            stamp = [int(msg.stamp.sec), int(msg.stamp.nanosec)]
+            if self.resumed and stamp == self.last_taken_stamp:
+                return   # the latched action this world carried out before it was restarted
+            self.actions.append((stamp, msg.name.strip()))
 
         def _on_belief(self, msg) -> None:
             self.closed_steps = max(self.closed_steps, int(msg.step))
@@ -142,9 +218,9 @@ def _make_node_class():
 
         # ----------------------------------------------------------------- loop
         def _ready(self) -> bool:
-            """The manager answered b0 and our inputs reach its tracker."""
-            return bool(self.actions) and all(p.get_subscription_count() > 0
-                                              for p in self.publishers_by_modality.values())
+            """The manager answered b0 (or, resumed, is still there) and our inputs reach its tracker."""
+            return (bool(self.actions) or self.resumed) and all(p.get_subscription_count() > 0
+                                                                for p in self.publishers_by_modality.values())
 
         def _tick(self) -> None:
             if self.finished:
@@ -158,11 +234,18 @@ def _make_node_class():
                 elif wall > self.start_timeout:
                     self._finish(f"no first action on /pearl/action within {self.start_timeout:g} s")
                 else:
-                    self._publish_clock()   # time 0 until the manager is up
+                    self._publish_clock()   # time 0 (or the journal's) until the manager is up
                 return
             if wall > self.wall_timeout:
                 self._finish(f"the episode did not end within {self.wall_timeout:g} wall seconds")
                 return
+            before = (self.now, len(self.calls), len(self.pending))
+            self._advance()
+            if not self.finished and (self.now, len(self.calls), len(self.pending)) != before:
+                self._save()
+
+        def _advance(self) -> None:
+            """One tick of the running world: the clock, the messages due, the next action."""
             answered = self.closed_steps >= len(self.taken)   # every step taken is closed
             if answered and len(self.taken) >= self.scenario.max_steps:
                 self._finish(None)
@@ -177,12 +260,14 @@ def _make_node_class():
             if self.pending:
                 return
             if self.actions and answered:
-                action = self.actions.popleft()
+                stamp, action = self.actions.popleft()
+                self.last_taken_stamp = stamp
                 if self.world.time < self.now:
                     self._idle(self.now)       # the time the manager took to answer
                 self._publish_truth("start", action)
                 try:
                     result = self.world.act(action)
+                    self.calls.append(["act", action])
                 except ValueError as err:
                     self._finish(f"/pearl/action {action!r}: {err}")
                     return
@@ -198,12 +283,14 @@ def _make_node_class():
         def _idle(self, until: float) -> None:
             """The robot waits: the world lives on (the scheduler may speak) until ``until``."""
             waited = self.world.wait(until)
+            self.calls.append(["wait", until])
             for message in waited.messages:
                 self._publish(message)
 
         def _finish(self, failure: Optional[str]) -> None:
             self.finished = True
             self.failed = failure
+            self._drop_journal()   # the episode is over: a new launch starts afresh
 
         def summary(self) -> dict:
             m = self.world.metrics
@@ -243,6 +330,8 @@ def main(args: Optional[List[str]] = None) -> int:
         print(f"pearl_sim_world: finished {node.scenario.name}: {json.dumps(node.summary())}", flush=True)
         return 0
     except KeyboardInterrupt:
+        if node is not None:
+            node._drop_journal()   # stopped on purpose: nothing to resume
         return 0
     finally:
         executor.shutdown()
