@@ -21,7 +21,7 @@ from pearl_sim.reception.scenario import ReceptionScenario
 from pearl_sim.reception.world import ReceptionWorld
 from pearl_sim.world_study import episode_settings, paired_differences, per_policy_rows, run_scored_episode
 
-__all__ = ["ReceptionEpisode", "run_reception_episode", "reception_agents", "run_study", "summarise",
+__all__ = ["ReceptionEpisode", "run_reception_episode", "reception_agents", "summarise",
            "BASELINE", "DEFAULT_POLICIES", "SCORES"]
 
 BASELINE = "behaviour_tree"
@@ -115,21 +115,6 @@ def reception_agents(domain, hierarchy_path, policies: Sequence[str] = DEFAULT_P
                                flat_trials=flat_trials or DEFAULT_FLAT_TRIALS, flat_time_limit=flat_time_limit)
 
     return plan_each(policies, build, log)
-
-
-def run_study(domain, agents, scenarios: Sequence[ReceptionScenario], noise_levels: Sequence[float], seeds: int,
-              params_file: Union[str, Path], progress: bool = False) -> List[ReceptionEpisode]:
-    """Every controller in every cell (episode × noise level × seed ``scenario.seed + 1000 k``), in a fixed order."""
-    from tqdm import tqdm
-
-    model = domain.compile()
-    work = [(sc, float(noise), k, name) for noise in noise_levels for sc in scenarios for k in range(seeds)
-            for name in agents]
-    out = []
-    for sc, noise, k, name in tqdm(work, desc="reception study", disable=not progress, leave=False):
-        out.append(run_reception_episode(sc, agents[name], domain, params_file, seed=sc.seed + 1000 * k,
-                                         word_error_rate=noise, model=model))
-    return out
 
 
 def summarise(episodes: Sequence[ReceptionEpisode], baseline: str = BASELINE) -> dict:
