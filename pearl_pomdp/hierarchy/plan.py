@@ -36,9 +36,10 @@ import numpy as np
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.hierarchy.abstraction import (AbstractionTooLarge, AbstractSubtask, KernelBuilder, SeparableTerms,
                                                abstract_subtask, separable_reward_terms)
-from pearl_pomdp.hierarchy.execute import HierarchicalPolicy, SubtaskPolicy
+from pearl_pomdp.hierarchy.execute import HierarchicalPolicy
 from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
 from pearl_pomdp.hierarchy.spec import Hierarchy, SubtaskSpec
+from pearl_pomdp.hierarchy.subtask import SubtaskPolicy
 from pearl_pomdp.model.factored import FactoredDomain
 from pearl_pomdp.policies.lookahead import Lookahead
 from pearl_pomdp.solution import SolveResult
