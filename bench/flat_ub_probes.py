@@ -81,7 +81,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
 
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.solvers.mdp import solve_qmdp
     from pearl_pomdp.solvers.point_based import PointBasedSolver
     from pearl_pomdp.solvers.refine import policy_paths, refine_along_paths

@@ -10,7 +10,7 @@ import pytest
 
 from pearl_pomdp.channels import NumberDiscretiser
 from pearl_pomdp.errors import SpecError
-from pearl_pomdp.model.factored import load_domain, parse_domain
+from pearl_pomdp.model.domain_yaml import load_domain, parse_domain
 from pearl_pomdp.tracking import BeliefTracker, StepSettings
 
 REPO = Path(__file__).resolve().parents[1]

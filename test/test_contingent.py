@@ -19,7 +19,7 @@ import pytest
 
 from pearl_pomdp.hierarchy import load_hierarchical_policy, parse_hierarchy, plan
 from pearl_pomdp.hierarchy.options import DONE, EXIT, with_exit
-from pearl_pomdp.model.factored import parse_domain
+from pearl_pomdp.model.domain_yaml import parse_domain
 from pearl_pomdp.model.pomdp import Pomdp
 
 PROBE_DOMAIN = """
@@ -215,7 +215,7 @@ def test_an_exact_solve_that_cannot_finish_falls_back_to_point_based_without_los
     from pathlib import Path
 
     from pearl_pomdp.hierarchy import flat_hierarchy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(Path(__file__).resolve().parents[1] / "config/table4.domain.yaml")
     exact_first = plan(domain, flat_hierarchy(list(domain.actions), solver="incprune", time_limit=2.0, horizon=None))
@@ -357,7 +357,7 @@ def test_pearl_answers_a_question_it_is_sure_of_while_the_walk_is_still_uncertai
     the group's offers passed up the root sees TellTime too and answers first."""
     from pathlib import Path
 
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(Path(__file__).resolve().parents[1] / "config/pearl.domain.yaml")
     hp = load_hierarchical_policy(pearl_policy, domain)

@@ -207,7 +207,7 @@ def test_hierarchical_policy_save_killed_at_each_rename(tmp_path):
 
     from pearl_pomdp.hierarchy import load_hierarchical_policy, plan
     from pearl_pomdp.hierarchy.spec import flat_hierarchy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(REPO / "config" / "table4.domain.yaml")
     old = plan(domain, flat_hierarchy(domain.actions, solver="qmdp"))

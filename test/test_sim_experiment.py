@@ -3,7 +3,7 @@ from pathlib import Path
 
 import pytest
 
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_pomdp.speech import KeywordFilter
 from pearl_sim.agents import ScriptedAgent
 from pearl_sim.experiment import mean_ci, proportion_ci, run_episode, with_word_error_rate

@@ -238,8 +238,8 @@ class HierarchicalPolicy:
         if got is not None:
             return got
         sub = self.subtasks[name]
-        best, second = self._rank(sub.one_step.q(bh), self._to_model[name],
-                                  [(self._index[c], (k,)) for k, c in enumerate(sub.actions) if self._index[c] not in banned])
+        offers = [(self._index[c], (k,)) for k, c in enumerate(sub.actions) if self._index[c] not in banned]
+        best, second = self._rank(sub.one_step.q(bh), self._to_model[name], offers)
         if not banned:
             self._remember(key, best, second)
         return best

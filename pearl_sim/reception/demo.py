@@ -97,7 +97,7 @@ def run_reception_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path,
     from pearl_pomdp.hierarchy import load_hierarchical_policy
     from pearl_pomdp.hierarchy.plan import plan
     from pearl_pomdp.hierarchy.spec import load_hierarchy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.nodes.graph import PearlGraph
