@@ -237,7 +237,8 @@ def test_hierarchical_policy_save_killed_at_each_rename(tmp_path):
 
 
 def test_write_pomdp_killed_before_rename_leaves_old_file(tmp_path, tiger):
-    from pearl_pomdp.model.pomdp_format import read_pomdp, write_pomdp
+    from pearl_pomdp.model.pomdp_format import read_pomdp
+    from pearl_pomdp.model.pomdp_writer import write_pomdp
 
     path = tmp_path / "m.pomdp"
     write_pomdp(tiger, path)
