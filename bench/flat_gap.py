@@ -171,7 +171,7 @@ def main() -> int:
                        "share": round(args.refine_share, 3), "depth": args.refine_depth,
                        "backups": refine["backups"], "sweeps": refine["sweeps"],
                        "seconds": round(refine["seconds"], 2), "rounds": refine["rounds"]},
-                   "vectors": solver.K, "ub_points": solver.pt_n, "nodes": len(solver.nodes),
+                   "vectors": solver.K, "ub_points": solver.bound.pt_n, "nodes": len(solver.nodes),
                    "history": [[round(t, 1), round(a, 4), round(b, 4)] for t, a, b in solver.history[::10]]},
         "initial_upper_bounds": {"fib": round(float(fib.value_at_start), 4), "qmdp": round(float(qmdp.value_at_start), 4)},
         "policies": {name: rounded(r) for name, r in evals.items()},
