@@ -51,7 +51,7 @@ def ensure_policy(replan: bool) -> None:
     if (PEARL / "policy").is_dir() and not replan:
         return
     from pearl_pomdp.hierarchy import load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     PEARL.mkdir(parents=True, exist_ok=True)
     shutil.copy(REPO / "config" / "pearl.domain.yaml", PEARL / "domain.yaml")

@@ -41,7 +41,7 @@ def mean_ci(xs):
 
 
 def main() -> int:
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.experiment import build_agents, run_episode
     from pearl_sim.nursing_home.scenario import load_scenarios
 

@@ -46,7 +46,7 @@ def main() -> int:
     import numpy as np
 
     from pearl_pomdp.hierarchy import load_hierarchical_policy, load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.simulate import simulate
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

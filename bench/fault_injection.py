@@ -51,7 +51,7 @@ FINISHED = re.compile(r"pearl_sim_world: finished \S+: (\{.*\})")
 def _policy(tmp: Path) -> Path:
     """A planned Pearl policy (planned once, ~5 s)."""
     from pearl_pomdp.hierarchy import load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(REPO / "config" / "pearl.domain.yaml")
     out = tmp / "policy"

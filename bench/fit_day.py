@@ -30,7 +30,7 @@ HEADER = ("# Pearl's domain fitted on WORKING DAYS (docs/day.md): written by ben
 
 def main() -> int:
     from pearl_pomdp.fit import fit_domain, load_episodes, write_fitted
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.day_study import day_agents, day_cases, run_days
     from pearl_sim.nursing_home.residents import generate_residents
 

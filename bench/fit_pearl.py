@@ -37,7 +37,7 @@ PAPER_NOISE = 0.25
 def main() -> int:
     from pearl_pomdp.fit import fit_domain, load_episodes, write_fitted
     from pearl_pomdp.hierarchy import load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.agents import Controller
     from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree
     from pearl_sim.nursing_home.episodes import record_episodes

@@ -125,7 +125,7 @@ def main() -> int:
     from pearl_pomdp.evaluation import evaluate_policies
     from pearl_pomdp.policies import LookaheadPolicy
     from pearl_pomdp.hierarchy import load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.solution import AlphaVectorPolicy
     from pearl_pomdp.solvers.mdp import solve_fib, solve_qmdp
 
@@ -171,7 +171,7 @@ def main() -> int:
                        "share": round(args.refine_share, 3), "depth": args.refine_depth,
                        "backups": refine["backups"], "sweeps": refine["sweeps"],
                        "seconds": round(refine["seconds"], 2), "rounds": refine["rounds"]},
-                   "vectors": solver.K, "ub_points": solver.pt_n, "nodes": len(solver.nodes),
+                   "vectors": solver.K, "ub_points": solver.bound.pt_n, "nodes": len(solver.nodes),
                    "history": [[round(t, 1), round(a, 4), round(b, 4)] for t, a, b in solver.history[::10]]},
         "initial_upper_bounds": {"fib": round(float(fib.value_at_start), 4), "qmdp": round(float(qmdp.value_at_start), 4)},
         "policies": {name: rounded(r) for name, r in evals.items()},

@@ -37,11 +37,11 @@ def lp_upper_at_b0(s) -> dict:
     import scipy.sparse as sp
     from scipy.optimize import linprog
 
-    n = s.pt_n
-    rows = np.repeat(np.arange(n), s.pt_len[:n])
-    ent = s._entries(np.arange(n))
-    P = sp.csr_matrix((s.ent_val[ent], (rows, s.ent_idx[ent])), shape=(n, s.S))
-    delta = s.pt_delta[:n].copy()
+    n = s.bound.pt_n
+    rows = np.repeat(np.arange(n), s.bound.pt_len[:n])
+    ent = s.bound.entries(np.arange(n))
+    P = sp.csr_matrix((s.bound.ent_val[ent], (rows, s.bound.ent_idx[ent])), shape=(n, s.S))
+    delta = s.bound.pt_delta[:n].copy()
     root = s.root
     U, C, live = s._successors(root)
     before = root.Rb + s.g * (root.p * root.ub_c).sum(axis=1)
@@ -61,7 +61,7 @@ def lp_upper_at_b0(s) -> dict:
                       bounds=(0, None), method="highs")
         if res.status == 0:
             a, o = divmod(int(f), s.Z)
-            ub_lp[a, o] = min(ub_lp[a, o], float(b @ s.Vc) + float(res.fun))
+            ub_lp[a, o] = min(ub_lp[a, o], float(b @ s.bound.Vc) + float(res.fun))
     after = root.Rb + s.g * (root.p * ub_lp).sum(axis=1)
     top = np.argsort(-before)[:5]
     return {"ub_sawtooth": round(float(before.max()), 5), "ub_lp": round(float(after.max()), 5),
@@ -81,7 +81,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
 
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.solvers.mdp import solve_qmdp
     from pearl_pomdp.solvers.point_based import PointBasedSolver
     from pearl_pomdp.solvers.refine import policy_paths, refine_along_paths
@@ -95,7 +95,7 @@ def main() -> int:
     lb0, ub0 = solver.bounds_at_start()
     out = {"bench": "flat_ub_probes", "model": model.name, "setup_seconds": round(setup, 2),
            "start": {"seconds": round(time.perf_counter() - t0, 1), "trials": solver.trials,
-                     "lb": round(lb0, 5), "ub": round(ub0, 5), "ub_points": solver.pt_n}}
+                     "lb": round(lb0, 5), "ub": round(ub0, 5), "ub_points": solver.bound.pt_n}}
     out["lp_at_b0"] = lp_upper_at_b0(solver)
 
     seqs = policy_paths(model, solve_qmdp(model).policy, args.episodes, args.depth, seed=args.seed)

@@ -34,7 +34,7 @@ from pearl_pomdp.errors import PearlError  # noqa: E402
 def _targets(tmp: Path):
     from pearl_pomdp.bags.reader import BagReader
     from pearl_pomdp.hierarchy.spec import parse_hierarchy
-    from pearl_pomdp.model.factored import load_domain, parse_domain
+    from pearl_pomdp.model.domain_yaml import load_domain, parse_domain
     from pearl_pomdp.model.pomdp_format import parse_pomdp
     from pearl_pomdp.model.pomdpx import format_pomdpx, parse_pomdpx
     from pearl_pomdp.policy_io import load_policy, save_policy

@@ -45,7 +45,7 @@ def main() -> int:
     args = ap.parse_args()
 
     from pearl_pomdp.hierarchy import load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.simulate import simulate
     from pearl_pomdp.solvers.mdp import most_likely_state_policy, solve_qmdp
     from pearl_pomdp.solvers.point_based import solve_point_based

@@ -35,7 +35,7 @@ def main() -> int:
     from flat_gap import flat_bounds
     from pearl_pomdp.evaluation import evaluate_policies
     from pearl_pomdp.hierarchy import load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.solution import AlphaVectorPolicy
     from pearl_pomdp.solvers.mdp import solve_qmdp
 

@@ -132,7 +132,7 @@ def run_inprocess(policy_dir, steps, warmup):
     import rclpy
 
     from pearl_pomdp.hierarchy import load_hierarchical_policy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.nodes.graph import PearlGraph
 
     domain = load_domain(REPO / "config" / "pearl.domain.yaml")

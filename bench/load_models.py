@@ -25,7 +25,8 @@ import scipy.sparse as sp
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from pearl_pomdp.model.pomdp_format import read_pomdp, write_pomdp  # noqa: E402
+from pearl_pomdp.model.pomdp_format import read_pomdp  # noqa: E402
+from pearl_pomdp.model.pomdp_writer import write_pomdp  # noqa: E402
 from pearl_pomdp.model.pomdpx import read_pomdpx, write_pomdpx  # noqa: E402
 
 sys.path.insert(0, str(REPO / "bench"))

@@ -34,7 +34,7 @@ MODELS = ["config/ward.domain.yaml", "config/pearl.domain.yaml", "RockSample_7_8
 
 
 def load(name: str):
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.model.pomdp_format import read_pomdp
 
     if name.endswith(".yaml"):

@@ -33,7 +33,7 @@ def main() -> int:
     args = ap.parse_args()
 
     from pearl_pomdp.hierarchy import load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.scenario import load_scenarios
 
     domain = load_domain(DOMAIN)

@@ -36,7 +36,10 @@ try:
 except ImportError:  # a tree from before the policies package
     from pearl_pomdp.executive import FlatPolicyDecider
 from pearl_pomdp.hierarchy import load_hierarchical_policy
-from pearl_pomdp.model.factored import load_domain
+try:
+    from pearl_pomdp.model.domain_yaml import load_domain
+except ImportError:  # a tree from before the domain YAML reader had its own module
+    from pearl_pomdp.model.factored import load_domain
 from pearl_pomdp.solvers.registry import solve
 try:
     from pearl_sim.nursing_home.agents import Controller

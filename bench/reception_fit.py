@@ -24,7 +24,7 @@ sys.path.insert(0, str(REPO))
 
 def main() -> int:
     from pearl_pomdp.fit import fit_domain, load_episodes, write_fitted
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.reception.scenario import load_reception_scenarios
     from pearl_sim.reception.study import reception_agents, run_reception_episode
 

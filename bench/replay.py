@@ -35,7 +35,7 @@ def build_long_bag(src: Path, out: Path, steps: int, clock_hz: float) -> int:
     from pearl_pomdp.bags import well_known as wk
     from pearl_pomdp.bags.reader import BagReader
     from pearl_pomdp.bags.writer import BagWriter
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from rclpy.serialization import serialize_message
     from rosgraph_msgs.msg import Clock
 

@@ -35,7 +35,7 @@ def main() -> int:
     args = parser.parse_args()
 
     from pearl_pomdp.hierarchy import load_hierarchical_policy, load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.agents import Controller
     from pearl_sim.nursing_home.experiment import run_episode
     from pearl_sim.nursing_home.scenario import load_scenarios

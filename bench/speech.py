@@ -142,7 +142,7 @@ def main(argv=None) -> int:
     from pearl_pomdp.asr.recognizer import Recognizer
     from pearl_pomdp.asr.synthesizer import synthesize
     from pearl_sim.cli.calibrate_speech import resident_utterances
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.speech import KeywordFilter
 
     domain = load_domain(args.domain)

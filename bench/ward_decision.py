@@ -72,7 +72,7 @@ def main() -> int:
     import numpy as np
 
     from pearl_pomdp.belief import BeliefFilter
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.online.decider import default_bounds
     from pearl_pomdp.online.generative import sample_step
 

@@ -39,7 +39,7 @@ def main() -> int:
     import numpy as np
 
     from pearl_pomdp.hierarchy import load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.planning import Controller
     from pearl_sim.ward.scenario import load_ward_scenarios
     from pearl_sim.ward.study import run_ward_episode

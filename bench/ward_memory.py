@@ -66,7 +66,7 @@ def main() -> int:
 
     import numpy as np
 
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.ward.study import run_ward_episode, ward_agents
 
     global _NO_BELIEF

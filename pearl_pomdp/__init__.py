@@ -27,11 +27,11 @@ if TYPE_CHECKING:  # pragma: no cover - the names resolve on first use (below)
     from pearl_pomdp.hierarchy import load_hierarchy, plan
     from pearl_pomdp.interfaces import Decision
     from pearl_pomdp.model import load_model
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.solvers.registry import solve
 
 #: Each exported name's module.
-_HOMES = {"load_model": "pearl_pomdp.model", "load_domain": "pearl_pomdp.model.factored",
+_HOMES = {"load_model": "pearl_pomdp.model", "load_domain": "pearl_pomdp.model.domain_yaml",
           "load_hierarchy": "pearl_pomdp.hierarchy", "solve": "pearl_pomdp.solvers.registry",
           "plan": "pearl_pomdp.hierarchy", "load_decider": "pearl_pomdp.deciders",
           "BeliefFilter": "pearl_pomdp.belief", "Decision": "pearl_pomdp.interfaces"}

@@ -38,7 +38,7 @@ import numpy as np
 from pearl_pomdp.belief import BeliefFilter
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.simulate import RowSampler, batched_actions
+from pearl_pomdp.simulate import EpisodeSampler, batched_actions
 
 __all__ = ["evaluate_policies", "steps_for_truncation", "feature_controls"]
 
@@ -83,13 +83,12 @@ def _run(model: Pomdp, policy, N: int, steps: int, seed: int, controls: np.ndarr
     """One policy over ``N`` episodes: the returns ``[N]`` and control sums ``[N, k]``.
     The random draws are :func:`~pearl_pomdp.simulate.simulate`'s, in the same order."""
     rng = np.random.default_rng(seed)
-    S, A, Z = model.num_states, model.num_actions, model.num_observations
+    A = model.num_actions
     filt = BeliefFilter(model)
-    trans = [RowSampler(Ta) for Ta in model.T]
-    obs_cum = np.cumsum(model.O, axis=2)
+    sampler = EpisodeSampler(model)
     choose = batched_actions(policy)
-    b0 = np.asarray(model.b0, dtype=float)
-    states = np.clip(np.searchsorted(np.cumsum(b0), rng.random(N) * b0.sum(), side="right"), 0, S - 1).astype(np.int64)
+    b0 = sampler.b0
+    states = sampler.start(rng.random(N))
     beliefs = np.tile(b0, (N, 1))
     returns = np.zeros(N)
     D = controls[states] - (b0 / b0.sum()) @ controls
@@ -102,13 +101,8 @@ def _run(model: Pomdp, policy, N: int, steps: int, seed: int, controls: np.ndarr
             raise PearlError(f"policy {type(policy).__name__} returned an action outside 0..{A - 1}")
         returns += weight * R[states, actions]
         u_state, u_obs = rng.random(N), rng.random(N)
-        nxt = np.empty_like(states)
-        for a in np.unique(actions):
-            rows = np.flatnonzero(actions == a)
-            nxt[rows] = trans[a].sample(states[rows], u_state[rows])
+        nxt, obs = sampler.step(states, actions, u_state, u_obs)
         D += (weight * g) * (controls[nxt] - TV[actions, states])
-        cum = obs_cum[actions, nxt]
-        obs = np.minimum((cum <= (u_obs * cum[:, -1])[:, None]).sum(axis=1), Z - 1)
         beliefs = filt.update_batch(beliefs, actions, obs)
         states = nxt
         weight *= g

@@ -143,7 +143,7 @@ def write_speech_fitted(domain_path: Union[str, Path], table, snr: float, out: U
     """
     from pearl_pomdp.atomic import atomic_write
     from pearl_pomdp.fit import FITTED_MARKER
-    from pearl_pomdp.model.factored import load_domain, parse_domain
+    from pearl_pomdp.model.domain_yaml import load_domain, parse_domain
 
     domain = load_domain(domain_path)
     rows = speech_rows(domain, table, snr, prior_strength, chatter_share)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Optional
+from typing import Optional, Tuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -25,7 +25,7 @@ from pearl_pomdp.belief import BeliefFilter
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.model.pomdp import Pomdp
 
-__all__ = ["simulate", "default_steps", "RowSampler", "batched_actions"]
+__all__ = ["simulate", "default_steps", "RowSampler", "EpisodeSampler", "batched_actions"]
 
 #: Default truncation: stop when γ^T falls below this (the rest of the return is then at
 #: most this fraction of max|R| / (1 − γ)).
@@ -59,6 +59,32 @@ class RowSampler:
         # picked because side="right" skips entries whose cumulative sum equals the target.
         k = np.clip(k, self.indptr[rows], self.indptr[rows + 1] - 1)
         return self.indices[k]
+
+
+class EpisodeSampler:
+    """``N`` episodes of ``model`` at once: start states from ``b0``, next states from ``T``,
+    observations from ``O``, each from uniforms the caller draws (so every user of it — the
+    simulator, the evaluation, the planners' sample paths — makes the same draws in one order)."""
+
+    def __init__(self, model: Pomdp) -> None:
+        self.trans = [RowSampler(Ta) for Ta in model.T]
+        self.obs_cum = np.cumsum(model.O, axis=2)  # [A, S, Z]
+        self.b0 = np.asarray(model.b0, dtype=float)
+
+    def start(self, u: np.ndarray) -> np.ndarray:
+        """``[N]`` start states for the uniforms ``u [N]``."""
+        b0 = self.b0
+        return np.clip(np.searchsorted(np.cumsum(b0), u * b0.sum(), side="right"), 0, b0.shape[0] - 1).astype(np.int64)
+
+    def step(self, states: np.ndarray, actions: np.ndarray, u_state: np.ndarray,
+             u_obs: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """``(next states [N], observations [N])`` after ``actions`` in ``states``, for the uniforms given."""
+        nxt = np.empty_like(states)
+        for a in np.unique(actions):
+            rows = np.flatnonzero(actions == a)
+            nxt[rows] = self.trans[a].sample(states[rows], u_state[rows])
+        cum = self.obs_cum[actions, nxt]  # [N, Z]
+        return nxt, np.minimum((cum <= (u_obs * cum[:, -1])[:, None]).sum(axis=1), cum.shape[1] - 1)
 
 
 def batched_actions(policy):
@@ -101,18 +127,13 @@ def simulate(model: Pomdp, policy, episodes: int = 1000, steps: Optional[int] = 
         raise ValueError(f"steps must be ≥ 1, got {steps}")
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
-    S, A = model.num_states, model.num_actions
+    A = model.num_actions
     N = int(episodes)
     filt = BeliefFilter(model)
-    trans = [RowSampler(Ta) for Ta in model.T]
-    obs_cum = np.cumsum(model.O, axis=2)  # [A, S, Z]
-    Z = model.num_observations
+    sampler = EpisodeSampler(model)
     choose = batched_actions(policy)
-
-    b0 = np.asarray(model.b0, dtype=float)
-    start = np.clip(np.searchsorted(np.cumsum(b0), rng.random(N) * b0.sum(), side="right"), 0, S - 1)
-    states = start.astype(np.int64)
-    beliefs = np.tile(b0, (N, 1))
+    states = sampler.start(rng.random(N))
+    beliefs = np.tile(sampler.b0, (N, 1))
     returns = np.zeros(N)
     weight = 1.0
 
@@ -130,12 +151,7 @@ def simulate(model: Pomdp, policy, episodes: int = 1000, steps: Optional[int] = 
                                  f"the model has actions 0..{A - 1}")
             returns += weight * model.R[states, actions]
             u_state, u_obs = rng.random(N), rng.random(N)
-            nxt = np.empty_like(states)
-            for a in np.unique(actions):
-                rows = np.flatnonzero(actions == a)
-                nxt[rows] = trans[a].sample(states[rows], u_state[rows])
-            cum = obs_cum[actions, nxt]  # [N, Z]
-            obs = np.minimum((cum <= (u_obs * cum[:, -1])[:, None]).sum(axis=1), Z - 1)
+            nxt, obs = sampler.step(states, actions, u_state, u_obs)
             beliefs = filt.update_batch(beliefs, actions, obs)
             states = nxt
             weight *= model.discount

@@ -112,7 +112,7 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
 
     from pearl_pomdp.bags.writer import BagWriter
     from pearl_pomdp.deciders import load_decider
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.nodes.graph import PearlGraph

@@ -100,7 +100,7 @@ def run_world_experiment(args: argparse.Namespace, files: "SimWorld", world: Wor
     from pearl_pomdp.cli._progress import show_progress
     from pearl_pomdp.cli.plan import resolve_hierarchy_path
     from pearl_pomdp.errors import SpecError
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     study = world.study
     name = files.name
     if args.snr is not None:

@@ -107,8 +107,8 @@ def worlds() -> Dict[str, SimWorld]:
 
 
 def domain_name_of(domain_path: Union[str, Path]) -> str:
-    """The ``name:`` of a domain file (as :func:`pearl_pomdp.model.factored.load_domain` reads it)."""
-    from pearl_pomdp.model.factored import load_domain
+    """The ``name:`` of a domain file (as :func:`pearl_pomdp.model.domain_yaml.load_domain` reads it)."""
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     return load_domain(domain_path).name
 

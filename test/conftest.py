@@ -49,7 +49,7 @@ def ward_domain():
     """``config/ward.domain.yaml`` loaded once for the session. Its ``compile()`` is cached on it, so the
     tests that need the flat ward (233,280 states: ~7 s and ~0.5 GB to compile) share one compilation.
     Nothing may change it: the tests read the model and build their own objects from it."""
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     return load_domain(Path(__file__).resolve().parents[1] / "config" / "ward.domain.yaml")
 

@@ -329,7 +329,7 @@ def day_policy(request, tmp_path_factory) -> Path:
 def _planned_policy(request, tmp_path_factory, domain_path: Path, candidates) -> Path:
     import hashlib
 
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(domain_path)
     for candidate in candidates:

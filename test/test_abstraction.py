@@ -21,7 +21,7 @@ import pytest
 from pearl_pomdp.hierarchy import load_hierarchy, parse_hierarchy
 from pearl_pomdp.hierarchy.abstraction import abstract_subtask
 from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_pomdp.solvers.incremental_pruning import solve_incremental_pruning
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
@@ -132,7 +132,7 @@ def test_inform_keeps_only_user_info_goal_exact_to_horizon_3(pearl):
 def test_check_adds_observed_features_the_seed_missed():
     """A feature only the observations read (not reward, not transition) must join X+,
     or the abstract value would differ on correlated beliefs."""
-    from pearl_pomdp.model.factored import parse_domain
+    from pearl_pomdp.model.domain_yaml import parse_domain
 
     text = """
 name: probe

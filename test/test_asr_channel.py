@@ -11,7 +11,7 @@ import espeakng_loader  # noqa: F401  (a missing install fails, it is not skippe
 
 from pearl_pomdp.asr.channel import ChannelError, ChannelTable, MeasuredChannel, calibrate  # noqa: E402
 from pearl_pomdp.asr.recognizer import Recognizer  # noqa: E402
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 from pearl_pomdp.speech import KeywordFilter  # noqa: E402
 
 from ros_helpers import DOMAIN  # noqa: E402
@@ -122,7 +122,7 @@ def test_fitted_domain_loads_and_moves_speech_rows_only(measured, tmp_path):
     import yaml
 
     from pearl_pomdp.asr.channel import fit_observation_rows
-    from pearl_pomdp.model.factored import parse_domain
+    from pearl_pomdp.model.domain_yaml import parse_domain
 
     table = measured[0]
     designer = load_domain(DOMAIN).compile()

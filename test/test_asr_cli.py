@@ -55,7 +55,7 @@ def test_calibrate_speech_writes_the_channel(tmp_path):
     assert summary["trials"] == 2 and summary["accuracy"]["30"] == 1.0
     table = json.loads((tmp_path / "ch.json").read_text())
     assert table["cells"]["30"]["time"]["counts"] == {"time": 1}
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     assert summary["observation_table"]["snr_db"] == 30.0
     assert load_domain(tmp_path / "fitted.yaml").compile().num_observations == 20   # 18 + navFailed, userLost

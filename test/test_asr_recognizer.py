@@ -16,7 +16,7 @@ from pearl_pomdp.asr.audio import AudioError, mix_at_snr  # noqa: E402
 from pearl_pomdp.asr.grammar import CHATTER, build_language_model, filler_sentences  # noqa: E402
 from pearl_pomdp.asr.recognizer import Recognizer, UtteranceSegmenter, UtteranceTooLong  # noqa: E402
 from pearl_pomdp.asr.synthesizer import synthesize  # noqa: E402
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 from pearl_pomdp.speech import KeywordFilter  # noqa: E402
 
 from ros_helpers import DOMAIN  # noqa: E402

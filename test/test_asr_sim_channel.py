@@ -9,7 +9,7 @@ import espeakng_loader  # noqa: F401  (a missing install fails, it is not skippe
 
 from pearl_pomdp.asr.channel import ChannelTable  # noqa: E402
 from pearl_pomdp.errors import SpecError  # noqa: E402
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 from pearl_pomdp.speech import KeywordFilter  # noqa: E402
 from pearl_sim.speech_channel import Heard, make_speech_channel  # noqa: E402
 

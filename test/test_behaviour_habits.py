@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from pearl_pomdp.hierarchy import load_hierarchical_policy
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_sim.nursing_home.agents import Controller
 from pearl_sim.nursing_home.experiment import run_episode
 from pearl_sim.nursing_home.scenario import load_scenarios

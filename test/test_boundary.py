@@ -65,7 +65,7 @@ def test_the_core_never_imports_the_simulator():
 
 def test_no_pearl_action_name_in_the_ros_layer():
     """Which actions drive, speak or clarify comes from the domain and the params file, not from node code."""
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     actions = load_domain(REPO / "config" / "pearl.domain.yaml").actions
     hits = []

@@ -15,7 +15,7 @@ from ros_helpers import (DISCOVERY_TIMEOUT, DOMAIN, Probe, Proc, allocate_domain
 pytestmark = [pytest.mark.ros]
 import rclpy
 
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.common import INPUT_QOS, LATCHED_QOS  # noqa: E402
 from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree  # noqa: E402

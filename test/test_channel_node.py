@@ -18,7 +18,7 @@ import rclpy  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import BatteryState  # noqa: E402
 
-from pearl_pomdp.model.factored import parse_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import parse_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.belief_tracker import BeliefTrackerNode  # noqa: E402
 from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS, NodeSetupError  # noqa: E402

@@ -10,7 +10,7 @@ import pytest
 
 from pearl_pomdp.channels import NumberDiscretiser
 from pearl_pomdp.errors import SpecError
-from pearl_pomdp.model.factored import load_domain, parse_domain
+from pearl_pomdp.model.domain_yaml import load_domain, parse_domain
 from pearl_pomdp.tracking import BeliefTracker, StepSettings
 
 REPO = Path(__file__).resolve().parents[1]
@@ -206,7 +206,8 @@ def test_pearl_defaults_live_in_pearls_files_not_in_the_code():
         ("", "", "", "")
     assert (pearl.nav_failed_observation, pearl.place_feature, pearl.drive_category) == \
         ("navFailed", "RobotLocation", "Move")
-    source = "".join((REPO / "pearl_pomdp" / name).read_text() for name in ("tracking.py", "channels.py"))
+    source = "".join(path.read_text() for path in [*(REPO / "pearl_pomdp" / "tracking").glob("*.py"),
+                                                     REPO / "pearl_pomdp" / "channels.py"])
     for pearl_name in ('"navFailed"', '"RobotLocation"', '"Move"', '"touchscreen"', '"laser"', '"reminder"'):
         assert pearl_name not in source, pearl_name
     # Drive deadlines without the domain's names are an error naming the parameter.

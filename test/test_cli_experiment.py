@@ -44,7 +44,7 @@ def test_experiment_json_reports_policies_pairs_and_files(tmp_path, capsys):
 
 
 def _pearl_actions():
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     return load_domain(Path(__file__).resolve().parents[1] / "config" / "pearl.domain.yaml").actions
 

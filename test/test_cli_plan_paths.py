@@ -146,7 +146,7 @@ def test_pearl_hierarchy_png_is_screen_sized(tmp_path, pearl_policy, capsys):
 def test_layout_gives_every_primitive_its_own_row():
     from pearl_pomdp.cli.hierarchy import layout
     from pearl_pomdp.hierarchy import load_hierarchy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(REPO / "config" / "pearl.domain.yaml")
     hierarchy = load_hierarchy(REPO / "config" / "pearl.hierarchy.yaml", domain)

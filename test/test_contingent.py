@@ -19,7 +19,7 @@ import pytest
 
 from pearl_pomdp.hierarchy import load_hierarchical_policy, parse_hierarchy, plan
 from pearl_pomdp.hierarchy.options import DONE, EXIT, with_exit
-from pearl_pomdp.model.factored import parse_domain
+from pearl_pomdp.model.domain_yaml import parse_domain
 from pearl_pomdp.model.pomdp import Pomdp
 
 PROBE_DOMAIN = """
@@ -152,7 +152,7 @@ def test_trace_values_are_one_step_values_of_the_offers(probe):
 
     offer = hp.execute(np.where(np.arange(model.num_states) >= 0, b, 0)).trace
     values = hp.values(b)
-    child_offer = hp.subtasks["Do"].actions[hp._pick("Do", b, {})[1]]
+    child_offer = hp.subtasks["Do"].actions[hp.pick("Do", b, {})[1]]
     assert values["Top"] == pytest.approx(max(q("Ask"), q(child_offer)), abs=1e-12)
     assert offer[0].value == pytest.approx(values["Top"], abs=1e-12)
 
@@ -215,7 +215,7 @@ def test_an_exact_solve_that_cannot_finish_falls_back_to_point_based_without_los
     from pathlib import Path
 
     from pearl_pomdp.hierarchy import flat_hierarchy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(Path(__file__).resolve().parents[1] / "config/table4.domain.yaml")
     exact_first = plan(domain, flat_hierarchy(list(domain.actions), solver="incprune", time_limit=2.0, horizon=None))
@@ -249,7 +249,7 @@ def test_deeper_search_counts_its_expansions_within_the_budget(probe):
         bh = top.project(bf)[0]
         best = -np.inf
         for k, child in enumerate(top.actions):
-            prim = deep._pick(child, bf, {})[0] if top.abstract[k] else deep._index[child]
+            prim = deep.pick(child, bf, {})[0] if top.abstract[k] else deep._index[child]
             a = top.model_actions.index(deep.action_names[prim])
             pred = np.asarray(la._Tt[a] @ bh)
             total = float(bh @ la.R[:, a])
@@ -313,7 +313,7 @@ def test_a_group_passes_its_childrens_offers_up_and_the_parent_chooses_by_its_ow
     top, act = hp.subtasks["Top"], hp.subtasks["Act"]
 
     for b in probe_beliefs(model, 5):
-        do_pick = hp.action_names[hp._pick("Do", b, {})[0]]
+        do_pick = hp.action_names[hp.pick("Do", b, {})[0]]
         offers = [(hp.action_names[prim], path) for prim, path in hp.offers(top.actions, b, {})]
         assert offers == [("Ask", (0, 0)), (do_pick, (0, 1))]       # Act's children, not Act's pick
         d = hp.execute(b)
@@ -334,7 +334,7 @@ def test_each_choosing_level_names_its_runner_up_and_the_runner_ups_value(groupe
     model, hp = grouped
     top, do = hp.subtasks["Top"], hp.subtasks["Do"]
     for b in probe_beliefs(model, 8):
-        do_pick = hp.action_names[hp._pick("Do", b, {})[0]]
+        do_pick = hp.action_names[hp.pick("Do", b, {})[0]]
         d = hp.execute(b)
         rival, label = ("Ask", "Act→Ask") if d.action_name != "Ask" else (do_pick, f"Act→Do→{do_pick}")
         assert d.trace[0].runner_up == label
@@ -357,7 +357,7 @@ def test_pearl_answers_a_question_it_is_sure_of_while_the_walk_is_still_uncertai
     the group's offers passed up the root sees TellTime too and answers first."""
     from pathlib import Path
 
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(Path(__file__).resolve().parents[1] / "config/pearl.domain.yaml")
     hp = load_hierarchical_policy(pearl_policy, domain)

@@ -207,7 +207,7 @@ def test_hierarchical_policy_save_killed_at_each_rename(tmp_path):
 
     from pearl_pomdp.hierarchy import load_hierarchical_policy, plan
     from pearl_pomdp.hierarchy.spec import flat_hierarchy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(REPO / "config" / "table4.domain.yaml")
     old = plan(domain, flat_hierarchy(domain.actions, solver="qmdp"))
@@ -237,7 +237,8 @@ def test_hierarchical_policy_save_killed_at_each_rename(tmp_path):
 
 
 def test_write_pomdp_killed_before_rename_leaves_old_file(tmp_path, tiger):
-    from pearl_pomdp.model.pomdp_format import read_pomdp, write_pomdp
+    from pearl_pomdp.model.pomdp_format import read_pomdp
+    from pearl_pomdp.model.pomdp_writer import write_pomdp
 
     path = tmp_path / "m.pomdp"
     write_pomdp(tiger, path)

@@ -34,7 +34,7 @@ def day(tmp_path_factory, day_policy):
 def test_the_nodes_live_the_same_morning_as_the_core(day, day_policy):
     """The graph over DDS and the core executive take the same actions and leave the same checklist."""
     from pearl_pomdp.hierarchy import load_hierarchical_policy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.day_study import DayCase, run_day
     from pearl_sim.planning import Controller
 

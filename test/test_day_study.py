@@ -61,7 +61,7 @@ def test_no_walk_wanted_is_no_miss():
 
 def test_pearl_experiment_day_runs_the_study_and_matches_run_day(tmp_path, capsys):
     from pearl_pomdp.cli import main
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.day_study import day_agents
 
     assert main(["experiment", "--day", "--domain", "config/pearl.domain.yaml", "--policies", "qmdp,day_tree",
@@ -124,7 +124,7 @@ def test_the_day_study_hears_her_through_the_measured_channel_at_each_snr(tmp_pa
 
 
 def test_the_days_picture_is_drawn(tmp_path):
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.day_plot import plot_day
     from pearl_sim.nursing_home.day_study import day_agents
 

@@ -166,7 +166,7 @@ def test_a_question_is_raised_only_when_she_voices_it_to_the_robot():
 def test_the_truth_says_what_she_wants_before_she_says_it_and_when_the_robot_sits_on_its_dock():
     """Amendment 4: her unvoiced question is her UserInfoGoal in the truth the fit counts (the checklist
     still counts only voiced ones); amendment 3: with the day domain, Battery=docked while it charges."""
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.scenario import default_domain
 
     day_domain = load_domain(REPO / "config/pearl_day.domain.yaml")

@@ -82,7 +82,7 @@ def test_demo_bag_replays_to_the_same_actions(demo):
     # Every belief is in the bag from b0 on (b0 is latched with depth 1: a recorder that joined
     # late lost it, one demo in three under load), and the replay computes each of them again.
     from pearl_pomdp.bags.reader import BagReader
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.nodes.bag_replay import recorded_beliefs
 
     b0 = load_domain(REPO / "config" / "pearl.domain.yaml").compile().b0

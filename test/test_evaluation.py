@@ -90,7 +90,7 @@ def test_control_variates_have_zero_mean_and_cut_variance_where_the_state_drives
 def test_feature_controls_follow_the_compiled_state_order():
     from pathlib import Path
 
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(Path(__file__).resolve().parents[1] / "config" / "pearl.domain.yaml")
     model = domain.compile()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pearl_pomdp.errors import SpecError
-from pearl_pomdp.model.factored import load_domain, parse_domain
+from pearl_pomdp.model.domain_yaml import load_domain, parse_domain
 
 # A two-feature domain small enough to compute every entry by hand.
 TINY = textwrap.dedent("""\

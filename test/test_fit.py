@@ -10,7 +10,7 @@ import pytest
 
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.fit import FITTED_MARKER, Episode, fit_domain, load_episodes, simulate_episodes, write_fitted
-from pearl_pomdp.model.factored import load_domain, parse_domain
+from pearl_pomdp.model.domain_yaml import load_domain, parse_domain
 
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = REPO / "config" / "pearl.domain.yaml"

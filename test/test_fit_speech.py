@@ -7,7 +7,7 @@ import pytest
 from pearl_pomdp.asr.channel import ChannelTable
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.fit_speech import speech_rows, write_speech_fitted
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 
 DOMAIN = "config/pearl.domain.yaml"
 SYMBOLS = ["time", "weather", "go", "no", "yes", "unknown"]

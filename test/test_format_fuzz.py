@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 
 from pearl_pomdp.errors import ModelFormatError
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.model.pomdp_format import RESERVED_WORDS, format_pomdp, parse_pomdp
+from pearl_pomdp.model.pomdp_format import RESERVED_WORDS, parse_pomdp
+from pearl_pomdp.model.pomdp_writer import format_pomdp
 from pearl_pomdp.model.pomdpx import format_pomdpx, parse_pomdpx
 
 FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])

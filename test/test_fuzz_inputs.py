@@ -137,13 +137,13 @@ SCENARIO_FILES = sorted(p.name for p in (CONFIG / "scenarios").glob("*.yaml"))
 
 @pytest.fixture(scope="module")
 def pearl_domain():
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     return load_domain(CONFIG / "pearl.domain.yaml")
 
 
 def _parse_domain(text, source):
-    from pearl_pomdp.model.factored import parse_domain
+    from pearl_pomdp.model.domain_yaml import parse_domain
 
     return parse_domain(text, source=source)
 
@@ -269,7 +269,7 @@ def test_policy_files_corrupted(saved_policy, tmp_path_factory, which, how, pos,
 def test_hierarchical_policy_files_corrupted(tmp_path):
     """A hierarchical policy directory with a truncated/garbage file raises PolicyError."""
     from pearl_pomdp.hierarchy import load_hierarchical_policy, load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(CONFIG / "table4.domain.yaml")
     from pearl_pomdp.hierarchy.spec import flat_hierarchy

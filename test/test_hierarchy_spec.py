@@ -106,7 +106,7 @@ def test_invalid_yaml_names_line():
 
 
 def test_pearl_hierarchy_file_is_valid():
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     config = Path(__file__).resolve().parents[1] / "config"
     domain = load_domain(config / "pearl.domain.yaml")

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pearl_pomdp.journal import FORMAT, Journal, decode_array, default_path, domain_hash, encode_array
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_pomdp.tracking import BeliefTracker, StepSettings
 
 REPO = Path(__file__).resolve().parents[1]

@@ -23,7 +23,7 @@ from lifecycle_msgs.msg import Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.common import INPUT_QOS, LATCHED_QOS  # noqa: E402
 

@@ -14,7 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros_helpers import DOMAIN  # noqa: E402
 
 from pearl_pomdp.errors import SpecError  # noqa: E402
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 from pearl_pomdp.navigation import DriveDeadline, DriveTimer, Place  # noqa: E402
 from pearl_pomdp.params import step_settings  # noqa: E402
 from pearl_pomdp.tracking import BeliefTracker, StepSettings  # noqa: E402
@@ -154,7 +154,7 @@ def test_a_drive_goal_without_a_pose_is_a_named_error(pearl):
 
 
 def test_a_domain_without_navFailed_keeps_drives_untimed_and_says_so():
-    from pearl_pomdp.model.factored import parse_domain
+    from pearl_pomdp.model.domain_yaml import parse_domain
 
     from pearl_pomdp.fit import FITTED_MARKER
 

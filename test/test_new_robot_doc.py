@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from pearl_pomdp.errors import SpecError
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_pomdp.tracking import BeliefTracker, StepSettings
 
 REPO = Path(__file__).resolve().parents[1]

@@ -29,7 +29,7 @@ from ros_helpers import (DISCOVERY_TIMEOUT, DOMAIN, Probe, Proc, allocate_domain
 pytestmark = [pytest.mark.ros]
 import rclpy
 
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.common import EVENT_QOS, INPUT_QOS, LATCHED_QOS  # noqa: E402
 

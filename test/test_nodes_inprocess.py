@@ -234,7 +234,7 @@ def test_pearl_inputs_map_to_modality_symbols(ros_context, pearl_policy):
     """The real Pearl domain: speech through the keyword filter, modality checks on symbol inputs."""
     from pearl_pomdp.belief import BeliefFilter
     from pearl_pomdp.hierarchy import load_hierarchical_policy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from ros_helpers import DOMAIN
 
     context, _ = ros_context

@@ -26,7 +26,7 @@ import rclpy
 
 from pearl_pomdp.belief import BeliefFilter  # noqa: E402
 from pearl_pomdp.hierarchy import load_hierarchical_policy  # noqa: E402
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.common import EVENT_QOS, INPUT_QOS, LATCHED_QOS  # noqa: E402
 

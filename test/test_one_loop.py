@@ -19,7 +19,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros_helpers import DOMAIN, allocate_domain_id, configure_test_process  # noqa: E402
 
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 from pearl_sim.nursing_home.agents import Controller  # noqa: E402
 from pearl_sim.nursing_home.experiment import episode_executive  # noqa: E402
 from pearl_sim.loop import ExecutiveBackend, run_episode  # noqa: E402

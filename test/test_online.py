@@ -461,7 +461,7 @@ def _plain_bounds(model):
 
 
 def _recorded_case(problem, tiger):
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.online.beliefs import sample_belief
 
     if problem == "rs7_8":

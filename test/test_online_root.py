@@ -11,7 +11,7 @@ import pytest
 
 from pearl_pomdp.errors import PolicyError, SpecError
 from pearl_pomdp.hierarchy import load_hierarchical_policy, parse_hierarchy, plan
-from pearl_pomdp.model.factored import parse_domain
+from pearl_pomdp.model.domain_yaml import parse_domain
 from pearl_pomdp.online.despot import DespotSettings
 from test_separable_reward import toy
 

@@ -25,7 +25,7 @@ from std_srvs.srv import SetBool  # noqa: E402
 
 from pearl_pomdp.belief import BeliefFilter  # noqa: E402
 from pearl_pomdp.hierarchy import parse_hierarchy, plan  # noqa: E402
-from pearl_pomdp.model.factored import parse_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import parse_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.common import EVENT_QOS, LATCHED_QOS  # noqa: E402
 from pearl_pomdp.nodes.graph import PearlGraph  # noqa: E402

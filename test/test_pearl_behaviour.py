@@ -13,7 +13,7 @@ import pytest
 
 from pearl_pomdp.executive import Executive
 from pearl_pomdp.hierarchy import load_hierarchical_policy
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_pomdp.speech import KeywordFilter
 
 pytestmark = pytest.mark.slow  # drives the planned policy through many episodes

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 

@@ -195,14 +195,14 @@ def test_settings_object_and_attributes_are_the_same_knobs():
 
 def _sawtooth_brute_force(s: PointBasedSolver, belief: np.ndarray) -> float:
     """HSVI2's sawtooth, read from its definition: min(FIB, b·V_c + min_i λ_i (v_i − b_i·V_c))."""
-    fib = float((belief @ s.Qfib).max())
-    base = float(belief @ s.Vc)
+    fib = float((belief @ s.bound.Qfib).max())
+    base = float(belief @ s.bound.Vc)
     corr = 0.0
-    for i in range(s.pt_n):
-        ent = slice(s.pt_start[i], s.pt_start[i] + s.pt_len[i])
-        sup, bv = s.ent_idx[ent], s.ent_val[ent]
+    for i in range(s.bound.pt_n):
+        ent = slice(s.bound.pt_start[i], s.bound.pt_start[i] + s.bound.pt_len[i])
+        sup, bv = s.bound.ent_idx[ent], s.bound.ent_val[ent]
         lam = float((belief[sup] / bv).min())
-        corr = min(corr, lam * (s.pt_v[i] - float(bv @ s.Vc[sup])))
+        corr = min(corr, lam * (s.bound.pt_v[i] - float(bv @ s.bound.Vc[sup])))
     return min(fib, base + corr)
 
 
@@ -212,7 +212,7 @@ def test_sawtooth_reads_equal_the_definition_full_and_incremental(benchmarks_dir
     m = read(benchmarks_dir / "4x3.95.POMDP")
     s = PointBasedSolver(m, seed=0, fib_time=None)
     s.run(time_limit=1e9, epsilon=1e-9, max_trials=25)
-    assert s.pt_n > 20
+    assert s.bound.pt_n > 20
     rng = np.random.default_rng(1)
     checked = 0
     for node in list(s.nodes.values())[:40]:
@@ -220,7 +220,7 @@ def test_sawtooth_reads_equal_the_definition_full_and_incremental(benchmarks_dir
             continue
         U, C, live = s._successors(node)
         rows = live[rng.permutation(live.size)[:8]]
-        fast = s._upper_batch(U, C[rows])
+        fast = s.bound.batch(U, C[rows])
         for r, value in zip(rows, fast):
             full = np.zeros(s.S)
             full[U] = C[r]
@@ -232,7 +232,7 @@ def test_sawtooth_reads_equal_the_definition_full_and_incremental(benchmarks_dir
         a = int(np.argmax(Qu))
         ub_c = node.ub_c.reshape(-1)
         greedy = live[(live >= a * s.Z) & (live < (a + 1) * s.Z)]
-        assert np.all(ub_c[greedy] <= s._upper_batch(U, C[greedy]) + 1e-9)
+        assert np.all(ub_c[greedy] <= s.bound.batch(U, C[greedy]) + 1e-9)
     assert checked > 100
 
 

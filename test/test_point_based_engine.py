@@ -6,13 +6,15 @@ SARSOP's 1e-3 brackets run on this project's machine for RockSample[4,4] ([17.92
 as test_point_based uses) and 4x3.95 ([1.88988, 1.89085] in 0.59 s, `pomdpsol --precision 0.001`, run for this
 test). Each solve here takes well under a second.
 """
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from pearl_pomdp.model import pomdp_format
-from pearl_pomdp.solvers.point_based import ENGINES, solve_point_based
+from pearl_pomdp.solvers.point_based import (C_ENGINE_SETTINGS, ENGINES, EngineLacksSetting, PointBasedSettings,
+                                             solve_point_based)
 from test_point_based import TIGER_EXACT, check_result, tiger
 
 DATA = Path(__file__).parent / "data" / "pomdp"
@@ -74,8 +76,6 @@ def test_c_engine_is_deterministic():
 
 
 def test_auto_is_c_unless_settings_or_a_trial_budget_ask_for_python():
-    from pearl_pomdp.solvers.point_based import PointBasedSettings
-
     m = tiger()
     assert solve_point_based(m, time_limit=10.0).extra["engine"] == "c"
     assert solve_point_based(m, time_limit=10.0, settings=PointBasedSettings()).extra["engine"] == "python"
@@ -93,3 +93,19 @@ def test_c_engine_rejects_an_undiscounted_model():
     m.discount = 1.0
     with pytest.raises(ValueError, match="discount"):
         solve_point_based(m, time_limit=1.0, engine="c")
+
+
+def test_c_engine_refuses_the_python_engines_knobs_by_name_and_takes_its_own():
+    """The C engine has no Perseus rounds, PBVI sweeps, κ bandit or pruning knobs: asked for one it
+    says which (EngineLacksSetting), instead of solving as if it had not been asked; its own knobs
+    (C_ENGINE_SETTINGS, one κ arm) it takes."""
+    m = tiger()
+    for knobs, named in [({"sweep_ratio": 0.0}, "settings.sweep_ratio"),
+                         ({"max_gamma_entries": 10}, "settings.max_gamma_entries"),
+                         ({"trial_kappa": (0.3, 0.1)}, "settings.trial_kappa")]:
+        with pytest.raises(EngineLacksSetting, match=named):
+            solve_point_based(m, time_limit=1.0, engine="c", settings=PointBasedSettings(**knobs))
+    own = solve_point_based(m, time_limit=None, epsilon=1e-3, engine="c",
+                            settings=PointBasedSettings(trial_kappa=(0.3,), ub_sweep_ratio=1.0, perseus_share=0.5))
+    assert own.extra["engine"] == "c" and own.converged
+    assert set(C_ENGINE_SETTINGS) < {f.name for f in dataclasses.fields(PointBasedSettings)}

@@ -17,7 +17,8 @@ import scipy.sparse as sp
 from pearl_pomdp.errors import ModelFormatError
 from pearl_pomdp.model import load_model
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.model.pomdp_format import format_pomdp, parse_pomdp, read_pomdp, write_pomdp
+from pearl_pomdp.model.pomdp_format import parse_pomdp, read_pomdp
+from pearl_pomdp.model.pomdp_writer import format_pomdp, write_pomdp
 
 # file: (S, A, Z, discount)  — test/data/pomdp/README.md
 EXPECTED = {

@@ -57,7 +57,7 @@ def test_a_silent_greeting_is_a_passer_by_and_a_low_battery_docks_between_visito
 
 
 def test_the_tree_serves_the_one_visitor_episode_through_the_step_loop():
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.reception.scenario import load_reception_scenarios
     from pearl_sim.reception.study import run_reception_episode
 

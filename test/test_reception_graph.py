@@ -22,7 +22,7 @@ import rclpy  # noqa: E402
 
 from pearl_pomdp.belief import BeliefFilter  # noqa: E402
 from pearl_pomdp.hierarchy import load_hierarchical_policy  # noqa: E402
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
 from pearl_pomdp.nodes.channel_messages import qos_profile  # noqa: E402
 from pearl_pomdp.nodes.common import INPUT_QOS, LATCHED_QOS  # noqa: E402

@@ -16,7 +16,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros_helpers import allocate_domain_id, ros_env  # noqa: E402
 
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 DOMAIN = REPO / "config" / "reception.domain.yaml"
@@ -194,7 +194,7 @@ def test_the_demos_bag_replays_by_the_reception_robots_rules(run):
     assert report["actions"][:len(run["demo"]["actions"])] == run["demo"]["actions"]
     # The bag holds b0 itself (latched with depth 1: the demo waits until the recorder has it).
     from pearl_pomdp.bags.reader import BagReader
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.nodes.bag_replay import recorded_beliefs
 
     first = recorded_beliefs(BagReader(run["out"] / "demo" / "bag"))[0]

@@ -195,7 +195,7 @@ def test_broken_bags_are_errors_naming_file_and_problem(tmp_path, capsys):
 @pytest.mark.parametrize("name", ["table4_clarification", "figure4_guidance"])
 def test_explain_says_why_for_every_step(name, tmp_path):
     """--explain: per step the input that closed it, the belief after it and the EXECUTE trace of the answer."""
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     configure_test_process(tmp_path)
     bag = REPO / "bags" / name

@@ -139,7 +139,7 @@ actions:
 
 
 def test_domain_file_reads_only_itself(tmp_path):
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     f = tmp_path / "evil.domain.yaml"
     f.write_text(EVIL_DOMAIN)
@@ -155,7 +155,7 @@ def test_domain_file_reads_only_itself(tmp_path):
 
 def test_hierarchy_and_scenario_files_read_only_themselves(tmp_path):
     from pearl_pomdp.hierarchy.spec import load_hierarchy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.scenario import load_scenarios
 
     domain = load_domain(REPO / "config" / "pearl.domain.yaml")
@@ -174,7 +174,7 @@ def test_hierarchy_and_scenario_files_read_only_themselves(tmp_path):
 def test_shipped_configs_read_only_themselves():
     """The real files load while opening nothing but themselves."""
     from pearl_pomdp.hierarchy.spec import load_hierarchy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.scenario import load_scenarios
 
     d = REPO / "config" / "pearl.domain.yaml"

@@ -19,7 +19,7 @@ from pearl_pomdp.hierarchy import parse_hierarchy, plan
 from pearl_pomdp.hierarchy.abstraction import abstract_subtask, separable_reward_terms
 from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
 from pearl_pomdp.hierarchy.spec import SubtaskSpec
-from pearl_pomdp.model.factored import parse_domain
+from pearl_pomdp.model.domain_yaml import parse_domain
 
 GAMMA = 0.9
 

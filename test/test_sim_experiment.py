@@ -3,7 +3,7 @@ from pathlib import Path
 
 import pytest
 
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_pomdp.speech import KeywordFilter
 from pearl_sim.nursing_home.agents import ScriptedAgent
 from pearl_sim.nursing_home.experiment import proportion_ci, run_episode, t_ci, with_word_error_rate

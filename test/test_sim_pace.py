@@ -11,7 +11,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros_helpers import DOMAIN  # noqa: E402
 
 from pearl_pomdp.guide_pace import GuidePaceConfig  # noqa: E402
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 from pearl_sim.nursing_home.scenario import load_scenarios, parse_scenarios  # noqa: E402
 from pearl_sim.nursing_home.world import World, default_guide_pace  # noqa: E402
 

@@ -151,7 +151,7 @@ def test_world_is_deterministic_for_a_seed():
 def test_resident_speaks_through_the_real_recogniser_channel():
     """speech: {channel: recogniser}: espeak-ng in her voice, noise at the SNR, the domain's pocketsphinx;
     the message carries the recogniser's confidence, which the tracker parses (issue 13)."""
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.speech import parse_speech_message
     from pearl_pomdp.tracking import BeliefTracker, StepSettings
 

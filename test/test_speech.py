@@ -3,7 +3,7 @@ from pathlib import Path
 
 import pytest
 
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_pomdp.speech import KeywordFilter, normalise
 
 PEARL = Path(__file__).resolve().parents[1] / "config" / "pearl.domain.yaml"
@@ -67,7 +67,7 @@ def test_bad_keyword_tables(keywords, problem):
 
 
 def test_from_domain_needs_keywords():
-    from pearl_pomdp.model.factored import parse_domain
+    from pearl_pomdp.model.domain_yaml import parse_domain
 
     d = parse_domain("discount: 0.9\nfeatures: {X: [a]}\nmodalities: {M: [unknown]}\nactions: {A: {}}\n"
                      "observations: {default: {table: {'*': unknown}}}\nrewards: []\n")

@@ -101,7 +101,7 @@ def test_synthesised_speech_reaches_the_tracker_as_keywords(tmp_path, probe_cont
         publish_audio(audio, (rng.standard_normal(24000) * 300).astype(np.int16))         # 1.5 s white noise
         wait_for(lambda: False, 3.0, executor)  # give a wrong keyword time to arrive
         stray = [m.text for m in speech[heard:]]
-        from pearl_pomdp.model.factored import load_domain
+        from pearl_pomdp.model.domain_yaml import load_domain
         from pearl_pomdp.speech import KeywordFilter
 
         kf = KeywordFilter.from_domain(load_domain(DOMAIN))
@@ -177,7 +177,7 @@ def test_synthesizer_speaks_to_the_recognizer(probe_context):
         say.publish(cv.text_to_msg("yes please"))
         # The synthesiser's pause after the sentence closes the utterance for the recogniser's VAD.
         assert wait_for(lambda: len(speech) == 1, 20.0, executor), (rec.counts, synth.counts)
-        from pearl_pomdp.model.factored import load_domain
+        from pearl_pomdp.model.domain_yaml import load_domain
         from pearl_pomdp.speech import KeywordFilter
 
         text = speech[0].text

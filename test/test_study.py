@@ -127,7 +127,7 @@ def test_a_policy_planned_with_measured_speech_rows_tracks_its_belief_in_them(tm
     from pearl_pomdp.asr.channel import ChannelTable
     from pearl_pomdp.cli import main
     from pearl_pomdp.fit_speech import write_speech_fitted
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.agents import Controller
     from pearl_sim.nursing_home.experiment import run_episode
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from pearl_pomdp.belief import BeliefFilter
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_pomdp.solvers.point_based import solve_point_based
 from pearl_pomdp.speech import KeywordFilter
 

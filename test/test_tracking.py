@@ -1,7 +1,7 @@
 """The core BeliefTracker on raw inputs: recogniser confidence, drives from the domain's categories."""
 from pathlib import Path
 
-from pearl_pomdp.model.factored import load_domain
+from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_pomdp.speech import Utterance, speech_message, utterance
 from pearl_pomdp.tracking import BeliefTracker, StepSettings
 

@@ -13,7 +13,7 @@ from test_parameterize import ACTIONS, HIERARCHY, meds_domain  # noqa: E402
 from pearl_pomdp.errors import PolicyError
 from pearl_pomdp.hierarchy import parse_hierarchy, plan
 from pearl_pomdp.interfaces import MaskingDecider
-from pearl_pomdp.model.factored import parse_domain
+from pearl_pomdp.model.domain_yaml import parse_domain
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.policies import FlatPolicyDecider
 from pearl_pomdp.solution import AlphaVectorPolicy

@@ -13,7 +13,7 @@ def _run(tree, observations):
 
 
 def test_the_trees_actions_are_the_ward_domains():
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     assert ACTIONS == list(load_domain("config/ward.domain.yaml").actions)
 

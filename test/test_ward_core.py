@@ -57,7 +57,7 @@ def test_explicit_model_is_the_inverse_cdf_of_each_row_without_copies():
 
 
 def test_create_without_copy_takes_the_arrays_over_and_compile_uses_it():
-    from pearl_pomdp.model.factored import parse_domain
+    from pearl_pomdp.model.domain_yaml import parse_domain
 
     model = _random_sparse_model()
     again = Pomdp.create(model.states, model.actions, model.observations, model.T, model.O, model.R, sparse=True, copy=False)
@@ -114,7 +114,7 @@ def test_planning_refuses_a_subtask_whose_state_pairs_do_not_fit_in_one_line_nam
     import pearl_pomdp.hierarchy.abstraction as abstraction
     from pearl_pomdp.errors import PearlError
     from pearl_pomdp.hierarchy import load_hierarchy, plan
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain("config/reception.domain.yaml")
     hierarchy = load_hierarchy("config/reception.hierarchy.yaml", domain)
@@ -132,7 +132,7 @@ def test_a_large_compiled_model_keeps_O_as_float32_and_the_filter_and_sampler_us
     with the float64 model's to float32 precision. Checked on the reception domain with the limit lowered."""
     import pearl_pomdp.belief as belief
     import pearl_pomdp.model.factored as factored
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     exact = load_domain("config/reception.domain.yaml").compile()
     monkeypatch.setattr(factored, "LARGE_O_ENTRIES", 100)
@@ -160,7 +160,7 @@ def test_ward_hierarchy_has_an_online_root_over_per_resident_subtasks():
     """config/ward.hierarchy.yaml: the root plans online over the three residents' subtasks, the drives
     and Wait; every child is a subtask of primitives (planned offline)."""
     from pearl_pomdp.hierarchy import load_hierarchy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain("config/ward.domain.yaml")
     hierarchy = load_hierarchy("config/ward.hierarchy.yaml", domain)

@@ -12,7 +12,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros_helpers import allocate_domain_id  # noqa: E402
 
-from pearl_pomdp.model.factored import load_domain  # noqa: E402
+from pearl_pomdp.model.domain_yaml import load_domain  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 PEARL = str(Path(sys.executable).parent / "pearl")

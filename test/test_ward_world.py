@@ -69,7 +69,7 @@ def test_a_reminder_reaches_a_resident_only_where_they_are_and_counts_on_time_or
 
 
 def test_the_truth_is_a_state_of_the_ward_domain():
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain("config/ward.domain.yaml")
     assert domain.num_states == 233_280 and len(domain.actions) == 15 and len(domain.observations) == 15

@@ -371,12 +371,12 @@ def fit_observation_rows(domain_path: Union[str, Path], table: ChannelTable, snr
     ``r'(o) = r(o)`` for non-speech symbols and ``r'(o) = Σ_m r(m) Ĉ(o|m)`` for speech symbols,
     with ``Ĉ`` from :func:`fitted_confusion` (a meant symbol the channel did not measure is
     kept as it is). Row sums are unchanged. Returns ``(data, rows changed)``; the data loads
-    with :func:`pearl_pomdp.model.factored.parse_domain` after ``yaml.safe_dump``.
+    with :func:`pearl_pomdp.model.domain_yaml.parse_domain` after ``yaml.safe_dump``.
 
     Raises:
         ChannelError: the channel's symbols are not the domain's Speech symbols.
     """
-    from pearl_pomdp.model.factored import as_number, load_domain
+    from pearl_pomdp.model.domain_yaml import as_number, load_domain
     from pearl_pomdp.yaml_lines import parse_yaml
 
     domain = load_domain(domain_path)

@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     model = load_model(src)
     if suffix == ".pomdp":
-        from pearl_pomdp.model.pomdp_format import write_pomdp as write
+        from pearl_pomdp.model.pomdp_writer import write_pomdp as write
     else:
         from pearl_pomdp.model.pomdpx import write_pomdpx as write
     write(model, out)

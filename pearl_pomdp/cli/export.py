@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     model = load_model(src)
     if fmt == "pomdp":
-        from pearl_pomdp.model.pomdp_format import format_pomdp as render, write_pomdp as write
+        from pearl_pomdp.model.pomdp_writer import format_pomdp as render, write_pomdp as write
     else:
         from pearl_pomdp.model.pomdpx import format_pomdpx as render, write_pomdpx as write
     if out is None:

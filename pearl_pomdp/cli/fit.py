@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.cli._inputs import require_file
     from pearl_pomdp.errors import PearlError
     from pearl_pomdp.fit import fit_domain, load_episodes, write_fitted
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     require_file(args.domain, "domain file (DOMAIN)")
     if Path(args.out).resolve() == Path(args.domain).resolve():

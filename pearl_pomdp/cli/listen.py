@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.asr.audio import AudioError, mix_at_snr, read_wav, write_wav
     from pearl_pomdp.asr.recognizer import Recognizer
     from pearl_pomdp.cli import print_json
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.speech import KeywordFilter
 
     if (args.audio is None) == (args.say is None):

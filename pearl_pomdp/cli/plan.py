@@ -120,7 +120,7 @@ def load_domain_any(path: str):
 
     p = require_file(path, "domain file")
     if p.suffix.lower() in (".yaml", ".yml"):
-        from pearl_pomdp.model.factored import load_domain
+        from pearl_pomdp.model.domain_yaml import load_domain
 
         return load_domain(p)
     from pearl_pomdp.model import load_model

@@ -15,188 +15,25 @@ A subtask with ``lookahead: d`` (hierarchy spec) decides by exact forward search
 (:class:`~pearl_pomdp.policies.lookahead.Lookahead`): its abstract model and horizon-``h`` vectors are kept, and the
 action is the argmax of the exact horizon-``h + d`` Q-values at the current belief.
 
-Persistence (``save`` / :func:`load_hierarchical_policy`): a directory with
-``policy.npz`` (arrays only, loaded with ``allow_pickle=False``) and ``hierarchy.json``
-(structure, sizes, the model fingerprint and the npz's SHA-256), each written to a
-temporary file and renamed into place, the JSON last.
+The subtask policies are :mod:`pearl_pomdp.hierarchy.subtask`'s; saving and loading is
+:mod:`pearl_pomdp.hierarchy.storage`'s directory format.
 """
 from __future__ import annotations
 
-import hashlib
-import io
-import json
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Collection, Dict, FrozenSet, List, Optional, Sequence, Tuple, Union, cast
+from typing import Any, Callable, Collection, Dict, FrozenSet, List, Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
-import scipy.sparse as sp
 
-from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import PolicyError
+from pearl_pomdp.hierarchy.storage import read_policy_dir, write_policy_dir
+from pearl_pomdp.hierarchy.subtask import SubtaskPolicy
 from pearl_pomdp.interfaces import Decision, TraceStep, forbidden_indices
-from pearl_pomdp.jsonable import numpy_to_json
 from pearl_pomdp.model.factored import FactoredDomain
-from pearl_pomdp.policies.lookahead import Lookahead, OneStep
+from pearl_pomdp.policies.lookahead import Lookahead
 
-__all__ = ["SubtaskPolicy", "HierarchicalPolicy", "load_hierarchical_policy", "FORMAT_VERSION"]
-
-FORMAT_VERSION = 1
-NPZ_NAME = "policy.npz"
-JSON_NAME = "hierarchy.json"
-
-
-@dataclass
-class SubtaskPolicy:
-    """The solved local policy of one subtask.
-
-    Attributes:
-        name: the subtask.
-        actions: its action names (children).
-        abstract: per action, whether it is a subtask.
-        alphas: ``[K, S_h]`` α-vectors over the abstract model's states.
-        alpha_actions: ``[K]`` index into ``actions`` of each vector.
-        state_to_model: ``[S]`` full state → abstract model state.
-        effective: ``[S]`` π_h(s): the primitive (full-model action index) EXECUTE(h) reaches
-            at the belief concentrated on s (eq. 15–17's input for h's parent).
-        info: the planning report of this subtask (sizes, solver, seconds...).
-        lookahead: the forward search EXECUTE uses instead of the bare vectors (``None``: none).
-        model_actions: policy-contingent subtasks only (``None`` otherwise): the actions of the
-            model the subtask was solved on — every primitive below it, then ``Exit`` when it is
-            an option (:mod:`pearl_pomdp.hierarchy.options`). ``lookahead`` is then the one-step
-            search over that model, and EXECUTE compares the primitives its children pick.
-        exit: the model has the ``Exit`` pseudo-action (every policy-contingent subtask but the root).
-        search_depth: policy-contingent only: steps of forward search EXECUTE takes over the
-            children's choices (1: one Bellman step with the vectors at the leaves).
-        expansions: the deeper search's budget of expanded beliefs per decision (depth > 1).
-        online: the root only, when it plans online (``solver: online``): the search's record
-            (``trials``, ``time_limit``, ``scenarios``, ``depth``, ``seed``); its vectors are a
-            placeholder and EXECUTE runs :class:`~pearl_pomdp.hierarchy.online_root.OnlineRoot`.
-    """
-
-    name: str
-    actions: List[str]
-    abstract: List[bool]
-    alphas: np.ndarray
-    alpha_actions: np.ndarray
-    state_to_model: np.ndarray
-    effective: np.ndarray
-    info: dict = field(default_factory=dict)
-    lookahead: Optional[Lookahead] = None
-    model_actions: Optional[List[str]] = None
-    exit: bool = False
-    search_depth: int = 1
-    expansions: int = 256
-    online: Optional[dict] = None
-
-    def __post_init__(self) -> None:
-        self.alphas = np.atleast_2d(np.asarray(self.alphas, dtype=float))
-        self.alpha_actions = np.asarray(self.alpha_actions, dtype=np.int64)
-        self.state_to_model = np.asarray(self.state_to_model, dtype=np.int64)
-        self.effective = np.asarray(self.effective, dtype=np.int64)
-        # α expanded to the full state space: α_full[k, s] = α[k, state_to_model[s]].
-        self.alphas_full = np.ascontiguousarray(self.alphas[:, self.state_to_model])
-
-        n_model = self.alphas.shape[1]
-        # P_h [S, S_h]: full state → its abstract state (copy 0), for the forward search.
-        self._projection = sp.csr_matrix((np.ones(self.state_to_model.shape[0]),
-                                          (np.arange(self.state_to_model.shape[0]), self.state_to_model)),
-                                         shape=(self.state_to_model.shape[0], n_model))
-        # P_hᵀ, built once (transposing per decision cost more than the product).
-        self._projection_t = self._projection.T.tocsr()
-        if self.model_actions is not None:
-            if self.lookahead is None:
-                raise PolicyError(f"subtask {self.name!r}: a policy-contingent subtask needs its model's search")
-            self.model_index = {a: i for i, a in enumerate(self.model_actions)}
-            la = self.lookahead
-            self.one_step = OneStep(la.T, la.O, la.R, la.discount, self.alphas)
-            #: A full state standing for each model state (the first that maps there; -1: the
-            #: option's ``done`` state): a belief over the model lifts to the full state space
-            #: this way, which is enough for the children, whose features are among this model's.
-            self.representative = np.full(n_model, -1, dtype=np.int64)
-            order = np.arange(self.state_to_model.shape[0] - 1, -1, -1)
-            self.representative[self.state_to_model[order]] = order
-
-    @property
-    def contingent(self) -> bool:
-        """Whether EXECUTE compares the children's picks through this subtask's model (see ``model_actions``)."""
-        return self.model_actions is not None
-
-    def project_states(self, states: np.ndarray) -> np.ndarray:
-        """The particle belief of full states ``states [K]`` (equal weights) → this subtask's model states."""
-        states = np.asarray(states, dtype=np.int64)
-        return np.bincount(self.state_to_model[states], minlength=self.alphas.shape[1]) / float(states.shape[0])
-
-    def project(self, B: np.ndarray) -> np.ndarray:
-        """Full beliefs ``[N, S]`` (or ``[S]``) → this subtask's model states (the X+ marginal)."""
-        B = np.asarray(B, dtype=float)
-        return np.asarray((self._projection_t @ np.atleast_2d(B).T).T)
-
-    def lift(self, b_model: np.ndarray) -> np.ndarray:
-        """A belief over this subtask's model states → a full belief with the same X+ marginal
-        (each model state's mass on its representative; the option's ``done`` state dropped)."""
-        out = np.zeros(self.state_to_model.shape[0])
-        keep = np.flatnonzero((b_model > 0) & (self.representative >= 0))
-        out[self.representative[keep]] = b_model[keep]
-        return out
-
-    def _q_values(self, B: np.ndarray) -> np.ndarray:
-        return cast(Lookahead, self.lookahead).q_values(np.asarray((self._projection_t @ B.T).T))
-
-    def choose(self, belief: np.ndarray):
-        """``(action index in self.actions, value)`` at a full belief ``[S]``."""
-        if self.lookahead is not None:
-            q = self._q_values(np.asarray(belief, dtype=float)[None, :])[0]
-            k = int(np.argmax(q))
-            return k, float(q[k])
-        values = self.alphas_full @ belief
-        k = int(np.argmax(values))
-        return int(self.alpha_actions[k]), float(values[k])
-
-    def runner_up(self, belief: np.ndarray, chosen: int) -> Tuple[str, float]:
-        """The best child other than ``chosen`` (an index into ``self.actions``) at a full belief,
-        by :meth:`choose`'s measure: ``(name, value)``, or ``("", NaN)`` when no other child has one."""
-        if self.lookahead is not None:
-            q = self._q_values(np.asarray(belief, dtype=float)[None, :])[0]
-            q[chosen] = -np.inf
-            k = int(np.argmax(q))
-            return (self.actions[k], float(q[k])) if np.isfinite(q[k]) else ("", math.nan)
-        others = self.alpha_actions != chosen
-        if not others.any():
-            return "", math.nan
-        values = np.where(others, self.alphas_full @ belief, -np.inf)
-        k = int(np.argmax(values))
-        return self.actions[int(self.alpha_actions[k])], float(values[k])
-
-    def choose_allowed(self, belief: np.ndarray, allowed: np.ndarray):
-        """:meth:`choose` among the children with ``allowed[k]`` true (``[len(actions)]`` bools):
-        the largest Q-value, or the largest vector among those labelled with an allowed child.
-        ``None`` when no allowed child has a value here (no vector carries one)."""
-        if self.lookahead is not None:
-            q = np.where(allowed, self._q_values(np.asarray(belief, dtype=float)[None, :])[0], -np.inf)
-        else:
-            keep = allowed[self.alpha_actions]
-            if not keep.any():
-                return None
-            values = np.where(keep, self.alphas_full @ belief, -np.inf)
-            k = int(np.argmax(values))
-            return int(self.alpha_actions[k]), float(values[k])
-        k = int(np.argmax(q))
-        return (k, float(q[k])) if np.isfinite(q[k]) else None
-
-    def choose_batch(self, beliefs: np.ndarray) -> np.ndarray:
-        """``[N]`` action indices (into ``self.actions``) for full beliefs ``[N, S]``; ties as :meth:`choose`."""
-        B = np.atleast_2d(np.asarray(beliefs, dtype=float))
-        if self.lookahead is not None:
-            return np.argmax(self._q_values(B), axis=1).astype(np.int64)
-        return self.alpha_actions[np.argmax(B @ self.alphas_full.T, axis=1)]
-
-    def value(self, belief: np.ndarray) -> float:
-        """The subtask's value at a full belief: ``max_k α_k·P_hᵀ b``, or ``max_a Q_{h+d}`` with lookahead."""
-        if self.lookahead is not None:
-            return float(np.max(self._q_values(np.asarray(belief, dtype=float)[None, :])))
-        return float(np.max(self.alphas_full @ belief))
+__all__ = ["HierarchicalPolicy", "load_hierarchical_policy"]
 
 
 #: A subtask's runner-up offer sits in EXECUTE's memo under its name plus this (no name has a NUL).
@@ -251,12 +88,16 @@ class HierarchicalPolicy:
         #: The runner-up of each cached pick (same keys), for the trace.
         self._rival_cache: Dict[tuple, Optional[tuple]] = {}
         #: Subtasks with a subtask among their children: their children's offers go up to their
-        #: parent (:meth:`_offers`), so a level of organisation hides no alternative.
+        #: parent (:meth:`offers`), so a level of organisation hides no alternative.
         self._groups = {name for name, sub in subtasks.items() if any(sub.abstract)}
         #: Per subtask, the full-model indices of the primitives below it (what a veto can leave).
         self._below: Dict[str, FrozenSet[int]] = {}
         for name in subtasks:
             self._primitives_below(name)
+        #: The execute mode, a strategy chosen once: ``(belief, banned primitive indices) -> Decision``.
+        self._mode: Callable[[np.ndarray, FrozenSet[int]], Decision] = (
+            self._execute_online if self.online else self._execute_contingent if self.contingent
+            else self._execute_corners)
 
     def bind_model(self, model, bounds=None) -> None:
         """Give an online root (``solver: online``) the full model its search steps (PLAN and
@@ -282,12 +123,6 @@ class HierarchicalPolicy:
         """Whether subtask ``name`` has subtasks among its children (it passes their offers up)."""
         return name in self._groups
 
-    def _online(self):
-        if self.online_root is None:
-            raise PolicyError(f"the root {self.root!r} plans online and needs the model: load the policy with "
-                              f"load_hierarchical_policy(directory, domain) (or call bind_model)")
-        return self.online_root
-
     def _primitives_below(self, name: str) -> FrozenSet[int]:
         got = self._below.get(name)
         if got is None:
@@ -300,7 +135,8 @@ class HierarchicalPolicy:
 
     # ------------------------------------------------------------- EXECUTE
     def execute(self, belief) -> Decision:
-        """EXECUTE(root, b): walk the hierarchy top-down and return the primitive action.
+        """EXECUTE(root, b): walk the hierarchy top-down and return the primitive action
+        (:meth:`execute_without` with nothing forbidden).
 
         Args:
             belief: the full belief ``[S]`` (a distribution over the full model's states).
@@ -308,24 +144,7 @@ class HierarchicalPolicy:
         Returns:
             :class:`Decision` with the trace root → … → primitive and each subtask's value.
         """
-        b = np.asarray(belief, dtype=float)
-        if b.shape != (self.num_states,):
-            raise ValueError(f"belief has shape {b.shape}, expected ({self.num_states},)")
-        if self.online:
-            return self._online().execute(b)
-        if self.contingent:
-            return self._execute_contingent(b)
-        trace = []
-        node = self.root
-        for _ in range(len(self.subtasks) + 1):
-            sub = self.subtasks[node]
-            k, value = sub.choose(b)
-            choice = sub.actions[k]
-            trace.append(TraceStep(node, choice, value, *sub.runner_up(b, k)))
-            if not sub.abstract[k]:
-                return Decision(self._index[choice], choice, trace)
-            node = choice
-        raise PolicyError(f"the hierarchy below {self.root!r} has a cycle")  # pragma: no cover - validated at load
+        return self.execute_without(belief, ())
 
     def execute_without(self, belief, forbidden: Collection[str]) -> Decision:
         """EXECUTE with the primitives in ``forbidden`` (names) masked for this one decision.
@@ -335,35 +154,41 @@ class HierarchicalPolicy:
         the best primitive it has left, and the subtask takes the offer with the largest one-step
         value over its own model (a deeper root search masks the first step only: later steps
         may take the action again). Otherwise: the largest Q-value (lookahead) or vector among
-        the children left. With ``forbidden`` empty this is :meth:`execute`.
+        the children left. The trace's runner-ups are among the children left too.
 
         Raises:
             PolicyError: a name is not a primitive action, every action is forbidden, or a
                 subtask has no value for any child left (no vector carries one).
         """
-        banned = forbidden_indices(self.action_names, forbidden)
-        if not banned:
-            return self.execute(belief)
+        banned = forbidden_indices(self.action_names, forbidden) if forbidden else frozenset()
         b = np.asarray(belief, dtype=float)
         if b.shape != (self.num_states,):
             raise ValueError(f"belief has shape {b.shape}, expected ({self.num_states},)")
-        if self.online:
-            return self._online().execute(b, banned)
-        if self.contingent:
-            return self._execute_contingent(b, banned)
+        return self._mode(b, banned)
+
+    def _execute_online(self, b: np.ndarray, banned: FrozenSet[int]) -> Decision:
+        """The online root's mode: its search over the children's picks (:mod:`pearl_pomdp.hierarchy.online_root`)."""
+        if self.online_root is None:
+            raise PolicyError(f"the root {self.root!r} plans online and needs the model: load the policy with "
+                              f"load_hierarchical_policy(directory, domain) (or call bind_model)")
+        return self.online_root.execute(b, banned)
+
+    def _execute_corners(self, b: np.ndarray, banned: FrozenSet[int]) -> Decision:
+        """The mode of the paper's eq. 15–17 parameterisation: each subtask on the trace takes its
+        largest Q-value (lookahead) or vector among its children still possible."""
         trace = []
         node = self.root
         for _ in range(len(self.subtasks) + 1):
             sub = self.subtasks[node]
             allowed = np.array([bool(self._below[c] - banned) if sub.abstract[k] else self._index[c] not in banned
                                 for k, c in enumerate(sub.actions)])
-            got = sub.choose_allowed(b, allowed) if allowed.any() else None
+            got = sub.choose(b, allowed)
             if got is None:
                 raise PolicyError(f"subtask {node!r} has no value for any action left once "
-                                  f"{', '.join(sorted(forbidden))} is forbidden")
+                                  f"{', '.join(sorted(self.action_names[i] for i in banned))} is forbidden")
             k, value = got
             choice = sub.actions[k]
-            trace.append(TraceStep(node, choice, value))
+            trace.append(TraceStep(node, choice, value, *sub.runner_up(b, k, allowed)))
             if not sub.abstract[k]:
                 return Decision(self._index[choice], choice, trace)
             node = choice
@@ -379,7 +204,7 @@ class HierarchicalPolicy:
         ``(primitive index, path)`` pairs, ``path`` the child indices from that subtask down.
 
         A primitive child offers itself. A child subtask whose children are all primitives
-        offers the primitive its own policy picks (:meth:`_pick`). A child subtask that has
+        offers the primitive its own policy picks (:meth:`pick`). A child subtask that has
         subtasks among its children (a *group*, such as Pearl's ``Assist``) passes its
         children's offers up instead of choosing among them by its own value: measured on
         Pearl (docs/hierarchy.md, "Groups pass their offers up"), a group ranked by its own
@@ -397,17 +222,13 @@ class HierarchicalPolicy:
                 grand = self.subtasks[child].actions
                 out.extend((prim, (k,) + path) for prim, path in self.offers(grand, b, memo, banned))
             else:
-                offer = self._pick(child, b, memo, banned)
+                offer = self.pick(child, b, memo, banned)
                 if offer is not None:
                     out.append((offer[0], (k,)))
         return out
 
-    def pick(self, name: str, b: np.ndarray, memo: Dict[str, Any], banned: FrozenSet[int] = frozenset()) -> Any:
-        """:meth:`_pick`: ``(primitive, child index, value, path)`` subtask ``name`` chooses at the full belief ``b``."""
-        return self._pick(name, b, memo, banned)
-
     def pick_projected(self, name: str, bh: np.ndarray, banned: FrozenSet[int] = frozenset()) -> Any:
-        """:meth:`_pick` of a subtask of primitives given its model belief ``bh`` directly (what it decides
+        """:meth:`pick` of a subtask of primitives given its model belief ``bh`` directly (what it decides
         on: the X+ marginal), e.g. the particle belief of an online root's search node. ``None`` when every
         child is banned."""
         if name in self._groups:
@@ -417,25 +238,28 @@ class HierarchicalPolicy:
         if got is not None:
             return got
         sub = self.subtasks[name]
-        q = sub.one_step.q(bh)
-        table = self._to_model[name]
+        offers = [(self._index[c], (k,)) for k, c in enumerate(sub.actions) if self._index[c] not in banned]
+        best, second = self._rank(sub.one_step.q(bh), self._to_model[name], offers)
+        if not banned:
+            self._remember(key, best, second)
+        return best
+
+    @staticmethod
+    def _rank(q: np.ndarray, table: np.ndarray, offers: Sequence[Tuple[int, Tuple[int, ...]]]) -> Tuple[Any, Any]:
+        """The best of ``offers`` by the one-step value ``q[table[prim]]`` as ``(primitive, child
+        index, value, path)`` and the runner-up as ``(primitive, path, value)``, the first on ties
+        (``None`` when there is none)."""
         best: Optional[tuple] = None
         second: Optional[tuple] = None
-        for k, child in enumerate(sub.actions):
-            prim = self._index[child]
-            if prim in banned:
-                continue
+        for prim, path in offers:
             value = float(q[table[prim]])
             if best is None or value > best[2]:
                 if best is not None:
                     second = (best[0], best[3], best[2])
-                best = (prim, k, value, (k,))
+                best = (prim, path[0], value, path)
             elif second is None or value > second[2]:
-                second = (prim, (k,), value)
-        if banned or best is None:
-            return best
-        self._remember(key, best, second)
-        return best
+                second = (prim, path, value)
+        return best, second
 
     def _remember(self, key: tuple, best: Optional[tuple], second: Optional[tuple]) -> None:
         """Cache a pick and its runner-up under the same key (emptied together when full); no pick
@@ -448,7 +272,7 @@ class HierarchicalPolicy:
         self._pick_cache[key] = best
         self._rival_cache[key] = second
 
-    def _pick(self, name: str, b: np.ndarray, memo: Dict[str, Any], banned: FrozenSet[int] = frozenset()) -> Any:
+    def pick(self, name: str, b: np.ndarray, memo: Dict[str, Any], banned: FrozenSet[int] = frozenset()) -> Any:
         """``(primitive index, child index, value, path)`` subtask ``name`` chooses at the full belief ``b``.
 
         Its children's offers (:meth:`offers`) are valued by one Bellman step over its own
@@ -470,28 +294,16 @@ class HierarchicalPolicy:
             memo[name] = got
             memo[name + RUNNER_UP] = self._rival_cache[key]
             return got
-        q = sub.one_step.q(bh)
-        table = self._to_model[name]
-        best: Optional[tuple] = None
-        second: Optional[tuple] = None   # the runner-up offer (prim, path, value), for the trace
-        for prim, path in self.offers(sub.actions, b, memo, banned):
-            value = float(q[table[prim]])
-            if best is None or value > best[2]:
-                if best is not None:
-                    second = (best[0], best[3], best[2])
-                best = (prim, path[0], value, path)
-            elif second is None or value > second[2]:
-                second = (prim, path, value)
+        best, second = self._rank(sub.one_step.q(bh), self._to_model[name], self.offers(sub.actions, b, memo, banned))
         memo[name] = best
         memo[name + RUNNER_UP] = second
-        if banned:
-            return best   # a masked pick is for this decision only: not cached
-        self._remember(key, best, second)
+        if not banned:   # a masked pick is for this decision only: not cached
+            self._remember(key, best, second)
         return best
 
     def _search_value(self, name: str, b: np.ndarray, depth: int, budget: List[int],
                       banned: FrozenSet[int] = frozenset()) -> Any:
-        """:meth:`_pick` with ``depth`` steps of forward search over subtask ``name``'s model:
+        """:meth:`pick` with ``depth`` steps of forward search over subtask ``name``'s model:
         each offer's successors are valued by the same choice one step shallower (the
         children asked again at every successor), the α-vectors at depth 1. ``budget[0]``
         counts down the beliefs expanded; once it is spent, successors take their vector
@@ -499,7 +311,7 @@ class HierarchicalPolicy:
         masks this step's offers only (the successors are later steps)."""
         memo: Dict[str, Any] = {}
         if depth <= 1 or budget[0] <= 0:
-            return self._pick(name, b, memo, banned)
+            return self.pick(name, b, memo, banned)
         sub = self.subtasks[name]
         la = cast(Lookahead, sub.lookahead)
         table = self._to_model[name]
@@ -532,7 +344,7 @@ class HierarchicalPolicy:
             got = self._search_value(self.root, b, root.search_depth, budget, banned)
             memo = {}   # the search asked the children at other beliefs too
         else:
-            got = self._pick(self.root, b, memo, banned)
+            got = self.pick(self.root, b, memo, banned)
         if got is None:
             raise PolicyError(f"no action is left below {self.root!r} once {len(banned)} are forbidden")
         prim, k, value, path = got
@@ -552,7 +364,7 @@ class HierarchicalPolicy:
             if child not in self.subtasks:
                 return Decision(self._index[child], child, trace, expansions=self.last_expansions)
             node = child
-            picked, k, value, picked_path = self._pick(node, b, memo, banned)
+            picked, k, value, picked_path = self.pick(node, b, memo, banned)
             child = self.subtasks[node].actions[k]
             trace.append(TraceStep(node, child, value, *self._runner_up(node, b, memo, picked, picked_path, banned)))
         raise PolicyError(f"the hierarchy below {self.root!r} has a cycle")  # pragma: no cover - validated at load
@@ -562,22 +374,16 @@ class HierarchicalPolicy:
         """The best offer subtask ``name`` did not take at ``b``, by the one-step value it chose with:
         ``(label, value)``, the label the children's names down to the primitive (``Rest→GoHome``);
         ``("", NaN)`` when it had no other offer. ``chosen``/``chosen_path``: what it took (its
-        :meth:`_pick`, which kept the runner-up in ``memo``, or else the offers are valued again)."""
+        :meth:`pick`, which kept the runner-up in ``memo``, or else the offers are valued again)."""
         best: Optional[Tuple[int, Tuple[int, ...], float]]
         picked = memo.get(name)
         if picked is not None and picked[0] == chosen and picked[3] == chosen_path and name + RUNNER_UP in memo:
             best = memo[name + RUNNER_UP]
         else:
             sub = self.subtasks[name]
-            q = sub.one_step.q(sub.project(b)[0])
-            table = self._to_model[name]
-            best = None
-            for prim, path in self.offers(sub.actions, b, memo, banned):
-                if prim == chosen and path == chosen_path:
-                    continue
-                value = float(q[table[prim]])
-                if best is None or value > best[2]:
-                    best = (prim, path, value)
+            others = [o for o in self.offers(sub.actions, b, memo, banned) if o != (chosen, chosen_path)]
+            got = self._rank(sub.one_step.q(sub.project(b)[0]), self._to_model[name], others)[0]
+            best = None if got is None else (got[0], got[3], got[2])
         if best is None:
             return "", math.nan
         prim, path, value = best
@@ -591,7 +397,7 @@ class HierarchicalPolicy:
         return "→".join(names), value
 
     def _pick_batch(self, name: str, B: np.ndarray, memo: Dict[str, np.ndarray]) -> np.ndarray:
-        """:meth:`_pick`'s primitive for every row of ``B`` ``[N, S]`` at once (ties as :meth:`_pick`)."""
+        """:meth:`pick`'s primitive for every row of ``B`` ``[N, S]`` at once (ties as :meth:`pick`)."""
         got = memo.get(name)
         if got is not None:
             return got
@@ -646,11 +452,9 @@ class HierarchicalPolicy:
         A policy-contingent root with a deeper search decides belief by belief (the search
         is per belief); otherwise every level is batched."""
         B = np.asarray(beliefs, dtype=float)
-        if self.online:
+        if self.online or (self.contingent and self.subtasks[self.root].search_depth > 1):
             return np.array([self.execute(b).action for b in np.atleast_2d(B)], dtype=np.int64)
         if self.contingent:
-            if self.subtasks[self.root].search_depth > 1:
-                return np.array([self.execute(b).action for b in np.atleast_2d(B)], dtype=np.int64)
             return self._pick_batch(self.root, np.atleast_2d(B), {})
         out = np.full(B.shape[0], -1, dtype=np.int64)
         pending = [(self.root, np.arange(B.shape[0]))]
@@ -670,56 +474,20 @@ class HierarchicalPolicy:
     def values(self, belief) -> Dict[str, float]:
         """Every subtask's value at ``belief`` (not only those on the trace)."""
         b = np.asarray(belief, dtype=float)
-        if self.online:
-            memo_o: Dict[str, tuple] = {}
-            out = {name: self._pick(name, b, memo_o)[2] for name in self.subtasks if name != self.root}
-            return {self.root: self.execute(b).trace[0].value, **out}
-        if self.contingent:
+        if self.contingent:   # an online root is too; its value is its search's
             memo: Dict[str, tuple] = {}
-            return {name: self._pick(name, b, memo)[2] for name in self.subtasks}
+            out = {name: self.pick(name, b, memo)[2] for name in self.subtasks if not (self.online and name == self.root)}
+            return {self.root: self.execute(b).trace[0].value, **out} if self.online else out
         return {name: sub.value(b) for name, sub in self.subtasks.items()}
 
-    # ---------------------------------------------------------- persistence
     def save(self, directory: Union[str, Path]) -> Path:
-        """Write ``policy.npz`` + ``hierarchy.json`` into ``directory`` (created), atomically per file.
+        """Write ``policy.npz`` + ``hierarchy.json`` into ``directory`` (created), atomically per file
+        (:func:`~pearl_pomdp.hierarchy.storage.write_policy_dir`).
 
         Returns:
             The directory.
         """
-        d = Path(directory)
-        d.mkdir(parents=True, exist_ok=True)
-        arrays = {}
-        subtasks = []
-        for i, (name, sub) in enumerate(self.subtasks.items()):
-            key = f"s{i}"
-            arrays[f"{key}_alphas"] = sub.alphas
-            arrays[f"{key}_alpha_actions"] = sub.alpha_actions
-            arrays[f"{key}_state_to_model"] = sub.state_to_model
-            arrays[f"{key}_effective"] = sub.effective
-            if sub.lookahead is not None:
-                arrays.update(sub.lookahead.arrays(f"{key}_la"))
-            entry = {"name": name, "key": key, "actions": sub.actions, "abstract": sub.abstract, "info": sub.info}
-            if sub.lookahead is not None:
-                entry["lookahead"] = {"depth": sub.lookahead.depth, "discount": sub.lookahead.discount}
-            if sub.contingent:
-                entry["contingent"] = {"model_actions": sub.model_actions, "exit": sub.exit,
-                                       "search_depth": sub.search_depth, "expansions": sub.expansions}
-            if sub.online is not None:
-                entry["online"] = sub.online
-            subtasks.append(entry)
-        buffer = io.BytesIO()
-        np.savez_compressed(buffer, **arrays)  # type: ignore[arg-type]  # numpy stubs type **kwds as allow_pickle
-        npz_bytes = buffer.getvalue()
-        digest = hashlib.sha256(npz_bytes).hexdigest()
-        header = {
-            "format": "pearl-hierarchical-policy", "version": FORMAT_VERSION,
-            "model_fingerprint": self.fingerprint, "model_name": self.model_name,
-            "hierarchy": self.hierarchy_name, "root": self.root, "actions": self.action_names,
-            "num_states": self.num_states, "npz_sha256": digest, "subtasks": subtasks, "report": self.report,
-        }
-        atomic_write(d / NPZ_NAME, npz_bytes)
-        atomic_write(d / JSON_NAME, json.dumps(header, indent=1, default=numpy_to_json) + "\n")
-        return d
+        return write_policy_dir(directory, self)
 
 
 def load_hierarchical_policy(directory: Union[str, Path], domain) -> HierarchicalPolicy:
@@ -733,59 +501,9 @@ def load_hierarchical_policy(directory: Union[str, Path], domain) -> Hierarchica
         PolicyError: missing/corrupt files, a checksum mismatch, or a model-fingerprint
             mismatch (the message names the file and what differs).
     """
-    d = Path(directory)
-    jpath, npath = d / JSON_NAME, d / NPZ_NAME
-    if not jpath.is_file() or not npath.is_file():
-        raise PolicyError(f"{d}: not a hierarchical policy directory (expected {JSON_NAME} and {NPZ_NAME})")
-    try:
-        header = json.loads(jpath.read_text())
-    except (OSError, ValueError) as err:
-        raise PolicyError(f"{jpath}: unreadable JSON header: {err}") from None
-    if header.get("format") != "pearl-hierarchical-policy":
-        raise PolicyError(f"{jpath}: format is {header.get('format')!r}, expected 'pearl-hierarchical-policy'")
-    if header.get("version") != FORMAT_VERSION:
-        raise PolicyError(f"{jpath}: version {header.get('version')!r} is not supported (expected {FORMAT_VERSION})")
-    raw = npath.read_bytes()
-    if hashlib.sha256(raw).hexdigest() != header.get("npz_sha256"):
-        raise PolicyError(f"{npath}: SHA-256 does not match {jpath.name} (the pair was not written together)")
     model = domain.compile() if isinstance(domain, FactoredDomain) else domain
-    fp = model.fingerprint()
-    if fp != header.get("model_fingerprint"):
-        raise PolicyError(f"{jpath}: the policy was planned for model {header.get('model_name')!r} with fingerprint "
-                          f"{str(header.get('model_fingerprint'))[:12]}…, but the given model {model.name!r} has "
-                          f"{fp[:12]}… (re-run `pearl plan`)")
-    if list(header.get("actions", [])) != list(model.actions):
-        raise PolicyError(f"{jpath}: the policy's actions differ from the model's")
-    try:
-        with np.load(npath, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError) as err:
-        raise PolicyError(f"{npath}: unreadable arrays: {err}") from None
-    subtasks = {}
-    for entry in header["subtasks"]:
-        key = entry["key"]
-        contingent = entry.get("contingent") or {}
-        try:
-            search = None
-            if entry.get("lookahead"):
-                spec = entry["lookahead"]
-                search = Lookahead.from_arrays(arrays, f"{key}_la", float(spec["discount"]), arrays[f"{key}_alphas"],
-                                               int(spec["depth"]))
-            subtasks[entry["name"]] = SubtaskPolicy(
-                name=entry["name"], actions=list(entry["actions"]), abstract=[bool(x) for x in entry["abstract"]],
-                alphas=arrays[f"{key}_alphas"], alpha_actions=arrays[f"{key}_alpha_actions"],
-                state_to_model=arrays[f"{key}_state_to_model"], effective=arrays[f"{key}_effective"],
-                info=entry.get("info", {}), lookahead=search,
-                model_actions=None if not contingent else list(contingent["model_actions"]),
-                exit=bool(contingent.get("exit", False)), search_depth=int(contingent.get("search_depth", 1)),
-                expansions=int(contingent.get("expansions", 256)), online=entry.get("online"))
-        except KeyError as err:
-            raise PolicyError(f"{npath}: missing array {err} for subtask {entry['name']!r}") from None
-        except (ValueError, TypeError, IndexError) as err:
-            raise PolicyError(f"{npath}: inconsistent arrays for subtask {entry['name']!r}: {err}") from None
-    if header["root"] not in subtasks:
-        raise PolicyError(f"{jpath}: root {header['root']!r} is not among the subtasks")
-    policy = HierarchicalPolicy(header["root"], subtasks, list(model.actions), fp, header.get("report"),
+    header, subtasks = read_policy_dir(directory, model)
+    policy = HierarchicalPolicy(header["root"], subtasks, list(model.actions), model.fingerprint(), header.get("report"),
                                 header.get("hierarchy", ""), header.get("model_name", ""))
     policy.bind_model(model)   # an online root's search steps the model (nothing for an offline root)
     return policy

@@ -36,9 +36,10 @@ import numpy as np
 from pearl_pomdp.errors import PearlError
 from pearl_pomdp.hierarchy.abstraction import (AbstractionTooLarge, AbstractSubtask, KernelBuilder, SeparableTerms,
                                                abstract_subtask, separable_reward_terms)
-from pearl_pomdp.hierarchy.execute import HierarchicalPolicy, SubtaskPolicy
+from pearl_pomdp.hierarchy.execute import HierarchicalPolicy
 from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
 from pearl_pomdp.hierarchy.spec import Hierarchy, SubtaskSpec
+from pearl_pomdp.hierarchy.subtask import SubtaskPolicy
 from pearl_pomdp.model.factored import FactoredDomain
 from pearl_pomdp.policies.lookahead import Lookahead
 from pearl_pomdp.solution import SolveResult
@@ -261,32 +262,24 @@ def entry_beliefs(model, seed: int = 0, episodes: int = ENTRY_EPISODES, steps: i
     it is already computed (an online root's upper bound past ``FIB_LIMIT``: the same value
     iteration, not run twice on the ward's 233,280 states)."""
     from pearl_pomdp.belief import BeliefFilter
-    from pearl_pomdp.simulate import RowSampler
+    from pearl_pomdp.simulate import EpisodeSampler
     from pearl_pomdp.solution import AlphaVectorPolicy
     from pearl_pomdp.solvers.mdp import solve_qmdp
 
     policy = solve_qmdp(model).policy if qmdp is None else AlphaVectorPolicy(
         np.asarray(qmdp, dtype=float).T.copy(), np.arange(model.num_actions))
     rng = np.random.default_rng(seed)
-    S, Z = model.num_states, model.num_observations
     filt = BeliefFilter(model)
-    trans = [RowSampler(t) for t in model.T]
-    ocum = np.cumsum(model.O, axis=2)
-    b0 = np.asarray(model.b0, dtype=float)
-    states = np.clip(np.searchsorted(np.cumsum(b0), rng.random(episodes) * b0.sum(), side="right"), 0, S - 1)
-    B = np.tile(b0, (episodes, 1))
+    sampler = EpisodeSampler(model)
+    states = sampler.start(rng.random(episodes))
+    B = np.tile(sampler.b0, (episodes, 1))
     kept = []
     for t in range(steps):
         if t % every == 0 or (t * episodes) % every < episodes:
             kept.append(B.copy())
         actions = policy.actions_batch(B)
         u_s, u_o = rng.random(episodes), rng.random(episodes)
-        nxt = np.empty_like(states)
-        for a in np.unique(actions):
-            rows = np.flatnonzero(actions == a)
-            nxt[rows] = trans[a].sample(states[rows], u_s[rows])
-        cum = ocum[actions, nxt]
-        obs = np.minimum((cum <= (u_o * cum[:, -1])[:, None]).sum(axis=1), Z - 1)
+        nxt, obs = sampler.step(states, actions, u_s, u_o)
         B = filt.update_batch(B, actions, obs)
         states = nxt
     flat = np.concatenate(kept)

@@ -20,7 +20,7 @@ def load_model(path: Union[str, Path]) -> Pomdp:
     if not path.is_file():
         raise FileNotFoundError(2, "no such model file", str(path))
     if path.suffix.lower() in (".yaml", ".yml"):
-        from pearl_pomdp.model.factored import load_domain
+        from pearl_pomdp.model.domain_yaml import load_domain
 
         return load_domain(path).compile()
     if path.suffix.lower() == ".pomdpx":

@@ -1,4 +1,5 @@
-"""Cassandra's ``.pomdp`` file format: reader and lossless writer.
+"""Cassandra's ``.pomdp`` file format: the reader (the lossless writer is
+:mod:`pearl_pomdp.model.pomdp_writer`).
 
 The grammar is pomdp-solve 5.5's (``src/mdp/parser.y``, ``scanner.l``), all of it:
 
@@ -58,7 +59,6 @@ from typing import Any, Dict, List, NoReturn, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import ModelFormatError
 from pearl_pomdp.model.pomdp import DENSE_LIMIT, Pomdp, issparse
 
@@ -79,13 +79,10 @@ class _Coo:
 __all__ = [
     "read_pomdp",
     "parse_pomdp",
-    "format_pomdp",
-    "write_pomdp",
-    "real_text",
-    "probability_text",
     "SUM_TOLERANCE",
     "RENORMALISE_ABOVE",
     "RESERVED_WORDS",
+    "NAME_PATTERN",
 ]
 
 #: How far a row of T/O or a start vector may be from summing to 1 (pomdp-solve's EPSILON).
@@ -97,7 +94,8 @@ RESERVED_WORDS = frozenset(
     "discount values states actions observations T O R uniform identity reward cost start include exclude reset".split()
 )
 _STATEMENTS = frozenset("discount values states actions observations start T O R".split())
-_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_\-]*\Z")
+#: A name in the file (states, actions, observations), when it is not a reserved word.
+NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_\-]*\Z")
 # pomdp-solve: IntLiteral, UnsignedReal (digits first); we also accept ".5".
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z")
 _COMMENT = re.compile(r"#[^\n]*")
@@ -379,10 +377,10 @@ class _Parser:
             t = toks[k0]
             if t == "T":
                 if not (self.seq and self._fast_t(k0)):
-                    self.transition(k0)
+                    self.probabilities(k0, "T")
             elif t == "O":
                 if not (self.seq and self._fast_o(k0)):
-                    self.observation(k0)
+                    self.probabilities(k0, "O")
             elif t == "R":
                 if not (self.seq and self._fast_r(k0)):
                     self.reward(k0)
@@ -555,7 +553,7 @@ class _Parser:
                     t = self.toks[self.i]
                     if t == _EOF or t in _STATEMENTS:
                         break
-                    if not _NAME.match(t):
+                    if not NAME_PATTERN.match(t):
                         self.fail(self.i, kw, f"bad {noun} name {t!r} (a name is a letter followed by letters, digits, '_' or '-')")
                     if t in RESERVED_WORDS:
                         self.fail(self.i, kw, f"{noun} name {t!r} is a reserved word")
@@ -629,7 +627,7 @@ class _Parser:
             b0 = np.zeros(S)
             b0[self.index["states"][t]] = 1.0
             self.start = ("state", b0, k0)
-        elif _NAME.match(t) and t not in RESERVED_WORDS:
+        elif NAME_PATTERN.match(t) and t not in RESERVED_WORDS:
             self.ref("states", k0)  # raises: unknown state
         else:
             b0 = np.array(self.numbers(k0, S, "the start vector", prob=True))
@@ -639,100 +637,66 @@ class _Parser:
             self.start = ("vector", b0, k0)
 
     # ------------------------------------------------------------------ T / O
-    def transition(self, k0: int):
+    def probabilities(self, k0: int, kind: str):
+        """A ``T:`` or ``O:`` statement (``kind``): one entry, a row or a matrix, as numbers or a
+        word (T: ``uniform``/``reset`` rows, ``uniform``/``identity`` matrices; O: ``uniform``)."""
         seq = self.next_event(k0)
         self.i += 1
         self.expect_colon(k0)
         a = self.ref("actions", k0)
         toks = self.toks
         S = self.counts["states"]
+        is_t = kind == "T"
+        last, n = ("states", S) if is_t else ("observations", self.counts["observations"])
+        pts, special = (self.t_pts, self.t_special) if is_t else (self.o_pts, self.o_special)
         if toks[self.i] == ":":
             self.i += 1
             s = self.ref("states", k0)
             if toks[self.i] == ":":
                 self.i += 1
-                s2 = self.ref("states", k0)
+                x = self.ref(last, k0)
                 p = self.number(k0, "a probability", prob=True)
-                if a is not None and s is not None and s2 is not None:
-                    pts = self.t_pts
+                if a is not None and s is not None and x is not None:
                     pts[0].append(a)
                     pts[1].append(s)
-                    pts[2].append(s2)
+                    pts[2].append(x)
                     pts[3].append(p)
                     pts[4].append(seq)
                 else:
-                    self.t_special.append((seq, "point", a, s, s2, p))
+                    special.append((seq, "point", a, s, x, p))
                 return
             t = toks[self.i]
-            if t in ("uniform", "reset"):
+            if t == "uniform" or (is_t and t == "reset"):
                 self.i += 1
-                self.t_special.append((seq, "row", a, s, None, t))
-            else:
-                row = np.array(self.numbers(k0, S, f"a row of T (one probability per state, {S})", prob=True))
-                self.t_special.append((seq, "row", a, s, None, row))
-            return
-        t = toks[self.i]
-        if t in ("uniform", "identity"):
-            self.i += 1
-            self.t_special.append((seq, "matrix", a, None, None, t))
-        elif t == "reset":
-            self.fail(self.i, self.where(k0, self.i), "'reset' is only valid for one row (T: a : s reset)")
-        else:
-            mat = np.array(self.numbers(k0, S * S, f"a T matrix ({S}×{S} probabilities)", prob=True))
-            self.t_special.append((seq, "matrix", a, None, None, mat.reshape(S, S)))
-
-    def observation(self, k0: int):
-        seq = self.next_event(k0)
-        self.i += 1
-        self.expect_colon(k0)
-        a = self.ref("actions", k0)
-        toks = self.toks
-        S, Z = self.counts["states"], self.counts["observations"]
-        if toks[self.i] == ":":
-            self.i += 1
-            s = self.ref("states", k0)
-            if toks[self.i] == ":":
-                self.i += 1
-                o = self.ref("observations", k0)
-                p = self.number(k0, "a probability", prob=True)
-                if a is not None and s is not None and o is not None:
-                    pts = self.o_pts
-                    pts[0].append(a)
-                    pts[1].append(s)
-                    pts[2].append(o)
-                    pts[3].append(p)
-                    pts[4].append(seq)
-                else:
-                    self.o_special.append((seq, "point", a, s, o, p))
+                special.append((seq, "row", a, s, None, t))
                 return
-            t = toks[self.i]
-            if t == "uniform":
-                self.i += 1
-                self.o_special.append((seq, "row", a, s, None, t))
-            elif t in ("reset", "identity"):
+            if not is_t and t in ("reset", "identity"):
                 self.fail(self.i, self.where(k0, self.i), f"'{t}' is not valid for O (only 'uniform' or numbers)")
+            what = f"a row of T (one probability per state, {S})" if is_t else \
+                f"a row of O (one probability per observation, {n})"
+            row = self.numbers(k0, n, what, prob=True)
+            if not is_t and a is not None and s is not None:
+                # concrete O rows are the bulk of some files (RockSample): keep them as points
+                pts[0].extend([a] * n)
+                pts[1].extend([s] * n)
+                pts[2].extend(range(n))
+                pts[3].extend(row)
+                pts[4].extend([seq] * n)
             else:
-                row = self.numbers(k0, Z, f"a row of O (one probability per observation, {Z})", prob=True)
-                if a is not None and s is not None:
-                    # concrete rows are the bulk of some files (RockSample): keep them as points
-                    pts = self.o_pts
-                    pts[0].extend([a] * Z)
-                    pts[1].extend([s] * Z)
-                    pts[2].extend(range(Z))
-                    pts[3].extend(row)
-                    pts[4].extend([seq] * Z)
-                else:
-                    self.o_special.append((seq, "row", a, s, None, np.array(row)))
+                special.append((seq, "row", a, s, None, np.array(row)))
             return
         t = toks[self.i]
-        if t == "uniform":
+        if t == "uniform" or (is_t and t == "identity"):
             self.i += 1
-            self.o_special.append((seq, "matrix", a, None, None, t))
-        elif t in ("reset", "identity"):
+            special.append((seq, "matrix", a, None, None, t))
+        elif is_t and t == "reset":
+            self.fail(self.i, self.where(k0, self.i), "'reset' is only valid for one row (T: a : s reset)")
+        elif not is_t and t in ("reset", "identity"):
             self.fail(self.i, self.where(k0, self.i), f"'{t}' is not valid for O (only 'uniform' or numbers)")
         else:
-            mat = np.array(self.numbers(k0, S * Z, f"an O matrix ({S}×{Z} probabilities)", prob=True))
-            self.o_special.append((seq, "matrix", a, None, None, mat.reshape(S, Z)))
+            what = f"a T matrix ({S}×{S} probabilities)" if is_t else f"an O matrix ({S}×{n} probabilities)"
+            mat = np.array(self.numbers(k0, S * n, what, prob=True))
+            special.append((seq, "matrix", a, None, None, mat.reshape(S, n)))
 
     # ------------------------------------------------------------------ R
     def reward(self, k0: int):
@@ -1038,177 +1002,3 @@ class _Parser:
             expect = np.bincount(s_, weights=prob * best_val, minlength=S)
             R[mixed, a] = expect[mixed]
         return R, depends
-
-
-# =====================================================================================  writer
-def _valid_name(n: str) -> bool:
-    return bool(_NAME.match(n)) and n not in RESERVED_WORDS
-
-
-def _file_names(names: Sequence[str], prefix: str) -> Tuple[Optional[List[str]], bool]:
-    """Names as the file will hold them: ``None`` for a count, else a valid, unique list.
-
-    Returns (names or None, renamed?). Names that are not valid identifiers are made so
-    (other characters become ``_``; a leading non-letter gets ``prefix``); duplicates get ``_2``…
-    """
-    names = [str(n) for n in names]
-    if names == [str(j) for j in range(len(names))]:
-        return None, False
-    if all(_valid_name(n) for n in names):
-        return names, False
-    out, used = [], set()
-    for n in names:
-        m = re.sub(r"[^A-Za-z0-9_\-]", "_", n)
-        if not m or not m[0].isalpha():
-            m = prefix + m
-        if m in RESERVED_WORDS:
-            m += "_"
-        base, j = m, 2
-        while m in used:
-            m = f"{base}_{j}"
-            j += 1
-        used.add(m)
-        out.append(m)
-    return out, True
-
-
-def real_text(x: float) -> str:
-    """Lossless float text (shortest repr; ``-0`` keeps the sign of a negative zero)."""
-    x = float(x)
-    if x == 0.0:
-        return "-0" if np.signbit(x) else "0"
-    if x == 1.0:
-        return "1"
-    return repr(x)
-
-
-def probability_text(x: float) -> str:
-    """A probability: as :func:`real_text`, but any zero is ``0`` (a probability has no sign)."""
-    x = float(x)
-    return "0" if x == 0.0 else real_text(x)
-
-
-def format_pomdp(model: Pomdp) -> str:
-    """The model as ``.pomdp`` text that :func:`parse_pomdp` reads back *identically*.
-
-    Floats are written with ``repr`` (shortest round-trip form). Small dense transition
-    matrices are written as rows (``T: a : s`` + row); large or sparse ones as
-    ``T: a : s : s' p`` lines for the nonzero entries; ``identity``/``uniform`` are used when
-    exact. Rewards are written per cell (``R: a : s : * : * v``) after a per-action default
-    (``R: a : * : * : * c``) when most cells share it. ``metadata["values"] == "cost"`` writes
-    costs (negated rewards) under ``values: cost``. Names that are not valid ``.pomdp``
-    identifiers are renamed (and the file says so in a comment).
-    """
-    S, A, Z = model.num_states, model.num_actions, model.num_observations
-    out: List[str] = []
-    w = out.append
-    st_names, st_ren = _file_names(model.states, "s")
-    ac_names, ac_ren = _file_names(model.actions, "a")
-    ob_names, ob_ren = _file_names(model.observations, "o")
-    title = " ".join(str(model.name).split()).encode("ascii", "replace").decode("ascii")
-    w(f"# {title}: written by pearl_pomdp ({S} states, {A} actions, {Z} observations)")
-    if st_ren or ac_ren or ob_ren:
-        w("# names that are not .pomdp identifiers were renamed (other characters became '_')")
-    w("")
-    w(f"discount: {repr(float(model.discount))}")
-    cost = model.metadata.get("values") == "cost"
-    w(f"values: {'cost' if cost else 'reward'}")
-    st = st_names if st_names is not None else [str(j) for j in range(S)]
-    ac = ac_names if ac_names is not None else [str(j) for j in range(A)]
-    ob = ob_names if ob_names is not None else [str(j) for j in range(Z)]
-    w(f"states: {S if st_names is None else ' '.join(st_names)}")
-    w(f"actions: {A if ac_names is None else ' '.join(ac_names)}")
-    w(f"observations: {Z if ob_names is None else ' '.join(ob_names)}")
-    w("")
-    b0 = np.asarray(model.b0, dtype=float)
-    support = b0 > 0
-    k = int(support.sum())
-    if np.array_equal(b0, np.full(S, 1.0 / S)):
-        w("start: uniform")
-    elif k and np.array_equal(b0, support.astype(float) / float(k)):
-        w("start include: " + " ".join(st[j] for j in np.flatnonzero(support)))
-    else:
-        w("start: " + " ".join(probability_text(x) for x in b0))
-    w("")
-
-    for a in range(A):
-        Ta = model.T[a]
-        if issparse(Ta):
-            import scipy.sparse as sp
-
-            Tc = sp.csr_matrix(Ta)
-            Tc.sum_duplicates()
-            Tc.eliminate_zeros()
-            Tc.sort_indices()
-            dense = None
-            nnz = Tc.nnz
-        else:
-            dense = np.asarray(Ta, dtype=float)
-            nnz = int(np.count_nonzero(dense))
-            Tc = None
-        if nnz == S and (dense is not None and np.array_equal(dense, np.eye(S))
-                         or Tc is not None and np.array_equal(Tc.indices, np.arange(S))
-                         and np.array_equal(Tc.indptr, np.arange(S + 1)) and (Tc.data == 1.0).all()):
-            w(f"T: {ac[a]} identity")
-            continue
-        if dense is not None and nnz == S * S and (dense == 1.0 / S).all():
-            w(f"T: {ac[a]} uniform")
-            continue
-        if dense is not None and S <= 100 and nnz >= 0.25 * S * S:
-            for s in range(S):
-                w(f"T: {ac[a]} : {st[s]} " + " ".join(probability_text(x) for x in dense[s]))
-            continue
-        if Tc is None:
-            import scipy.sparse as sp
-
-            Tc = sp.csr_matrix(dense)
-            Tc.sort_indices()
-        indptr, indices, data = Tc.indptr, Tc.indices, Tc.data
-        for s in range(S):
-            lo, hi = indptr[s], indptr[s + 1]
-            pre = f"T: {ac[a]} : {st[s]} : "
-            for j in range(lo, hi):
-                w(f"{pre}{st[indices[j]]} {probability_text(data[j])}")
-    w("")
-
-    O = np.asarray(model.O, dtype=float)
-    for a in range(A):
-        Oa = O[a]
-        if (Oa == Oa[0]).all():
-            if (Oa[0] == 1.0 / Z).all():
-                w(f"O: {ac[a]} uniform")
-            else:
-                w(f"O: {ac[a]} : * " + " ".join(probability_text(x) for x in Oa[0]))
-            continue
-        dense_rows = Z <= 16 or np.count_nonzero(Oa) >= 0.25 * S * Z
-        for s in range(S):
-            if dense_rows:
-                w(f"O: {ac[a]} : {st[s]} " + " ".join(probability_text(x) for x in Oa[s]))
-            else:
-                for o in np.flatnonzero(Oa[s]):
-                    w(f"O: {ac[a]} : {st[s]} : {ob[o]} {probability_text(Oa[s, o])}")
-    w("")
-
-    R = np.asarray(model.R, dtype=float)
-    if cost:
-        R = -R
-    for a in range(A):
-        col = R[:, a]
-        vals, counts = np.unique(col, return_counts=True)
-        c = float(vals[np.argmax(counts)])
-        if counts.max() * 2 <= S or c == 0.0:
-            c = 0.0  # (+0: a file's unset cells are +0; negative zeros are written explicitly)
-        if c != 0.0:
-            w(f"R: {ac[a]} : * : * : * {real_text(c)}")
-        # a cell differs from the default if its value or the sign of a zero differs
-        for cell in np.flatnonzero((col != c) | (np.signbit(col) != np.signbit(c))):
-            w(f"R: {ac[a]} : {st[cell]} : * : * {real_text(col[cell])}")
-    w("")
-    return "\n".join(out)
-
-
-def write_pomdp(model: Pomdp, path: PathLike) -> Path:
-    """Write ``model`` as a ``.pomdp`` file atomically (temporary file + rename); returns the path."""
-    path = Path(path)
-    atomic_write(path, format_pomdp(model), encoding="ascii")
-    return path

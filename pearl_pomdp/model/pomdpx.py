@@ -40,7 +40,8 @@ import scipy.sparse as sp
 from pearl_pomdp.atomic import atomic_write
 from pearl_pomdp.errors import ModelFormatError
 from pearl_pomdp.model.pomdp import Pomdp
-from pearl_pomdp.model.pomdp_format import RENORMALISE_ABOVE, SUM_TOLERANCE, probability_text, real_text
+from pearl_pomdp.model.pomdp_format import RENORMALISE_ABOVE, SUM_TOLERANCE
+from pearl_pomdp.model.pomdp_writer import deduplicated, probability_text, real_text
 
 __all__ = ["write_pomdpx", "format_pomdpx", "read_pomdpx", "parse_pomdpx"]
 
@@ -57,18 +58,8 @@ def _token_names(names: Sequence[str], prefix: str) -> List[str]:
     names = [str(n) for n in names]
     if all(_SAFE.match(n) and n.lower() not in _SPECIAL for n in names):
         return names
-    out, used = [], set()
-    for n in names:
-        m = re.sub(r"[^A-Za-z0-9_.=,:+\-]", "_", n) or prefix
-        if m.lower() in _SPECIAL:
-            m = prefix + m
-        base, j = m, 2
-        while m in used:
-            m = f"{base}_{j}"
-            j += 1
-        used.add(m)
-        out.append(m)
-    return out
+    cleaned = [re.sub(r"[^A-Za-z0-9_.=,:+\-]", "_", n) or prefix for n in names]
+    return deduplicated([prefix + m if m.lower() in _SPECIAL else m for m in cleaned])
 
 
 def format_pomdpx(model: Pomdp) -> str:
@@ -166,9 +157,7 @@ def format_pomdpx(model: Pomdp) -> str:
 
 def write_pomdpx(model: Pomdp, path: PathLike) -> Path:
     """Write ``model`` as flat PomdpX (SARSOP-readable), atomically; returns the path."""
-    path = Path(path)
-    atomic_write(path, format_pomdpx(model), encoding="ascii")
-    return path
+    return atomic_write(path, format_pomdpx(model), encoding="ascii")
 
 
 # =====================================================================================  reader

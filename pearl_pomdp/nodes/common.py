@@ -219,7 +219,7 @@ def resolve_path(value: str, parameter: str, must_exist: bool = True, kind: str 
 def load_domain_and_model(path: Path):
     """``(domain or None, Pomdp)`` from a factored ``.yaml`` domain or a flat ``.pomdp`` file."""
     if path.suffix.lower() in (".yaml", ".yml"):
-        from pearl_pomdp.model.factored import load_domain
+        from pearl_pomdp.model.domain_yaml import load_domain
 
         domain = load_domain(path)
         return domain, domain.compile()

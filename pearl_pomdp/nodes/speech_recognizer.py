@@ -132,7 +132,7 @@ class SpeechRecognizerNode(PearlNode):
         if recognizer is None:
             keywords = None
             if p["language_model"] == "domain":
-                from pearl_pomdp.model.factored import load_domain
+                from pearl_pomdp.model.domain_yaml import load_domain
 
                 domain = load_domain(resolve_path(p["domain"], "domain"))
                 if not domain.keywords:

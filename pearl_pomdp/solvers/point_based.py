@@ -18,10 +18,8 @@ The solver keeps
 
 * a **lower bound** Γ of α-vectors (each the value of a concrete policy, so
   ``max_k Γ_k·b ≤ V*(b)``), initialised with the blind policies "always do a";
-* an **upper bound**: the fast informed bound (FIB) vectors ``max_a b·Q_FIB(:,a)``
-  together with a point set ``{(b_i, v_i)}`` over corner values
-  ``V_c(s) = max_a Q_FIB(s, a)`` read by sawtooth interpolation (HSVI2):
-  ``UB(b) = min(max_a b·Q_FIB(:,a), b·V_c + min_i min_{s∈supp b_i} (b(s)/b_i(s)) (v_i − b_i·V_c))``.
+* an **upper bound**: the FIB vectors and a sawtooth point set over corner values (HSVI2),
+  :class:`~pearl_pomdp.solvers.sawtooth.SawtoothUpperBound`.
 
 Each *trial* walks forward from ``b0``: at belief ``b`` (depth ``d``) it takes
 the action with the best upper bound and the observation with the largest
@@ -62,7 +60,8 @@ which exactly tied observations are considered.
 in one C call, ``_search_kernel.c``: HSVI2 trials with these bounds, each distinct belief
 stored once with cached successor upper bounds, upper-bound sweeps, round-robin lower-bound
 backups in place of Perseus, and no per-trial Python (docs/solvers.md, "The C engine on issue
-24's seven files").
+24's seven files"). Given a knob only the Python engine has it raises
+:class:`EngineLacksSetting` (:data:`C_ENGINE_SETTINGS` are the ones it reads).
 """
 from __future__ import annotations
 
@@ -77,9 +76,11 @@ import numpy as np
 from ..model.pomdp import Pomdp
 from . import _pointbased_kernel as _kernel
 from ..solution import AlphaVectorPolicy, SolveResult
-from .mdp import blind_lower_bound, fib_q
+from .mdp import blind_lower_bound
+from .sawtooth import SawtoothUpperBound
 
-__all__ = ["solve_point_based", "PointBasedSolver", "PointBasedSettings", "transition_block", "ENGINES"]
+__all__ = ["solve_point_based", "PointBasedSolver", "PointBasedSettings", "transition_block", "ENGINES",
+           "C_ENGINE_SETTINGS", "EngineLacksSetting"]
 
 
 @dataclass(frozen=True)
@@ -202,6 +203,14 @@ def transition_block(T, coo=None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
             np.ascontiguousarray(vals[order], dtype=float))
 
 
+def _action_rows(coo, S: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The per-action non-zeros ``coo`` of ``T`` as one ``(A·S) × S`` CSR ``(ptr, ind, dat)``: row
+    ``a·S + s`` is ``T[a][s, :]`` (each action's non-zeros come row-major already)."""
+    ptr = _row_pointers(np.concatenate([r + a * S for a, (r, _, _) in enumerate(coo)]), len(coo) * S)
+    return (ptr, np.ascontiguousarray(np.concatenate([c for _, c, _ in coo]), dtype=np.int64),
+            np.ascontiguousarray(np.concatenate([v for _, _, v in coo]), dtype=float))
+
+
 def _row_pointers(rows: np.ndarray, n: int) -> np.ndarray:
     """CSR row pointers of sorted row indices ``rows`` over ``n`` rows."""
     return np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))]).astype(np.int64)
@@ -225,8 +234,6 @@ def _setting(name: str) -> property:
 
     return property(get, set_, doc=f"``settings.{name}`` (see :class:`PointBasedSettings`).")
 
-#: Probe states per sawtooth point (its most likely ones) for the branch-and-bound bound.
-_PROBES = 4
 #: The immediate reward given to an action the action filter forbids at a belief.
 _FORBIDDEN = -1e30
 
@@ -300,12 +307,9 @@ class PointBasedSolver:
         # T[a] as (rows, cols, values) of its non-zeros, row-major (no scipy for a dense model:
         # importing scipy.sparse costs more than solving a small file).
         coo = [_nonzeros(t) for t in model.T]
-        vals = np.concatenate([v for _, _, v in coo])
         self.t_ptr, self.t_ind, self.t_dat = transition_block(model.T, coo)
         # (A·S) × S: row a·S + s is T[a][s, :] (the backed-up vector's product).
-        self.tv_ptr = _row_pointers(np.concatenate([r + a * S for a, (r, _, _) in enumerate(coo)]), A * S)
-        self.tv_ind = np.ascontiguousarray(np.concatenate([c for _, c, _ in coo]), dtype=np.int64)
-        self.tv_dat = np.ascontiguousarray(vals, dtype=float)
+        self.tv_ptr, self.tv_ind, self.tv_dat = _action_rows(coo, S)
         self._inner = np.zeros(S)
         # Scratch of the kernels (all zero / -1 between calls) and the successor output buffers.
         self._bT = np.zeros(A * S)
@@ -316,35 +320,9 @@ class PointBasedSolver:
         self.b0 = np.asarray(model.b0, dtype=float)
         self.r_span = float(self.R.max() - self.R.min())
 
-        # ---- upper bound: FIB vectors + sawtooth points over corner values.
-        t0 = time.perf_counter()
-        Q, self.fib_iterations, self.fib_converged = fib_q(model, epsilon=self.settings.fib_epsilon,
-                                                          time_limit=fib_time)
-        self.fib_seconds = time.perf_counter() - t0
-        self.Qfib = np.ascontiguousarray(Q, dtype=float)   # [S, A]
-        self.Vc = np.ascontiguousarray(Q.max(axis=1))      # corner values
-        self.pt_cap = 1024
-        self.pt_n = 0
-        self.pt_start = np.zeros(self.pt_cap, dtype=np.int64)
-        self.pt_len = np.zeros(self.pt_cap, dtype=np.int64)
-        # Probe states (the point's _PROBES most likely) and 1/b_i there: λ_i(c) ≤ min over
-        # probes of c(s)/b_i(s).
-        self.pt_probe = np.zeros((self.pt_cap, _PROBES), dtype=np.int64)
-        self.pt_pinv = np.zeros((self.pt_cap, _PROBES))
-        self.pt_v = np.zeros(self.pt_cap)
-        self.pt_delta = np.zeros(self.pt_cap)
-        # Versions: a point's stamp is the version at which its value last fell; a cached
-        # successor bound read at version t only needs the points stamped after t again,
-        # unless a corner value fell since (that moves every point's delta: full re-read).
-        self.pt_stamp = np.zeros(self.pt_cap, dtype=np.int64)
-        self.ub_version = 0
-        self.vc_version = 0
-        self.ent_cap = 1 << 14
-        self.ent_n = 0
-        self.ent_idx = np.zeros(self.ent_cap, dtype=np.int64)
-        self.ent_val = np.zeros(self.ent_cap)
-        self.pt_index: Dict[bytes, int] = {}
         self.pos = np.full(S, -1, dtype=np.int64)
+        #: The upper bound: FIB vectors and the sawtooth point set over corner values.
+        self.bound = SawtoothUpperBound(model, self.settings.fib_epsilon, fib_time, self.pos)
         self._one_lb = np.zeros(1)
         self._one_best = np.zeros(1, dtype=np.int64)
         self._row0 = np.zeros(1, dtype=np.int64)
@@ -447,101 +425,9 @@ class PointBasedSolver:
                            False)
         return float(lb[0])
 
-    # ------------------------------------------------------------ upper bound
-    def _refresh_deltas(self) -> None:
-        n = self.pt_n
-        if n == 0:
-            return
-        seg = np.repeat(np.arange(n), self.pt_len[:n])
-        ent = self._entries(np.arange(n))
-        dots = np.bincount(seg, weights=self.ent_val[ent] * self.Vc[self.ent_idx[ent]], minlength=n)
-        self.pt_delta[:n] = self.pt_v[:n] - dots
-
-    def _entries(self, pts: np.ndarray) -> np.ndarray:
-        lens = self.pt_len[pts]
-        total = int(lens.sum())
-        if total == 0:
-            return np.zeros(0, dtype=np.int64)
-        offs = np.cumsum(lens) - lens
-        return np.repeat(self.pt_start[pts] - offs, lens) + np.arange(total)
-
-    def _upper_batch(self, U: np.ndarray, C: np.ndarray, since: Optional[int] = None,
-                     rows: Optional[np.ndarray] = None, with_points: bool = True) -> np.ndarray:
-        """Upper bound at the rows ``rows`` of ``C`` ([M, |U|], beliefs on states ``U``; all rows
-        when ``None``).
-
-        With ``since`` (a version): only the sawtooth over the points whose value fell after
-        it, ``b·V_c + min(0, min_i λ_i δ_i)``, without the FIB vectors; the caller takes the
-        minimum with what it read before. Without: ``min(max_a b·Q_FIB(:,a), b·V_c + min(0, min_i λ_i δ_i))``
-        over all points (over none with ``with_points=False``: the cheap bound of a first expansion).
-
-        ``λ_i(c) = min_{s ∈ supp b_i} c(s)/b_i(s)`` is at most ``c(s)/b_i(s)`` at each of the
-        point's probe states (its most likely ones), and ``δ_i < 0``, so the probes bound the
-        point's correction from below; the kernel reads a point in full only when that bound
-        beats the best correction found so far, and stops reading it as soon as it cannot
-        (branch and bound): the result is the full sawtooth minimum."""
-        C = np.ascontiguousarray(C, dtype=float)
-        if rows is None:
-            rows = np.arange(C.shape[0], dtype=np.int64)
-        out = np.empty(rows.shape[0])
-        if since is None:
-            # every point (none for the cheap bound), and the FIB vectors
-            since, with_fib = (-1 if with_points else self.ub_version + 1), True
-        else:
-            with_fib = False
-        _kernel.sawtooth(C, U.shape[0], U, rows, with_fib, since, self.pos, *self._point_set(), self.A, out)
-        return out
-
     def upper(self, idx: np.ndarray, val: np.ndarray) -> float:
         """Upper bound at the belief ``val`` on states ``idx``."""
-        return float(self._upper_batch(idx, val[None, :])[0])
-
-    def _set_upper(self, idx: np.ndarray, val: np.ndarray, v: float, key: bytes) -> None:
-        if idx.shape[0] == 1:
-            s = int(idx[0])
-            if v < self.Vc[s] - 1e-12:
-                self.Vc[s] = v
-                self._refresh_deltas()
-                self.ub_version += 1
-                self.vc_version = self.ub_version
-            return
-        delta = v - float(val @ self.Vc[idx])
-        i = self.pt_index.get(key)
-        if i is not None:
-            if v < self.pt_v[i]:
-                self.pt_v[i] = v
-                self.pt_delta[i] = delta
-                self.ub_version += 1
-                self.pt_stamp[i] = self.ub_version
-            return
-        if delta >= 0.0:
-            return  # no better than the corners: the point would never bind
-        if self.pt_n == self.pt_cap:
-            self.pt_cap *= 2
-            for name in ("pt_start", "pt_len", "pt_v", "pt_delta", "pt_stamp", "pt_probe", "pt_pinv"):
-                old = getattr(self, name)
-                new = np.zeros((self.pt_cap,) + old.shape[1:], dtype=old.dtype)
-                new[: old.shape[0]] = old
-                setattr(self, name, new)
-        m = idx.shape[0]
-        while self.ent_n + m > self.ent_cap:
-            self.ent_cap *= 2
-            self.ent_idx = np.resize(self.ent_idx, self.ent_cap)
-            self.ent_val = np.resize(self.ent_val, self.ent_cap)
-        i = self.pt_n
-        self.ent_idx[self.ent_n: self.ent_n + m] = idx
-        self.ent_val[self.ent_n: self.ent_n + m] = val
-        top = int(np.argmax(val))
-        self.pt_start[i], self.pt_len[i] = self.ent_n, m
-        probes = np.argsort(-val, kind="stable")[:_PROBES]
-        probes = np.concatenate([probes, np.full(_PROBES - probes.size, top)])
-        self.pt_probe[i], self.pt_pinv[i] = idx[probes], 1.0 / val[probes]
-        self.pt_v[i], self.pt_delta[i] = v, delta
-        self.ub_version += 1
-        self.pt_stamp[i] = self.ub_version
-        self.ent_n += m
-        self.pt_n += 1
-        self.pt_index[key] = i
+        return self.bound.value(idx, val)
 
     def _allowed_at(self, idx: np.ndarray, val: np.ndarray) -> np.ndarray:
         """The action filter's mask at a belief, checked (shape ``[A]``, at least one True)."""
@@ -585,7 +471,7 @@ class PointBasedSolver:
             # Cheap bounds first (corners and FIB vectors); the sawtooth is read lazily, only
             # for the successors of actions that become greedy (see _refresh_upper).
             ub = np.zeros(A * Z)
-            ub[live] = self._upper_batch(U, C, rows=live, with_points=False)
+            ub[live] = self.bound.batch(U, C, rows=live, with_points=False)
             node.ub_c = ub.reshape(A, Z)
             node.ub_seen = np.full(A, -1, dtype=np.int64)
             self.expansions += 1
@@ -602,14 +488,8 @@ class PointBasedSolver:
         first read). The result is the same as a full re-read."""
         Qu = np.empty(self.A)
         _kernel.refresh_upper(node.Rb, node.p, node.ub_c, node.ub_seen, C, U.shape[0], U, live, self.g, self.A,
-                              self.Z, self.ub_version, self.vc_version, self.pos, *self._point_set(), Qu)
+                              self.Z, self.bound.ub_version, self.bound.vc_version, self.pos, *self.bound.point_set(), Qu)
         return Qu
-
-    def _point_set(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                  np.ndarray, np.ndarray, np.ndarray, int, int]:
-        """The sawtooth point set as the kernel reads it (see ``_pointbased_kernel.c``)."""
-        return (self.Vc, self.Qfib, self.pt_start, self.pt_len, self.pt_probe, self.pt_pinv, self.ent_idx,
-                self.ent_val, self.pt_delta, self.pt_stamp, self.pt_n, _PROBES)
 
     def _lower_children(self, U, C, live) -> Tuple[np.ndarray, np.ndarray]:
         """``(lb, best)`` ``[A, Z]``: the lower bound at each live successor and its maximising vector (0 elsewhere)."""
@@ -670,7 +550,7 @@ class PointBasedSolver:
         u = float(Qu.max())
         if u < node.ub:
             node.ub = u
-            self._set_upper(node.idx, node.val, u, node.key)
+            self.bound.lower_at(node.idx, node.val, u, node.key)
 
     def sweep_upper(self) -> None:
         """An upper-bound backup at every expanded belief, the most recently created first (deep
@@ -1064,9 +944,9 @@ class PointBasedSolver:
             policy=policy, method="pointbased", value_at_start=lo, upper_bound=hi,
             iterations=self.trials, seconds=self.seconds, converged=self._open_gap(epsilon) is None,
             extra={
-                "gap": hi - lo, "backups": self.backups, "vectors": self.K, "ub_points": self.pt_n,
-                "beliefs": len(self.beliefs), "pruned": self.pruned, "fib_iterations": self.fib_iterations, "nodes": len(self.nodes),
-                "fib_seconds": self.fib_seconds, "perseus_backups": self.perseus_backups,
+                "gap": hi - lo, "backups": self.backups, "vectors": self.K, "ub_points": self.bound.pt_n,
+                "beliefs": len(self.beliefs), "pruned": self.pruned, "fib_iterations": self.bound.fib_iterations, "nodes": len(self.nodes),
+                "fib_seconds": self.bound.fib_seconds, "perseus_backups": self.perseus_backups,
                 "sweeps": self.sweeps, "sweep_backups": self.sweep_backups, "spreads_skipped": self.spreads_skipped,
                 "ub_sweeps": self.ub_sweeps,
                 "starts": len(self.starts),
@@ -1078,27 +958,33 @@ class PointBasedSolver:
 
 #: The values of ``solve_point_based(engine=...)``.
 ENGINES = ("auto", "c", "python")
+#: The :class:`PointBasedSettings` the C engine reads (of ``trial_kappa`` the first arm). Its
+#: lower-bound spreading is round-robin backups from the newest visited belief,
+#: ``perseus_share`` of them per trial backup, not Perseus' randomised rounds (so ``seed`` is
+#: unused); the bandit over several κ, PBVI sweeps and the pruning knobs are the Python engine's.
+C_ENGINE_SETTINGS = ("trial_kappa", "perseus_share", "spread_backoff", "ub_sweep_ratio", "fib_epsilon")
+
+
+class EngineLacksSetting(ValueError):
+    """``solve_point_based(engine="c")`` was given a :class:`PointBasedSettings` knob that only the
+    Python engine has (see :data:`C_ENGINE_SETTINGS`): refused, not silently ignored."""
 
 
 def _search_c(model: Pomdp, time_limit: Optional[float], epsilon: float,
               settings: PointBasedSettings, max_trials: Optional[int]) -> SolveResult:
     """``engine="c"``: the whole search in ``_search_kernel.c`` (HSVI2 with the same bounds as the
     Python engine: blind-policy α-vectors below, FIB vectors and a sawtooth point set above),
-    one call, no Python per trial. Its knobs are ``settings.trial_kappa[0]`` (the trials' share
-    of the gap at b0), ``settings.ub_sweep_ratio`` (an upper-bound backup at every visited
-    belief after that many trial backups per visited belief) and ``settings.fib_epsilon`` (the
-    start bounds' tolerance); the rest steer the Python engine's lower-bound spreading (Perseus,
-    PBVI sweeps), which this engine does not do."""
+    one call, no Python per trial. Its knobs are :data:`C_ENGINE_SETTINGS`: ``trial_kappa[0]``
+    (the trials' share of the gap at b0), ``ub_sweep_ratio`` (an upper-bound backup at every
+    visited belief after that many trial backups per visited belief), ``perseus_share`` and
+    ``spread_backoff`` (its round-robin lower-bound backups) and ``fib_epsilon`` (the start
+    bounds' tolerance)."""
     from . import _search_kernel
 
     t0 = time.perf_counter()
     S, A, Z = model.num_states, model.num_actions, model.num_observations
     g = float(model.discount)
-    coo = [_nonzeros(t) for t in model.T]
-    # (A·S) × S CSR: row a·S + s is T[a][s, :] (each action's non-zeros come row-major already).
-    t_ptr = _row_pointers(np.concatenate([r + a * S for a, (r, _, _) in enumerate(coo)]), A * S)
-    t_ind = np.ascontiguousarray(np.concatenate([c for _, c, _ in coo]), dtype=np.int64)
-    t_dat = np.ascontiguousarray(np.concatenate([v for _, _, v in coo]), dtype=float)
+    t_ptr, t_ind, t_dat = _action_rows([_nonzeros(t) for t in model.T], S)
     R = np.ascontiguousarray(model.R, dtype=float)
     O = np.ascontiguousarray(model.O, dtype=float)
     b0 = np.ascontiguousarray(model.b0, dtype=float)
@@ -1185,6 +1071,13 @@ def solve_point_based(model: Pomdp, time_limit: Optional[float] = 60.0, epsilon:
             raise ValueError(f"solve_point_based: engine='c' needs an epsilon > 0, got {epsilon!r}")
         if time_limit is not None and not time_limit > 0:
             raise ValueError(f"solve_point_based: time_limit must be > 0 or None, got {time_limit!r}")
+        default = PointBasedSettings()
+        python_only = [f"settings.{f.name}" for f in dataclasses.fields(PointBasedSettings)
+                       if settings is not None and getattr(settings, f.name) != getattr(default, f.name)
+                       and (f.name not in C_ENGINE_SETTINGS or f.name == "trial_kappa" and len(settings.trial_kappa) > 1)]
+        if python_only:
+            raise EngineLacksSetting(f"solve_point_based: engine='c' has no Perseus rounds, PBVI sweeps, κ bandit or "
+                                     f"pruning knobs: {', '.join(python_only)} would be ignored (use engine='python')")
         return _search_c(model, time_limit, epsilon, settings or PointBasedSettings(), max_trials)
     t0 = time.perf_counter()
     # Without a clock limit FIB runs to its own convergence (deterministic), else it

@@ -31,29 +31,22 @@ def policy_paths(model: Pomdp, policy, episodes: int, depth: int, seed: int = 0)
     """``[episodes, depth]`` flat ``a·|Z| + o`` sequences of ``policy``'s episodes in ``model``
     (start state from ``b0``, next state from ``T``, observation from ``O``, belief by eq. 5)."""
     from pearl_pomdp.belief import BeliefFilter
-    from pearl_pomdp.simulate import RowSampler, batched_actions
+    from pearl_pomdp.simulate import EpisodeSampler, batched_actions
 
     if episodes < 1 or depth < 1:
         raise ValueError(f"policy_paths: episodes and depth must be >= 1, got {episodes}, {depth}")
     rng = np.random.default_rng(seed)
-    S, Z = model.num_states, model.num_observations
+    Z = model.num_observations
     filt = BeliefFilter(model)
-    trans = [RowSampler(t) for t in model.T]
-    ocum = np.cumsum(model.O, axis=2)
+    sampler = EpisodeSampler(model)
     choose = batched_actions(policy)
-    b0 = np.asarray(model.b0, dtype=float)
-    states = np.clip(np.searchsorted(np.cumsum(b0), rng.random(episodes) * b0.sum(), side="right"), 0, S - 1)
-    B = np.tile(b0, (episodes, 1))
+    states = sampler.start(rng.random(episodes))
+    B = np.tile(sampler.b0, (episodes, 1))
     out = np.empty((episodes, depth), dtype=np.int64)
     for t in range(depth):
         a = choose(B)
         u_state, u_obs = rng.random(episodes), rng.random(episodes)
-        nxt = np.empty_like(states)
-        for act in np.unique(a):
-            rows = np.flatnonzero(a == act)
-            nxt[rows] = trans[act].sample(states[rows], u_state[rows])
-        c = ocum[a, nxt]
-        o = np.minimum((c <= (u_obs * c[:, -1])[:, None]).sum(axis=1), Z - 1)
+        nxt, o = sampler.step(states, a, u_state, u_obs)
         out[:, t] = a * Z + o
         B = filt.update_batch(B, a, o)
         states = nxt

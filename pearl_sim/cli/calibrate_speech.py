@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.asr.synthesizer import get_voice
     from pearl_pomdp.cli import print_json
     from pearl_pomdp.errors import SpecError
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.speech import KeywordFilter
 
     snrs = _parse_snrs(args.snr)
@@ -173,7 +173,7 @@ def write_observation_table(args: argparse.Namespace, table, snrs) -> dict:
     from pearl_pomdp.asr.channel import fit_observation_rows
     from pearl_pomdp.atomic import atomic_write
     from pearl_pomdp.errors import SpecError
-    from pearl_pomdp.model.factored import parse_domain
+    from pearl_pomdp.model.domain_yaml import parse_domain
 
     snr = args.fit_snr if args.fit_snr is not None else (20.0 if 20.0 in snrs else snrs[0])
     if snr not in snrs:

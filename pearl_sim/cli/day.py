@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.cli import print_json
     from pearl_pomdp.cli._inputs import require_file
     from pearl_pomdp.errors import SpecError
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.day import clock
     from pearl_sim.nursing_home.day_plot import plot_day
     from pearl_sim.nursing_home.day_study import DAY_POLICY_NAMES, DayCase, day_agents, run_day

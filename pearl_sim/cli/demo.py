@@ -63,7 +63,7 @@ def _saved_policy(args: argparse.Namespace) -> str:
     from pearl_pomdp.cli.plan import DEFAULT_POLICY_ROOT
     from pearl_pomdp.errors import PolicyError
     from pearl_pomdp.hierarchy import load_hierarchical_policy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     domain = load_domain(args.domain)
     candidate = DEFAULT_POLICY_ROOT / domain.name

@@ -222,7 +222,7 @@ def _run_pearl(args: argparse.Namespace) -> int:
 
     from pearl_pomdp.cli import print_json
     from pearl_sim.policies import DEFAULT_FLAT_TRIALS
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home import study
     from pearl_sim.nursing_home.experiment import build_agents
 

@@ -54,7 +54,7 @@ class BehaviourTreeNode(PearlNode):
         super().__init__(**kwargs)
         self.params = p = self.declare_table(self.PARAMETERS)
         if actions is None:
-            from pearl_pomdp.model.factored import load_domain
+            from pearl_pomdp.model.domain_yaml import load_domain
 
             actions = list(load_domain(resolve_path(p["domain"], "domain")).actions)
         from pearl_sim.nursing_home.behaviour_tree import PearlBehaviourTree

@@ -98,7 +98,7 @@ def run_day_graph(domain_path, policy_dir, resident: Dict[str, Any], articulatio
 
     from pearl_pomdp.bags.writer import BagWriter
     from pearl_pomdp.hierarchy import load_hierarchical_policy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.nodes.graph import PearlGraph
     from pearl_pomdp.nodes.sim_clock import SimClockDriver

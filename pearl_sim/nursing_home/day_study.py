@@ -293,7 +293,7 @@ def run_cli(args) -> int:
     from pearl_pomdp.cli._inputs import require_file
     from pearl_pomdp.cli._progress import show_progress
     from pearl_pomdp.errors import SpecError
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.worlds import share_path
     from pearl_sim.nursing_home.residents import parse_population
 

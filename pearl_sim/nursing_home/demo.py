@@ -239,7 +239,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
     from pearl_pomdp.hierarchy import load_hierarchical_policy
     from pearl_pomdp.hierarchy.plan import plan
     from pearl_pomdp.hierarchy.spec import load_hierarchy
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     shutil.copyfile(domain_path, out_dir / "domain.yaml")
     domain = load_domain(out_dir / "domain.yaml")

@@ -164,7 +164,7 @@ class Scenario:
 def default_domain():
     """The shipped Pearl domain (``config/pearl.domain.yaml``), loaded once per process."""
     from pearl_pomdp.launch_xml import package_share_dir
-    from pearl_pomdp.model.factored import load_domain
+    from pearl_pomdp.model.domain_yaml import load_domain
 
     share = package_share_dir("pearl_pomdp")
     if share is None:

@@ -20,7 +20,8 @@ thousands of episodes — so a change to the rules below shows up in both. Its s
 :class:`StepSettings`, whose fields are the node's parameters (name, type, range,
 description, whether it may change at run time): one source for every default.
 
-**Inputs → observation symbols** (the one place this is done). The inputs are the domain's
+**Inputs → observation symbols** (the one place this is done: :mod:`pearl_pomdp.tracking.readers`,
+one reader class per input kind). The inputs are the domain's
 channels (:attr:`FactoredDomain.inputs <pearl_pomdp.model.factored.FactoredDomain.inputs>`, one
 per modality, declared in the domain file: :mod:`pearl_pomdp.channels`); the code lists none.
 Each input is read by its kind:
@@ -92,10 +93,11 @@ from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Sequenc
 import numpy as np
 
 from pearl_pomdp.belief import BeliefFilter
-from pearl_pomdp.channels import InputChannel, NumberDiscretiser, flat_channels
+from pearl_pomdp.channels import InputChannel, flat_channels
 from pearl_pomdp.model.pomdp import Pomdp
 from pearl_pomdp.navigation import DriveTimer, places_from_parameters
-from pearl_pomdp.speech import KeywordFilter, Utterance, parse_speech_message
+from pearl_pomdp.speech import KeywordFilter, Utterance
+from pearl_pomdp.tracking.readers import SpeechReader, input_readers
 
 __all__ = ["BeliefTracker", "InputOutcome", "StepResult", "StepSettings", "SettingSpec", "Event",
            "COUNTERS", "drive_actions"]
@@ -610,119 +612,6 @@ class _StepProtocol:
 
 
 
-class _ObservationMapper:
-    """Turns input messages into observation symbols of the model (see the module doc).
-
-    Private: :class:`BeliefTracker` is its only user.
-
-    Args:
-        model: the compiled :class:`~pearl_pomdp.model.pomdp.Pomdp`.
-        channels: the inputs (:class:`~pearl_pomdp.channels.InputChannel`), each with its own name.
-        keywords: the domain's ``keywords:`` (symbol → phrases), or ``{}``.
-        keyword_filter: a ready keyword filter for every speech input (default: the domain's
-            keywords over the input's symbols, with its unknown symbol).
-        confidence_floor: speech below this recogniser confidence counts as the unknown symbol.
-
-    Raises:
-        ValueError: two inputs with one name, or an input symbol the model does not have.
-    """
-
-    def __init__(self, model: Pomdp, channels: Sequence[InputChannel], keywords: Mapping[str, Sequence[str]],
-                 keyword_filter: Optional[KeywordFilter] = None, confidence_floor: float = 0.0):
-        self.model = model
-        symbols = set(model.observations)
-        self.channels: Dict[str, InputChannel] = {}
-        self.allowed: Dict[str, FrozenSet[str]] = {}
-        self.filters: Dict[str, Optional[KeywordFilter]] = {}
-        self.numbers: Dict[str, NumberDiscretiser] = {}
-        for c in channels:
-            if c.name in self.channels:
-                raise ValueError(f"two inputs are called {c.name!r} (modalities {self.channels[c.name].modality} "
-                                 f"and {c.modality})")
-            missing = [z for z in c.symbols if z not in symbols]
-            if missing:
-                raise ValueError(f"input {c.name!r} carries {missing[0]!r}, which is not an observation of {model.name}")
-            self.channels[c.name] = c
-            self.allowed[c.name] = frozenset(c.symbols)
-            if c.kind == "speech":
-                own = {z: list(keywords[z]) for z in keywords if z in c.symbols}
-                # No unknown symbol: text without a keyword classifies as "" (no symbol: invalid).
-                self.filters[c.name] = keyword_filter if keyword_filter is not None else (
-                    KeywordFilter(own, unknown_symbol=c.unknown or "") if own else None)
-            elif c.kind == "number":
-                self.numbers[c.name] = NumberDiscretiser(c)
-        self.confidence_floor = float(confidence_floor)
-        self.reset()
-
-    def reset(self) -> None:
-        """Zero the counts; number inputs forget their current bin."""
-        self.invalid: Dict[str, int] = {key: 0 for key in self.channels}
-        self.unchanged: Dict[str, int] = {key: 0 for key in self.numbers}
-        self.last_number: Dict[str, Optional[str]] = {key: None for key in self.numbers}
-        for discretiser in self.numbers.values():
-            discretiser.reset()
-        self.no_keyword = 0
-        self.low_confidence = 0
-
-    def speech(self, key: str, text: str, confidence: float = 1.0) -> Tuple[Optional[str], str]:
-        """``(symbol or None, how it was heard)`` of recognised text (see :attr:`InputOutcome.heard`)."""
-        stripped = text.strip()
-        allowed, keyword_filter = self.allowed[key], self.filters[key]
-        if stripped in allowed:
-            symbol, heard = stripped, "symbol"
-        elif keyword_filter is not None:
-            symbol = keyword_filter.classify(text)
-            heard = "no_keyword" if symbol == keyword_filter.unknown_symbol else "keyword"
-            if heard == "no_keyword":
-                self.no_keyword += 1
-        else:
-            self.invalid[key] += 1
-            return None, "invalid"
-        unknown = keyword_filter.unknown_symbol if keyword_filter is not None else None
-        if heard in ("symbol", "keyword") and confidence < self.confidence_floor and unknown \
-                and symbol != unknown:
-            self.low_confidence += 1
-            symbol, heard = unknown, "low_confidence"
-        if symbol not in allowed:
-            self.invalid[key] += 1
-            return None, "invalid"
-        return symbol, heard
-
-    def symbol(self, key: str, text: str) -> Optional[str]:
-        """The symbol of a symbol input's string, or ``None`` (counted) if invalid."""
-        symbol = text.strip()
-        if symbol not in self.allowed[key]:
-            self.invalid[key] += 1
-            return None
-        return symbol
-
-    def number(self, key: str, data: Any) -> Tuple[Optional[str], str]:
-        """``(symbol or None, how it was read)`` of a number input's reading: ``"number"`` (a new
-        symbol), ``"unchanged"`` (``report: change`` and the symbol stays: no observation),
-        ``"symbol"`` (one of its symbols given as text) or ``"invalid"``."""
-        channel, discretiser = self.channels[key], self.numbers[key]
-        if isinstance(data, str) and data.strip() in self.allowed[key]:
-            symbol = data.strip()
-            # The hysteresis goes on from the symbol given (the next reading may keep it).
-            discretiser.current = [b.symbol for b in channel.bins].index(symbol)
-            self.last_number[key] = symbol
-            return symbol, "symbol"
-        value: Optional[float]
-        try:
-            value = float(data)   # a number, or a number as text
-        except (TypeError, ValueError):
-            value = None
-        read = discretiser.read(value) if value is not None else None
-        if read is None:
-            self.invalid[key] += 1
-            return None, "invalid"
-        if channel.report == "change" and read == self.last_number[key]:
-            self.unchanged[key] += 1
-            return read, "unchanged"
-        self.last_number[key] = read
-        return read, "number"
-
-
 class BeliefTracker:
     """The step loop on raw inputs, behind one closed façade (see the module doc).
 
@@ -776,8 +665,10 @@ class BeliefTracker:
         if channels is None:
             channels = domain.inputs if domain is not None else \
                 flat_channels(model.observations, "speech" if keyword_filter is not None else "symbol")
-        self._mapper = _ObservationMapper(model, channels, domain.keywords if domain is not None else {},
-                                          keyword_filter, settings.confidence_floor)
+        #: Input name → its reader (:mod:`pearl_pomdp.tracking.readers`, one class per input kind).
+        self._readers = input_readers(model, channels, domain.keywords if domain is not None else {},
+                                      keyword_filter, settings.confidence_floor)
+        self._speech = [r for r in self._readers.values() if isinstance(r, SpeechReader)]
         self.history: Optional[Deque[StepResult]] = None
         self._run = 1 + secrets.randbits(31)   # never 0: a belief with run 0 carries none
         self._resumed_action: Optional[str] = None
@@ -832,12 +723,12 @@ class BeliefTracker:
     def keyword_filter(self) -> Optional[KeywordFilter]:
         """The first speech input's keyword filter, or ``None`` (no speech input with keywords:
         speech text must be a symbol)."""
-        return next((f for f in self._mapper.filters.values() if f is not None), None)
+        return next((r.keyword_filter for r in self._speech if r.keyword_filter is not None), None)
 
     @property
     def channels(self) -> Tuple[InputChannel, ...]:
         """The inputs, in the domain's modality order (the node subscribes to each)."""
-        return tuple(self._mapper.channels.values())
+        return tuple(r.channel for r in self._readers.values())
 
     def symbols(self, key: str) -> FrozenSet[str]:
         """The observation symbols input ``key`` may carry.
@@ -845,22 +736,21 @@ class BeliefTracker:
         Raises:
             ValueError: ``key`` is not an input (names the inputs).
         """
-        return self._mapper.allowed[self._check_input(key)]
+        return self._readers[self._check_input(key)].allowed
 
     def _check_input(self, key: str) -> str:
-        if key not in self._mapper.channels:
-            raise ValueError(f"unknown input {key!r}; inputs: {', '.join(self._mapper.channels)}")
+        if key not in self._readers:
+            raise ValueError(f"unknown input {key!r}; inputs: {', '.join(self._readers)}")
         return key
 
     def input_for(self, observation: str) -> str:
         """The input that carries ``observation``: the one whose symbols have it, else the first
         speech input (recognised text for its keyword filter), else the first input."""
         stripped = observation.strip()
-        for key, allowed in self._mapper.allowed.items():
-            if stripped in allowed:
+        for key, reader in self._readers.items():
+            if stripped in reader.allowed:
                 return key
-        speech = [c.name for c in self._mapper.channels.values() if c.kind == "speech"]
-        return speech[0] if speech else next(iter(self._mapper.channels))
+        return self._speech[0].channel.name if self._speech else next(iter(self._readers))
 
     def deadline(self) -> Optional[float]:
         """When the open step times out (clock seconds), or ``None`` (no open step, no timeout,
@@ -874,12 +764,10 @@ class BeliefTracker:
     def counters(self) -> Dict[str, int]:
         """Every counter of the step rules and the input mapping (all zeroed by :meth:`reset`)."""
         out = dict(self._protocol.counters)
-        out["unknown_speech"] = self._mapper.no_keyword
-        out["low_confidence"] = self._mapper.low_confidence
-        for key, n in self._mapper.invalid.items():
-            out[f"invalid_{key}"] = n
-        for key, n in self._mapper.unchanged.items():
-            out[f"unchanged_{key}"] = n
+        out["unknown_speech"] = sum(r.no_keyword for r in self._speech)
+        out["low_confidence"] = sum(r.low_confidence for r in self._speech)
+        for reader in self._readers.values():
+            out.update(reader.counts())
         return out
 
     def warnings(self) -> int:
@@ -887,7 +775,7 @@ class BeliefTracker:
         deadline (the /diagnostics WARN condition)."""
         c = self.counters()
         return (c["dropped_stale"] + c["dropped_overflow"] + c["replaced_actions"] + c["unknown_actions"]
-                + c["zero_likelihood"] + c["nav_failures"] + sum(self._mapper.invalid.values()))
+                + c["zero_likelihood"] + c["nav_failures"] + sum(r.invalid for r in self._readers.values()))
 
     def marginals(self, belief: Optional[np.ndarray] = None) -> Dict[str, Dict[str, float]]:
         """``{feature: {value: P}}`` of ``belief`` (default: the current one); a flat model
@@ -978,7 +866,8 @@ class BeliefTracker:
     def reset(self) -> None:
         """Back to ``b0``: no open step, nothing queued, every counter zeroed (history kept)."""
         self._protocol.reset()
-        self._mapper.reset()
+        for reader in self._readers.values():
+            reader.reset()
         self._run = 1 + secrets.randbits(31)   # never 0: a belief with run 0 carries none
         self._resumed_action = None
 
@@ -1044,24 +933,9 @@ class BeliefTracker:
         Raises:
             ValueError: ``key`` is not an input (names the inputs).
         """
-        kind = self._mapper.channels[self._check_input(key)].kind
-        if kind == "speech":
-            if isinstance(data, Utterance):
-                text, confidence = data.text, data.confidence
-                given = data.symbol if data.symbol in self._mapper.allowed[key] else ""
-                symbol, heard = self._mapper.speech(key, given or text, confidence)
-            else:
-                text, confidence = parse_speech_message(str(data))
-                symbol, heard = self._mapper.speech(key, text, confidence)
-        elif kind == "number":
-            text, confidence = (data if isinstance(data, str) else str(data)), 1.0
-            symbol, heard = self._mapper.number(key, data)
-            if heard == "unchanged":
-                return self._outcome("idle", None, symbol, heard, text, confidence)
-        else:
-            text, confidence = str(data), 1.0
-            symbol = self._mapper.symbol(key, text)
-            heard = "symbol" if symbol is not None else "invalid"
+        symbol, heard, text, confidence = self._readers[self._check_input(key)].read(data)
+        if heard == "unchanged":   # a number input's reading that kept its symbol: nothing observed
+            return self._outcome("idle", None, symbol, heard, text, confidence)
         if symbol is None:
             return self._outcome("invalid", None, None, heard, text, confidence)
         kind, closed = self._protocol.on_observation(symbol, key, now, text, confidence)
@@ -1092,7 +966,8 @@ class BeliefTracker:
         self.settings = new
         self._protocol.step_timeout = new.step_timeout
         self._protocol.stale_after = new.stale_after
-        self._mapper.confidence_floor = new.confidence_floor
+        for reader in self._speech:
+            reader.confidence_floor = new.confidence_floor
 
     # ---------------------------------------------------------------- out
     def _outcome(self, kind: str, closed: Optional[StepResult], symbol: Optional[str] = None, heard: str = "",
