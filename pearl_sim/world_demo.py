@@ -205,10 +205,13 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
         def closing(decision: dict) -> Optional[dict]:
             return next((b for b in marginals if b.get("step") == decision.get("belief_step", -2) + 1), None)
 
+        def answered(action: str) -> bool:
+            d = naming(action)
+            return d is not None and closing(decisions[d]) is not None
+
         def on_action(step: StepResult, waits: List[StepResult]) -> None:
             index = len(result.actions) + 1
-            graph.spin_until(lambda: naming(step.action) is not None and closing(decisions[naming(step.action)])
-                             is not None, timeout_sec=wall_timeout)
+            graph.spin_until(lambda: answered(step.action), timeout_sec=wall_timeout)
             d = naming(step.action)
             decision = decisions[d] if d is not None else {"trace": []}
             latest = closing(decision) or {}
