@@ -185,7 +185,8 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
             "pearl.policy": (node_policy if node_policy != str(policy_dir)
                              else os.path.relpath(policy_dir, bag_dir.resolve())),
             "pearl.tracker_params": json.dumps(tracker_params),
-            **({"pearl.params_file": os.path.relpath(params_file, bag_dir)} if params_file is not None else {})})
+            # Empty: the nodes ran on their code's defaults (pearl replay does the same).
+            "pearl.params_file": os.path.relpath(params_file, bag_dir) if params_file is not None else ""})
         recorder = Recorder(rec_node, writer, topics=topics)
         # The bag must hold the loop from its first message (b0 and the answer to it are latched).
         recorder.wait_until_recording(graph.spin_until, wall_timeout)

@@ -63,6 +63,13 @@ def test_a_world_registered_by_entry_point_runs_demo_and_experiment(tmp_path):
     topics = {m.topic for m in open_bag(tmp_path / "demo" / "bag").read_messages()}
     assert {"/pearl/action", "/pearl/belief", "/kiosk/sim/truth"} <= topics
     assert (tmp_path / "demo" / "policy" / "hierarchy.json").is_file()   # the flat hierarchy, planned and saved
+    # The bag replays on its own: the graph, rebuilt from its custom_data (the world has no params file:
+    # the nodes' code defaults, recorded as such), takes the recorded actions with the same beliefs.
+    replay = pearl(["replay", str(tmp_path / "demo" / "bag"), "--json", "--domain-id", str(allocate_domain_id())], site)
+    assert replay.returncode == 0, replay.stderr[-3000:]
+    replayed = json.loads(replay.stdout)
+    assert replayed["match"] and replayed["beliefs_match"] and replayed["actions"] == replayed["expected_actions"]
+    assert len(replayed["actions"]) >= summary["steps"]   # the graph also answered the last steps' beliefs
 
     study = pearl(["experiment", "--domain", str(DOMAIN), "--episodes", "2", "--out", str(tmp_path / "study"),
                    "--json"], site)

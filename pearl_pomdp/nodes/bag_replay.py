@@ -35,11 +35,13 @@ The nodes' ``diagnostics_period`` is set to an hour during a replay: /diagnostic
 compared, and its timers would only add stops to the lock-step.
 
 The graph's configuration comes from the bag's ``custom_data`` (written by the recording
-script): ``pearl.domain``, ``pearl.policy`` (paths relative to the bag directory),
+script): ``pearl.domain``, ``pearl.policy`` (paths relative to the bag directory; a policy may also be
+the spec ``online[:TRIALS]``, planned again at every belief),
 ``pearl.tracker_params`` (JSON of belief-tracker parameter overrides) and, optionally,
 ``pearl.policy_params`` (JSON of policy-node overrides: the autonomy level the run started with)
-and ``pearl.params_file`` (the robot's node params file, relative to the bag directory; absent:
-the shipped one, as for the nursing-home robot).
+and ``pearl.params_file`` (the robot's node params file, relative to the bag directory; empty: the
+nodes' code defaults, as a world without a params file ran them; absent: the shipped one, as for
+the nursing-home robot).
 
 A person in the loop (docs/ros-nodes.md, "Operator") is replayed too: the recorded vetoes and
 commands (``/pearl/operator/veto``, ``/pearl/operator/command``) are fed to the policy in
@@ -221,6 +223,8 @@ def _check_topics(reader: BagReader, inputs: Optional[Dict[str, str]] = None) ->
 
 def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optional[str] = None) -> Dict[str, Any]:
     """Domain, policy and tracker parameters for replaying ``reader``'s bag (PearlError if missing)."""
+    from pearl_pomdp.online.decider import online_trials
+
     custom = (reader.metadata or {}).get("custom_data") or {}
     base = reader.path if reader.path.is_dir() else reader.path.parent
 
@@ -228,6 +232,8 @@ def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optio
         value = given if given is not None else custom.get(key)
         if not value:
             raise PearlError(f"{reader.path}: custom_data has no {key!r}: pass --{key.split('.')[1]} to replay it")
+        if key == KEY_POLICY and online_trials(value, key) is not None:
+            return value      # planned online at every belief (a spec, not a file)
         p = Path(value)
         if given is None and not p.is_absolute():
             p = base / p
@@ -246,8 +252,10 @@ def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optio
 
     return {"domain": path_of(KEY_DOMAIN, domain), "policy": path_of(KEY_POLICY, policy),
             "tracker_params": params_of(KEY_TRACKER), "policy_params": params_of(KEY_POLICY_PARAMS),
-            # Another robot's node params (its tracker rules); absent: the shipped file.
-            "params_file": path_of(KEY_PARAMS_FILE, None) if custom.get(KEY_PARAMS_FILE) else "default"}
+            # Another robot's node params (its tracker rules); recorded empty: the nodes' code defaults
+            # (a world without a params file); absent (an older bag): the shipped file.
+            "params_file": (path_of(KEY_PARAMS_FILE, None) if custom.get(KEY_PARAMS_FILE)
+                            else None if KEY_PARAMS_FILE in custom else "default")}
 
 
 def _graph_options() -> Dict[str, Any]:
