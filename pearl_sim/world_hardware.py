@@ -12,6 +12,7 @@ resident, a scheduler and a navigation stack with their own topics).
 from __future__ import annotations
 
 import json
+import math
 from typing import Any, Dict, Optional, Tuple
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -49,12 +50,15 @@ class WorldHardware:
         world: the simulated world (a :class:`~pearl_sim.world_base.StudyWorld`) whose messages go out.
         domain: the FactoredDomain whose inputs (topics, types) the publishers follow.
         name: the world's name (the node's and the said/truth topics').
+        pose_topic: where the robot's pose goes with every true state (``geometry_msgs/PoseStamped``
+            in the ``map`` frame, from the scenario's ``map`` of places; the nursing home's
+            ``/pearl/pose``, which the live view draws); ``None``: none.
 
     Raises:
         PearlError: a world message of a modality the domain declares no input for (names both).
     """
 
-    def __init__(self, context, world, domain, name: str):
+    def __init__(self, context, world, domain, name: str, pose_topic: Optional[str] = None):
         import rclpy
 
         from pearl_pomdp.nodes.channel_messages import reader_for
@@ -71,6 +75,12 @@ class WorldHardware:
         self.said = self.node.create_publisher(String, said_topic(name), RELIABLE)
         self.truth = self.node.create_publisher(String, truth_topic(name), RELIABLE)
         self._domain_file = domain.source
+        self.pose = None
+        if pose_topic:
+            from geometry_msgs.msg import PoseStamped
+
+            self._Pose = PoseStamped
+            self.pose = self.node.create_publisher(PoseStamped, pose_topic, 10)
 
     def outgoing(self, message: Message) -> Tuple[Any, Any]:
         """``(publisher, ROS message)`` carrying ``message`` on its modality's input."""
@@ -94,8 +104,25 @@ class WorldHardware:
         self.said.publish(String(data=said))
 
     def publish_truth(self, t: float, phase: str, action: str = "", result: Optional[StepResult] = None) -> None:
-        """The true state (JSON) at the start or end of an action."""
+        """The true state (JSON) at the start or end of an action (``phase`` ``start``: the state an
+        action starts in, which ``pearl fit`` counts transitions between; ``end``: after it, with its
+        events and whether it was wrong), and the robot's pose when there is a pose topic."""
+        if self.pose is not None:
+            self.publish_pose(t)
         self.truth.publish(String(data=json.dumps(self.world.truth_record(phase, action, result))))
+
+    def publish_pose(self, t: float) -> None:
+        """The robot's place in the scenario's map, stamped ``t`` (sim seconds)."""
+        if self.pose is None:
+            return
+        x, y = self.world.scenario.map[self.world.robot_at]
+        msg = self._Pose()
+        msg.header.frame_id = "map"
+        sec = int(math.floor(t))
+        msg.header.stamp.sec, msg.header.stamp.nanosec = sec, int(round((t - sec) * 1e9)) % 1_000_000_000
+        msg.pose.position.x, msg.pose.position.y = float(x), float(y)
+        msg.pose.orientation.w = 1.0
+        self.pose.publish(msg)
 
     def destroy(self) -> None:
         self.node.destroy_node()

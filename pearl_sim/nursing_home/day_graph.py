@@ -138,7 +138,7 @@ def run_day_graph(domain_path, policy_dir, resident: Dict[str, Any], articulatio
                            overrides={"belief_tracker": {**tracker_params, "diagnostics_period": 600.0},
                                       "hierarchical_policy": {"policy": str(local_policy),
                                                               "diagnostics_period": 600.0}})
-        sim = SimulatedHardware(context, world)
+        sim = SimulatedHardware(context, world, domain)
         for node in sim.nodes:
             graph.add_node(node)
         rec_node = graph.add_node(rclpy.create_node("day_recorder", context=context, parameter_overrides=[
