@@ -18,12 +18,12 @@ import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from pearl_pomdp.errors import PearlError
 from pearl_sim.messages import StepResult
 
-__all__ = ["WorldDemo", "DemoRun", "run_world_demo", "run_demo_cli"]
+__all__ = ["WorldDemo", "DemoRun", "run_world_demo", "run_demo_cli", "run_folder", "close_run"]
 
 
 @dataclass(frozen=True)
@@ -71,6 +71,38 @@ class DemoRun:
                 "actions": self.actions, "seconds": round(self.seconds, 2), **self.metrics, "outcome": self.outcome()}
 
 
+def run_folder(out_dir, domain_path) -> Tuple[Path, Path, Any]:
+    """A run's output folder, made ready: ``(out_dir resolved, its bag folder, the domain)``, the
+    domain copied beside the bag and loaded from the copy, so the bag replays on its own.
+
+    Raises:
+        PearlError: the bag folder already holds a bag (names it).
+    """
+    from pearl_pomdp.model.domain_yaml import load_domain
+
+    out_dir = Path(out_dir).resolve()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    bag_dir = out_dir / "bag"
+    if bag_dir.exists() and any(bag_dir.iterdir()):
+        raise PearlError(f"{bag_dir}: already holds a bag; choose another --out folder")
+    shutil.copyfile(domain_path, out_dir / "domain.yaml")
+    return out_dir, bag_dir, load_domain(out_dir / "domain.yaml")
+
+
+def close_run(writer, hardware, graph, context) -> None:
+    """End a run through the graph, whatever got started: the bag closed first (every message it took
+    is kept), then the simulated hardware, the graph and the rclpy context."""
+    import rclpy
+
+    if writer is not None:
+        writer.close()
+    if hardware is not None:
+        hardware.destroy()
+    if graph is not None:
+        graph.shutdown()
+    rclpy.try_shutdown(context=context)
+
+
 def _format(index: int, result: StepResult, waits: List[StepResult], trace: List[dict], marginals: dict) -> str:
     path = " → ".join([trace[0]["subtask"]] + [t["choice"] for t in trace]) if trace else result.action
     lines = [f"[{result.start:7.1f} s] action {result.action:<16} trace {path}"]
@@ -112,7 +144,6 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
 
     from pearl_pomdp.bags.writer import BagWriter
     from pearl_pomdp.deciders import load_decider
-    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.nodes.graph import PearlGraph
@@ -124,17 +155,11 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
 
     started = time.monotonic()
     scenario = demo.load_scenarios(scenario_path)[0]
-    out_dir = Path(out_dir).resolve()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    bag_dir = out_dir / "bag"
-    if bag_dir.exists() and any(bag_dir.iterdir()):
-        raise PearlError(f"{bag_dir}: already holds a bag; choose another --out folder")
-    shutil.copyfile(domain_path, out_dir / "domain.yaml")
+    out_dir, bag_dir, domain = run_folder(out_dir, domain_path)
     if params_file is not None:
         # The robot's node params beside the bag too: `pearl replay` runs the tracker by its rules.
         shutil.copyfile(params_file, out_dir / "nodes.yaml")
         params_file = out_dir / "nodes.yaml"
-    domain = load_domain(out_dir / "domain.yaml")
     model = domain.compile()
     world = demo.make_world(scenario, seed)
     policy_dir = out_dir / "policy"
@@ -234,13 +259,7 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
         recorder.stop()
         result.bag_messages = sum(recorder.counts.values())
     finally:
-        if writer is not None:
-            writer.close()
-        if hardware is not None:
-            hardware.destroy()
-        if graph is not None:
-            graph.shutdown()
-        rclpy.try_shutdown(context=context)
+        close_run(writer, hardware, graph, context)
     result.metrics = demo.metrics(world)
     result.bag = bag_dir
     result.transcript = out_dir / "transcript.txt"

@@ -98,7 +98,6 @@ def run_day_graph(domain_path, policy_dir, resident: Dict[str, Any], articulatio
 
     from pearl_pomdp.bags.writer import BagWriter
     from pearl_pomdp.hierarchy import load_hierarchical_policy
-    from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.nodes.bag_recorder import Recorder
     from pearl_pomdp.nodes.graph import PearlGraph
     from pearl_pomdp.nodes.sim_clock import SimClockDriver
@@ -106,15 +105,10 @@ def run_day_graph(domain_path, policy_dir, resident: Dict[str, Any], articulatio
     from pearl_sim.loop import run_episode
     from pearl_sim.nodes import GraphBackend, SimulatedHardware
     from pearl_sim.nursing_home.residents import effective_word_error_rate
+    from pearl_sim.world_demo import close_run, run_folder
 
     started = time.monotonic()
-    out = Path(out_dir).resolve()
-    out.mkdir(parents=True, exist_ok=True)
-    bag_dir = out / "bag"
-    if bag_dir.exists() and any(bag_dir.iterdir()):
-        raise PearlError(f"{bag_dir}: already holds a bag; choose another --out folder")
-    shutil.copyfile(domain_path, out / "domain.yaml")
-    domain = load_domain(out / "domain.yaml")
+    out, bag_dir, domain = run_folder(out_dir, domain_path)
     local_policy = out / "policy"
     if Path(policy_dir).resolve() != local_policy:
         shutil.copytree(policy_dir, local_policy, dirs_exist_ok=True)
@@ -177,13 +171,7 @@ def run_day_graph(domain_path, policy_dir, resident: Dict[str, Any], articulatio
             raise PearlError("the belief tracker node was not configured: no belief to check")
         final_belief = np.asarray(core.belief, dtype=float)
     finally:
-        if writer is not None:
-            writer.close()
-        if sim is not None:
-            sim.destroy()
-        if graph is not None:
-            graph.shutdown()
-        rclpy.try_shutdown(context=context)
+        close_run(writer, sim, graph, context)
     checklist = world.checklist()
     hours = int(np.ceil(min(until, world.time) / HOUR_S))
     return {"scenario": name, "seed": seed, "until": until, "score": day_score(checklist), "checklist": checklist,

@@ -17,7 +17,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional
 
-from pearl_pomdp.errors import PearlError
 from pearl_sim.nursing_home.scenario import Scenario, load_scenarios
 from pearl_sim.nursing_home.world import StepResult, World
 
@@ -228,21 +227,15 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
 
     started = time.monotonic()
     scenario: Scenario = load_scenarios(scenario_path)[0]
-    out_dir = Path(out_dir).resolve()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    bag_dir = out_dir / "bag"
-    if bag_dir.exists() and any(bag_dir.iterdir()):
-        raise PearlError(f"{bag_dir}: already holds a bag; choose another --out folder")
     # The bag must be replayable on its own: keep the domain and the planned policy beside it.
     import shutil
 
     from pearl_pomdp.hierarchy import load_hierarchical_policy
     from pearl_pomdp.hierarchy.plan import plan
     from pearl_pomdp.hierarchy.spec import load_hierarchy
-    from pearl_pomdp.model.domain_yaml import load_domain
+    from pearl_sim.world_demo import close_run, run_folder
 
-    shutil.copyfile(domain_path, out_dir / "domain.yaml")
-    domain = load_domain(out_dir / "domain.yaml")
+    out_dir, bag_dir, domain = run_folder(out_dir, domain_path)
     world = World(scenario, seed=seed, domain=domain)
     if policy:
         # A copy beside the bag, so the bag replays on its own (as a freshly planned one does).
@@ -379,13 +372,7 @@ def run_demo(scenario_path: Path, out_dir: Path, *, domain_path: Path, hierarchy
         result.bag_messages = sum(recorder.counts.values())
         result.tracker_counters = dict(graph.tracker.counters())
     finally:
-        if writer is not None:
-            writer.close()
-        if sim is not None:
-            sim.destroy()
-        if graph is not None:
-            graph.shutdown()
-        rclpy.try_shutdown(context=context)
+        close_run(writer, sim, graph, context)
     m = world.metrics
     result.metrics = {"steps": m.steps, "reminders_delivered": m.reminders_delivered,
                       "guidances_started": m.guidances_started, "guidances_completed": m.guidances_completed,
