@@ -180,7 +180,10 @@ def test_shipped_configs_read_only_themselves():
     d = REPO / "config" / "pearl.domain.yaml"
     h = REPO / "config" / "pearl.hierarchy.yaml"
     s = REPO / "config" / "scenarios" / "study.yaml"
-    load_domain(d)  # warm imports outside the recording
+    # Warm every lazy import outside the recording (loading a scenario imports the speech
+    # channel's modules on first use): run alone, this test would otherwise see their files.
+    load_scenarios(s)
+    load_hierarchy(h, load_domain(d))
     with recorded() as events:
         domain = load_domain(d)
         load_hierarchy(h, domain)
