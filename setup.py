@@ -88,6 +88,7 @@ setup(
         (f"share/{PACKAGE}/config/speech", glob("config/speech/*.json")),
         (f"share/{PACKAGE}/config/foxglove", glob("config/foxglove/*.json")),
         (f"share/{PACKAGE}/config/sros2", glob("config/sros2/*.xml")),
+        (f"share/{PACKAGE}/config/plans/pearl_day", glob("config/plans/pearl_day/*")),
     ],
     python_requires=">=3.10",
     install_requires=["numpy>=1.24", "scipy>=1.11", "PyYAML>=6", "tqdm>=4.60"],

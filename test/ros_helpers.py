@@ -320,10 +320,11 @@ def pearl_policy(request, tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def day_policy(request, tmp_path_factory) -> Path:
     """A planned policy of the working day's domain (``config/pearl_day.domain.yaml``):
-    ``$PEARL_DAY_POLICY_DIR`` when it fits, else planned once and cached as :func:`pearl_policy` is."""
+    ``$PEARL_DAY_POLICY_DIR`` or the shipped ``config/plans/pearl_day`` when it fits, else planned
+    once and cached as :func:`pearl_policy` is."""
     env_dir = os.environ.get("PEARL_DAY_POLICY_DIR")
     return _planned_policy(request, tmp_path_factory, REPO / "config" / "pearl_day.domain.yaml",
-                           [Path(env_dir)] if env_dir else [])
+                           ([Path(env_dir)] if env_dir else []) + [REPO / "config" / "plans" / "pearl_day"])
 
 
 def _planned_policy(request, tmp_path_factory, domain_path: Path, candidates) -> Path:

@@ -7,7 +7,7 @@ import pytest
 from ros_helpers import allocate_domain_id, configure_test_process
 
 REPO = Path(__file__).resolve().parents[1]
-pytestmark = [pytest.mark.ros, pytest.mark.slow]   # plans the 864-state day domain once (~1 min)
+pytestmark = [pytest.mark.ros, pytest.mark.slow]   # a whole morning through the nodes (the shipped day plan)
 #: A morning that starts with a vitamin reminder at 08:05 (the rest of the day far away), to 08:15.
 UNTIL = 15 * 60.0
 SPLIT = 5 * 60.0

@@ -3,7 +3,8 @@
 A resident from the study's generator (`--resident-seed`, `--resident`) lives one day (`--seed`):
 meals, a nap, the lounge, a visitor, her physiotherapy appointment and session, three reminders,
 questions, and the robot's battery over hours (docs/day.md). The controller is the hierarchical
-POMDP planned on the day domain (config/pearl_day.domain.yaml, fitted on training days), or
+POMDP planned on the day domain (config/pearl_day.domain.yaml, fitted on training days; its plan
+ships in config/plans/pearl_day, so the day starts at once), or
 `--policy day_tree|qmdp|flat_pointbased`. The day runs on the core executive, the step loop the
 nodes run (about a second of CPU a day for the tree, several for the hierarchy); with --nodes it
 runs through the real ROS 2 nodes over DDS under /clock (the hierarchical policy; minutes for a
@@ -13,6 +14,7 @@ read, with the answer time per hour and the process's memory. Prints the checkli
 its battery, every action), checklist.json and timeline.json into --out.
 
 Examples:
+  pearl day --seed 3 --until 12:00            # the hierarchy (the shipped plan), the morning
   pearl day --policy day_tree --seed 3 --out out/day-tree
 """
 from __future__ import annotations
@@ -21,6 +23,7 @@ import argparse
 import json
 import time
 from pathlib import Path
+from typing import Optional
 
 COMMAND = "day"
 HELP = "run one working day (08:00-20:00) and print the nurse's checklist and a picture of the day"
@@ -46,7 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--until", default="20:00", metavar="HH:MM",
                         help="end the day early at this clock time (default 20:00)")
     parser.add_argument("--policy-dir", default="", metavar="DIR",
-                        help="with --nodes: a hierarchical policy `pearl plan` saved for the domain (default: plan now)")
+                        help="a hierarchical policy `pearl plan` saved for the domain (default: the shipped plan "
+                             "config/plans/pearl_day when the domain and hierarchy are the shipped ones, else plan "
+                             "now, 1-2 minutes)")
     parser.add_argument("--domain-id", type=int, default=None, help="with --nodes: ROS_DOMAIN_ID of the graph")
     parser.add_argument("--out", default=None, help="folder for day.png, checklist.json, timeline.json "
                                                     "(default out/day-<time>)")
@@ -55,7 +60,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.cli import print_json
-    from pearl_pomdp.cli._inputs import require_file
+    from pearl_pomdp.cli._inputs import require_dir, require_file
     from pearl_pomdp.errors import SpecError
     from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.day import clock
@@ -80,10 +85,19 @@ def run(args: argparse.Namespace) -> int:
     case = DayCase(profile.name, dict(profile.fields), float(profile.articulation_wer), args.seed, args.seed)
     out = Path(args.out) if args.out else Path("out") / f"day-{time.strftime('%Y%m%d-%H%M%S')}"
     out.mkdir(parents=True, exist_ok=True)
+    if args.policy_dir:
+        require_dir(args.policy_dir, "policy directory (--policy-dir, from `pearl plan`)")
     if args.nodes:
         day = _run_nodes(args, domain, profile, case, until, out)
     else:
-        controller = day_agents(domain, args.hierarchy, [args.policy])[args.policy]
+        planned = _planned_policy_dir(args, domain) if args.policy == "hierarchical" else None
+        if planned is not None:
+            from pearl_pomdp.hierarchy import load_hierarchical_policy
+            from pearl_sim.planning import Controller
+
+            controller = Controller(args.policy, load_hierarchical_policy(planned, domain))
+        else:
+            controller = day_agents(domain, args.hierarchy, [args.policy])[args.policy]
         day = run_day(controller, domain, case, args.noise, timeline=True, until=until)
     title = (f"{args.policy} · resident {profile.name} (generator seed {args.resident_seed}) · day seed {args.seed} · "
              f"noise {args.noise}")
@@ -141,15 +155,40 @@ def _clock_seconds(text: str) -> float:
     return t
 
 
+#: The shipped plan of the shipped day domain and Pearl's hierarchy (`pearl plan
+#: config/pearl_day.domain.yaml --out config/plans/pearl_day`, 1-2 minutes of CPU), so a day starts at once.
+SHIPPED_DAY_PLAN = "config/plans/pearl_day"
+
+
+def _planned_policy_dir(args, domain) -> Optional[Path]:
+    """``--policy-dir``, else the shipped day plan when the domain and the hierarchy are the shipped
+    ones and the plan was planned for this domain (its model fingerprint), else ``None`` (plan now)."""
+    from pearl_pomdp.errors import PolicyError
+    from pearl_pomdp.hierarchy import load_hierarchical_policy
+    from pearl_sim.worlds import share_path
+
+    if args.policy_dir:
+        return Path(args.policy_dir)
+    shipped = Path(share_path(SHIPPED_DAY_PLAN))
+    defaults = (share_path("config/pearl_day.domain.yaml"), share_path("config/pearl.hierarchy.yaml"))
+    if (Path(args.domain).resolve(), Path(args.hierarchy).resolve()) != tuple(Path(p).resolve() for p in defaults):
+        return None
+    try:
+        load_hierarchical_policy(shipped, domain)
+    except (PolicyError, OSError):
+        return None   # a refitted domain the shipped plan is not for: plan it now
+    return shipped
+
+
 def _run_nodes(args, domain, profile, case, until: float, out: Path) -> dict:
-    """The day through the ROS 2 graph: a policy planned now (or --policy-dir), then run_day_graph."""
-    from pearl_pomdp.cli._inputs import require_dir
+    """The day through the ROS 2 graph: a policy planned before (--policy-dir, or the shipped plan of
+    the shipped domain) or planned now, then run_day_graph."""
     from pearl_pomdp.hierarchy import load_hierarchy, plan
     from pearl_sim.nursing_home.day_graph import run_day_graph
 
-    if args.policy_dir:
-        require_dir(args.policy_dir, "policy directory (--policy-dir, from `pearl plan`)")
-        policy_dir = Path(args.policy_dir)
+    planned = _planned_policy_dir(args, domain)
+    if planned is not None:
+        policy_dir = planned
     else:
         if not args.json:
             print("pearl day: planning the hierarchical policy…", flush=True)
