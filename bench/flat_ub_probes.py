@@ -43,7 +43,7 @@ def lp_upper_at_b0(s) -> dict:
     P = sp.csr_matrix((s.bound.ent_val[ent], (rows, s.bound.ent_idx[ent])), shape=(n, s.S))
     delta = s.bound.pt_delta[:n].copy()
     root = s.root
-    U, C, live = s._successors(root)
+    U, C, live = s.successors(root)
     before = root.Rb + s.g * (root.p * root.ub_c).sum(axis=1)
     ub_lp = root.ub_c.copy()
     t0 = time.perf_counter()

@@ -218,7 +218,7 @@ def test_sawtooth_reads_equal_the_definition_full_and_incremental(benchmarks_dir
     for node in list(s.nodes.values())[:40]:
         if node.p is None:
             continue
-        U, C, live = s._successors(node)
+        U, C, live = s.successors(node)
         rows = live[rng.permutation(live.size)[:8]]
         fast = s.bound.batch(U, C[rows])
         for r, value in zip(rows, fast):
@@ -313,7 +313,7 @@ def test_kernel_successors_and_lower_bounds_equal_the_definition(benchmarks_dir,
     for node in list(s.nodes.values())[:25]:
         if node.p is None:
             continue
-        U, C, live = s._successors(node)
+        U, C, live = s.successors(node)
         full = np.zeros(s.S)
         full[node.idx] = node.val
         rows, p = _definition_successors(m, full)
@@ -322,7 +322,7 @@ def test_kernel_successors_and_lower_bounds_equal_the_definition(benchmarks_dir,
         got[:, U] = C
         assert np.allclose(got[live], rows[live], atol=1e-12)
         assert np.array_equal(live, np.flatnonzero(p.ravel() > 1e-300))
-        lb, best = s._lower_children(U, C, live)
+        lb, best = s.lower_children(U, C, live)
         vals = rows[live] @ G
         assert np.allclose(lb.ravel()[live], vals.max(axis=1), atol=1e-9)
         assert np.allclose(vals[np.arange(live.size), best.ravel()[live]], vals.max(axis=1), atol=1e-9)
@@ -331,7 +331,7 @@ def test_kernel_successors_and_lower_bounds_equal_the_definition(benchmarks_dir,
             inner = sum(m.O[a][:, o] * G[:, best[a, o]] for o in range(s.Z))
             t = m.T[a]
             want = m.R[:, a] + m.discount * np.asarray(t @ inner).ravel()
-            assert np.allclose(s._alpha(a, best[a]), want, atol=1e-9)
+            assert np.allclose(s.backed_up_alpha(a, best[a]), want, atol=1e-9)
         checked += 1
     assert checked >= 5
 
@@ -420,13 +420,13 @@ def test_prune_keeps_what_the_greedy_policy_needs_at_its_next_beliefs(benchmarks
         for node in [n for n in s.nodes.values() if n.p is not None]:
             s.lower(node.idx, node.val)
             a = int(s.gact[s._one_best[0]])
-            U, C, live = s._successors(node)
-            lb, _ = s._lower_children(U, C, live)
+            U, C, live = s.successors(node)
+            lb, _ = s.lower_children(U, C, live)
             out.append(lb[a].copy())
         return np.concatenate(out)
 
     before, k_before = greedy_successor_bounds(), s.K
-    assert s._batched_children([n for n in s.nodes.values() if n.p is not None]) is None   # the fallback runs
+    assert s.belief_set.batched_children([n for n in s.nodes.values() if n.p is not None]) is None   # the fallback runs
     removed = s.prune()
     assert removed > 0 and s.K == k_before - removed
     np.testing.assert_array_equal(greedy_successor_bounds(), before)

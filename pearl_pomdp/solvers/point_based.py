@@ -77,9 +77,10 @@ from ..model.pomdp import Pomdp
 from . import _pointbased_kernel as _kernel
 from ..solution import AlphaVectorPolicy, SolveResult
 from .mdp import blind_lower_bound
+from .belief_set import BeliefSetBackups
 from .sawtooth import SawtoothUpperBound
 
-__all__ = ["solve_point_based", "PointBasedSolver", "PointBasedSettings", "transition_block", "ENGINES",
+__all__ = ["solve_point_based", "PointBasedSolver", "PointBasedSettings", "BeliefNode", "transition_block", "ENGINES",
            "C_ENGINE_SETTINGS", "EngineLacksSetting"]
 
 
@@ -237,7 +238,7 @@ def _setting(name: str) -> property:
 #: The immediate reward given to an action the action filter forbids at a belief.
 _FORBIDDEN = -1e30
 
-class _Node:
+class BeliefNode:
     """A belief in the search graph, with cached upper bounds at its successors.
 
     Upper bounds only ever decrease, so a cached successor bound is always a
@@ -256,7 +257,7 @@ class _Node:
         self.Rb: Any = None   # [A] expected immediate reward
         self.ub_c: Any = None  # [A, Z] cached upper bounds at the successors
         self.ub = np.inf      # upper bound at b
-        self.children = {}    # flat (a*Z + o) -> _Node, created when the search goes there
+        self.children = {}    # flat (a*Z + o) -> BeliefNode, created when the search goes there
         self.ub_seen: Any = None  # [A] sawtooth version ub_c[a] was last read at (-1: never)
         self.reach = 0.0      # max over the trials' paths to b of γ^d Π P(o|b,a): b's weight in V(b0)
         self.allowed = None   # [A] bool: the actions the action filter allows at b (None: all)
@@ -336,7 +337,7 @@ class PointBasedSolver:
         self.gact = np.zeros(self.cap, dtype=np.int64)
         self.gbirth = np.zeros(self.cap, dtype=np.int64)
         self.beliefs: Dict[bytes, Tuple[np.ndarray, np.ndarray]] = {}
-        self.nodes: Dict[bytes, _Node] = {}
+        self.nodes: Dict[bytes, BeliefNode] = {}
         self.expansions = 0
         idx0 = np.flatnonzero(self.b0 > 0)
         self.root = self._node(idx0, self.b0[idx0])
@@ -344,7 +345,7 @@ class PointBasedSolver:
         #: The beliefs trials start from: b0 first, then ``starts`` (each row a belief over the
         #: model's states; duplicates and b0 itself are dropped). The search targets the gap at
         #: every one of them (see :meth:`run`).
-        self.starts: List[_Node] = [self.root]
+        self.starts: List[BeliefNode] = [self.root]
         for row in ([] if starts is None else np.atleast_2d(np.asarray(starts, dtype=float))):
             if row.shape != (S,) or not np.all(np.isfinite(row)) or row.min() < 0 or row.sum() <= 0:
                 raise ValueError(f"PointBasedSolver: a start belief must be a non-negative row of {S} numbers "
@@ -366,9 +367,9 @@ class PointBasedSolver:
                 n.allowed = mask
             seeds = np.flatnonzero(np.logical_and.reduce(masks))
             first = int(np.flatnonzero(masks[0])[0])
-            self._add_alpha(np.full(S, float(self.R.min()) / (1.0 - self.g)), first)
+            self.add_alpha(np.full(S, float(self.R.min()) / (1.0 - self.g)), first)
         for a in seeds:
-            self._add_alpha(blind[a], int(a))
+            self.add_alpha(blind[a], int(a))
         self.trials = 0
         self.prunes = 0
         self.pruned = 0
@@ -383,7 +384,7 @@ class PointBasedSolver:
         # Perseus rounds (Spaan & Vlassis 2005) and PBVI sweeps spread lower-bound gains
         # over the visited beliefs between trials.
         self.perseus_backups = 0
-        self._p_todo: Optional[np.ndarray] = None
+        self.belief_set = BeliefSetBackups(self)
         self.sweeps = 0
         self.sweep_backups = 0
         self._trial_backups_at_sweep = 0
@@ -405,7 +406,8 @@ class PointBasedSolver:
         self._clock = time.perf_counter
 
     # ------------------------------------------------------------ lower bound
-    def _add_alpha(self, alpha: np.ndarray, action: int) -> None:
+    def add_alpha(self, alpha: np.ndarray, action: int) -> None:
+        """Append ``alpha`` (the value of doing ``action`` then following Γ) to the lower bound Γ."""
         if self.K == self.cap:
             self.cap *= 2
             GT = np.zeros((self.S, self.cap))
@@ -438,7 +440,7 @@ class PointBasedSolver:
         return mask
 
     # ------------------------------------------------------------ expansion
-    def _successors(self, node: _Node) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def successors(self, node: BeliefNode) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(U, C, live)``: states reachable in one step, successor beliefs ``[A*Z, |U|]`` on U
         (rows with ``P(o|b,a) = 0`` left unnormalised zeros) and the flat indices of the live rows.
         Fills ``node.p`` and ``node.Rb`` on the first call."""
@@ -478,7 +480,7 @@ class PointBasedSolver:
             self._refresh_upper(node, U, C, live)
         return U, C, live
 
-    def _refresh_upper(self, node: _Node, U, C, live) -> np.ndarray:
+    def _refresh_upper(self, node: BeliefNode, U, C, live) -> np.ndarray:
         """Re-read the sawtooth at the successors of the greedy action until the greedy action
         is one already refreshed in this call; returns ``Q^U(b, ·)`` (the kernel's loop).
 
@@ -491,7 +493,7 @@ class PointBasedSolver:
                               self.Z, self.bound.ub_version, self.bound.vc_version, self.pos, *self.bound.point_set(), Qu)
         return Qu
 
-    def _lower_children(self, U, C, live) -> Tuple[np.ndarray, np.ndarray]:
+    def lower_children(self, U, C, live) -> Tuple[np.ndarray, np.ndarray]:
         """``(lb, best)`` ``[A, Z]``: the lower bound at each live successor and its maximising vector (0 elsewhere)."""
         AZ = self.A * self.Z
         lb = np.zeros(AZ)
@@ -503,15 +505,15 @@ class PointBasedSolver:
     def _key(idx: np.ndarray, val: np.ndarray) -> bytes:
         return idx.tobytes() + np.round(val, 12).tobytes()
 
-    def _node(self, idx: np.ndarray, val: np.ndarray) -> _Node:
+    def _node(self, idx: np.ndarray, val: np.ndarray) -> BeliefNode:
         key = self._key(idx, val)
         node = self.nodes.get(key)
         if node is None:
-            node = _Node(idx, val, key)
+            node = BeliefNode(idx, val, key)
             self.nodes[key] = node
         return node
 
-    def _update(self, node: _Node, U, C, live, seen=None) -> Tuple[float, float]:
+    def _update(self, node: BeliefNode, U, C, live, seen=None) -> Tuple[float, float]:
         """Back up the lower bound and lower the upper bound at ``node``; returns (LB, UB) there.
 
         ``seen = (lb [A,Z], best [A,Z], LB(b), K)`` are the lower bounds computed on the way
@@ -519,7 +521,7 @@ class PointBasedSolver:
         grows during a trial)."""
         g = self.g
         if seen is None:
-            lb, best = self._lower_children(U, C, live)
+            lb, best = self.lower_children(U, C, live)
             cur = self.lower(node.idx, node.val)
         else:
             lb, best, cur, K0 = seen
@@ -531,14 +533,14 @@ class PointBasedSolver:
         a, ql = _kernel.qvalue(node.Rb, node.p, lb, g, self.A, self.Z)
         self.backups += 1
         if ql > cur + 1e-10 * max(1.0, abs(cur)):
-            alpha = self._alpha(a, best[a])
-            self._add_alpha(alpha, a)
+            alpha = self.backed_up_alpha(a, best[a])
+            self.add_alpha(alpha, a)
             cur = max(cur, float(node.val @ alpha[node.idx]))
         self.beliefs.setdefault(node.key, (node.idx, node.val))
         self._update_upper(node, U, C, live)
         return cur, node.ub
 
-    def _update_upper(self, node: _Node, U, C, live) -> None:
+    def _update_upper(self, node: BeliefNode, U, C, live) -> None:
         """Lower the upper bound at ``node``: refresh the cached successor bounds from successors
         updated elsewhere, then re-read the sawtooth for the successors of the greedy action
         (the one that sets UB(b)) until that action stops changing; store the new value."""
@@ -556,7 +558,7 @@ class PointBasedSolver:
         """An upper-bound backup at every expanded belief, the most recently created first (deep
         beliefs tend to be created last, so improvements travel towards ``b0`` in one pass)."""
         for node in reversed([n for n in self.nodes.values() if n.p is not None]):
-            U, C, live = self._successors(node)
+            U, C, live = self.successors(node)
             self._update_upper(node, U, C, live)
         self.ub_sweeps += 1
 
@@ -585,7 +587,7 @@ class PointBasedSolver:
             # when that is too costly (RockSample[7,8]), at the successors under the action the
             # policy takes there.
             nodes = [n for n in self.nodes.values() if n.p is not None]
-            got = self._batched_children(nodes)
+            got = self.belief_set.batched_children(nodes)
             if got is not None:
                 _, best, live = got
                 used[best[live]] = True
@@ -619,7 +621,7 @@ class PointBasedSolver:
         for node in nodes:
             self.lower(node.idx, node.val)
             a = int(self.gact[self._one_best[0]])
-            U, C, live = self._successors(node)
+            U, C, live = self.successors(node)
             rows = live[live // Z == a]
             if rows.size == 0:
                 continue
@@ -640,101 +642,13 @@ class PointBasedSolver:
         d = np.log(eps_t * (1 - self.g) / self.r_span) / np.log(self.g)
         return int(min(max(d, 1), 1000))
 
-    def _alpha(self, a: int, best_a: np.ndarray) -> np.ndarray:
-        """α = R(:,a) + γ T[a] Σ_o O[a,:,o] ∘ Γ_{best_a[o]}  (the o-sum moves inside T[a])."""
+    def backed_up_alpha(self, a: int, best_a: np.ndarray) -> np.ndarray:
+        """The point-based backup's new vector for action ``a``, ``best_a[o]`` the vector of Γ to follow after ``o``:
+        α = R(:,a) + γ T[a] Σ_o O[a,:,o] ∘ Γ_{best_a[o]}  (the o-sum moves inside T[a])."""
         out = np.empty(self.S)
         _kernel.alpha(a, np.ascontiguousarray(best_a, dtype=np.int64), self.R, self.O, self.GT, self.cap,
                       self.tv_ptr, self.tv_ind, self.tv_dat, self.S, self.A, self.Z, self.g, self._inner, out)
         return out
-
-    def _perseus_start(self) -> bool:
-        nodes = [n for n in self.nodes.values() if n.p is not None]
-        if len(nodes) < 2:
-            return False
-        # The round's beliefs as one flat list of (belief, state, probability) entries: a new
-        # vector's values at all of them are one gather and one bincount.
-        self._p_seg = np.repeat(np.arange(len(nodes)), [n.idx.shape[0] for n in nodes])
-        self._p_idx = np.concatenate([n.idx for n in nodes])
-        self._p_val = np.concatenate([n.val for n in nodes])
-        self._p_nodes = nodes
-        self._p_lb = np.array([self.lower(n.idx, n.val) for n in nodes])
-        self._p_todo = np.ones(len(nodes), dtype=bool)
-        return True
-
-    def _batched_children(self, nodes):
-        """For beliefs ``nodes``: ``(Ql [N,A], best [N,A,Z], live [N,A,Z])`` — the one-step LB
-        lookahead and the maximising vector at every successor, against Γ as it is (or ``None``
-        when that would cost more than ``sweep_max_flops`` multiply-adds)."""
-        N, K, A, Z, g = len(nodes), self.K, self.A, self.Z, self.g
-        nnz = sum(n.idx.shape[0] for n in nodes)
-        if N == 0 or nnz * A * K * 4 > self.sweep_max_flops:
-            return None
-        Ql = np.empty((N, A))
-        best = np.empty((N, A, Z), dtype=np.int64)
-        live = np.zeros((N, A * Z), dtype=bool)
-        for i, node in enumerate(nodes):
-            U, C, lv = self._successors(node)
-            lb, best[i] = self._lower_children(U, C, lv)
-            Ql[i] = node.Rb + g * (node.p * lb).sum(axis=1)
-            live[i, lv] = True
-        return Ql, best, live.reshape(N, A, Z)
-
-    def sweep(self) -> bool:
-        """One synchronous point-based backup of every expanded belief (PBVI, Pineau et al. 2003):
-        every backup reads Γ as it was before the sweep; adds the new vectors that improve their
-        own belief. Returns False (and does nothing) when the products would be too large."""
-        nodes = [n for n in self.nodes.values() if n.p is not None]
-        if len(nodes) < 2:
-            return False
-        got = self._batched_children(nodes)
-        if got is None:
-            return False
-        Ql, best, _ = got
-        N = len(nodes)
-        an = Ql.argmax(axis=1)
-        qn = Ql[np.arange(N), an]
-        new = []
-        for i, node in enumerate(nodes):
-            cur = self.lower(node.idx, node.val)
-            if qn[i] > cur + 1e-10 * max(1.0, abs(cur)):
-                self.spread_gain = max(self.spread_gain, (float(qn[i]) - cur) * node.reach)
-                new.append((self._alpha(int(an[i]), best[i, an[i]]), int(an[i])))
-        for alpha, a in new:
-            self._add_alpha(alpha, a)
-        self.sweeps += 1
-        self.sweep_backups += N
-        return True
-
-    def perseus(self, budget: int) -> None:
-        """Up to ``budget`` Perseus backups: a random belief of the round's to-do set is backed
-        up; every belief at which the new vector reaches its value from the start of the round
-        leaves the set; a new round starts (with the beliefs found since) when it is empty."""
-        done = 0
-        while done < budget:
-            if self._p_todo is None or not self._p_todo.any():
-                if not self._perseus_start():
-                    return
-            todo_mask = cast(np.ndarray, self._p_todo)   # set by _perseus_start above
-            todo = np.flatnonzero(todo_mask)
-            i = int(todo[self.rng.integers(todo.size)])
-            todo_mask[i] = False
-            node = self._p_nodes[i]
-            U, C, live = self._successors(node)
-            lb, best = self._lower_children(U, C, live)
-            Ql = node.Rb + self.g * (node.p * lb).sum(axis=1)
-            a = int(np.argmax(Ql))
-            done += 1
-            self.perseus_backups += 1
-            if Ql[a] <= self._p_lb[i] + 1e-10 * max(1.0, abs(self._p_lb[i])):
-                continue
-            alpha = self._alpha(a, best[a])
-            cur = self.lower(node.idx, node.val)
-            if Ql[a] > cur + 1e-10 * max(1.0, abs(Ql[a])):
-                self.spread_gain = max(self.spread_gain, (float(Ql[a]) - cur) * node.reach)
-                self._add_alpha(alpha, a)
-            values = np.bincount(self._p_seg, weights=self._p_val * alpha[self._p_idx], minlength=len(self._p_nodes))
-            covered = values >= self._p_lb
-            todo_mask &= ~covered
 
     def _pick_arm(self) -> int:
         n = len(self.trial_kappa)
@@ -759,7 +673,7 @@ class PointBasedSolver:
         open_ = np.flatnonzero(self.start_gaps() > epsilon)
         return int(open_[0]) if open_.size else None
 
-    def _next_start(self, epsilon: float) -> Tuple[Optional[_Node], float]:
+    def _next_start(self, epsilon: float) -> Tuple[Optional[BeliefNode], float]:
         """The start of the next trial and its gap: b0 on every other trial while its gap is
         open, else the start belief with the widest gap (the first on ties); ``(None, 0)`` when
         every gap is within ``epsilon``."""
@@ -772,7 +686,7 @@ class PointBasedSolver:
         i = int(np.argmax(gaps))
         return (self.starts[i], float(gaps[i])) if gaps[i] > epsilon else (None, 0.0)
 
-    def trial(self, eps_t: float, start: Optional[_Node] = None) -> None:
+    def trial(self, eps_t: float, start: Optional[BeliefNode] = None) -> None:
         """One HSVI2/SARSOP trial from ``b0`` with target width ``eps_t``, then the backups on its path.
 
         **Down.** At belief ``b`` of depth ``d`` the trial stops when the width there,
@@ -807,8 +721,8 @@ class PointBasedSolver:
         d = 0
         max_d = self._max_depth(eps_t)
         while True:
-            U, C, live = self._successors(node)
-            lb, best = self._lower_children(U, C, live)
+            U, C, live = self.successors(node)
+            lb, best = self.lower_children(U, C, live)
             seen = (lb, best, self.lower(node.idx, node.val), self.K)
             a, qu = _kernel.qvalue(node.Rb, node.p, node.ub_c, g, self.A, Z)       # greedy on Q^U
             u = min(node.ub, qu)
@@ -901,14 +815,14 @@ class PointBasedSolver:
                 swept = False
                 if self.sweep_ratio > 0 and \
                         self.backups - self._trial_backups_at_sweep >= self.sweep_ratio * len(self.nodes):
-                    swept = self.sweep()
+                    swept = self.belief_set.sweep()
                     if swept:
                         self._trial_backups_at_sweep = self.backups
                 spread = swept
                 if not swept and self.perseus_share > 0:
                     owed = int(self.perseus_share * self.backups) - self.perseus_backups - self._perseus_forgiven
                     if owed > 0:
-                        self.perseus(owed)
+                        self.belief_set.perseus(owed)
                         spread = True
                 lo, hi = self.bounds_at_start()
                 converged = self._open_gap(epsilon) is None

@@ -78,7 +78,7 @@ def refine_along_paths(solver, paths: np.ndarray, seconds: Optional[float] = Non
         for seq in np.asarray(paths, dtype=np.int64):
             node, path = solver.root, []
             for ao in map(int, seq):
-                U, C, live = solver._successors(node)
+                U, C, live = solver.successors(node)
                 path.append((node, ao, U, C, live))
                 child = node.children.get(ao)
                 if child is None:
