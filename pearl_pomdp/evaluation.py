@@ -162,7 +162,7 @@ def evaluate_policies(model: Pomdp, policies: Mapping[str, object], episodes: in
         steps = steps_for_truncation(model, truncation_tolerance)
     if steps < 1:
         raise ValueError(f"steps must be ≥ 1, got {steps}")
-    S, A = model.num_states, model.num_actions
+    S = model.num_states
     if controls is None:
         from pearl_pomdp.solvers.mdp import mdp_value_iteration
 

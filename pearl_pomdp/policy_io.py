@@ -54,10 +54,6 @@ KIND_MLS = "most_likely_state"
 
 PathLike = Union[str, Path]
 
-# Header keys taken from ``meta``; everything else in ``meta`` goes under "meta".
-_META_KEYS = {"method": "method", "value_at_start": "value_at_start", "upper_bound": "upper_bound",
-              "seconds": "solve_seconds", "solve_seconds": "solve_seconds"}
-
 
 def header_path(path: PathLike) -> Path:
     """Where the JSON header of the policy at ``path`` is written: ``path`` with suffix ``.json``."""
@@ -83,8 +79,6 @@ def _json_number(value: Any) -> Any:
         return None
     value = float(value)
     return value if math.isfinite(value) else None
-
-
 
 
 def save_policy(path: PathLike, policy, model: Pomdp, meta: Optional[dict] = None) -> Path:

@@ -27,7 +27,7 @@ import math
 import re
 from collections import deque
 from dataclasses import dataclass
-from typing import Deque, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple
+from typing import Deque, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["KeywordFilter", "normalise", "tokens", "parse_speech_message", "speech_message", "Utterance",
            "utterance"]

@@ -1,4 +1,4 @@
-"""``pearl demo`` for every world of the frame: one episode through the full ROS 2 graph.
+"""``pearl demo`` for every world: one episode through the full ROS 2 graph.
 
 The belief tracker, the policy and the action executor run as real rclpy nodes with the world's
 params file, fed by the world's simulated sensors (:class:`~pearl_sim.world_hardware.WorldHardware`:
@@ -7,7 +7,9 @@ loop as the study (:func:`pearl_sim.loop.run_episode` with :class:`pearl_sim.nod
 Prints a transcript, writes it, ``summary.json`` and an MCAP bag (with the domain, node parameters
 and policy beside it, so ``pearl replay`` needs nothing else) into the output folder, and ends with
 a one-line outcome. What a world brings is a :class:`WorldDemo`: its scenario loader, how to make
-its world, what it scores and how it says the outcome.
+its world, what it scores and how it says the outcome; a world may also bring its own transcript
+lines, its end of the episode, a belief plot, its summary and a :class:`DemoWatcher` (the nursing
+home's: Figure 4's features, "Pearl leaves", the belief plot and the Foxglove live view).
 """
 from __future__ import annotations
 
@@ -18,30 +20,76 @@ import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 from pearl_pomdp.errors import PearlError
-from pearl_sim.messages import StepResult
+from pearl_sim.messages import Message, StepResult
 
-__all__ = ["WorldDemo", "DemoRun", "run_world_demo", "run_demo_cli", "run_folder", "close_run"]
+__all__ = ["WorldDemo", "DemoRun", "DemoStep", "DemoWatcher", "run_world_demo", "run_demo_cli", "run_folder",
+           "close_run", "describe_step", "trace_path"]
 
 
-@dataclass(frozen=True)
-class WorldDemo:
-    """What one world brings to the frame's ``pearl demo``.
+@dataclass
+class DemoStep:
+    """One step of a demo: the action the world carried out, what was heard during it (and the waits
+    after it), what the graph decided (its EXECUTE trace) and believed after the step."""
 
-    Attributes:
-        load_scenarios: a scenario file (path) -> its scenarios; the demo runs the first.
-        make_world: ``(scenario, seed or None)`` -> a fresh simulated world
-            (:class:`~pearl_sim.world_base.StudyWorld`).
-        metrics: the world after the episode -> its scores (JSON-ready; ``summary.json`` holds them).
-        outcome: those scores -> the one-line outcome (``outcome: …``).
+    index: int
+    time: float
+    action: str
+    trace: List[dict]
+    heard: List[Message]
+    events: List[str]
+    observation: Optional[str]
+    marginals: Dict[str, Dict[str, float]]
+    wrong: Optional[str]
+
+
+def trace_path(step: DemoStep) -> str:
+    """The step's EXECUTE trace as ``root → … → primitive`` (the action alone without a trace)."""
+    return " → ".join([step.trace[0]["subtask"]] + [t["choice"] for t in step.trace]) if step.trace else step.action
+
+
+def describe_step(step: DemoStep, scenario: Any) -> str:
+    """The transcript lines of one step: the action and its trace, everything heard, the world's
+    events and the most likely value of each feature after the step."""
+    lines = [f"[{step.time:7.1f} s] action {step.action:<16} trace {trace_path(step)}"]
+    for m in step.heard:
+        who = f"said \"{m.said}\" → " if m.said else ""
+        lines.append(f"           {m.modality.lower()}: {who}{m.text}")
+    if not step.heard:
+        lines.append("           (nothing heard: the step timed out)")
+    lines += [f"           * {e}" for e in step.events]
+    if step.marginals:
+        top = []
+        for feature, values in step.marginals.items():
+            v, p = max(values.items(), key=lambda kv: kv[1])
+            top.append(f"{feature}={v} {p:.2f}")
+        lines.append(f"           belief after '{step.observation}': " + " | ".join(top))
+    return "\n".join(lines)
+
+
+class DemoWatcher:
+    """Watches a demo as it runs (the nursing home's Foxglove live view is one); here, each does nothing.
+
+    :meth:`start` gets the graph's listener node (to subscribe to more of the graph), the scenario,
+    the world and ``now()``: the sim time (s) at which the step being answered started.
     """
 
-    load_scenarios: Callable[[Any], Sequence[Any]]
-    make_world: Callable[[Any, Optional[int]], Any]
-    metrics: Callable[[Any], Dict[str, Any]]
-    outcome: Callable[[Dict[str, Any]], str]
+    def start(self, listener: Any, scenario: Any, world: Any, now: Callable[[], float]) -> None:
+        """Before the episode."""
+
+    def decision(self, decision: dict) -> None:
+        """A decision of the policy (``conversions.msg_to_decision``)."""
+
+    def belief(self, marginals: dict) -> None:
+        """A belief of the tracker (``conversions.msg_to_marginals``)."""
+
+    def step(self, step: DemoStep, world: Any) -> None:
+        """A step the world carried out."""
+
+    def stop(self) -> None:
+        """After the demo, whatever happened."""
 
 
 @dataclass
@@ -51,24 +99,69 @@ class DemoRun:
     world: str
     scenario: str
     out_dir: Path
-    outcome_line: Callable[[Dict[str, Any]], str]
+    demo: "WorldDemo"
+    steps: List[DemoStep] = field(default_factory=list)
     lines: List[str] = field(default_factory=list)
-    actions: List[str] = field(default_factory=list)
     metrics: Dict[str, Any] = field(default_factory=dict)
     bag: Optional[Path] = None
     bag_messages: int = 0
     transcript: Optional[Path] = None
+    plot: Optional[Path] = None
     seconds: float = 0.0
+    tracker_counters: Dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def actions(self) -> List[str]:
+        """The actions the world carried out, in order."""
+        return [s.action for s in self.steps]
 
     def outcome(self) -> str:
         """The world's outcome line and the bag."""
-        return f"{self.outcome_line(self.metrics)}; bag {self.bag} ({self.bag_messages} messages)"
+        return f"{self.demo.outcome(self.metrics)}; bag {self.bag} ({self.bag_messages} messages)"
 
     def summary(self) -> dict:
-        """The ``--json`` object."""
+        """The ``--json`` object (and ``summary.json``): the world's, or the frame's."""
+        if self.demo.summary is not None:
+            return self.demo.summary(self)
         return {"world": self.world, "scenario": self.scenario, "out_dir": str(self.out_dir), "bag": str(self.bag),
                 "bag_messages": self.bag_messages, "transcript": str(self.transcript), "steps": len(self.actions),
                 "actions": self.actions, "seconds": round(self.seconds, 2), **self.metrics, "outcome": self.outcome()}
+
+
+@dataclass(frozen=True)
+class WorldDemo:
+    """What one world brings to the frame's ``pearl demo``.
+
+    Attributes:
+        load_scenarios: a scenario file (path) -> its scenarios; the demo runs the first.
+        make_world: ``(scenario, seed or None, domain)`` -> a fresh simulated world
+            (:class:`~pearl_sim.world_base.StudyWorld`) for the domain the graph runs.
+        metrics: the world after the episode -> its scores (JSON-ready; ``summary.json`` holds them).
+        outcome: those scores -> the one-line outcome (``outcome: …``).
+        describe_step: ``(step, scenario)`` -> the step's transcript lines (default :func:`describe_step`).
+        stop_when: the world -> a test that ends the episode early (``None``: the scenario's steps end it).
+        pose_topic: where the simulated hardware publishes the robot's pose (``None``: nowhere).
+        hierarchy: the hierarchy file planned with when ``--hierarchy`` is not given (``None``:
+            ``NAME.hierarchy.yaml`` beside the domain, else the flat hierarchy).
+        plot: ``(run, scenario)`` -> a picture of the run written into its folder (``None``: none).
+        summary: the run -> the ``--json`` object (``None``: :meth:`DemoRun.summary`).
+    """
+
+    load_scenarios: Callable[[Any], Sequence[Any]]
+    make_world: Callable[[Any, Optional[int], Any], Any]
+    metrics: Callable[[Any], Dict[str, Any]]
+    outcome: Callable[[Dict[str, Any]], str]
+    describe_step: Callable[[DemoStep, Any], str] = describe_step
+    stop_when: Optional[Callable[[Any], Callable[[], bool]]] = None
+    pose_topic: Optional[str] = None
+    hierarchy: Optional[str] = None
+    plot: Optional[Callable[[DemoRun, Any], Path]] = None
+    summary: Optional[Callable[[DemoRun], dict]] = None
+
+
+def _refuse_bag(bag_dir: Path) -> None:
+    if bag_dir.exists() and any(bag_dir.iterdir()):
+        raise PearlError(f"{bag_dir}: already holds a bag; choose another --out folder")
 
 
 def run_folder(out_dir, domain_path) -> Tuple[Path, Path, Any]:
@@ -83,8 +176,7 @@ def run_folder(out_dir, domain_path) -> Tuple[Path, Path, Any]:
     out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     bag_dir = out_dir / "bag"
-    if bag_dir.exists() and any(bag_dir.iterdir()):
-        raise PearlError(f"{bag_dir}: already holds a bag; choose another --out folder")
+    _refuse_bag(bag_dir)
     shutil.copyfile(domain_path, out_dir / "domain.yaml")
     return out_dir, bag_dir, load_domain(out_dir / "domain.yaml")
 
@@ -103,36 +195,22 @@ def close_run(writer, hardware, graph, context) -> None:
     rclpy.try_shutdown(context=context)
 
 
-def _format(index: int, result: StepResult, waits: List[StepResult], trace: List[dict], marginals: dict) -> str:
-    path = " → ".join([trace[0]["subtask"]] + [t["choice"] for t in trace]) if trace else result.action
-    lines = [f"[{result.start:7.1f} s] action {result.action:<16} trace {path}"]
-    heard = result.messages + [m for w in waits for m in w.messages]
-    for m in heard:
-        who = f"said \"{m.said}\" → " if m.said else ""
-        lines.append(f"           {m.modality.lower()}: {who}{m.text}")
-    if not heard:
-        lines.append("           (nothing heard: the step timed out)")
-    for e in result.events + [e for w in waits for e in w.events]:
-        lines.append(f"           * {e}")
-    if marginals.get("marginals"):
-        top = []
-        for feature, values in marginals["marginals"].items():
-            v, p = max(values.items(), key=lambda kv: kv[1])
-            top.append(f"{feature}={v} {p:.2f}")
-        lines.append(f"           belief after '{marginals.get('observation')}': " + " | ".join(top))
-    return "\n".join(lines)
-
-
 def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Path, *, domain_path: Path,
-                   params_file: Optional[Path], policy: str = "", hierarchy_path: Optional[Path] = None,
+                   params_file: Union[Path, str, None], policy: str = "", hierarchy_path: Optional[Path] = None,
                    seed: Optional[int] = None, domain_id: Optional[int] = None,
-                   echo: Optional[Callable[[str], None]] = None, wall_timeout: float = 30.0) -> DemoRun:
+                   echo: Optional[Callable[[str], None]] = None, wall_timeout: float = 30.0,
+                   watcher: Optional[DemoWatcher] = None) -> DemoRun:
     """Run the scenario's first episode of world ``name`` through the graph; see the module doc.
 
     Args:
-        params_file: the robot's node parameters (``None``: the nodes' code defaults).
+        params_file: the robot's node parameters, copied beside the bag (``None``: the nodes' code
+            defaults; ``"default"``: the shipped file a node started alone reads, which the bag
+            does not name, so ``pearl replay`` reads it too).
         policy: a planned policy folder (``pearl plan --out``) or ``online[:TRIALS]``; empty: plan
             ``hierarchy_path`` now (``None``: the flat hierarchy), saved beside the bag.
+        echo: called with each step's transcript lines as they happen (e.g. ``print``).
+        wall_timeout: wall seconds to wait for the graph's answer in one step before failing.
+        watcher: sees the run as it happens (the nursing home's live view).
 
     Raises:
         PearlError: the output folder already holds a bag, or the graph did not answer (names the phase).
@@ -156,12 +234,16 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
     started = time.monotonic()
     scenario = demo.load_scenarios(scenario_path)[0]
     out_dir, bag_dir, domain = run_folder(out_dir, domain_path)
-    if params_file is not None:
+    params_data: Dict[str, str] = {}
+    if params_file is None:
+        params_data["pearl.params_file"] = ""   # the nodes ran on their code's defaults (pearl replay does the same)
+    elif params_file != "default":
         # The robot's node params beside the bag too: `pearl replay` runs the tracker by its rules.
         shutil.copyfile(params_file, out_dir / "nodes.yaml")
         params_file = out_dir / "nodes.yaml"
+        params_data["pearl.params_file"] = os.path.relpath(params_file, bag_dir)
     model = domain.compile()
-    world = demo.make_world(scenario, seed)
+    world = demo.make_world(scenario, seed, domain)
     policy_dir = out_dir / "policy"
     if policy and online_trials(policy, "--policy") is not None:
         decider, node_policy = load_decider(policy, model, domain, where="--policy"), policy
@@ -181,7 +263,8 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
     context = Context()
     rclpy.init(args=["--ros-args", "--log-level", "warn"], context=context, domain_id=domain_id,
                signal_handler_options=SignalHandlerOptions.NO)
-    result = DemoRun(name, scenario.name, out_dir, demo.outcome)
+    result = DemoRun(name, scenario.name, out_dir, demo)
+    watcher = watcher or DemoWatcher()
     graph = hardware = writer = None
     try:
         tracker_params = scenario.tracker_parameters()
@@ -189,17 +272,26 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
                            model=model, decider=decider, params_file=params_file,
                            overrides={"belief_tracker": {**tracker_params, "diagnostics_period": 60.0},
                                       "hierarchical_policy": {"policy": node_policy, "diagnostics_period": 60.0}})
-        hardware = WorldHardware(context, world, domain, name)
+        hardware = WorldHardware(context, world, domain, name, pose_topic=demo.pose_topic)
         for node in hardware.nodes:
             graph.add_node(node)
         decisions: List[dict] = []
         marginals: List[dict] = []
         listener = graph.add_node(rclpy.create_node("demo_listener", context=context))
-        listener.create_subscription(cv.DecisionMsg, "/pearl/decision",
-                                     lambda msg: decisions.append(cv.msg_to_decision(msg)), 50)
+        sim_now = {"s": 0.0}   # sim time at which the step being answered started (the watcher's stamps)
+
+        def on_decision(msg: Any) -> None:
+            decisions.append(cv.msg_to_decision(msg))
+            watcher.decision(decisions[-1])
+
+        def on_belief(msg: Any) -> None:
+            marginals.append(cv.msg_to_marginals(msg))
+            watcher.belief(marginals[-1])
+
+        listener.create_subscription(cv.DecisionMsg, "/pearl/decision", on_decision, 50)
         latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        listener.create_subscription(cv.BeliefMsg, "/pearl/belief", lambda msg: marginals.append(cv.msg_to_marginals(msg)),
-                                     latched)
+        listener.create_subscription(cv.BeliefMsg, "/pearl/belief", on_belief, latched)
+        watcher.start(listener, scenario, world, lambda: sim_now["s"])
         rec_node = graph.add_node(rclpy.create_node("demo_recorder", context=context, parameter_overrides=[
             rclpy.parameter.Parameter("use_sim_time", rclpy.parameter.Parameter.Type.BOOL, True)]))
         topics = ["/clock", "/pearl/action", "/pearl/belief", "/pearl/decision", "/pearl/say", "/pearl/display",
@@ -209,14 +301,14 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
             "pearl.domain": os.path.relpath(out_dir / "domain.yaml", bag_dir),
             "pearl.policy": (node_policy if node_policy != str(policy_dir)
                              else os.path.relpath(policy_dir, bag_dir.resolve())),
-            "pearl.tracker_params": json.dumps(tracker_params),
-            # Empty: the nodes ran on their code's defaults (pearl replay does the same).
-            "pearl.params_file": os.path.relpath(params_file, bag_dir) if params_file is not None else ""})
-        recorder = Recorder(rec_node, writer, topics=topics)
+            "pearl.tracker_params": json.dumps(tracker_params), **params_data})
+        recorder = Recorder(rec_node, writer, topics=topics + ([demo.pose_topic] if demo.pose_topic else []))
         # The bag must hold the loop from its first message (b0 and the answer to it are latched).
         recorder.wait_until_recording(graph.spin_until, wall_timeout)
         driver = SimClockDriver(graph, wait_s=wall_timeout)
         backend = GraphBackend(graph, hardware, driver)
+        # Every /clock must reach the bag, or a replay would see inputs at the wrong time:
+        # wait until each sim-time node and the recorder subscribe to the driver's /clock.
         driver.wait_for_clock_readers(extra=1)   # the recorder
 
         # The graph may publish more actions than the world carries out (a message mid-drive closes a
@@ -236,7 +328,7 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
             return d is not None and closing(decisions[d]) is not None
 
         def on_action(step: StepResult, waits: List[StepResult]) -> None:
-            index = len(result.actions) + 1
+            sim_now["s"] = backend.now_ns * 1e-9
             graph.spin_until(lambda: answered(step.action), timeout_sec=wall_timeout)
             d = naming(step.action)
             decision = decisions[d] if d is not None else {"trace": []}
@@ -244,41 +336,62 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
             if d is not None:
                 unread["decision"] = d + 1
             hardware.publish_truth(backend.now_ns * 1e-9, "end", step.action, step)
-            result.actions.append(step.action)
-            block = _format(index, step, waits, decision.get("trace", []), latest)
-            result.lines.append(block)
+            shown = DemoStep(index=len(result.steps) + 1, time=step.start, action=step.action,
+                             trace=decision.get("trace", []), heard=step.messages + [m for w in waits for m in w.messages],
+                             events=step.events + [e for w in waits for e in w.events],
+                             observation=latest.get("observation"), marginals=latest.get("marginals", {}),
+                             wrong=step.wrong)
+            result.steps.append(shown)
+            watcher.step(shown, world)
+            result.lines.append(demo.describe_step(shown, scenario))
             if echo is not None:
-                echo(block)
+                echo(result.lines[-1])
 
         run_episode(world, backend, on_action=on_action,
+                    stop_when=demo.stop_when(world) if demo.stop_when is not None else None,
                     before_action=lambda action: hardware.publish_truth(backend.now_ns * 1e-9, "start", action))
-        hardware.publish_truth(backend.now_ns * 1e-9, "start")
+        hardware.publish_truth(backend.now_ns * 1e-9, "start")   # the state after the last action
+        # The policy answers the last belief too: wait until that action is in the bag, or a
+        # replay (which always sees the answer) would find one action more than recorded.
         graph.spin_until(lambda: recorder.counts.get("/pearl/action", 0) >= len(driver.actions), timeout_sec=5.0)
+        # A second of /clock past the end, so a replay sees time pass beyond the last step as
+        # the live nodes did (less than step_timeout: nothing else fires).
         for k in range(1, 11):
             driver.set_time(backend.now_ns + k * 100_000_000)
         recorder.stop()
         result.bag_messages = sum(recorder.counts.values())
+        result.tracker_counters = dict(graph.tracker.counters())
     finally:
         close_run(writer, hardware, graph, context)
     result.metrics = demo.metrics(world)
     result.bag = bag_dir
     result.transcript = out_dir / "transcript.txt"
     result.transcript.write_text("\n".join(result.lines) + "\n" + result.outcome() + "\n", encoding="utf-8")
+    if demo.plot is not None:
+        result.plot = demo.plot(result, scenario)
     result.seconds = time.monotonic() - started
     (out_dir / "summary.json").write_text(json.dumps(result.summary(), indent=1), encoding="utf-8")
     return result
 
 
-def run_demo_cli(args: argparse.Namespace, files, demo: WorldDemo) -> int:
+def run_demo_cli(args: argparse.Namespace, files, demo: WorldDemo, *, shipped_params: bool = False,
+                 watch: Optional[Callable[[], DemoWatcher]] = None) -> DemoRun:
     """``pearl demo`` for the world ``files`` (its :class:`~pearl_sim.worlds.SimWorld`) from the demo
-    command's parsed arguments; every input is checked before anything is planned or started."""
+    command's parsed arguments; every input is checked before anything is planned or started.
+
+    Args:
+        shipped_params: the robot's nodes read the shipped params file themselves, as started alone
+            (the nursing home's); else they run with the world's ``params_file``.
+        watch: starts what watches the run (``--foxglove``: the nursing home's live view), once the
+            inputs are checked; ``None``: ``--foxglove`` is refused.
+    """
     from pearl_pomdp.cli import print_json
     from pearl_pomdp.cli._inputs import require_dir, require_file
     from pearl_pomdp.cli.plan import resolve_hierarchy_path
     from pearl_pomdp.online.decider import online_trials
     from pearl_sim.cli.demo import _saved_policy
 
-    if getattr(args, "foxglove", False):
+    if getattr(args, "foxglove", False) and watch is None:
         raise PearlError(f"--foxglove: the live view's layout is the nursing home's; the {files.name} demo has none yet")
     scenario = args.scenario or files.path(files.demo_scenario)
     require_file(scenario, "scenario file (--scenario)")
@@ -288,20 +401,30 @@ def run_demo_cli(args: argparse.Namespace, files, demo: WorldDemo) -> int:
         if online_trials(args.policy, "--policy") is None:
             require_dir(args.policy, "policy directory (--policy, from `pearl plan`, or online[:TRIALS])")
     else:
-        hierarchy = resolve_hierarchy_path(args.domain, args.hierarchy)
+        hierarchy = resolve_hierarchy_path(args.domain, args.hierarchy
+                                           or (files.path(demo.hierarchy) if demo.hierarchy else None))
         args.policy = _saved_policy(args) or ""
     out = Path(args.out) if args.out else Path("out") / f"demo-{Path(scenario).stem}-{time.strftime('%Y%m%d-%H%M%S')}"
-    if not args.json:
-        print(f"pearl demo: {files.name} world, scenario {scenario}; "
-              + ("starting the graph…" if args.policy else "planning the policy and starting the graph…"), flush=True)
-    result = run_world_demo(files.name, demo, Path(scenario), out, domain_path=Path(args.domain),
-                            params_file=Path(files.path(files.params_file)) if files.params_file else None,
-                            policy=args.policy,
-                            hierarchy_path=hierarchy, seed=args.seed, domain_id=args.domain_id,
-                            echo=None if args.json else (lambda text: print(text, flush=True)))
+    _refuse_bag(out / "bag")
+    params_file: Union[Path, str, None] = ("default" if shipped_params else
+                                           Path(files.path(files.params_file)) if files.params_file else None)
+    watcher = watch() if watch is not None and getattr(args, "foxglove", False) else None
+    try:
+        if not args.json:
+            print(f"pearl demo: {files.name} world, scenario {scenario}; "
+                  + ("starting the graph…" if args.policy else "planning the policy and starting the graph…"),
+                  flush=True)
+        result = run_world_demo(files.name, demo, Path(scenario), out, domain_path=Path(args.domain),
+                                params_file=params_file, policy=args.policy, hierarchy_path=hierarchy,
+                                seed=args.seed, domain_id=args.domain_id, watcher=watcher,
+                                echo=None if args.json else (lambda text: print(text, flush=True)))
+    finally:
+        if watcher is not None:
+            watcher.stop()
     if args.json:
         print_json(result.summary())
     else:
-        print(f"wrote {result.transcript}, {result.bag} ({result.seconds:.1f} s)")
+        print(f"wrote {result.transcript}, " + (f"{result.plot}, " if result.plot else "")
+              + f"{result.bag} ({result.seconds:.1f} s)")
         print(result.outcome())
-    return 0
+    return result

@@ -6,8 +6,8 @@ text as ``std_msgs/String``, a number channel's reading in the field the tracker
 (``BatteryState.percentage`` …). What a person actually said and the true state go to
 ``/WORLD/sim/said`` and ``/WORLD/sim/truth`` (JSON; ``WORLD`` the world's name, e.g.
 ``/reception/sim/truth``) for the bag and transcripts. Every world of the frame's ``pearl demo``
-(:mod:`pearl_sim.world_demo`) uses it; the nursing home has its own (:mod:`pearl_sim.nodes`: a
-resident, a scheduler and a navigation stack with their own topics).
+(:mod:`pearl_sim.world_demo`) uses it, the nursing home with the robot's pose
+(:class:`pearl_sim.nodes.SimulatedHardware`).
 """
 from __future__ import annotations
 

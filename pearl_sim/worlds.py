@@ -9,7 +9,8 @@ domain ``name:`` it simulates), the same way inside this repository (``setup.py`
 ``demo`` and ``experiment`` name (``module:attr``) either a :class:`pearl_sim.world_demo.WorldDemo` /
 :class:`pearl_sim.world_study.WorldExperiment`, which the frame runs (the graph, the hardware, the
 bag, the study's cells, statistics and report are the frame's), or a function of the command's
-arguments for a world that brings its own runner (the nursing home). A domain with no world is a
+arguments for a world that brings its own runner (the nursing home's: its study, and its demo, which
+adds the live view to the frame's). A domain with no world is a
 one-line error naming the domain file and the worlds there are. Looking a world up imports only
 the module that defines its :class:`SimWorld` (each world keeps that module light).
 """

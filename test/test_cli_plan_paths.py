@@ -201,7 +201,7 @@ def test_experiment_prints_the_noise_numbers_in_its_table(tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["demo", "--scenario", "/nonexistent.yaml"], "/nonexistent.yaml: no such scenario file (--scenario)"),
     (["demo", "--scenario", "/"], "/: is a directory, expected a scenario file (--scenario)"),
-    (["demo", "--policy", "/nonexistent"], "/nonexistent: no such policy directory (--policy, from `pearl plan`)"),
+    (["demo", "--policy", "/nonexistent"], "/nonexistent: no such policy directory (--policy, from `pearl plan`"),
     (["solve", "/"], "/: is a directory, expected a model file (.pomdp, .pomdpx or domain .yaml)"),
     (["experiment", "--noise", "0,x"], "<command line>: --noise: '0,x': expected comma-separated numbers"),
     (["experiment", "--study", "/nonexistent.yaml"], "/nonexistent.yaml: no such study file (--study)"),

@@ -31,7 +31,7 @@ def test_demo_transcript_shows_the_completed_guidance(demo):
     # No clarification here since issue 21: after the reminder and her 'sure' (and a 'yes' on the
     # screen) the converged plan is confident enough to guide, and on arrival it listens for her
     # question instead of asking "What would you like to know?". The eq. 15-17 plan asked both.
-    assert result.clarifications == 0 and result.metrics.get("unprompted_questions", 0) == 0
+    assert result.metrics["clarifications"] == 0 and result.metrics.get("unprompted_questions", 0) == 0
     actions = [s.action for s in result.steps]
     # Figure 4's order: contact before the reminder, the reminder before the guidance.
     assert actions.index("RemindPhysioAppt") < actions.index("GuideToPhysio")
@@ -108,20 +108,17 @@ def test_plotted_features_follow_the_scenario():
 
 
 def test_outcome_scores_only_what_the_scenario_asked_for():
-    from pearl_sim.nursing_home.demo import DemoResult
+    from pearl_sim.nursing_home.demo import outcome_line
 
     metrics = {"guidances_completed": 0, "guidances_started": 0, "time_to_goal": [], "reminders_delivered": 1,
                "reminders_due": 1, "questions_answered": 1, "questions_raised": 2, "clarifications": 3,
                "unprompted_questions": 1, "wrong_actions": 0, "robot_at_end": "room"}
-    quiet = DemoResult("t", Path("."), metrics=metrics, guidance_wanted=False)
-    assert quiet.outcome().startswith("outcome: no guidance wanted; 1/1 reminder(s) delivered, 1/2 question(s) "
-                                      "answered, 3 clarification question(s), 1 unprompted, 0 wrong action(s), "
-                                      "ended away from home; bag")
-    wanted = DemoResult("t", Path("."), metrics=metrics, guidance_wanted=True)
-    assert wanted.outcome().startswith("outcome: guidance NOT completed; 1/1 reminder(s)")
+    assert outcome_line(dict(metrics, guidance_wanted=False)) == (
+        "outcome: no guidance wanted; 1/1 reminder(s) delivered, 1/2 question(s) answered, 3 clarification "
+        "question(s), 1 unprompted, 0 wrong action(s), ended away from home")
+    assert outcome_line(dict(metrics, guidance_wanted=True)).startswith(
+        "outcome: guidance NOT completed; 1/1 reminder(s)")
     # No question was raised and no reminder fell due: the line says nothing about them.
-    idle = DemoResult("t", Path("."), metrics=dict(metrics, reminders_due=0, questions_raised=0, robot_at_end="home"),
-                      guidance_wanted=False)
-    assert idle.outcome().startswith("outcome: no guidance wanted; 3 clarification question(s), 1 unprompted, "
-                                     "0 wrong action(s), ended at home")
-
+    idle = dict(metrics, reminders_due=0, questions_raised=0, robot_at_end="home", guidance_wanted=False)
+    assert outcome_line(idle) == ("outcome: no guidance wanted; 3 clarification question(s), 1 unprompted, "
+                                  "0 wrong action(s), ended at home")

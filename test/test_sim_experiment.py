@@ -6,7 +6,8 @@ import pytest
 from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_pomdp.speech import KeywordFilter
 from pearl_sim.nursing_home.agents import ScriptedAgent
-from pearl_sim.nursing_home.experiment import proportion_ci, run_episode, t_ci, with_word_error_rate
+from pearl_sim.nursing_home.experiment import run_episode, with_word_error_rate
+from pearl_sim.stats import proportion_ci, t_ci
 from pearl_sim.nursing_home.scenario import load_scenarios, parse_scenarios
 from pearl_sim.nursing_home.world import Message
 

@@ -54,8 +54,6 @@ LIVELINESS_NAMES = {0: "system_default", 1: "automatic", 3: "manual_by_topic", 4
                     5: "best_available"}
 #: RMW_DURATION_INFINITE as rosbag2 writes it: {sec: 9223372036, nsec: 854775807}.
 DURATION_INFINITE = (9223372036, 854775807)
-#: RMW_DURATION_UNSPECIFIED ("use the default").
-DURATION_UNSPECIFIED = (0, 0)
 
 # --- topics of the Pearl graph (docs/design.md §6) ---------------------------------------------
 CLOCK_TOPIC = "/clock"

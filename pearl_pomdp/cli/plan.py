@@ -115,17 +115,11 @@ def default_policy_dir(domain_path) -> Path:
 
 
 def load_domain_any(path: str):
-    """A FactoredDomain for .yaml, else the flat model from :func:`pearl_pomdp.model.load_model`."""
+    """A FactoredDomain for .yaml, else the flat model (:func:`pearl_pomdp.model.load_domain_or_model`)."""
     from pearl_pomdp.cli._inputs import require_file
+    from pearl_pomdp.model import load_domain_or_model
 
-    p = require_file(path, "domain file")
-    if p.suffix.lower() in (".yaml", ".yml"):
-        from pearl_pomdp.model.domain_yaml import load_domain
-
-        return load_domain(p)
-    from pearl_pomdp.model import load_model
-
-    return load_model(p)
+    return load_domain_or_model(require_file(path, "domain file"))
 
 
 def resolve_hierarchy_path(domain_path: str, hierarchy_path, flat: bool = False, warn=None):

@@ -131,12 +131,6 @@ class SubtaskModel:
         """``P(o | s, k, s')`` as a dense ``[S, S', Z]`` array (eq. 13/16; small models only)."""
         return self.model.O[self.source[k]]
 
-    def observation_kernel(self, k: int) -> np.ndarray:
-        """Dense ``[S, S', Z]``: ``T_h(s,k,s') · P(o | s,k,s')`` (small models only, used by tests)."""
-        T = self.transition(k)
-        T = T.toarray() if sp.issparse(T) else np.asarray(T)
-        return T[:, :, None] * self.observation_pair(k)
-
 
 def parameterize(model: Pomdp, spec: SubtaskSpec, effective: Mapping[str, np.ndarray],
                  factors: Optional[StateFactors] = None) -> SubtaskModel:

@@ -29,7 +29,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from typing import Dict, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -134,42 +134,85 @@ def _left(deadline: Optional[float], own: Optional[float]) -> Optional[float]:
     return left if own is None else min(own, left)
 
 
+class _Planning:
+    """What both PLANs share: the model, its factors, the clock and deadline, the subtasks solved so
+    far (bottom-up, :meth:`Hierarchy.postorder`) with their abstractions and reports, the progress bar."""
+
+    def __init__(self, domain, hierarchy: Hierarchy, abstraction: bool, progress: bool, strict_local_reward: bool,
+                 time_limit: Optional[float]):
+        self.t_start = time.perf_counter()
+        self.deadline = None if time_limit is None else self.t_start + time_limit
+        self.model = domain.compile() if isinstance(domain, FactoredDomain) else domain
+        self.factored = domain if isinstance(domain, FactoredDomain) else None
+        self.factors = StateFactors.from_domain(domain)
+        self.builder = KernelBuilder(self.model)
+        self.hierarchy, self.abstraction, self.time_limit = hierarchy, abstraction, time_limit
+        self.strict_local_reward = strict_local_reward
+        self.policies: Dict[str, SubtaskPolicy] = {}
+        self.abstracts: Dict[str, AbstractSubtask] = {}
+        self.reports: List[dict] = []
+        self.order = hierarchy.postorder()
+        self.bar = None
+        if progress:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=len(self.order), desc="plan", unit="subtask", leave=False)
+
+    def abstract(self, name: str, spec: SubtaskSpec, sub, below, charged_under) -> Tuple[AbstractSubtask, SeparableTerms]:
+        """Subtask ``name``'s model ``sub`` abstracted (eq. 18) less its separable reward terms; its
+        local-reward problems are warned about (or, strict, raised)."""
+        for problem in sub.warnings:
+            if self.strict_local_reward:
+                raise PearlError(f"{self.hierarchy.source}: subtasks.{name}: {problem}")
+            log.warning("%s", problem)
+        child_relevant = sorted({f for c in spec.children if c in self.abstracts for f in self.abstracts[c].relevant})
+        separable = _separate(sub, self.factored, below, charged_under, self.abstraction)
+        try:
+            abst = abstract_subtask(sub, self.factors, self.factored, child_relevant, enabled=self.abstraction,
+                                    builder=self.builder, dropped=separable.rules)
+        except AbstractionTooLarge as e:
+            raise PearlError(f"{self.hierarchy.source}: subtasks.{name}: {e}") from None
+        return abst, separable
+
+    def solved(self, name: str, pol: SubtaskPolicy, info: dict, abst: Optional[AbstractSubtask] = None) -> None:
+        """Subtask ``name`` planned: its policy (``info`` its report) and abstraction kept for its parents."""
+        pol.info = info
+        self.policies[name] = pol
+        if abst is not None:
+            self.abstracts[name] = abst
+        self.reports.append(info)
+        if self.bar is not None:
+            self.bar.update(1)
+            if abst is not None:
+                self.bar.set_postfix(subtask=name, states=abst.model.num_states)
+
+    def finish(self, parameterize: str, **extra: Any) -> HierarchicalPolicy:
+        """The hierarchical policy of every subtask, its report the ``pearl plan --json`` object."""
+        if self.bar is not None:
+            self.bar.close()
+        model, hierarchy = self.model, self.hierarchy
+        report = {"domain": model.name, "hierarchy": hierarchy.name, "root": hierarchy.root,
+                  "parameterize": parameterize, "time_limit": self.time_limit, "abstraction": self.abstraction,
+                  **extra, "subtasks": self.reports, "total_seconds": round(time.perf_counter() - self.t_start, 6)}
+        hp = HierarchicalPolicy(hierarchy.root, {n: self.policies[n] for n in self.order}, list(model.actions),
+                                model.fingerprint(), report, hierarchy.name, model.name)
+        hp.abstract_models = self.abstracts  # kept for inspection (tests, `pearl hierarchy`); not saved
+        return hp
+
+
 def _plan_corner(domain, hierarchy: Hierarchy, abstraction: bool, solver: Optional[str], seed: int, progress: bool,
                  strict_local_reward: bool, time_limit: Optional[float]) -> HierarchicalPolicy:
     """The paper's PLAN with eq. 15–17 (``parameterize: corner``)."""
-    t_start = time.perf_counter()
-    deadline = None if time_limit is None else t_start + time_limit
-    model = domain.compile() if isinstance(domain, FactoredDomain) else domain
-    factored = domain if isinstance(domain, FactoredDomain) else None
-    factors = StateFactors.from_domain(domain)
-    builder = KernelBuilder(model)
-    policies: Dict[str, SubtaskPolicy] = {}
-    abstracts: Dict[str, AbstractSubtask] = {}
-    reports = []
-    order = hierarchy.postorder()
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(order), desc="plan", unit="subtask", leave=False)
-    for name in order:
+    run = _Planning(domain, hierarchy, abstraction, progress, strict_local_reward, time_limit)
+    model, policies, deadline = run.model, run.policies, run.deadline
+    for name in run.order:
         spec = hierarchy.subtasks[name]
         t0 = time.perf_counter()
         effective = {c: policies[c].effective for c in spec.children if c in policies}
-        sub = parameterize(model, spec, effective, factors)
-        for problem in sub.warnings:
-            if strict_local_reward:
-                raise PearlError(f"{hierarchy.source}: subtasks.{name}: {problem}")
-            log.warning("%s", problem)
-        child_relevant = sorted({f for c in spec.children if c in abstracts for f in abstracts[c].relevant})
+        sub = parameterize(model, spec, effective, run.factors)
         # Eq. 15-17's subtask never stops: a term charged under each of its primitives alike is separable.
         below = hierarchy.descendants(name)
-        separable = _separate(sub, factored, below, below, abstraction)
-        try:
-            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder,
-                                    dropped=separable.rules)
-        except AbstractionTooLarge as e:
-            raise PearlError(f"{hierarchy.source}: subtasks.{name}: {e}") from None
+        abst, separable = run.abstract(name, spec, sub, below, below)
         t1 = time.perf_counter()
         limited = spec if deadline is None else dataclasses.replace(spec, time_limit=_left(deadline, spec.time_limit))
         result = solve_subtask(abst.model, limited, seed=seed, solver=solver)
@@ -224,29 +267,8 @@ def _plan_corner(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
         }
         if timed_out:
             log.warning("%s", info["warnings"][-1])
-        pol.info = info
-        policies[name] = pol
-        abstracts[name] = abst
-        reports.append(info)
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(subtask=name, states=abst.model.num_states)
-    if bar is not None:
-        bar.close()
-    report = {
-        "domain": model.name,
-        "hierarchy": hierarchy.name,
-        "root": hierarchy.root,
-        "parameterize": "corner",
-        "time_limit": time_limit,
-        "abstraction": abstraction,
-        "subtasks": reports,
-        "total_seconds": round(time.perf_counter() - t_start, 6),
-    }
-    hp = HierarchicalPolicy(hierarchy.root, {n: policies[n] for n in order}, list(model.actions),
-                            model.fingerprint(), report, hierarchy.name, model.name)
-    hp.abstract_models = abstracts  # kept for inspection (tests, `pearl hierarchy`); not saved
-    return hp
+        run.solved(name, pol, info, abst)
+    return run.finish("corner")
 
 
 # ------------------------------------------------------------------ policy-contingent PLAN
@@ -379,12 +401,8 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
 
     if solver not in (None, "pointbased", "incprune"):
         raise PearlError(f"unknown solver {solver!r}; choose pointbased or incprune (an online root stays online)")
-    t_start = time.perf_counter()
-    deadline = None if time_limit is None else t_start + time_limit
-    model = domain.compile() if isinstance(domain, FactoredDomain) else domain
-    factored = domain if isinstance(domain, FactoredDomain) else None
-    factors = StateFactors.from_domain(domain)
-    builder = KernelBuilder(model)
+    run = _Planning(domain, hierarchy, abstraction, progress, strict_local_reward, time_limit)
+    model, policies, deadline = run.model, run.policies, run.deadline
     online_bounds, bounds_seconds, qmdp = None, 0.0, None
     if hierarchy.subtasks[hierarchy.root].solver == "online":
         from pearl_pomdp.online.decider import default_bounds, default_upper
@@ -396,43 +414,22 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
         bounds_seconds = time.perf_counter() - t_bounds
         qmdp = getattr(online_bounds, "upper_q", None) if default_upper(model) == "qmdp" else None
     entries = entry_beliefs(model, seed=seed, qmdp=qmdp)
-    policies: Dict[str, SubtaskPolicy] = {}
-    abstracts: Dict[str, AbstractSubtask] = {}
-    reports = []
-    order = hierarchy.postorder()
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(order), desc="plan", unit="subtask", leave=False)
-    for name in order:
+    for name in run.order:
         spec = hierarchy.subtasks[name]
         is_root = name == hierarchy.root
         t0 = time.perf_counter()
         below = hierarchy.descendants(name)
         if is_root and spec.solver == "online":
             # Not planned here: DESPOT over its actions at run time (bound to the model below).
-            policies[name] = _online_root(spec, model, policies, seed, factors.names)
-            reports.append(policies[name].info)
-            if bar is not None:
-                bar.update(1)
+            root = _online_root(spec, model, policies, seed, run.factors.names)
+            run.solved(name, root, root.info)
             continue
         # The subtask over the primitives below it (eq. 11–14 for each), abstracted exactly.
         flat_spec = dataclasses.replace(spec, children=list(below))
-        sub = parameterize(model, flat_spec, {}, factors)
-        for problem in sub.warnings:
-            if strict_local_reward:
-                raise PearlError(f"{hierarchy.source}: subtasks.{name}: {problem}")
-            log.warning("%s", problem)
-        child_relevant = sorted({f for c in spec.children if c in abstracts for f in abstracts[c].relevant})
+        sub = parameterize(model, flat_spec, {}, run.factors)
         # An option hands the step back to its parent when it stops: a term is separable only when
         # every action of the domain pays it (the root never stops: its own primitives suffice).
-        separable = _separate(sub, factored, below, below if is_root else list(model.actions), abstraction)
-        try:
-            abst = abstract_subtask(sub, factors, factored, child_relevant, enabled=abstraction, builder=builder,
-                                    dropped=separable.rules)
-        except AbstractionTooLarge as e:
-            raise PearlError(f"{hierarchy.source}: subtasks.{name}: {e}") from None
+        abst, separable = run.abstract(name, spec, sub, below, below if is_root else list(model.actions))
         solve_model = abst.model if is_root else with_exit(abst.model)
         starts = _starts(abst, solve_model.num_states, entries)
         abstract_children = [c for c in spec.children if c in policies]
@@ -526,31 +523,11 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
             "warnings": list(sub.warnings) + notes,
             **abst.summary(),
         }
-        pol.info = info
-        policies[name] = pol
-        abstracts[name] = abst
-        reports.append(info)
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(subtask=name, states=abst.model.num_states)
-    if bar is not None:
-        bar.close()
-    report = {
-        "domain": model.name,
-        "hierarchy": hierarchy.name,
-        "root": hierarchy.root,
-        "parameterize": "policy",
-        "time_limit": time_limit,
-        "abstraction": abstraction,
-        "entry_beliefs": int(entries.shape[0]),
-        "subtasks": reports,
-        "total_seconds": round(time.perf_counter() - t_start, 6),
-    }
-    hp = HierarchicalPolicy(hierarchy.root, {n: policies[n] for n in order}, list(model.actions),
-                            model.fingerprint(), report, hierarchy.name, model.name)
+        run.solved(name, pol, info, abst)
+    hp = run.finish("policy", entry_beliefs=int(entries.shape[0]))
     # π_h(s) for the record (`pearl explain`, `pearl hierarchy`): the primitive each subtask
     # picks at the belief certain of s (an online root has none: -1).
-    for name in order:
+    for name in run.order:
         if policies[name].online is None:
             policies[name].effective = hp.corner_picks(name)
     if hp.online:
@@ -565,6 +542,5 @@ def _plan_policy(domain, hierarchy: Hierarchy, abstraction: bool, solver: Option
                     b0_decision={"action": first.action_name, "trace": [t.choice for t in first.trace],
                                  **{k: search[k] for k in ("trials", "nodes", "expansions", "seconds", "stop")}})
         info["seconds"] = round(info["seconds"] + info["bounds_seconds"], 6)
-        report["total_seconds"] = round(time.perf_counter() - t_start, 6)
-    hp.abstract_models = abstracts  # kept for inspection (tests, `pearl hierarchy`); not saved
+        hp.report["total_seconds"] = round(time.perf_counter() - run.t_start, 6)
     return hp

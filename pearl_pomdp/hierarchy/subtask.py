@@ -81,7 +81,6 @@ class SubtaskPolicy:
         if self.model_actions is not None:
             if self.lookahead is None:
                 raise PolicyError(f"subtask {self.name!r}: a policy-contingent subtask needs its model's search")
-            self.model_index = {a: i for i, a in enumerate(self.model_actions)}
             la = self.lookahead
             self.one_step = OneStep(la.T, la.O, la.R, la.discount, self.alphas)
             #: A full state standing for each model state (the first that maps there; -1: the

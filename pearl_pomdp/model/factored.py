@@ -165,24 +165,12 @@ class FactoredDomain:
         """The actions tagged ``category: <category>``, in file order."""
         return [a for a in self.actions if self.categories.get(a) == category]
 
-    def deterministic_effect(self, action: str, feature: str) -> Optional[str]:
-        """The value ``action`` always gives ``feature`` (whatever the state), or ``None``.
-
-        E.g. a drive's destination: ``GoHome`` sets ``RobotLocation`` to ``home``.
-        """
-        cpt = self._transitions[self.actions.index(action)][self.feature_index(feature)]
-        rows = cpt.table.reshape(-1, cpt.table.shape[-1])
-        first = rows[0]
-        if not np.allclose(rows, first) or not np.isclose(first.max(), 1.0):
-            return None
-        return self.feature(feature).values[int(first.argmax())]
-
     def intended_effect(self, action: str, feature: str) -> Optional[str]:
         """The value ``action`` gives ``feature`` most likely from every state (p > 0.5), or ``None``.
 
         A drive's destination when the drive may fail: ``GotoPatientRoom`` sets
         ``RobotLocation`` to ``room`` with 0.97 and keeps it with 0.03; the intended effect is
-        ``room``. Equals :meth:`deterministic_effect` when that is not ``None``.
+        ``room``; a drive that never fails sets it with 1.
         """
         cpt = self._transitions[self.actions.index(action)][self.feature_index(feature)]
         rows = cpt.table.reshape(-1, cpt.table.shape[-1])
@@ -315,11 +303,6 @@ class FactoredDomain:
         """``(parents, table)`` with ``table[v_p1, …, v_pk, v'] = P(feature' = v' | parents, action)``."""
         a = self._action_index(action)
         cpt = self._transitions[a][self.feature_index(feature)]
-        return [self.feature_names[p] for p in cpt.parents], cpt.table.copy()
-
-    def observation_table(self, action: Union[str, int]) -> Tuple[List[str], np.ndarray]:
-        """``(parents, table)`` with ``table[v_p1', …, v_pk', o] = P(o | next-state parents, action)``."""
-        cpt = self._observations[self._action_index(action)]
         return [self.feature_names[p] for p in cpt.parents], cpt.table.copy()
 
     # ---------------------------------------------------------------- compile

@@ -218,14 +218,10 @@ def resolve_path(value: str, parameter: str, must_exist: bool = True, kind: str 
 
 def load_domain_and_model(path: Path):
     """``(domain or None, Pomdp)`` from a factored ``.yaml`` domain or a flat ``.pomdp`` file."""
-    if path.suffix.lower() in (".yaml", ".yml"):
-        from pearl_pomdp.model.domain_yaml import load_domain
+    from pearl_pomdp.model import Pomdp, load_domain_or_model
 
-        domain = load_domain(path)
-        return domain, domain.compile()
-    from pearl_pomdp.model import load_model
-
-    return None, load_model(path)
+    loaded = load_domain_or_model(path)
+    return (None, loaded) if isinstance(loaded, Pomdp) else (loaded, loaded.compile())
 
 
 def _one_line(err: BaseException) -> str:

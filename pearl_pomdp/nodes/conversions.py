@@ -39,7 +39,6 @@ Wire formats (common_interfaces, and this project's pearl_interfaces):
 from __future__ import annotations
 
 import array
-import json
 import math
 from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
 

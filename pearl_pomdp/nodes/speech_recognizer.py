@@ -225,13 +225,6 @@ class SpeechRecognizerNode(PearlNode):
                 self.get_logger().warning(f"decoder busy: utterance dropped ({self.counts['overflow']} so far)",
                                           throttle_duration_sec=1.0)
 
-    def end_of_stream(self) -> None:
-        """Close an utterance still open (e.g. at the end of a file)."""
-        with self._feed_lock:
-            utterances = self.segmenter.flush()
-        for u in utterances:
-            self._queue.put(u, timeout=5.0)
-
     # ----------------------------------------------------------- decode
     def _decode_loop(self) -> None:
         from pearl_pomdp.asr.audio import AudioError

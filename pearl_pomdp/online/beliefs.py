@@ -16,7 +16,7 @@ recurring complaint); the beliefs here do not:
 """
 from __future__ import annotations
 
-from typing import Callable, Optional
+from typing import Callable
 
 import numpy as np
 

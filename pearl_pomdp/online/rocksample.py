@@ -267,7 +267,6 @@ class RockSampleBounds:
         return float(10.0 * share @ self._upper_discounts[cell] + 10.0 * m.discount ** (m.n - 1 - cell % m.n))
 
     def lower(self, states, rng):
-        m = self.model
         return self._tour_value(*self._share(states))
 
     def _tour_value(self, cell: int, share: np.ndarray) -> float:

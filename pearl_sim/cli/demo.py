@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
-from pathlib import Path
 
 from pearl_sim.worlds import share_path
 
@@ -94,39 +92,22 @@ def run(args: argparse.Namespace) -> int:
                                              f"`pearl experiment --domain {args.domain}`")
     target = load_attribute(world.demo)
     if isinstance(target, WorldDemo):
-        return run_demo_cli(args, world, target)
+        run_demo_cli(args, world, target)
+        return 0
     return int(target(args))
 
 
 def run_nursing_home(args: argparse.Namespace) -> int:
-    """``pearl demo`` in the nursing home: Figure 4 through the graph (the world's own runner: the
-    resident, the live view and the belief plot are the nursing home's)."""
-    from pearl_pomdp.cli._inputs import require_dir, require_file
-    from pearl_pomdp.errors import PearlError
-    from pearl_sim.nursing_home import WORLD as world
-    from pearl_sim.nursing_home.scenario import load_scenarios
+    """``pearl demo`` in the nursing home: the frame's, with Pearl's hooks (:mod:`pearl_sim.nursing_home.demo`),
+    the shipped node params and the Foxglove live view; exit status 1 when a guidance was started and
+    not completed."""
+    from pearl_sim.nursing_home import WORLD
+    from pearl_sim.nursing_home.demo import DEMO, LiveViewWatcher
+    from pearl_sim.world_demo import run_demo_cli
 
-    args.scenario = args.scenario or world.path(world.demo_scenario)
-    args.hierarchy = args.hierarchy or share_path("config/pearl.hierarchy.yaml")
-    require_file(args.scenario, "scenario file (--scenario)")
-    if args.policy:
-        require_dir(args.policy, "policy directory (--policy, from `pearl plan`)")
-    else:
-        require_file(args.hierarchy, "hierarchy file (--hierarchy)")
-        args.policy = _saved_policy(args) or ""
-    load_scenarios(args.scenario)  # parse errors name the file and field
-    out = Path(args.out) if args.out else Path("out") / f"demo-{Path(args.scenario).stem}-{time.strftime('%Y%m%d-%H%M%S')}"
-    if (out / "bag").is_dir() and any((out / "bag").iterdir()):
-        raise PearlError(f"{out / 'bag'}: already holds a bag; choose another --out folder")
-    echo = None if args.json else (lambda text: print(text, flush=True))
-    view = _start_live_view(args) if getattr(args, "foxglove", False) else None
-    try:
-        return _run(args, out, echo, view)
-    finally:
-        if view is not None:
-            if args.foxglove_linger > 0:
-                time.sleep(args.foxglove_linger)
-            view.stop()
+    result = run_demo_cli(args, WORLD, DEMO, shipped_params=True,
+                          watch=lambda: LiveViewWatcher(_start_live_view(args), linger=args.foxglove_linger))
+    return 0 if result.metrics.get("guidances_completed") or not result.metrics.get("guidances_started") else 1
 
 
 def _start_live_view(args: argparse.Namespace):
@@ -154,20 +135,3 @@ def _start_live_view(args: argparse.Namespace):
             print(f"pearl demo: no Foxglove client subscribed within {args.foxglove_wait:g} s; starting anyway",
                   file=sys.stderr, flush=True)
     return view
-
-
-def _run(args: argparse.Namespace, out: Path, echo, view) -> int:
-    from pearl_pomdp.cli import print_json
-    from pearl_sim.nursing_home.demo import run_demo, summary_dict
-
-    if not args.json:
-        what = "starting the graph" if args.policy else "planning the policy and starting the graph"
-        print(f"pearl demo: scenario {args.scenario}; {what}…", flush=True)
-    result = run_demo(Path(args.scenario), out, domain_path=Path(args.domain), hierarchy_path=Path(args.hierarchy),
-                      policy=args.policy, seed=args.seed, domain_id=args.domain_id, echo=echo, live_view=view)
-    if args.json:
-        print_json(summary_dict(result))
-    else:
-        print(f"wrote {result.transcript}, {result.plot}, {result.bag} ({result.seconds:.1f} s)")
-        print(result.outcome())
-    return 0 if result.metrics.get("guidances_completed") or not result.metrics.get("guidances_started") else 1

@@ -12,8 +12,8 @@ the Figure 4 demo through the graph (:mod:`.demo`), the working day (:mod:`.day`
 """
 from pearl_sim.worlds import SimWorld
 
-#: The nursing home as a registered world (entry point ``pearl.worlds: pearl``); its demo (Figure 4, the
-#: live view, the belief plot) and its study (residents, SNR axes, the cluster) are its own runners.
+#: The nursing home as a registered world (entry point ``pearl.worlds: pearl``); its demo is the frame's
+#: with Pearl's hooks and the live view (:mod:`.demo`), its study (residents, SNR axes, the cluster) its own runner.
 WORLD = SimWorld("pearl", "the nursing home: a resident, reminders, guidance to physiotherapy",
                  "config/scenarios/figure4.yaml", "config/scenarios/study.yaml", "config/pearl_nodes.yaml",
                  demo="pearl_sim.cli.demo:run_nursing_home", experiment="pearl_sim.cli.experiment:run_nursing_home")

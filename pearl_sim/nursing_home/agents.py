@@ -67,7 +67,6 @@ class ScriptedAgent:
         self.contact = False
         self.guiding = False
         self.last = TIMEOUT_SYMBOL
-        self.rang = False
 
     def act(self) -> str:
         heard = self.last

@@ -108,10 +108,6 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
     )
 
 
-# ----------------------------------------------------------------- statistics
-from pearl_sim.stats import proportion_ci, t_ci  # noqa: E402,F401  (re-exported: one source)
-
-
 def with_word_error_rate(scenario: Scenario, wer: float) -> Scenario:
     """A copy of ``scenario`` whose recogniser has word error rate ``wer`` (resident override cleared)."""
     return replace(scenario, word_error_rate=float(wer), resident=replace(scenario.resident, word_error_rate=None))

@@ -19,8 +19,9 @@ import multiprocessing
 from dataclasses import dataclass, replace
 from typing import Dict, List, Optional, Sequence
 
-from pearl_sim.nursing_home.experiment import EpisodeResult, proportion_ci, run_episode, t_ci
+from pearl_sim.nursing_home.experiment import EpisodeResult, run_episode
 from pearl_sim.nursing_home.residents import StudyCase, effective_word_error_rate
+from pearl_sim.stats import proportion_ci, t_ci
 
 __all__ = ["Cell", "StudyEpisode", "cells", "run_cells", "per_policy", "paired", "acceptance", "write_csv",
            "plot_study", "BASELINE", "PAIRED_METRICS"]
@@ -175,9 +176,6 @@ def _value(e: StudyEpisode, metric: str) -> Optional[float]:
     if metric == "time_to_goal":
         return r.time_to_goal
     return float(getattr(r, metric))
-
-
-from pearl_sim.stats import t_ci  # noqa: E402,F401  (re-exported: one source)
 
 
 def per_policy(episodes: Sequence[StudyEpisode]) -> Dict[str, Dict[str, dict]]:

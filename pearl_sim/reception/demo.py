@@ -36,5 +36,5 @@ def _outcome(m: Dict[str, Any]) -> str:
 
 #: What the reception brings to the frame's ``pearl demo``.
 DEMO = WorldDemo(load_scenarios=load_reception_scenarios,
-                 make_world=lambda scenario, seed: ReceptionWorld(scenario, seed=seed),
+                 make_world=lambda scenario, seed, domain: ReceptionWorld(scenario, seed=seed),
                  metrics=_metrics, outcome=_outcome)

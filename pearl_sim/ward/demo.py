@@ -34,5 +34,5 @@ def _outcome(m: Dict[str, Any]) -> str:
 
 #: What the ward brings to the frame's ``pearl demo``.
 DEMO = WorldDemo(load_scenarios=load_ward_scenarios,
-                 make_world=lambda scenario, seed: WardWorld(scenario, seed=seed),
+                 make_world=lambda scenario, seed, domain: WardWorld(scenario, seed=seed),
                  metrics=_metrics, outcome=_outcome)

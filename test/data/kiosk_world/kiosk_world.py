@@ -137,7 +137,7 @@ def _metrics(world: KioskWorld) -> Dict[str, Any]:
     return {"customers": m.customers, "served": m.served, "left": m.left, "wrong_actions": m.wrong_actions}
 
 
-DEMO = WorldDemo(load_scenarios=load_kiosk_scenarios, make_world=lambda sc, seed: KioskWorld(sc, seed=seed),
+DEMO = WorldDemo(load_scenarios=load_kiosk_scenarios, make_world=lambda sc, seed, domain: KioskWorld(sc, seed=seed),
                  metrics=_metrics,
                  outcome=lambda m: f"outcome: {m['served']}/{m['customers']} customer(s) served, {m['left']} left, "
                                    f"{m['wrong_actions']} wrong action(s)")
