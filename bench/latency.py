@@ -37,6 +37,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 SPIN_TIMEOUT = 0.01
 PARAMETER_SERVICES = True
+#: Multi-process: the launch file's journal (each node replaces its crash journal, with fsync, after
+#: every step it changed: docs/reliability.md, "Crashes"); ``--no-journal`` launches with journal:=false.
+JOURNAL = True
 sys.path.insert(0, str(REPO))
 
 #: ``--inputs resident`` (default): a resident who wants the time answers the robot's last
@@ -188,7 +191,8 @@ def run_multiprocess(policy_dir, steps, warmup):
     pearl = str(Path(sys.executable).parent / "pearl")
     err = open(log_dir / "launch.err", "wb")
     launch = subprocess.Popen([pearl, "launch", "launch/pearl.launch.xml", f"policy:={policy_dir}",
-                               "step_timeout:=0.0"], cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=err)
+                               "step_timeout:=0.0"] + ([] if JOURNAL else ["journal:=false"]),
+                              cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=err)
     context = Context()
     rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("latency_probe", context=context)
@@ -307,15 +311,18 @@ def main(argv=None):
                         help="resident: answer the robot's actions plausibly (default); cycle: fixed input cycle")
     parser.add_argument("--no-parameter-services", action="store_true",
                         help="in-process: build the nodes without parameter services (fewer entities per spin)")
+    parser.add_argument("--no-journal", action="store_true",
+                        help="multi-process: launch with journal:=false (no crash journal, so no fsync per step)")
     args = parser.parse_args(argv)
-    global PARAMETER_SERVICES, INPUT_MODE
+    global PARAMETER_SERVICES, INPUT_MODE, JOURNAL
     PARAMETER_SERVICES = not args.no_parameter_services
+    JOURNAL = not args.no_journal
     INPUT_MODE = args.inputs
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO / "config" / "fastdds_profile.xml"))
     policy = _find_policy(args.policy)
     out = {"benchmark": "observation -> action latency", "policy": str(policy), "cpus": os.cpu_count(),
-           "inputs": INPUT_MODE, "inprocess_parameter_services": PARAMETER_SERVICES,
+           "inputs": INPUT_MODE, "inprocess_parameter_services": PARAMETER_SERVICES, "multiprocess_journal": JOURNAL,
            "load_before": [round(x, 2) for x in os.getloadavg()]}
     if args.mode in ("inprocess", "both"):
         print("in-process ...", file=sys.stderr)
