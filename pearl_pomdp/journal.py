@@ -29,17 +29,16 @@ import base64
 import hashlib
 import json
 import os
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Dict, Mapping, Optional, Union
+from typing import Any, Dict, Mapping, Optional, Union
 
 import numpy as np
 
 from pearl_pomdp.atomic import atomic_write
 
-__all__ = ["FORMAT", "DEFAULT_MAX_AGE", "Journal", "JournalWriter", "Resumed", "domain_hash", "default_path",
+__all__ = ["FORMAT", "DEFAULT_MAX_AGE", "Journal", "Resumed", "domain_hash", "default_path",
            "encode_array", "decode_array"]
 
 #: The journal format this code writes and reads.
@@ -114,28 +113,16 @@ class Journal:
         self.sync = sync
         self.writes = 0
 
-    def encode(self, state: Mapping[str, Any], now: Optional[float] = None) -> str:
-        """The journal file's text for ``state`` (JSON-serialisable), stamped ``now`` (wall clock s)."""
-        body = {"format": FORMAT, "kind": self.kind, "domain": self.domain, "domain_hash": self.domain_hash,
-                "written_at": time.time() if now is None else float(now), "state": dict(state)}
-        return json.dumps(body, separators=(",", ":"))
-
-    def write_text(self, text: str) -> None:
-        """Replace the journal with ``text`` (from :meth:`encode`).
-
-        Raises:
-            OSError: the file cannot be written (the old journal is left as it was).
-        """
-        atomic_write(self.path, text, sync=self.sync)
-        self.writes += 1
-
     def write(self, state: Mapping[str, Any], now: Optional[float] = None) -> None:
         """Replace the journal with ``state`` (JSON-serialisable), stamped ``now`` (wall clock s).
 
         Raises:
             OSError: the file cannot be written (the old journal is left as it was).
         """
-        self.write_text(self.encode(state, now))
+        body = {"format": FORMAT, "kind": self.kind, "domain": self.domain, "domain_hash": self.domain_hash,
+                "written_at": time.time() if now is None else float(now), "state": dict(state)}
+        atomic_write(self.path, json.dumps(body, separators=(",", ":")), sync=self.sync)
+        self.writes += 1
 
     def load(self, now: Optional[float] = None) -> Resumed:
         """The journal's state if it may be resumed from, else ``None`` and the one-line reason
@@ -173,84 +160,3 @@ class Journal:
             return Resumed(None, f"refused {where}: written {-age:.1f} s in the future (the clock moved "
                                  f"back?); starting afresh", age)
         return Resumed(body["state"], f"resuming from {where}, written {max(age, 0.0):.1f} s ago", age)
-
-
-class JournalWriter:
-    """Writes a :class:`Journal` on a thread of its own, so a node's callback does not wait for the disk.
-
-    A write with its two fsyncs takes 0.7 ms at the median and 7 ms at the 99th percentile on this
-    project's test machine; in a node's callback it delays whatever message comes next. Here the
-    callback only encodes the state (:meth:`submit`: the text is fixed at that moment) and the thread
-    replaces the file; when states come faster than the disk takes them, only the newest is written
-    (each journal replaces the one before, so nothing a restart reads is lost by skipping one). A
-    crash loses at most the write in flight, as a crash between publishing and writing did before
-    (a write that must be on disk before the node goes on is no job for it: the tracker writes its
-    own). :meth:`close` writes what is pending (bounded by its timeout) before the process ends.
-
-    Args:
-        journal: the file and its header.
-        on_error: called on the writer thread with the ``OSError`` of a write that failed (the old
-            journal is then left as it was; later writes are tried as they come).
-    """
-
-    def __init__(self, journal: Journal, on_error: Callable[[OSError], None]):
-        self.journal = journal
-        self._on_error = on_error
-        self._pending: Optional[str] = None
-        self._writing = False
-        self._closed = False
-        self._changed = threading.Condition()
-        self._thread = threading.Thread(target=self._run, name=f"journal {journal.path.name}", daemon=True)
-        self._thread.start()
-
-    def submit(self, state: Mapping[str, Any], now: Optional[float] = None) -> None:
-        """Journal ``state`` as it is now; returns at once (a closed writer writes it in this thread)."""
-        text = self.journal.encode(state, now)
-        with self._changed:
-            if not self._closed:
-                self._pending = text
-                self._changed.notify_all()
-                return
-        self._write(text)
-
-    def flush(self, timeout: float) -> bool:
-        """Wait up to ``timeout`` s until everything submitted is written; True when it is."""
-        deadline = time.monotonic() + timeout
-        with self._changed:
-            while self._pending is not None or self._writing:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self._changed.wait(left)
-        return True
-
-    def close(self, timeout: float = 1.0) -> bool:
-        """Write what is pending (waiting up to ``timeout`` s) and stop the thread; True when nothing was left unwritten."""
-        done = self.flush(timeout)
-        with self._changed:
-            self._closed = True
-            self._changed.notify_all()
-        self._thread.join(max(0.0, timeout))
-        return done
-
-    def _write(self, text: str) -> None:
-        try:
-            self.journal.write_text(text)
-        except OSError as err:
-            self._on_error(err)
-
-    def _run(self) -> None:
-        while True:
-            with self._changed:
-                while self._pending is None and not self._closed:
-                    self._changed.wait()
-                if self._pending is None:
-                    return
-                text, self._pending = self._pending, None
-                self._writing = True
-            try:
-                self._write(text)
-            finally:
-                with self._changed:
-                    self._writing = False
-                    self._changed.notify_all()

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pearl_pomdp.journal import FORMAT, Journal, JournalWriter, decode_array, default_path, domain_hash, encode_array
+from pearl_pomdp.journal import FORMAT, Journal, decode_array, default_path, domain_hash, encode_array
 from pearl_pomdp.model.domain_yaml import load_domain
 from pearl_pomdp.tracking import BeliefTracker, StepSettings
 
@@ -161,72 +161,3 @@ def test_a_journal_state_that_does_not_fit_the_model_is_refused(pearl, field, va
     with pytest.raises(ValueError, match=why):
         t.resume(state)
     assert np.array_equal(t.belief, before[0]) and (t.step, t.run) == before[1:]
-
-
-class _SlowDisk(Journal):
-    """A journal whose writes wait until the test lets them go (a disk in the middle of an fsync)."""
-
-    def __init__(self, *args, **kw):
-        super().__init__(*args, **kw)
-        import threading
-
-        self.gate = threading.Event()
-        self.texts: list = []
-
-    def write_text(self, text: str) -> None:
-        self.gate.wait(10.0)
-        self.texts.append(json.loads(text)["state"]["n"])
-        super().write_text(text)
-
-
-def test_the_writer_returns_at_once_and_writes_the_newest_state(tmp_path):
-    slow = _SlowDisk(tmp_path / "j" / "belief_tracker.json", "belief_tracker", str(DOMAIN), domain_hash(DOMAIN))
-    writer = JournalWriter(slow, on_error=lambda err: pytest.fail(str(err)))
-    started = time.monotonic()
-    for n in range(50):
-        writer.submit({"n": n})          # the disk is held: none of these may wait for it
-    assert time.monotonic() - started < 1.0
-    assert not writer.flush(0.05)        # still held
-    slow.gate.set()
-    assert writer.flush(5.0)
-    # The first state may already have been taken before the rest arrived; the last is always written,
-    # and states are never written out of order.
-    assert slow.texts[-1] == 49 and slow.texts == sorted(slow.texts) and len(slow.texts) <= 2
-    assert json.loads(slow.path.read_text())["state"] == {"n": 49}
-    assert writer.close(1.0)
-
-
-def test_close_writes_what_is_pending_and_later_writes_go_straight_to_the_file(tmp_path):
-    slow = _SlowDisk(tmp_path / "j" / "belief_tracker.json", "belief_tracker", str(DOMAIN), domain_hash(DOMAIN))
-    writer = JournalWriter(slow, on_error=lambda err: pytest.fail(str(err)))
-    writer.submit({"n": 1})
-    writer.submit({"n": 2})
-    slow.gate.set()
-    assert writer.close(5.0)
-    assert json.loads(slow.path.read_text())["state"] == {"n": 2}
-    writer.submit({"n": 3})              # after close: written in the caller's thread
-    assert json.loads(slow.path.read_text())["state"] == {"n": 3}
-
-
-def test_a_failed_write_is_reported_and_the_old_journal_stays(tmp_path):
-    good = journal(tmp_path)
-    good.write({"n": 0})
-    blocked = tmp_path / "file_not_dir"
-    blocked.write_text("")
-    bad = Journal(blocked / "belief_tracker.json", "belief_tracker", str(DOMAIN), domain_hash(DOMAIN))
-    errors: list = []
-    writer = JournalWriter(bad, on_error=errors.append)
-    writer.submit({"n": 1})
-    assert writer.flush(5.0) and writer.close(1.0)
-    assert len(errors) == 1 and isinstance(errors[0], OSError)
-    assert json.loads(good.path.read_text())["state"] == {"n": 0}
-
-
-def test_a_close_that_cannot_finish_returns_within_its_timeout(tmp_path):
-    slow = _SlowDisk(tmp_path / "j" / "belief_tracker.json", "belief_tracker", str(DOMAIN), domain_hash(DOMAIN))
-    writer = JournalWriter(slow, on_error=lambda err: None)
-    writer.submit({"n": 1})
-    started = time.monotonic()
-    assert writer.close(0.2) is False
-    assert time.monotonic() - started < 1.0
-    slow.gate.set()

@@ -192,9 +192,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         inputs = self._input_subscriptions(core.channels, domain.source if domain is not None else p["domain"])
         for event in core.startup_events:
             self._log(event.level, event.text)
-        # Not threaded: a closed step must be on disk before its belief goes out (_handle).
-        self.journal = NodeJournal(self, "belief_tracker", p, model, domain.source if domain is not None else p["domain"],
-                                   threaded=False)
+        self.journal = NodeJournal(self, "belief_tracker", p, model, domain.source if domain is not None else p["domain"])
         self.journal.resume(self._resume)
 
         self.belief_pub = self.lifecycle_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
@@ -427,12 +425,6 @@ class BeliefTrackerNode(ManagedPearlNode):
             self._diagnostics_soon()
         self._journal()
 
-    def save_state(self, timeout: float) -> None:
-        """The journal's last state reaches the disk before the node goes (see :class:`PearlNode`)."""
-        journal = getattr(self, "journal", None)   # None until set up (a start-up error destroys the node)
-        if journal is not None:
-            journal.close(timeout)
-
     def _resume(self, state) -> str:
         """Carry on from a journal's state (the core checks it); what was resumed, for the log."""
         assert self.core is not None
@@ -441,7 +433,7 @@ class BeliefTrackerNode(ManagedPearlNode):
                 f"{self.core.pending} observation(s) queued")
 
     def _journal(self) -> None:
-        """Journal the core's state when it changed (on disk when this returns: see _handle)."""
+        """Journal the core's state when it changed (after the belief went out)."""
         core = self.core
         if self.journal is not None and core is not None:
             key = (core.run, core.step, core.open_action, core.opened_at, core.deadline(), core.pending,

@@ -193,18 +193,6 @@ class PearlNode(Node):
         """The node clock (sim time when ``use_sim_time``) in seconds."""
         return self.get_clock().now().nanoseconds * 1e-9
 
-    #: Seconds :meth:`save_state` may wait for the disk at a stop (within the clean-up's deadline).
-    SAVE_STATE_TIMEOUT = 1.0
-
-    def save_state(self, timeout: float) -> None:
-        """Write to disk what must outlive the process (a journal still being written), waiting at
-        most ``timeout`` s. Called in the clean-up after the executor stopped, signal or not, and
-        by :meth:`destroy_node`; a node with nothing to save does nothing."""
-
-    def destroy_node(self):
-        self.save_state(self.SAVE_STATE_TIMEOUT)
-        return super().destroy_node()
-
 
 def resolve_path(value: str, parameter: str, must_exist: bool = True, kind: str = "file") -> Path:
     """A file/dir parameter as a path: as given, else relative to the package share directory.
@@ -399,8 +387,6 @@ def _init_spin_and_clean_up(node_class: Type[PearlNode], args: List[str], prog: 
         try:
             if executor is not None:
                 executor.shutdown(timeout_sec=0.5)  # releases the entities it was waiting on
-            if node is not None:
-                node.save_state(node.SAVE_STATE_TIMEOUT)   # before os._exit skips everything after a signal
             # After a stop signal the process ends right after this clean-up, so the node's
             # DDS entities are not destroyed one by one: with several participants leaving at
             # once, Fast DDS can block an entity's deletion for seconds *holding the GIL*

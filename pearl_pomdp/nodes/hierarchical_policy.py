@@ -335,12 +335,6 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                 "acted": list(self._acted_key) if self._acted_key is not None else None,
                 "autonomy": settings[0], "confirm_categories": list(settings[1]), "confirm_timeout": settings[2]})
 
-    def save_state(self, timeout: float) -> None:
-        """The journal's last state reaches the disk before the node goes (see :class:`PearlNode`)."""
-        journal = getattr(self, "journal", None)   # None until set up (a start-up error destroys the node)
-        if journal is not None:
-            journal.close(timeout)
-
     def _resume(self, state) -> str:
         """Carry on from a journal: the step last acted (its belief is not answered again) and the
         operator's level (set as the parameters too). Raises ``ValueError`` when it does not fit."""

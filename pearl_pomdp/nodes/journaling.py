@@ -5,9 +5,7 @@ The tracker and the policy node journal what they need to resume after a crash (
 both nodes share: the ``journal`` and ``journal_max_age`` parameters (:data:`JOURNAL_PARAMETERS`),
 the file's place (``auto``: :func:`pearl_pomdp.journal.default_path` of the node's name; ``''``:
 off), the domain's hash, one line in the log for what was resumed or refused, and writes that
-never stop the node (a full disk is logged once and counted) nor hold up its callbacks (a
-:class:`~pearl_pomdp.journal.JournalWriter` thread does the disk's part; :meth:`NodeJournal.close`
-writes what is pending before the process ends).
+never stop the node (a full disk is logged once and counted).
 """
 from __future__ import annotations
 
@@ -15,7 +13,7 @@ import json
 from pathlib import Path
 from typing import Any, Callable, Dict, Mapping, Optional
 
-from pearl_pomdp.journal import DEFAULT_MAX_AGE, Journal, JournalWriter, default_path, domain_hash
+from pearl_pomdp.journal import DEFAULT_MAX_AGE, Journal, default_path, domain_hash
 from pearl_pomdp.nodes.common import NodeSetupError, Param
 
 __all__ = ["JOURNAL_PARAMETERS", "NodeJournal", "model_hash"]
@@ -48,9 +46,6 @@ class NodeJournal:
         kind: the node kind written into the journal (another kind's journal is refused).
         params: the node's parameter values (``journal``, ``journal_max_age``).
         model, source: the model and the domain file it came from (for the hash).
-        threaded: write on a :class:`~pearl_pomdp.journal.JournalWriter` thread (the callback does
-            not wait for the disk); False: every write is on disk when :meth:`write` returns (the
-            tracker's: a closed step is journaled before its belief goes out).
 
     Attributes:
         journal: the :class:`~pearl_pomdp.journal.Journal`, or ``None`` when journaling is off.
@@ -61,13 +56,12 @@ class NodeJournal:
         NodeSetupError: ``journal_max_age`` is not positive.
     """
 
-    def __init__(self, node, kind: str, params: Mapping[str, Any], model, source: str, threaded: bool = True):
+    def __init__(self, node, kind: str, params: Mapping[str, Any], model, source: str):
         self._node = node
         self.errors = 0
         self._last: Any = None
         self.status = "off (parameter journal is '')"
         self.journal: Optional[Journal] = None
-        self._writer: Optional[JournalWriter] = None
         value = str(params["journal"]).strip()
         if not value:
             return
@@ -77,8 +71,6 @@ class NodeJournal:
             self.journal = Journal(path, kind, source, model_hash(model, source), params["journal_max_age"])
         except ValueError as err:
             raise NodeSetupError(f"parameter {err}") from None
-        if threaded:
-            self._writer = JournalWriter(self.journal, self._failed)
 
     def resume(self, apply: Callable[[Dict[str, Any]], str]) -> bool:
         """Load the journal and hand its state to ``apply`` (which returns what was resumed, for
@@ -105,38 +97,17 @@ class NodeJournal:
         return True
 
     def write(self, key: Any, state: Callable[[], Mapping[str, Any]]) -> None:
-        """Journal ``state()`` unless ``key`` (a cheap summary of it) is what was written last: on the
-        writer's thread when the journal is threaded (the state is taken now), else before returning."""
+        """Journal ``state()`` unless ``key`` (a cheap summary of it) is what was written last."""
         if self.journal is None or key == self._last:
-            return
-        if self._writer is not None:
-            self._writer.submit(state())
-            self._last = key
             return
         try:
             self.journal.write(state())
             self._last = key
         except OSError as err:
-            self._failed(err)
-
-    def flush(self, timeout: float) -> bool:
-        """Wait up to ``timeout`` s until every state handed to :meth:`write` is on disk; True when it is."""
-        return self._writer is None or self._writer.flush(timeout)
-
-    def close(self, timeout: float = 1.0) -> None:
-        """Write what is pending (up to ``timeout`` s) and stop the writer; later writes go straight to the file."""
-        if self._writer is not None and not self._writer.close(timeout):
-            self._node.get_logger().warning(f"journal {self.journal.path if self.journal else ''}: the last state "
-                                            f"was not written within {timeout:g} s of the stop")
-
-    def _failed(self, err: OSError) -> None:
-        # On the writer's thread: a failed write is counted and logged (throttled); the node goes on,
-        # and the next write is tried even if its state looks the same.
-        self.errors += 1
-        self._last = None
-        self._node.get_logger().error(f"cannot write journal {self.journal.path if self.journal else ''}: {err} "
-                                      f"({self.errors} failed writes; the node goes on without it)",
-                                      throttle_duration_sec=10.0)
+            self.errors += 1
+            self._node.get_logger().error(f"cannot write journal {self.journal.path}: {err} "
+                                          f"({self.errors} failed writes; the node goes on without it)",
+                                          throttle_duration_sec=10.0)
 
     def diagnostics(self) -> Dict[str, Any]:
         """``journal`` (the file or ``off``), ``journal_status``, ``journal_writes``, ``journal_errors``."""
