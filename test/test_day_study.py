@@ -1,6 +1,7 @@
 """The study on days (pearl_sim/nursing_home/day_study.py): cases, paired statistics, the acceptance
 rows, `pearl experiment --day` end to end and the day's picture."""
 import json
+import time
 
 import pytest
 
@@ -254,3 +255,12 @@ def test_pearl_experiment_day_runs_the_channel_twins_beside_the_others(tmp_path,
     day = run_day(Controller(twins[1], policy, domain=fitted), world, case, 5.0, until=120.0,
                   channel="config/speech/pearl_channel_babble.json")
     assert seen[0][0] is fitted and seen[0][1].O is not world.compile().O and day["checklist"]["steps"] > 5
+    # The run's folder resumes: the twins' saved plans are loaded for their domains, not planned again.
+    from pearl_sim.nursing_home.day_study import plan_channel_twins
+
+    started = time.perf_counter()
+    by_level, again, _ = plan_channel_twins("config/pearl.domain.yaml", "config/pearl.hierarchy.yaml",
+                                            "config/speech/pearl_channel_babble.json", "babble", [5.0], [0.0, 0.2],
+                                            tmp_path / "twins")
+    assert [(r["plan_reused"], r["plan_seconds"]) for r in again] == [(True, None), (True, None)]
+    assert set(by_level[5.0]) == set(twins) and time.perf_counter() - started < 20.0

@@ -118,17 +118,34 @@ def plan_channel_twins(domain_path, hierarchy_path, channel_path, kind: str, lev
     The plans run in ``jobs`` processes; ``meanwhile`` (e.g. planning the other controllers) runs in
     this process while they do, and its result is returned.
 
+    A plan already saved in ``folder`` for exactly its twin's fitted domain (the model's fingerprint)
+    is loaded instead of planned again (``plan_reused``): a stopped run resumes its plans.
+
     Returns ``(by_level, records, meanwhile_result)``: ``by_level`` maps each SNR to
     ``{twin name: Controller}`` (each twin tracks its belief in its own fitted domain); ``records``
-    are :func:`fit_channel_twins`' with the seconds each plan took (``plan_seconds``).
+    are :func:`fit_channel_twins`' with the seconds each plan took (``plan_seconds``, ``None`` when
+    reused).
     """
     from pearl_pomdp.hierarchy.execute import load_hierarchical_policy
     from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.planning import Controller
 
+    from pathlib import Path
+
+    from pearl_pomdp.errors import PearlError
+
     records = fit_channel_twins(domain_path, channel_path, kind, levels, chatter_shares, folder)
-    tasks = [(r["domain"], str(hierarchy_path), r["policy"]) for r in records]
-    if jobs <= 1:
+    saved: Dict[str, Any] = {}
+    for r in records:
+        # A run's folder resumes: a plan already saved there for exactly this fitted domain (its
+        # model's fingerprint) is loaded, not planned again.
+        if Path(r["policy"]).is_dir():
+            try:
+                saved[r["policy"]] = load_hierarchical_policy(r["policy"], load_domain(r["domain"]))
+            except PearlError:
+                pass
+    tasks = [(r["domain"], str(hierarchy_path), r["policy"]) for r in records if r["policy"] not in saved]
+    if jobs <= 1 or not tasks:
         extra = meanwhile() if meanwhile is not None else None
         seconds = [_plan_twin(t) for t in tasks]
     else:
@@ -138,11 +155,13 @@ def plan_channel_twins(domain_path, hierarchy_path, channel_path, kind: str, lev
             pending = pool.map_async(_plan_twin, tasks, chunksize=1)
             extra = meanwhile() if meanwhile is not None else None
             seconds = pending.get()
+    took = dict(zip([t[2] for t in tasks], seconds))
     by_level: Dict[float, Dict[str, Any]] = {}
-    for record, took in zip(records, seconds):
-        record["plan_seconds"] = round(took, 1)
+    for record in records:
+        record["plan_seconds"] = round(took[record["policy"]], 1) if record["policy"] in took else None
+        record["plan_reused"] = record["policy"] in saved
         domain = load_domain(record["domain"])
-        policy = load_hierarchical_policy(record["policy"], domain)
+        policy = saved.get(record["policy"]) or load_hierarchical_policy(record["policy"], domain)
         by_level.setdefault(record["snr_db"], {})[record["name"]] = Controller(record["name"], policy, domain=domain)
     return by_level, records, extra
 
@@ -253,7 +272,9 @@ def run_days(domain, agents, cases: Sequence[DayCase], noise_levels: Sequence[fl
     ``each`` is called with every day's result as soon as it is in (in that order): a long study
     keeps what it has done (``pearl experiment --day`` appends each day to ``days.jsonl``)."""
     by_level = {float(k): v for k, v in (by_level or {}).items()}
-    work = [_Job(name, case, float(level), record, channel) for level in noise_levels for case in cases
+    # Day by day, every level of a day before the next day: a study stopped part way keeps whole
+    # days at every level (what a paired contrast between levels needs).
+    work = [_Job(name, case, float(level), record, channel) for case in cases for level in noise_levels
             for name in [*agents, *by_level.get(float(level), {})]]
     iterator: Any
     if jobs <= 1:
