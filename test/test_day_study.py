@@ -1,6 +1,7 @@
 """The study on days (pearl_sim/nursing_home/day_study.py): cases, paired statistics, the acceptance
 rows, `pearl experiment --day` end to end and the day's picture."""
 import json
+import time
 
 import pytest
 
@@ -136,3 +137,130 @@ def test_the_days_picture_is_drawn(tmp_path):
     assert {r["robot"] for r in rows} <= {"home", "room", "physio"}
     png = plot_day(rows, day["checklist"], tmp_path / "day.png", "G01 day 0")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
+
+
+def _row(domain, action: str, parents: str) -> dict:
+    """The observation row of ``action`` at its parents' values ``"v1,v2"``, as {symbol: probability}."""
+    cpt = domain._observations[domain.actions.index(action)]
+    index = tuple(domain.features[p].values.index(v) for p, v in zip(cpt.parents, parents.split(",")))
+    return {z: float(p) for z, p in zip(domain.observations, cpt.table[index]) if p > 0}
+
+
+def test_the_twins_speech_rows_move_as_the_measured_channel_says(tmp_path):
+    """The conjecture arm's twins (docs/day.md) are the day domain with its speech rows refitted to the
+    babble channel at each SNR: the doorbell's 'yes' is heard as 'yes' less at 5 dB than at 30 dB (the
+    channel's Ĉ(yes|yes) 0.97 → 0.53), the touchscreen part is untouched; only the twin with insertions
+    (chatter share 0.2) hears keywords in a silent row, in the channel's measured proportion."""
+    import numpy as np
+
+    from pearl_pomdp.asr.channel import ChannelTable, fitted_confusion
+    from pearl_pomdp.model.domain_yaml import load_domain
+    from pearl_sim.nursing_home.day_study import fit_channel_twins, twin_name
+
+    channel = "config/speech/pearl_channel_babble.json"
+    records = fit_channel_twins("config/pearl_day.domain.yaml", channel, "babble", [30.0, 5.0], [0.0, 0.2],
+                                tmp_path)
+    assert [(r["name"], r["snr_db"]) for r in records] == [
+        (twin_name(0.0), 30.0), (twin_name(0.2), 30.0), (twin_name(0.0), 5.0), (twin_name(0.2), 5.0)]
+    assert [r["name"] for r in records[:2]] == ["hierarchical@channel-chatter0", "hierarchical@channel-chatter0.2"]
+    twins = {(r["snr_db"], r["chatter_share"]): load_domain(r["domain"]) for r in records}
+    designer = load_domain("config/pearl_day.domain.yaml")
+    bell = {key: _row(d, "RingDoorBell", "yes") for key, d in twins.items()}
+    before = _row(designer, "RingDoorBell", "yes")
+    assert bell[(5.0, 0.0)]["yes"] < bell[(30.0, 0.0)]["yes"] < before["yes"]
+    assert bell[(5.0, 0.0)]["yes"] < 0.6 * before["yes"]
+    assert bell[(5.0, 0.0)]["t_yes"] == pytest.approx(before["t_yes"])        # the touchscreen is not speech
+    table = ChannelTable.load(channel)
+    for snr in (30.0, 5.0):
+        heard = fitted_confusion(table, snr, 10.0)["unknown"]                # chatter heard as keywords
+        silent = {share: _row(twins[(snr, share)], "TellTime", "no,none") for share in (0.0, 0.2)}
+        assert _row(designer, "TellTime", "no,none") == {"unknown": 1.0} == silent[0.0]
+        assert silent[0.2]["no"] == pytest.approx(0.2 * heard["no"]) and silent[0.2]["no"] > 0
+        assert silent[0.2]["unknown"] == pytest.approx(1 - 0.2 * (1 - heard["unknown"]))
+    # Everything but the speech rows is the day domain's: its 864 states and its fitted transitions.
+    for domain in twins.values():
+        assert len(domain.compile().states) == 864
+        assert all(np.array_equal(a, b) for a, b in zip(domain.compile().T, designer.compile().T))
+    assert records[1]["speech_rows_changed"] > records[0]["speech_rows_changed"] > 50
+
+
+def test_the_snr_contrast_is_the_paired_advantage_at_the_quietest_minus_at_the_noisiest():
+    """c = (P − tree)[30 dB] − (P − tree)[5 dB] per day, by hand on three days: −2, −4, −3."""
+    days = []
+    for seed, (tree30, pol30, tree5, pol5) in enumerate([(90, 85, 80, 77), (90, 86, 70, 70), (95, 90, 85, 83)]):
+        days += [_day(BASELINE, seed, tree30, noise=30.0), _day("hierarchical", seed, pol30, noise=30.0),
+                 _day(BASELINE, seed, tree5, noise=5.0), _day("hierarchical", seed, pol5, noise=5.0)]
+    from pearl_sim.nursing_home.day_study import snr_contrasts
+
+    c = snr_contrasts(days)["hierarchical"]
+    assert (c["quiet_db"], c["noisy_db"]) == (30.0, 5.0)
+    assert c["contrast"]["mean"] == pytest.approx(-3.0) and c["contrast"]["n"] == 3
+    assert c["contrast"]["high"] == pytest.approx(-3.0 + 4.302653 * 1.0 / 3 ** 0.5, rel=1e-5)
+    assert snr_contrasts([d for d in days if d["noise"] == 5.0]) == {}
+
+
+def test_the_speech_twins_option_says_what_it_needs(capsys):
+    from pearl_pomdp.cli import main
+
+    assert main(["experiment", "--day", "--policies", "day_tree", "--speech-twins", "0,0.2"]) == 2
+    assert "--speech-twins: needs --snr" in capsys.readouterr().err
+    assert main(["experiment", "--day", "--policies", "day_tree", "--snr", "5", "--speech-twins", "0,1.5"]) == 2
+    assert "--speech-twins: '0,1.5': chatter shares are fractions in [0, 1]" in capsys.readouterr().err
+    assert main(["experiment", "--day", "--policies", "day_tree", "--snr", "15", "--speech-twins", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "pearl_channel.json" in err and "snr_db" in err and "15 dB was not measured" in err
+    assert main(["experiment", "--snr", "5", "--speech-twins", "0"]) == 2
+    assert "--speech-twins: is the day study's" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_pearl_experiment_day_runs_the_channel_twins_beside_the_others(tmp_path, capsys, monkeypatch):
+    """`pearl experiment --day --snr 5 --speech-twins 0,0.2`: both twins planned on their refitted domains
+    (written with their plans into the run's folder), each with its own results and paired difference at
+    the level it was fitted for; a twin tracks its belief in its own domain, the world in the run's."""
+    from pearl_pomdp.cli import main
+    from pearl_pomdp.hierarchy.execute import load_hierarchical_policy
+    from pearl_pomdp.model.domain_yaml import load_domain
+    from pearl_sim.nursing_home import experiment
+    from pearl_sim.planning import Controller
+
+    assert main(["experiment", "--day", "--domain", "config/pearl.domain.yaml", "--policies", "day_tree",
+                 "--speech-twins", "0,0.2", "--snr", "5", "--noise-kind", "babble", "--residents", "generated:1",
+                 "--seed", "11", "--days", "1", "--jobs", "2", "--out", str(tmp_path), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    twins = ["hierarchical@channel-chatter0", "hierarchical@channel-chatter0.2"]
+    assert set(report["per_policy"]) == {BASELINE, *twins} and set(report["paired_vs_baseline"]) == set(twins)
+    for name in twins:
+        assert report["per_policy"][name]["5.0"]["days"] == 1
+        mine = [d for d in report["days"] if d["policy"] == name]
+        assert len(mine) == 1 and mine[0]["checklist"]["steps"] > 1000
+        tree = next(d for d in report["days"] if d["policy"] == BASELINE)
+        assert report["paired_vs_baseline"][name]["5.0"]["score"]["mean"] == pytest.approx(
+            mine[0]["score"] - tree["score"])
+    records = report["protocol"]["speech_twins"]["twins"]
+    assert [(r["name"], r["chatter_share"], r["snr_db"]) for r in records] == [(twins[0], 0.0, 5.0),
+                                                                              (twins[1], 0.2, 5.0)]
+    assert report["protocol"]["speech_twins"]["prior_strength"] == 10.0
+    record = records[1]
+    assert record["domain"] == str(tmp_path / "twins" / "babble-5dB-chatter0.2.domain.yaml")
+    fitted = load_domain(record["domain"])
+    policy = load_hierarchical_policy(record["policy"], fitted)     # the plan saved is the fitted domain's
+    seen = []
+    real = experiment.episode_executive
+    monkeypatch.setattr(experiment, "episode_executive",
+                        lambda controller, domain, scenario, model=None: seen.append((domain, model))
+                        or real(controller, domain, scenario, model))
+    world = load_domain("config/pearl.domain.yaml")
+    case = day_cases(generate_residents(1, seed=11), 1)[0]
+    day = run_day(Controller(twins[1], policy, domain=fitted), world, case, 5.0, until=120.0,
+                  channel="config/speech/pearl_channel_babble.json")
+    assert seen[0][0] is fitted and seen[0][1].O is not world.compile().O and day["checklist"]["steps"] > 5
+    # The run's folder resumes: the twins' saved plans are loaded for their domains, not planned again.
+    from pearl_sim.nursing_home.day_study import plan_channel_twins
+
+    started = time.perf_counter()
+    by_level, again, _ = plan_channel_twins("config/pearl.domain.yaml", "config/pearl.hierarchy.yaml",
+                                            "config/speech/pearl_channel_babble.json", "babble", [5.0], [0.0, 0.2],
+                                            tmp_path / "twins")
+    assert [(r["plan_reused"], r["plan_seconds"]) for r in again] == [(True, None), (True, None)]
+    assert set(by_level[5.0]) == set(twins) and time.perf_counter() - started < 20.0

@@ -86,6 +86,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "--seed 29, --noise 0.25,0.5, policies hierarchical,flat_pointbased,qmdp,day_tree; "
                              "or --snr DB,… --noise-kind white|babble (one kind per run): her speech through the "
                              "measured recogniser channel")
+    parser.add_argument("--speech-twins", default=None, metavar="F,…",
+                        help="with --day --snr: also run the hierarchical policy planned on the domain's speech rows "
+                             "refitted to the measured channel at each SNR (`pearl fit DOMAIN --speech CHANNEL --snr "
+                             "DB --chatter-share F`, prior strength 10), one twin per chatter share F, named "
+                             "hierarchical@channel-chatterF; the fitted domains and plans go to OUT/twins/ "
+                             "(docs/day.md, the conjecture arm: 0,0.2)")
     parser.add_argument("--days", type=int, default=None, metavar="N",
                         help="with --day: days per resident (default 4; bench/study_power.py --days decides it)")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes for the episodes (default 1)")
@@ -199,6 +205,9 @@ def run(args: argparse.Namespace) -> int:
         from pearl_sim.nursing_home.day_study import run_cli as run_day_study
 
         return int(run_day_study(args))
+    if args.speech_twins is not None:
+        raise SpecError("<command line>", "--speech-twins", "is the day study's (--day --snr); the episode study's "
+                                                            "twins are --speech-rows")
     require_file(args.domain, "domain file (--domain)")
     world = world_for(args.domain)
     args.seed = 0 if args.seed is None else args.seed

@@ -15,7 +15,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from pearl_sim.nursing_home.day import DAY_SECONDS, DayPlan, DayWorld, day_scenario, day_score, plan_day
 
-__all__ = ["DayCase", "day_cases", "run_day", "run_days", "summarize", "BASELINE", "SCORED_ROWS", "day_agents"]
+__all__ = ["DayCase", "day_cases", "run_day", "run_days", "summarize", "BASELINE", "SCORED_ROWS", "day_agents",
+           "twin_name", "fit_channel_twins", "plan_channel_twins", "snr_contrasts"]
 
 #: The day study's non-POMDP baseline: the episode tree with the day's Dock rule.
 BASELINE = "day_tree"
@@ -57,13 +58,123 @@ def day_agents(domain, hierarchy_path, policies: Sequence[str], flat_trials: int
     return plan_each(policies, build, log=log)
 
 
+#: The conjecture arm's prior for the twins' refitted speech rows: "heard as meant" worth 10 trials (docs/day.md).
+TWIN_PRIOR_STRENGTH = 10.0
+
+
+def twin_name(chatter_share: float) -> str:
+    """The name of the hierarchy planned on speech rows refitted to the channel with ``chatter_share``."""
+    return f"hierarchical@channel-chatter{float(chatter_share):g}"
+
+
+def _plan_twin(task) -> float:
+    """Plan the hierarchy on one twin's fitted domain file and save it (a worker's job); its seconds."""
+    from pearl_pomdp.hierarchy import load_hierarchy, plan
+    from pearl_pomdp.model.domain_yaml import load_domain
+
+    domain_file, hierarchy_path, policy_dir = task
+    t0 = time.perf_counter()
+    domain = load_domain(domain_file)
+    plan(domain, load_hierarchy(hierarchy_path, domain)).save(policy_dir)
+    return time.perf_counter() - t0
+
+
+def fit_channel_twins(domain_path, channel_path, kind: str, levels: Sequence[float],
+                      chatter_shares: Sequence[float], folder) -> List[Dict[str, Any]]:
+    """The conjecture arm's twins' domains (docs/day.md): for every SNR of ``levels`` and chatter share
+    of ``chatter_shares``, the domain's speech rows refitted to the measured channel at that SNR —
+    ``pearl fit DOMAIN --speech CHANNEL --snr DB --chatter-share F``, prior strength 10 — written to
+    ``folder/<kind>-<DB>dB-chatter<F>.domain.yaml``.
+
+    Returns one record per twin: ``name, snr_db, chatter_share, domain`` (the file), ``policy``
+    (the directory its plan is saved in, :func:`plan_channel_twins`) and ``speech_rows_changed``.
+    """
+    from pathlib import Path
+
+    from pearl_pomdp.asr.channel import ChannelTable
+    from pearl_pomdp.fit_speech import write_speech_fitted
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    table = ChannelTable.load(channel_path)
+    records: List[Dict[str, Any]] = []
+    for level in levels:
+        for share in chatter_shares:
+            stem = f"{kind}-{float(level):g}dB-chatter{float(share):g}"
+            domain_file, rows = write_speech_fitted(domain_path, table, float(level), folder / f"{stem}.domain.yaml",
+                                                    TWIN_PRIOR_STRENGTH, float(share), label=f"{kind} noise")
+            records.append({"name": twin_name(share), "snr_db": float(level), "chatter_share": float(share),
+                            "domain": str(domain_file), "policy": str(folder / f"{stem}.policy"),
+                            "speech_rows_changed": len(rows)})
+    return records
+
+
+def plan_channel_twins(domain_path, hierarchy_path, channel_path, kind: str, levels: Sequence[float],
+                       chatter_shares: Sequence[float], folder, jobs: int = 1,
+                       meanwhile: Optional[Callable[[], Any]] = None):
+    """The conjecture arm's twins: their domains (:func:`fit_channel_twins`) and the hierarchy planned
+    on each, saved beside it (``….policy/``, a directory ``pearl day --nodes --policy-dir`` reads).
+
+    The plans run in ``jobs`` processes; ``meanwhile`` (e.g. planning the other controllers) runs in
+    this process while they do, and its result is returned.
+
+    A plan already saved in ``folder`` for exactly its twin's fitted domain (the model's fingerprint)
+    is loaded instead of planned again (``plan_reused``): a stopped run resumes its plans.
+
+    Returns ``(by_level, records, meanwhile_result)``: ``by_level`` maps each SNR to
+    ``{twin name: Controller}`` (each twin tracks its belief in its own fitted domain); ``records``
+    are :func:`fit_channel_twins`' with the seconds each plan took (``plan_seconds``, ``None`` when
+    reused).
+    """
+    from pearl_pomdp.hierarchy.execute import load_hierarchical_policy
+    from pearl_pomdp.model.domain_yaml import load_domain
+    from pearl_sim.planning import Controller
+
+    from pathlib import Path
+
+    from pearl_pomdp.errors import PearlError
+
+    records = fit_channel_twins(domain_path, channel_path, kind, levels, chatter_shares, folder)
+    saved: Dict[str, Any] = {}
+    for r in records:
+        # A run's folder resumes: a plan already saved there for exactly this fitted domain (its
+        # model's fingerprint) is loaded, not planned again.
+        if Path(r["policy"]).is_dir():
+            try:
+                saved[r["policy"]] = load_hierarchical_policy(r["policy"], load_domain(r["domain"]))
+            except PearlError:
+                pass
+    tasks = [(r["domain"], str(hierarchy_path), r["policy"]) for r in records if r["policy"] not in saved]
+    if jobs <= 1 or not tasks:
+        extra = meanwhile() if meanwhile is not None else None
+        seconds = [_plan_twin(t) for t in tasks]
+    else:
+        import multiprocessing
+
+        with multiprocessing.get_context("fork").Pool(min(jobs, len(tasks))) as pool:
+            pending = pool.map_async(_plan_twin, tasks, chunksize=1)
+            extra = meanwhile() if meanwhile is not None else None
+            seconds = pending.get()
+    took = dict(zip([t[2] for t in tasks], seconds))
+    by_level: Dict[float, Dict[str, Any]] = {}
+    for record in records:
+        record["plan_seconds"] = round(took[record["policy"]], 1) if record["policy"] in took else None
+        record["plan_reused"] = record["policy"] in saved
+        domain = load_domain(record["domain"])
+        policy = saved.get(record["policy"]) or load_hierarchical_policy(record["policy"], domain)
+        by_level.setdefault(record["snr_db"], {})[record["name"]] = Controller(record["name"], policy, domain=domain)
+    return by_level, records, extra
+
+
 def run_day(controller, domain, case: DayCase, noise: float, model=None, record: bool = False,
             timeline: bool = False, until: Optional[float] = None, plan: Optional[DayPlan] = None,
-            channel: Optional[str] = None) -> Dict[str, Any]:
+            channel: Optional[str] = None, own_model=None) -> Dict[str, Any]:
     """One day of ``controller`` for ``case`` at recogniser word error rate ``noise`` — or, with
     ``channel`` (a measured recogniser channel, ``pearl calibrate-speech --out``), with her speech
     heard through that channel at ``noise`` dB SNR (her articulation is not applied on this axis, as
-    in the episode study's).
+    in the episode study's). A controller with its own ``domain`` (a twin planned on refitted speech
+    rows) tracks its belief in that domain (``own_model``: its compiled POMDP, compiled here if not
+    given); the world and the score are ``domain``'s.
 
     Returns ``policy, resident, day, seed, noise, score, checklist, seconds`` and, with ``record``,
     ``episode`` (``pearl fit``'s ``.jsonl`` fields; the day then ends early if the battery runs
@@ -81,7 +192,12 @@ def run_day(controller, domain, case: DayCase, noise: float, model=None, record:
     scenario = day_scenario(fields, effective_word_error_rate(noise, case.articulation_wer) if not channel else 0.0,
                             case.seed, name=f"{case.resident}-day{case.day}", plan=plan, speech=speech)
     world = DayWorld(scenario, plan, domain=domain)
-    executive = episode_executive(controller, domain, scenario, model)
+    # The robot's model: the controller's own (a twin planned on refitted speech rows) or the world's.
+    own = getattr(controller, "domain", None)
+    if own is not None and own_model is None:
+        own_model = own.compile()
+    executive = (episode_executive(controller, own, scenario, own_model) if own is not None
+                 else episode_executive(controller, domain, scenario, model))
     states: List[Dict[str, str]] = []
     rows: List[Dict[str, Any]] = []
 
@@ -124,36 +240,50 @@ class _Job:
 _WORKER: Dict[str, Any] = {}
 
 
-def _init_worker(domain, agents) -> None:
-    _WORKER.update(domain=domain, agents=agents, model=domain.compile())
+def _init_worker(domain, agents, by_level=None) -> None:
+    _WORKER.update(domain=domain, agents=agents, by_level=by_level or {}, model=domain.compile(), own_models={})
 
 
 def _run_job(job: _Job) -> Dict[str, Any]:
     import logging
 
     logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
-    return run_day(_WORKER["agents"][job.policy], _WORKER["domain"], job.case, job.noise, model=_WORKER["model"],
-                   record=job.record, channel=job.channel)
+    controller = _WORKER["by_level"].get(job.noise, {}).get(job.policy) or _WORKER["agents"][job.policy]
+    own = getattr(controller, "domain", None)
+    own_model = None
+    if own is not None:    # a twin's own model, compiled once per worker
+        own_model = _WORKER["own_models"].get(id(own))
+        if own_model is None:
+            own_model = _WORKER["own_models"][id(own)] = own.compile()
+    return run_day(controller, _WORKER["domain"], job.case, job.noise, model=_WORKER["model"],
+                   record=job.record, channel=job.channel, own_model=own_model)
 
 
 def run_days(domain, agents, cases: Sequence[DayCase], noise_levels: Sequence[float], jobs: int = 1,
              record: bool = False, progress: bool = False,
              each: Optional[Callable[[Dict[str, Any]], None]] = None,
-             channel: Optional[str] = None) -> List[Dict[str, Any]]:
+             channel: Optional[str] = None,
+             by_level: Optional[Dict[float, Dict[str, Any]]] = None) -> List[Dict[str, Any]]:
     """Every controller × case × noise level; the results in a fixed order whatever ``jobs`` is.
     ``channel``: the noise levels are SNRs (dB) through this measured recogniser channel (:func:`run_day`).
+    ``by_level``: level → {name: controller} run at that level only, besides ``agents`` (the conjecture
+    arm's twins, planned per SNR: :func:`plan_channel_twins`).
 
     ``each`` is called with every day's result as soon as it is in (in that order): a long study
     keeps what it has done (``pearl experiment --day`` appends each day to ``days.jsonl``)."""
-    work = [_Job(name, case, float(level), record, channel) for level in noise_levels for case in cases
-            for name in agents]
+    by_level = {float(k): v for k, v in (by_level or {}).items()}
+    # Day by day, every level of a day before the next day: a study stopped part way keeps whole
+    # days at every level (what a paired contrast between levels needs).
+    work = [_Job(name, case, float(level), record, channel) for case in cases for level in noise_levels
+            for name in [*agents, *by_level.get(float(level), {})]]
     iterator: Any
     if jobs <= 1:
-        _init_worker(domain, agents)
+        _init_worker(domain, agents, by_level)
         return _progress(map(_run_job, work), len(work), progress, each)
     import multiprocessing
 
-    with multiprocessing.get_context("fork").Pool(jobs, initializer=_init_worker, initargs=(domain, agents)) as pool:
+    with multiprocessing.get_context("fork").Pool(jobs, initializer=_init_worker,
+                                                  initargs=(domain, agents, by_level)) as pool:
         return _progress(pool.imap(_run_job, work, chunksize=1), len(work), progress, each)
 
 
@@ -242,6 +372,38 @@ def summarize(days: Sequence[Dict[str, Any]], baseline: str = BASELINE) -> Dict[
     return {"per_policy": per_policy, "paired_vs_baseline": paired}
 
 
+def snr_contrasts(days: Sequence[Dict[str, Any]], baseline: str = BASELINE) -> Dict[str, Any]:
+    """Does each controller's advantage over ``baseline`` grow as the channel worsens (SNR axis)?
+
+    Per day present at the quietest and the noisiest SNR for both the controller and the baseline
+    (same resident, same seed): ``c = (policy − baseline)[quietest] − (policy − baseline)[noisiest]``
+    of the day score; its mean and 95 % t interval. ``c < 0``: the advantage grows as the channel
+    worsens (the paper's conjecture). ``{policy: {"quiet_db", "noisy_db", "contrast"}}``; empty with
+    fewer than two levels.
+    """
+    from pearl_sim.stats import t_ci
+
+    levels = sorted({float(d["noise"]) for d in days})
+    if len(levels) < 2:
+        return {}
+    noisy, quiet = levels[0], levels[-1]
+    score = {(d["policy"], float(d["noise"]), d["resident"], d["seed"]): d["score"] for d in days}
+    out: Dict[str, Any] = {}
+    for policy in dict.fromkeys(d["policy"] for d in days):
+        if policy == baseline:
+            continue
+        values = []
+        for (p, level, resident, seed), s in score.items():
+            if p != policy or level != quiet:
+                continue
+            others = [score.get(k) for k in ((baseline, quiet, resident, seed), (policy, noisy, resident, seed),
+                                             (baseline, noisy, resident, seed))]
+            if None not in others:
+                values.append((s - others[0]) - (others[1] - others[2]))
+        out[policy] = {"quiet_db": quiet, "noisy_db": noisy, "contrast": t_ci(values)}
+    return out
+
+
 @dataclass
 class Acceptance:
     """The day issue's acceptance for one controller at one noise level (docs/day.md)."""
@@ -308,7 +470,8 @@ def run_cli(args) -> int:
         raise SpecError("<command line>", "--jobs", f"{args.jobs}: at least 1 process")
     if args.speech_rows is not None or args.cluster is not None:
         raise SpecError("<command line>", "--day", "runs with --jobs on --noise word error rates or --snr "
-                                                  "(--speech-rows and --cluster are the episode study's)")
+                                                  "(--speech-rows and --cluster are the episode study's; its twins "
+                                                  "are --speech-twins)")
     channel: Optional[str] = None
     kind: Optional[str] = None
     if args.snr is not None:
@@ -341,6 +504,7 @@ def run_cli(args) -> int:
                         f"{bad[0] if bad else 'none'!r}: the day study runs {', '.join(DAY_POLICY_NAMES)}")
     require_file(args.domain, "domain file (--domain)")
     require_file(hierarchy, "hierarchy file (--hierarchy)")
+    shares = _chatter_shares(args.speech_twins, channel, noise)
     spec = "generated:6" if args.residents == "paper,generated:6" else args.residents
     if "paper" in spec.split(","):
         raise SpecError("<command line>", "--residents", "the day study takes generated:N residents (the paper's "
@@ -351,25 +515,43 @@ def run_cli(args) -> int:
     terminal = show_progress(args)
     log = (lambda line: print(line, file=sys.stderr, flush=True)) if terminal else None
     domain = load_domain(args.domain)
-    agents = day_agents(domain, hierarchy, policies, log=log)
-    logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
     out = Path(args.out) if args.out else Path("out") / f"day-study-{time.strftime('%Y%m%d-%H%M%S')}"
     out.mkdir(parents=True, exist_ok=True)
+    twins: Dict[float, Dict[str, Any]] = {}
+    twin_records: List[Dict[str, Any]] = []
+    if shares:
+        # The conjecture arm's twins, planned in --jobs processes while this one plans the others.
+        assert channel is not None and kind is not None
+        twins, twin_records, agents = plan_channel_twins(
+            args.domain, hierarchy, channel, kind, noise, shares, out / "twins", jobs=args.jobs,
+            meanwhile=lambda: day_agents(domain, hierarchy, policies, log=log))
+        if log:
+            for r in twin_records:
+                log(f"planned {r['name']} at {r['snr_db']:g} dB in {r['plan_seconds']:.1f} s")
+    else:
+        agents = day_agents(domain, hierarchy, policies, log=log)
+    logging.getLogger("pearl_pomdp").setLevel(logging.ERROR)
     t0 = time.perf_counter()
     with (out / "days.jsonl").open("w", encoding="utf-8") as sink:
         def keep(day: Dict[str, Any]) -> None:
             sink.write(json.dumps(day) + "\n")
             sink.flush()
 
-        results = run_days(domain, agents, cases, noise, jobs=args.jobs, progress=terminal, each=keep, channel=channel)
+        results = run_days(domain, agents, cases, noise, jobs=args.jobs, progress=terminal, each=keep, channel=channel,
+                           by_level=twins)
     day_seconds = time.perf_counter() - t0
     summary = summarize(results)
+    if channel is not None and BASELINE in policies:
+        summary["snr_contrast_vs_baseline"] = snr_contrasts(results)
     png = plot_study(summary, out / "day-study.png", snr_kind=kind)
     report = {
         "protocol": {"domain": str(args.domain), "hierarchy": str(hierarchy), "residents": [p.name for p in profiles],
                      "resident_spec": spec, "resident_seed": seed, "days_per_resident": days, "noise_levels": noise,
                      "noise_axis": "snr_db" if channel else "word_error_rate", "noise_kind": kind, "channel": channel,
-                     "policies": policies, "baseline": BASELINE, "jobs": args.jobs, "days": len(results)},
+                     "policies": policies + [twin_name(f) for f in shares], "baseline": BASELINE,
+                     "speech_twins": {"chatter_shares": shares, "prior_strength": TWIN_PRIOR_STRENGTH,
+                                      "twins": twin_records} if shares else None,
+                     "jobs": args.jobs, "days": len(results)},
         "plan_seconds": {k: round(v, 1) for k, v in agents.timings.items()},
         **summary,
         "acceptance": acceptance(summary) if "hierarchical" in policies and BASELINE in policies else None,
@@ -382,20 +564,53 @@ def run_cli(args) -> int:
         print_json(report)
         return 0
     print_table(summary)
+    for policy, c in summary.get("snr_contrast_vs_baseline", {}).items():
+        d = c["contrast"]
+        if d["n"]:
+            print(f"{policy}: advantage over {BASELINE} at {c['quiet_db']:g} dB − at {c['noisy_db']:g} dB "
+                  f"{d['mean']:+.1f} [{d['low']:+.1f}, {d['high']:+.1f}] (< 0: it grows as the channel worsens)")
     print(f"{len(results)} days in {day_seconds:.1f} s ({args.jobs} job(s)); wrote {png}, {out / 'day-study.json'}")
     return 0
 
 
+def _chatter_shares(text: Optional[str], channel: Optional[str], levels: Sequence[float]) -> List[float]:
+    """``--speech-twins F,…``: the chatter shares of the twins, checked against the run (one clear error)."""
+    from pearl_pomdp.asr.channel import ChannelError, ChannelTable
+    from pearl_pomdp.errors import SpecError
+
+    if text is None:
+        return []
+    if channel is None:
+        raise SpecError("<command line>", "--speech-twins", "needs --snr (the twins' speech rows are refitted to the "
+                                                            "measured channel at each SNR)")
+    try:
+        shares = list(dict.fromkeys(float(x) for x in text.split(",") if x.strip()))
+    except ValueError:
+        raise SpecError("<command line>", "--speech-twins", f"{text!r}: expected comma-separated chatter shares") \
+            from None
+    if not shares or any(not 0.0 <= f <= 1.0 for f in shares):
+        raise SpecError("<command line>", "--speech-twins", f"{text!r}: chatter shares are fractions in [0, 1]")
+    try:
+        measured = [float(x) for x in ChannelTable.load(channel).snr_db]
+    except ChannelError as err:
+        raise SpecError(channel, "snr_db", str(err)) from None
+    missing = [x for x in levels if float(x) not in measured]
+    if missing:
+        raise SpecError(channel, "snr_db", f"--speech-twins refits at every --snr, and {missing[0]:g} dB was not "
+                                           f"measured (measured: {', '.join(f'{x:g}' for x in measured)})")
+    return shares
+
+
 def print_table(summary: Dict[str, Any]) -> None:
     """One line per controller and noise level: the day score and the checklist's pooled rows."""
-    print(f"{'policy':<16} {'noise':>5} {'days':>4} {'score':>13} {'Δscore vs tree':>22} {'rem.ontime':>10} "
+    print(f"{'policy':<30} {'noise':>5} {'days':>4} {'score':>13} {'Δscore vs tree':>22} {'rem.ontime':>10} "
           f"{'walks':>6} {'questions':>9} {'unpr/h':>6} {'wrong/d':>7} {'empty':>5} {'docked':>6} {'station':>7}")
     for policy, levels in summary["per_policy"].items():
         for level, s in levels.items():
             p, sc = s["pooled"], s["score"]
             d = summary["paired_vs_baseline"].get(policy, {}).get(level)
             delta = f"{d['score']['mean']:+.1f} [{d['score']['low']:+.1f},{d['score']['high']:+.1f}]" if d else "-"
-            print(f"{policy:<16} {level:>5} {s['days']:>4} {sc['mean']:>7.1f}±{sc['ci95']:<5.1f} {delta:>22} "
+            print(f"{policy:<30} {level:>5} {s['days']:>4} {sc['mean']:>7.1f}±{sc['ci95']:<5.1f} {delta:>22} "
                   f"{_fmt(p['reminders_on_time_share'], 10)} {_fmt(p['walks_completed_share'], 6)} "
                   f"{_fmt(p['questions_answered_share'], 9)} "
                   f"{p['unprompted_per_hour']:>6.2f} {s['rows']['wrong_actions']['mean']:>7.2f} "
