@@ -396,10 +396,10 @@ def snr_contrasts(days: Sequence[Dict[str, Any]], baseline: str = BASELINE) -> D
         for (p, level, resident, seed), s in score.items():
             if p != policy or level != quiet:
                 continue
-            others = [score.get(k) for k in ((baseline, quiet, resident, seed), (policy, noisy, resident, seed),
-                                             (baseline, noisy, resident, seed))]
-            if None not in others:
-                values.append((s - others[0]) - (others[1] - others[2]))
+            tree_quiet, own_noisy, tree_noisy = (score.get(k) for k in (
+                (baseline, quiet, resident, seed), (policy, noisy, resident, seed), (baseline, noisy, resident, seed)))
+            if tree_quiet is not None and own_noisy is not None and tree_noisy is not None:
+                values.append((s - tree_quiet) - (own_noisy - tree_noisy))
         out[policy] = {"quiet_db": quiet, "noisy_db": noisy, "contrast": t_ci(values)}
     return out
 
