@@ -197,3 +197,30 @@ def test_a_restarted_policy_keeps_the_operators_level_from_its_journal(ros_conte
         assert third.journal is not None and "more than journal_max_age" in third.journal.status
     finally:
         third.destroy_node()
+
+
+def test_a_policy_whose_record_cannot_go_out_still_journals_the_step_it_acted_on(ros_context, pearl_policy,
+                                                                                  tmp_path):
+    """A stop signal shuts the context down under a running callback: the action went out, then
+    publishing the decision record raises. The journal must still say the step was acted on, or
+    a restarted policy acts on the tracker's latched belief again (the race .ci/run once hit)."""
+    from pearl_pomdp.nodes.hierarchical_policy import HierarchicalPolicyNode
+
+    context, _ = ros_context
+    params = {"domain": str(DOMAIN), "policy": str(pearl_policy), "journal": str(tmp_path / "policy.json")}
+    node = HierarchicalPolicyNode(context=context, parameter_overrides=params)
+    try:
+        published = []
+        node.action_pub.publish = published.append          # the action goes out
+
+        def context_gone(_msg):
+            raise RuntimeError("publisher's context is invalid")
+
+        node.decision_pub.publish = context_gone              # the record does not
+        belief = cv.belief_to_msg(node.model.b0, step=3, run=77)
+        with pytest.raises(RuntimeError, match="context is invalid"):
+            node._on_belief(belief)
+        assert len(published) == 1
+        assert json.loads((tmp_path / "policy.json").read_text())["state"]["acted"] == [77, 3]
+    finally:
+        node.destroy_node()

@@ -310,7 +310,17 @@ class HierarchicalPolicyNode(ManagedPearlNode):
             self.action_pub.publish(cv.action_to_msg(action, self.now_s()))
             self.actions_published += 1
             self._acted_key = self._belief_key
-        latency = time.perf_counter() - start
+        try:
+            self._publish_record(out, time.perf_counter() - start)
+        finally:
+            # Whatever happens to the record (a stop signal shuts the context down under this
+            # callback, and the next publish raises), what went out is journaled: a restarted
+            # policy must not act on this belief again.
+            self._journal_acted()
+
+    def _publish_record(self, out: GateOutput, latency: float) -> None:
+        """The decisions, the operator's proposal and events, and the confirmation deadline."""
+        assert self.gate is not None
         for decision in out.decisions:
             self.latencies.append(latency)
             self.decision_pub.publish(cv.decision_to_msg(self.decisions, decision.action_name, decision.trace,
@@ -328,7 +338,10 @@ class HierarchicalPolicyNode(ManagedPearlNode):
                 self.get_logger().info(f"operator: {event.kind} {event.action}"
                                        + (f" ({event.detail})" if event.detail else ""))
         self._arm_confirm_deadline()
-        if self.journal is not None:
+
+    def _journal_acted(self) -> None:
+        """Journal the step last acted on and the operator's settings, when they changed."""
+        if self.journal is not None and self.gate is not None:
             gate = self.gate
             settings = (gate.autonomy, tuple(gate.confirm_categories), gate.confirm_timeout)
             self.journal.write((self._acted_key, settings), lambda: {
