@@ -32,6 +32,9 @@ __all__ = ["WorldExperiment", "run_world_experiment", "StandardStudy", "WorldEpi
 #: ``pearl experiment --residents``' default: these worlds' people are in their study file, so any other
 #: value is refused (``WorldExperiment.residents_reason``).
 _DEFAULT_RESIDENTS = "paper,generated:6"
+#: The options of ``pearl experiment`` only the nursing-home study reads; another world's
+#: :class:`WorldExperiment` refuses them (``refused``).
+NURSING_HOME_ONLY = ("--noise-kind", "--speech-rows", "--measured-policies", "--cluster")
 
 
 @dataclass(frozen=True)
@@ -427,7 +430,7 @@ class StandardStudy:
         ``--cluster``) are refused."""
         return WorldExperiment(
             default_noise=default_noise, default_seeds=default_seeds,
-            refused=("--noise-kind", "--speech-rows", "--measured-policies", "--cluster"),
+            refused=NURSING_HOME_ONLY,
             refused_reason="is for the nursing-home study; this world's study runs on this machine's processes "
                            "(--jobs) with word error rates",
             residents_reason="this world's people are in its study file (--study)",

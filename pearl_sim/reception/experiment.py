@@ -14,7 +14,7 @@ from typing import List
 
 from pearl_sim.reception import study
 from pearl_sim.reception.scenario import load_reception_scenarios
-from pearl_sim.world_study import WorldExperiment
+from pearl_sim.world_study import NURSING_HOME_ONLY, WorldExperiment
 
 __all__ = ["EXPERIMENT", "DEFAULT_NOISE", "DEFAULT_SEEDS"]
 
@@ -40,7 +40,7 @@ def _agents(domain, hierarchy, policies: List[str], args: argparse.Namespace, lo
 #: What the reception brings to the frame's study runner (:func:`pearl_sim.world_study.run_world_experiment`).
 EXPERIMENT = WorldExperiment(
     default_noise=DEFAULT_NOISE, default_seeds=DEFAULT_SEEDS,
-    refused=("--noise-kind", "--speech-rows", "--measured-policies", "--cluster"),
+    refused=NURSING_HOME_ONLY,
     refused_reason="is for the nursing-home study; the reception study runs on this machine's processes "
                    "(--jobs) with word error rates",
     residents_reason="the reception world's visitors are in its study file (--study)",

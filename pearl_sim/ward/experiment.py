@@ -14,7 +14,7 @@ from typing import List
 
 from pearl_sim.ward import study
 from pearl_sim.ward.scenario import load_ward_scenarios
-from pearl_sim.world_study import WorldExperiment
+from pearl_sim.world_study import NURSING_HOME_ONLY, WorldExperiment
 
 __all__ = ["EXPERIMENT", "DEFAULT_NOISE", "DEFAULT_SEEDS"]
 
@@ -43,8 +43,7 @@ def _agents(domain, hierarchy, policies: List[str], args: argparse.Namespace, lo
 #: What the ward brings to the frame's study runner (:func:`pearl_sim.world_study.run_world_experiment`).
 EXPERIMENT = WorldExperiment(
     default_noise=DEFAULT_NOISE, default_seeds=DEFAULT_SEEDS,
-    refused=("--noise-kind", "--speech-rows", "--measured-policies", "--cluster", "--flat-trials",
-             "--flat-time-limit"),
+    refused=NURSING_HOME_ONLY + ("--flat-trials", "--flat-time-limit"),
     refused_reason="is not for the ward study (docs/ward.md: the flat solve does not close at this size; "
                    "online and the hierarchy are compared)",
     residents_reason="the ward's residents are in its study file (--study)",
