@@ -239,10 +239,23 @@ class HierarchicalPolicy:
             return got
         sub = self.subtasks[name]
         offers = [(self._index[c], (k,)) for k, c in enumerate(sub.actions) if self._index[c] not in banned]
-        best, second = self._rank(sub.one_step.q(bh), self._to_model[name], offers)
+        best, second = self._rank_offers(name, bh, offers)
         if not banned:
             self._remember(key, best, second)
         return best
+
+    def _rank_offers(self, name: str, bh: np.ndarray,
+                     offers: Sequence[Tuple[int, Tuple[int, ...]]]) -> Tuple[Any, Any]:
+        """:meth:`_rank` of ``offers`` by subtask ``name``'s one-step values at its model belief ``bh``,
+        computed for the offered actions only (the same values:
+        :meth:`~pearl_pomdp.policies.lookahead.OneStep.q`)."""
+        if not offers:
+            return None, None
+        table = self._to_model[name]
+        one_step = self.subtasks[name].one_step
+        wanted = [int(table[prim]) for prim, _ in offers]
+        every = len(set(wanted)) == one_step.A   # no mask to build
+        return self._rank(one_step.q(bh, None if every else wanted), table, offers)
 
     @staticmethod
     def _rank(q: np.ndarray, table: np.ndarray, offers: Sequence[Tuple[int, Tuple[int, ...]]]) -> Tuple[Any, Any]:
@@ -294,7 +307,7 @@ class HierarchicalPolicy:
             memo[name] = got
             memo[name + RUNNER_UP] = self._rival_cache[key]
             return got
-        best, second = self._rank(sub.one_step.q(bh), self._to_model[name], self.offers(sub.actions, b, memo, banned))
+        best, second = self._rank_offers(name, bh, self.offers(sub.actions, b, memo, banned))
         memo[name] = best
         memo[name + RUNNER_UP] = second
         if not banned:   # a masked pick is for this decision only: not cached
@@ -359,7 +372,8 @@ class HierarchicalPolicy:
             node = child
             sub = self.subtasks[node]
             child = sub.actions[idx]
-            trace.append(TraceStep(node, child, float(sub.one_step.q(sub.project(b)[0])[self._to_model[node][prim]])))
+            model_action = int(self._to_model[node][prim])
+            trace.append(TraceStep(node, child, float(sub.one_step.q(sub.project(b)[0], [model_action])[model_action])))
         for _ in range(len(self.subtasks) + 1):
             if child not in self.subtasks:
                 return Decision(self._index[child], child, trace, expansions=self.last_expansions)
@@ -382,7 +396,7 @@ class HierarchicalPolicy:
         else:
             sub = self.subtasks[name]
             others = [o for o in self.offers(sub.actions, b, memo, banned) if o != (chosen, chosen_path)]
-            got = self._rank(sub.one_step.q(sub.project(b)[0]), self._to_model[name], others)[0]
+            got = self._rank_offers(name, sub.project(b)[0], others)[0]
             best = None if got is None else (got[0], got[3], got[2])
         if best is None:
             return "", math.nan

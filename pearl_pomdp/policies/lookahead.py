@@ -9,7 +9,7 @@
 """
 from __future__ import annotations
 
-from typing import Dict, Optional
+from typing import Dict, Optional, Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -151,16 +151,27 @@ class OneStep:
         self._lb = np.zeros(self.A * self.Z)
         self._best = np.zeros(self.A * self.Z, dtype=np.int64)
 
-    def q(self, b: np.ndarray) -> np.ndarray:
-        """``[A]`` Q-values at the belief ``b [S_h]`` (need not be normalised)."""
+    def q(self, b: np.ndarray, actions: Optional[Sequence[int]] = None) -> np.ndarray:
+        """``[A]`` Q-values at the belief ``b [S_h]`` (need not be normalised).
+
+        ``actions``: the action indices whose values are wanted (a parent ranks only its
+        children's offers, often a third of its model's actions); the others are NaN. A wanted
+        action's value is bit for bit the one of a call without ``actions``: the kernel skips the
+        other actions' columns and rows, and every sum it keeps adds the same terms in the same
+        order (a state no wanted action reaches adds exact zeros)."""
         from pearl_pomdp.solvers import _pointbased_kernel as kernel
 
         b = np.asarray(b, dtype=float)
         idx = np.flatnonzero(b > 0)
         val = np.ascontiguousarray(b[idx])
+        allowed = bytearray()
+        if actions is not None:
+            allowed = bytearray(self.A)
+            for a in actions:
+                allowed[a] = 1
         while True:
             nU, nl = kernel.successors(idx, val, self.t_ptr, self.t_ind, self.t_dat, self.O, self.A, self.S, self.Z,
-                                       self._bT, self._pos, self._U, self._C, self._p, self._live)
+                                       self._bT, self._pos, self._U, self._C, self._p, self._live, allowed)
             if nl >= 0:
                 break
             self._C = np.zeros(2 * self.A * self.Z * nU)
@@ -169,7 +180,10 @@ class OneStep:
             kernel.lower_rows(self._C, nU, self._U, self._live[:nl], self.GT, self.K, 0, self.K, self._lb,
                               self._best, False)
         expect = (self._p * self._lb).reshape(self.A, self.Z).sum(axis=1)
-        return val @ self.R[idx] + self.g * expect
+        q = val @ self.R[idx] + self.g * expect
+        if actions is not None:
+            q[np.frombuffer(allowed, dtype=np.uint8) == 0] = np.nan
+        return q
 
     def q_rows(self, B: np.ndarray) -> np.ndarray:
         """:meth:`q` for every row of ``B [N, S_h]`` → ``[N, A]``."""
