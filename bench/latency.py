@@ -37,9 +37,12 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 SPIN_TIMEOUT = 0.01
 PARAMETER_SERVICES = True
-#: Multi-process: the launch file's journal (each node replaces its crash journal, with fsync, after
-#: every step it changed: docs/reliability.md, "Crashes"); ``--no-journal`` launches with journal:=false.
+#: Multi-process: the launch file's journal (each node replaces its crash journal after every step
+#: it changed: docs/reliability.md, "Crashes"); ``--no-journal`` launches with journal:=false.
 JOURNAL = True
+#: ``--journal-sync MODE``: the tracker's and the policy's ``journal_sync`` (None: the nodes' default),
+#: through a copy of config/pearl_nodes.yaml that adds it to the two nodes.
+JOURNAL_SYNC = None
 sys.path.insert(0, str(REPO))
 
 #: ``--inputs resident`` (default): a resident who wants the time answers the robot's last
@@ -186,12 +189,25 @@ def run_multiprocess(policy_dir, steps, warmup):
 
     domain_id = _domain_id(2)
     log_dir = Path(tempfile.mkdtemp(prefix="pearl_latency_"))
+    # ROS_HOME: the nodes' journals live there (journal:=auto), so a run never resumes from the
+    # journal of the run before it (which would leave its latched belief "answered already").
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_profile.xml"), ROS_LOG_DIR=str(log_dir))
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_profile.xml"), ROS_LOG_DIR=str(log_dir),
+               ROS_HOME=str(log_dir))
     pearl = str(Path(sys.executable).parent / "pearl")
     err = open(log_dir / "launch.err", "wb")
+    extra = [] if JOURNAL else ["journal:=false"]
+    if JOURNAL_SYNC is not None:
+        import yaml
+
+        nodes = yaml.safe_load((REPO / "config" / "pearl_nodes.yaml").read_text())
+        for name in ("belief_tracker", "hierarchical_policy"):
+            nodes.setdefault(name, {}).setdefault("ros__parameters", {})["journal_sync"] = JOURNAL_SYNC
+        params = log_dir / "pearl_nodes.yaml"
+        params.write_text(yaml.safe_dump(nodes))
+        extra.append(f"params_file:={params}")
     launch = subprocess.Popen([pearl, "launch", "launch/pearl.launch.xml", f"policy:={policy_dir}",
-                               "step_timeout:=0.0"] + ([] if JOURNAL else ["journal:=false"]),
+                               "step_timeout:=0.0"] + extra,
                               cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=err)
     context = Context()
     rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
@@ -251,8 +267,11 @@ def run_relay_baseline(steps, warmup, timeout=10.0):
 
     domain_id = _domain_id(3)
     log_dir = Path(tempfile.mkdtemp(prefix="pearl_relay_"))
+    # ROS_HOME: the nodes' journals live there (journal:=auto), so a run never resumes from the
+    # journal of the run before it (which would leave its latched belief "answered already").
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_profile.xml"), ROS_LOG_DIR=str(log_dir))
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_profile.xml"), ROS_LOG_DIR=str(log_dir),
+               ROS_HOME=str(log_dir))
     relays = [subprocess.Popen([sys.executable, "-c", RELAY, name, src, dst], cwd=REPO, env=env,
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
               for name, src, dst in (("relay1", "/relay/a", "/relay/b"), ("relay2", "/relay/b", "/relay/c"))]
@@ -311,18 +330,22 @@ def main(argv=None):
                         help="resident: answer the robot's actions plausibly (default); cycle: fixed input cycle")
     parser.add_argument("--no-parameter-services", action="store_true",
                         help="in-process: build the nodes without parameter services (fewer entities per spin)")
+    parser.add_argument("--journal-sync", choices=["fsync", "background", "none"], default=None,
+                        help="multi-process: the tracker's and the policy's journal_sync (default: the nodes' own)")
     parser.add_argument("--no-journal", action="store_true",
-                        help="multi-process: launch with journal:=false (no crash journal, so no fsync per step)")
+                        help="multi-process: launch with journal:=false (no crash journal)")
     args = parser.parse_args(argv)
-    global PARAMETER_SERVICES, INPUT_MODE, JOURNAL
+    global PARAMETER_SERVICES, INPUT_MODE, JOURNAL, JOURNAL_SYNC
     PARAMETER_SERVICES = not args.no_parameter_services
     JOURNAL = not args.no_journal
+    JOURNAL_SYNC = args.journal_sync
     INPUT_MODE = args.inputs
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO / "config" / "fastdds_profile.xml"))
     policy = _find_policy(args.policy)
     out = {"benchmark": "observation -> action latency", "policy": str(policy), "cpus": os.cpu_count(),
            "inputs": INPUT_MODE, "inprocess_parameter_services": PARAMETER_SERVICES, "multiprocess_journal": JOURNAL,
+           "multiprocess_journal_sync": JOURNAL_SYNC or "default",
            "load_before": [round(x, 2) for x in os.getloadavg()]}
     if args.mode in ("inprocess", "both"):
         print("in-process ...", file=sys.stderr)

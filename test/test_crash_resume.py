@@ -224,3 +224,15 @@ def test_a_policy_whose_record_cannot_go_out_still_journals_the_step_it_acted_on
         assert json.loads((tmp_path / "policy.json").read_text())["state"]["acted"] == [77, 3]
     finally:
         node.destroy_node()
+
+
+def test_a_journal_sync_mode_the_node_does_not_know_is_refused_naming_the_parameter(ros_context, pearl_policy,
+                                                                                   tmp_path):
+    from pearl_pomdp.nodes.common import NodeSetupError
+    from pearl_pomdp.nodes.hierarchical_policy import HierarchicalPolicyNode
+
+    context, _ = ros_context
+    params = {"domain": str(DOMAIN), "policy": str(pearl_policy), "journal": str(tmp_path / "policy.json"),
+              "journal_sync": "sometimes"}
+    with pytest.raises(NodeSetupError, match="journal_sync: 'sometimes' is not one of fsync, background, none"):
+        HierarchicalPolicyNode(context=context, parameter_overrides=params).destroy_node()

@@ -161,3 +161,115 @@ def test_a_journal_state_that_does_not_fit_the_model_is_refused(pearl, field, va
     with pytest.raises(ValueError, match=why):
         t.resume(state)
     assert np.array_equal(t.belief, before[0]) and (t.step, t.run) == before[1:]
+
+
+def _fsync_spy(monkeypatch, gate=None):
+    """Record the path of every fd fsynced; ``gate``: an event the fsync thread's fsyncs wait for
+    (the thread held back), the caller's own fsyncs never wait."""
+    import os
+    import threading
+
+    synced = []
+    real = os.fsync
+
+    def spy(fd):
+        synced.append(Path(os.readlink(f"/proc/self/fd/{fd}")))
+        if gate is not None and threading.current_thread().name == "pearl-journal-fsync":
+            assert gate.wait(10.0), "the test never released the fsync thread"
+        real(fd)
+
+    monkeypatch.setattr(os, "fsync", spy)
+    return synced
+
+
+def test_a_background_write_is_in_place_before_its_fsync_and_on_disk_after_the_flush(pearl, tmp_path, monkeypatch):
+    """``background``: the caller returns with the new journal readable (what a killed node's restart
+    reads) while the fsync thread is still held back; flushing waits for the file's and the directory's
+    fsync."""
+    import threading
+
+    from pearl_pomdp.journal import flush_journals
+
+    gate = threading.Event()
+    synced = _fsync_spy(monkeypatch, gate)
+    j = journal(tmp_path, sync="background")
+    done = threading.Event()
+    threading.Thread(target=lambda: (j.write({"step": 1}), done.set()), daemon=True).start()
+    assert done.wait(5.0), "a background write waited for its fsync"
+    assert j.load().state == {"step": 1}
+    assert flush_journals(timeout=0.2) is False        # the fsync is held back: not on disk yet
+    gate.set()
+    assert flush_journals(timeout=10.0) is True
+    assert j.path.resolve() in synced and j.path.parent.resolve() in synced
+
+
+def test_an_fsync_write_is_on_disk_when_it_returns(tmp_path, monkeypatch):
+    synced = _fsync_spy(monkeypatch)
+    j = journal(tmp_path, sync="fsync")
+    j.write({"step": 1})
+    assert len(synced) == 2 and synced[1] == j.path.parent.resolve()   # the temporary file, then the directory
+    none = journal(tmp_path / "n", sync="none")
+    none.write({"step": 1})
+    assert len(synced) == 2 and none.load().state == {"step": 1}
+
+
+def test_an_unknown_sync_mode_names_the_parameter(tmp_path):
+    with pytest.raises(ValueError, match=r"journal_sync: 'always' is not one of fsync, background, none"):
+        journal(tmp_path, sync="always")
+
+
+def test_a_writer_killed_between_unlinking_and_renaming_leaves_the_next_journal_to_resume_from(tmp_path):
+    """``background``/``none`` write the next journal complete beside the old one, unlink the old and
+    rename the next: a death in between leaves only the next one, and load() reads it."""
+    from pearl_pomdp.journal import _next_path
+
+    j = journal(tmp_path, sync="none")
+    j.write({"step": 1})
+    j.write({"step": 2})
+    assert j.load().state == {"step": 2} and not _next_path(j.path).exists()
+    j.path.rename(_next_path(j.path))          # as if killed after the unlink, before the rename
+    found = j.load()
+    assert found.state == {"step": 2} and "resuming from journal" in found.reason
+    j.write({"step": 3})
+    assert j.load().state == {"step": 3} and not _next_path(j.path).exists()
+    _next_path(j.path).write_text('{"format": "pearl-jou')   # killed while writing the next one
+    assert j.load().state == {"step": 3}
+    j.remove()
+    assert not j.path.exists() and not _next_path(j.path).exists()
+    assert j.load().state is None
+
+
+@pytest.mark.parametrize("sync", ["none", "background"])
+def test_a_writer_killed_at_any_moment_leaves_a_journal_that_loads(tmp_path, sync):
+    """SIGKILL a process that journals as fast as it can, 12 times at spread moments: every time the
+    journal loads whole, at a step at or after the one it had reported as written."""
+    import signal
+    import subprocess
+    import sys
+
+    writer = (
+        "import sys\n"
+        "from pearl_pomdp.journal import Journal\n"
+        f"j = Journal(sys.argv[1], 'belief_tracker', 'd', 'sha256:0', sync={sync!r})\n"
+        "step = 0\n"
+        "while True:\n"
+        "    j.write({'step': step, 'pad': 'x' * (step % 9000)})\n"
+        "    if step % 50 == 0:\n"
+        "        print(step, flush=True)\n"
+        "    step += 1\n")
+    path = tmp_path / "killed.json"
+    for round_ in range(12):
+        proc = subprocess.Popen([sys.executable, "-c", writer, str(path)], stdout=subprocess.PIPE, text=True,
+                                cwd=REPO)
+        try:
+            assert proc.stdout is not None
+            for _ in range(1 + round_ % 4):
+                reported = int(proc.stdout.readline())
+            time.sleep(0.003 * (round_ % 5))
+        finally:
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(10)
+        found = Journal(path, "belief_tracker", "d", "sha256:0").load()
+        assert found.state is not None, found.reason
+        assert found.state["step"] >= reported and found.state["pad"] == "x" * (found.state["step"] % 9000)
+        Journal(path, "belief_tracker", "d", "sha256:0").remove()

@@ -87,7 +87,9 @@ class BeliefTrackerNode(ManagedPearlNode):
         * ``journal`` (str, ``auto``), ``journal_max_age`` (double, s): the journal this node writes
           after every change and resumes from when restarted (:mod:`pearl_pomdp.nodes.journaling`:
           ``auto`` is ``$ROS_HOME/pearl/journal/domain<ID>/<node>.json``, ``''`` none); a journal older
-          than ``journal_max_age`` or of another domain file is refused with one line.
+          than ``journal_max_age`` or of another domain file is refused with one line;
+          ``journal_sync`` (str, ``background``): when a write reaches the disk
+          (:data:`pearl_pomdp.journal.SYNC_MODES`).
 
     Subscribers:
         * One per input the domain declares, on its topic with its message type and QoS

@@ -36,6 +36,7 @@ from rclpy.utilities import get_default_context
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from pearl_pomdp.errors import PearlError
+from pearl_pomdp.journal import flush_journals
 from pearl_pomdp.launch_xml import package_share_dir
 
 __all__ = ["Param", "PearlNode", "NodeSetupError", "run_node", "resolve_path", "load_domain_and_model",
@@ -337,6 +338,9 @@ def run_node(node_class: Type[PearlNode], args: Optional[List[str]] = None) -> i
         code = _init_spin_and_clean_up(node_class, args, prog, stop)
     finally:
         stop.close()
+    # A journal write the fsync thread has not put on disk yet is on disk before the process
+    # ends (bounded: a stop stays prompt; a killed process's writes are in the page cache anyway).
+    flush_journals(timeout=1.0)
     if stop.signum is not None:
         # Stopped by a signal and cleaned up (node, context and DDS participant destroyed):
         # end the process here. The interpreter's finalisation has nothing left that matters

@@ -87,7 +87,8 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         * ``use_sim_time`` (bool): follow /clock.
         * ``journal`` (str, ``auto``), ``journal_max_age`` (double, s): the journal of the step last
           acted and the operator's level (:mod:`pearl_pomdp.nodes.journaling`); a restarted node
-          does not answer that step's belief again and keeps the level the operator set.
+          does not answer that step's belief again and keeps the level the operator set;
+          ``journal_sync`` (str, ``background``) as the tracker's.
 
     Parameters (changeable at run time, the operator's):
         * ``autonomy`` (str): ``full`` (act), ``confirm`` (wait for a yes) or ``off`` (propose only).

@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 from typing import Any, Callable, Dict, Mapping, Optional
 
-from pearl_pomdp.journal import DEFAULT_MAX_AGE, Journal, default_path, domain_hash
+from pearl_pomdp.journal import DEFAULT_MAX_AGE, DEFAULT_SYNC, SYNC_MODES, Journal, default_path, domain_hash
 from pearl_pomdp.nodes.common import NodeSetupError, Param
 
 __all__ = ["JOURNAL_PARAMETERS", "NodeJournal", "model_hash"]
@@ -24,6 +24,10 @@ JOURNAL_PARAMETERS = (
                              "domain<ROS_DOMAIN_ID>/<node name>.json; '': no journal"),
     Param("journal_max_age", DEFAULT_MAX_AGE, "Seconds a journal stays good to resume from; an older one is "
                                               "refused and the node starts afresh", range=(0.001, 1.0e7)),
+    Param("journal_sync", DEFAULT_SYNC, f"When a journal write reaches the disk ({' | '.join(SYNC_MODES)}): "
+                                        "fsync before the node goes on (survives a power loss at once); "
+                                        "background: a thread fsyncs it right after (a killed node always "
+                                        "finds it; a power loss may lose the last milliseconds); none: never"),
 )
 
 
@@ -44,7 +48,7 @@ class NodeJournal:
     Args:
         node: the node (its logger and fully qualified name).
         kind: the node kind written into the journal (another kind's journal is refused).
-        params: the node's parameter values (``journal``, ``journal_max_age``).
+        params: the node's parameter values (``journal``, ``journal_max_age``, ``journal_sync``).
         model, source: the model and the domain file it came from (for the hash).
 
     Attributes:
@@ -53,7 +57,7 @@ class NodeJournal:
         errors: writes that failed (the node goes on).
 
     Raises:
-        NodeSetupError: ``journal_max_age`` is not positive.
+        NodeSetupError: ``journal_max_age`` is not positive, or ``journal_sync`` not a mode.
     """
 
     def __init__(self, node, kind: str, params: Mapping[str, Any], model, source: str):
@@ -68,7 +72,8 @@ class NodeJournal:
         path = (default_path(node.get_fully_qualified_name(), node.context.get_domain_id()) if value == "auto"
                 else Path(value).expanduser())
         try:
-            self.journal = Journal(path, kind, source, model_hash(model, source), params["journal_max_age"])
+            self.journal = Journal(path, kind, source, model_hash(model, source), params["journal_max_age"],
+                                   sync=str(params["journal_sync"]).strip())
         except ValueError as err:
             raise NodeSetupError(f"parameter {err}") from None
 

@@ -102,7 +102,7 @@ def _make_node_class():
                 # Tied to the scenario file's bytes and the seed: another episode's journal is refused.
                 ident = Path(path).read_bytes() + f"\nseed={self.world.seed}".encode()
                 self.journal = Journal(where, "pearl_sim_world", str(path), domain_hash(ident),
-                                       max_age=journal_max_age, sync=False)
+                                       max_age=journal_max_age, sync="none")
             self._String, self._Clock, self._Pose = String, Clock, PoseStamped
             self.clock_pub = self.create_publisher(Clock, "/clock", 10)
             self.types_by_modality = {m: SPEECH_TYPE if m == "Speech" else "std_msgs/msg/String"
@@ -177,7 +177,7 @@ def _make_node_class():
         def _drop_journal(self) -> None:
             if self.journal is not None:
                 try:
-                    self.journal.path.unlink()
+                    self.journal.remove()
                 except OSError:
                     pass
 
