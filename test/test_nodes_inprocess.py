@@ -260,6 +260,17 @@ def test_pearl_inputs_map_to_modality_symbols(ros_context, pearl_policy):
             values = [str(v) for v in next(f.values for f in domain.features if f.name == feature)]
             assert [last["marginals"][feature][v] for v in values] == pytest.approx(marginal.tolist(), abs=1e-12)
         assert _actions(probe)[1] == policy.execute(expected).action_name
+        # The message names no state itself: its marginals' features and values, in mixed radix (first
+        # feature most significant), spell every state's name, and it stays small (85 kB with names).
+        from itertools import product
+
+        from rclpy.serialization import serialize_message
+
+        message = probe.received["/pearl/belief"][-1]
+        assert list(message.state_names) == [] and len(serialize_message(message)) < 8000
+        spelled = [",".join(f"{m.feature}={v}" for m, v in zip(message.marginals, values))
+                   for values in product(*[list(m.values) for m in message.marginals])]
+        assert spelled == list(model.states)
         # Speech with no keyword is the `unknown` observation, counted (not a warning, not dropped).
         assert g.spin_until(lambda: g.tracker.core.step_open, 10.0)
         _say(probe, "speech", "hmm", g)

@@ -11,7 +11,8 @@ Wire formats (common_interfaces, and this project's pearl_interfaces):
   (empty for ``b0``), one ``FeatureMarginal`` per feature (value names and probabilities; a flat
   model without features reports one pseudo-feature ``"state"``), and the full belief
   ``probabilities[s] = b(s)`` in the model's state order (for a factored domain: mixed radix,
-  first feature most significant), named in ``state_names`` up to :data:`MAX_NAMED_STATES` states.
+  first feature most significant); :func:`belief_to_msg` names the states in ``state_names`` when
+  asked (up to :data:`MAX_NAMED_STATES`), the tracker does not (the marginals name them already).
 * **speech** — ``pearl_interfaces/RecognisedSpeech``: the recognised text, the recogniser's
   confidence in [0, 1] and, when the recogniser mapped it, the speech symbol; stamped. (Bags recorded
   before it hold the JSON ``{"text", "confidence"}`` in a ``std_msgs/String``.)
