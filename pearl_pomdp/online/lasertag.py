@@ -1,0 +1,349 @@
+"""LaserTag as a generative model, with its exact belief and its bounds.
+
+LaserTag is Tag (Pineau, Gordon & Thrun, IJCAI 2003) with a laser for eyes (Somani, Ye, Hsu & Lee,
+*DESPOT: Online POMDP Planning with Regularization*, NIPS 2013): a robot and an opponent on a 7×11
+grid with 8 obstacles at random cells. The robot moves North, East, South or West (into a wall or
+an obstacle: it stays), −1 a move; ``tag`` is +10 and ends the episode when both share a cell,
+−10 otherwise (the episode goes on). The opponent moves away from the robot: along each axis
+where they differ one cell away with 0.4, along an axis where they are level one cell either way
+with 0.2 each, and stays with the remaining 0.2 (a move into a wall or an obstacle stays); its move
+depends on the state before the robot's. The robot sees neither position: after every step its
+laser reads the distance to the first obstacle, wall or the opponent in 8 directions (the four
+axes and the four diagonals, a diagonal cell √2 long), each reading ``floor(d + ε)`` with
+``ε ≤ 0`` half-normal of σ = 2.5 folded below the true distance ``d`` (``P(reading r) = 2 (Φ(min(d,
+r + 1) − d) − Φ(r − d))``, ``Φ`` of N(0, 2.5²), the first bucket open below); when both share a cell it
+reads the one observation "same cell". Every reading is a 7-bit field of the observation, 8 of
+them: ~10⁸ observations, so the model is generative only. The start belief is uniform over every
+pair of free cells (the robot does not know where it is either); γ = 0.95.
+
+These are the dynamics and the observation model of DESPOT's own code (AdaCompNUS/despot,
+``examples/cpp_models/tag/src/laser_tag/laser_tag.cpp`` and ``base/base_tag.cpp``), written here from
+that description. The code draws its obstacles at random for every run (``RandomMap(7, 11, 8)``):
+there is no standard map. Ours (:data:`LAYOUT`) is drawn once with ``numpy.random.default_rng(8)``;
+:func:`random_lasertag` draws one as that code does, for a study over maps.
+
+* :class:`LaserTag` — ``step`` over many particles at once, deterministic given 9 uniforms a
+  step (the opponent's move, then one per beam), as the search needs
+  (:mod:`pearl_pomdp.online.generative`).
+* :class:`LaserTagBelief` — the exact belief over the 69² cell pairs (Bayes' rule with the
+  transition and the 8 beams' likelihoods): the root's particles are drawn from it.
+* :class:`LaserTagBounds` — above, each particle's value if the opponent stood still at its
+  Manhattan distance (the opponent never comes closer, so no policy tags sooner: DESPOT's
+  ``MANHATTAN`` bound); below, the best of a few open-loop plans the whole particle set follows:
+  the shortest path from one of the most common particles' robot cell to its opponent, ``tag``,
+  then moves forever (−1 a step), each simulated on every particle.
+"""
+from __future__ import annotations
+
+import math
+from collections import defaultdict, deque
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import scipy.sparse as sp
+from scipy import special
+
+__all__ = ["LaserTag", "LaserTagBelief", "LaserTagBounds", "lasertag", "random_lasertag", "LAYOUT",
+           "SAME_CELL", "NORTH", "EAST", "SOUTH", "WEST", "TAG"]
+
+ROWS, COLUMNS, OBSTACLES = 7, 11, 8
+#: The obstacles (x, y) of our fixed map: :func:`random_lasertag` with ``numpy.random.default_rng(8)``
+#: (its free cells are connected). A test checks the draw.
+LAYOUT: Tuple[Tuple[int, int], ...] = ((6, 6), (5, 5), (2, 1), (5, 1), (1, 2), (6, 4), (4, 4), (8, 6))
+NORTH, EAST, SOUTH, WEST, TAG = range(5)
+#: Moves and beams (x, y): the four axes (the actions' order), then the diagonals.
+DIRECTIONS = ((0, 1), (1, 0), (0, -1), (-1, 0), (1, 1), (1, -1), (-1, -1), (-1, 1))
+BITS_PER_READING = 7
+#: The observation when robot and opponent share a cell: every reading 101.
+SAME_CELL = sum(101 << (BITS_PER_READING * beam) for beam in range(8))
+TAG_REWARD = 10.0
+NOISE_SIGMA = 2.5
+
+
+def _normal_cdf(x: np.ndarray) -> np.ndarray:
+    """Φ of the laser's noise, N(0, σ²)."""
+    return special.ndtr(np.asarray(x, dtype=float) / NOISE_SIGMA)
+
+
+class LaserTag:
+    """LaserTag on one map (module doc). States ``robot_cell · N + opponent_cell`` over the ``N`` free
+    cells (row by row from y = 0), then one absorbing ``terminal`` state (tagged).
+
+    Args:
+        obstacles: the blocked ``(x, y)`` cells of the 11 × 7 grid.
+        discount: γ.
+    """
+
+    uniforms_per_step = 1 + len(DIRECTIONS)
+
+    def __init__(self, obstacles: Sequence[Tuple[int, int]] = LAYOUT, discount: float = 0.95):
+        self.obstacles = tuple((int(x), int(y)) for x, y in obstacles)
+        blocked = set(self.obstacles)
+        if len(blocked) != len(self.obstacles) or any(not (0 <= x < COLUMNS and 0 <= y < ROWS) for x, y in blocked):
+            raise ValueError(f"obstacles must be distinct cells of the {COLUMNS}x{ROWS} grid, got {obstacles}")
+        self.name = "LaserTag" + ("" if self.obstacles == LAYOUT else f"[{len(blocked)} obstacles]")
+        self.actions = ["north", "east", "south", "west", "tag"]
+        self.discount = float(discount)
+        self.cells: List[Tuple[int, int]] = [(x, y) for y in range(ROWS) for x in range(COLUMNS)
+                                             if (x, y) not in blocked]
+        self.index: Dict[Tuple[int, int], int] = {c: i for i, c in enumerate(self.cells)}
+        n = self.n = len(self.cells)
+        self.num_states = n * n + 1
+        self.terminal = n * n
+        # The robot's next cell per (cell, move); a wall or an obstacle: it stays.
+        self.next_cell = np.array([[self.index.get((x + dx, y + dy), i) for dx, dy in DIRECTIONS[:4]]
+                                   for i, (x, y) in enumerate(self.cells)], dtype=np.int64)
+        self._build_opponent(n)
+        self._build_readings(n)
+
+    # ------------------------------------------------------------------ dynamics
+    def _build_opponent(self, n: int) -> None:
+        """Per (robot, opponent) pair, the opponent's next cells and their cumulative probabilities,
+        in ascending cell order (the order the search's uniform is read in)."""
+        width = 5
+        cells = np.zeros((n * n, width), dtype=np.int64)
+        cumulative = np.ones((n * n, width))
+        for rob, (rx, ry) in enumerate(self.cells):
+            for opp, (ox, oy) in enumerate(self.cells):
+                moves: Dict[int, float] = defaultdict(float)
+                steps_x = ((1, 0.2), (-1, 0.2)) if ox == rx else ((1 if ox > rx else -1, 0.4),)
+                steps_y = ((1, 0.2), (-1, 0.2)) if oy == ry else ((1 if oy > ry else -1, 0.4),)
+                for dx, p in steps_x:
+                    moves[self.index.get((ox + dx, oy), opp)] += p
+                for dy, p in steps_y:
+                    moves[self.index.get((ox, oy + dy), opp)] += p
+                moves[opp] += 0.2
+                s = rob * n + opp
+                targets = sorted(moves)
+                cells[s, :len(targets)] = targets
+                cells[s, len(targets):] = targets[-1]
+                cumulative[s, :len(targets)] = np.cumsum([moves[c] for c in targets])
+                cumulative[s, len(targets) - 1:] = 1.0
+        self._opp_cells, self._opp_cumulative = cells, cumulative
+
+    def _build_readings(self, n: int) -> None:
+        """Per state and beam the reading's distribution: ``_reading_cdf [S, 8, R]`` (cumulative)
+        and ``_reading_p [S, 8, R]`` (zero past the true distance)."""
+        ranges = np.zeros((n * n, len(DIRECTIONS)))
+        for rob, (rx, ry) in enumerate(self.cells):
+            for opp, (ox, oy) in enumerate(self.cells):
+                for beam, (dx, dy) in enumerate(DIRECTIONS):
+                    d = 1
+                    while (rx + dx * d, ry + dy * d) in self.index and (rx + dx * d, ry + dy * d) != (ox, oy):
+                        d += 1
+                    ranges[rob * n + opp, beam] = d * math.hypot(dx, dy)
+        self.laser_range = ranges
+        width = int(math.ceil(ranges.max()))
+        bucket = np.arange(width)[None, None, :]
+        dist = ranges[:, :, None]
+        upper = _normal_cdf(np.minimum(dist, bucket + 1.0) - dist)
+        lower = np.where(bucket > 0, _normal_cdf(bucket - dist), 0.0)
+        p = np.where(bucket < dist, 2.0 * (upper - lower), 0.0)
+        self._reading_p = p
+        self._reading_cdf = np.cumsum(p, axis=2)
+
+    def is_terminal(self, states):
+        return np.asarray(states) == self.terminal
+
+    def step(self, states, action, uniforms):
+        """``(next_states, observations, rewards)`` of ``states [N]`` under ``action``, deterministic
+        given ``uniforms [N, 9]`` (the opponent's move, then one per beam)."""
+        nxt, rewards = self.transition(states, action, uniforms[:, 0])
+        return nxt, self._observe(nxt, uniforms[:, 1:]), rewards
+
+    def transition(self, states, action: int, uniform: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """``(next_states, rewards)`` of :meth:`step` without the observation (``uniform [N]``: the
+        opponent's move)."""
+        states = np.asarray(states, dtype=np.int64)
+        n = self.n
+        live = states != self.terminal
+        s = np.where(live, states, 0)
+        rob, opp = s // n, s % n
+        if action == TAG:
+            tagged = live & (rob == opp)
+            rewards = np.where(tagged, TAG_REWARD, -TAG_REWARD)
+            next_rob = rob
+        else:
+            tagged = np.zeros(states.shape, dtype=bool)
+            rewards = np.full(states.shape, -1.0)
+            next_rob = self.next_cell[rob, action]
+        pick = (uniform[:, None] > self._opp_cumulative[s]).sum(axis=1)
+        next_opp = self._opp_cells[s, np.minimum(pick, self._opp_cells.shape[1] - 1)]
+        nxt = np.where(tagged | ~live, self.terminal, next_rob * n + next_opp)
+        return nxt, np.where(live, rewards, 0.0)
+
+    def _observe(self, states: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
+        """The laser's observation of each state (``SAME_CELL`` when both share a cell or tagged)."""
+        n = self.n
+        live = states != self.terminal
+        s = np.where(live, states, 0)
+        cdf = self._reading_cdf[s]                                   # [N, 8, R]
+        readings = (uniforms[:, :, None] > cdf).sum(axis=2)         # the first bucket whose cdf ≥ u
+        tops = np.ceil(self.laser_range[s] - 1e-9).astype(np.int64) - 1
+        readings = np.minimum(readings, np.maximum(tops, 0))        # round-off past the last bucket
+        shifts = BITS_PER_READING * np.arange(len(DIRECTIONS), dtype=np.int64)
+        obs = (readings.astype(np.int64) << shifts[None, :]).sum(axis=1)
+        same = ~live | (s // n == s % n)
+        return np.where(same, SAME_CELL, obs)
+
+    def observation_likelihood(self, observation: int) -> np.ndarray:
+        """``[S]``: P(observation | the state the step ended in), for every state."""
+        like = np.zeros(self.num_states)
+        n = self.n
+        same = np.arange(n) * n + np.arange(n)
+        if observation == SAME_CELL:
+            like[same] = 1.0
+            like[self.terminal] = 1.0
+            return like
+        readings = [(observation >> (BITS_PER_READING * beam)) & ((1 << BITS_PER_READING) - 1)
+                    for beam in range(len(DIRECTIONS))]
+        width = self._reading_p.shape[2]
+        prod = np.ones(n * n)
+        for beam, r in enumerate(readings):
+            if r >= width:
+                return like
+            prod *= self._reading_p[:, beam, r]
+        prod[same] = 0.0
+        like[:n * n] = prod
+        return like
+
+    def transition_matrix(self, action: int) -> sp.csr_matrix:
+        """``[S, S]`` sparse ``T[s, s']`` of ``action`` (what :class:`LaserTagBelief` predicts with)."""
+        n = self.n
+        s = np.arange(n * n)
+        rob, opp = s // n, s % n
+        probs = np.diff(np.concatenate([np.zeros((n * n, 1)), self._opp_cumulative], axis=1), axis=1)
+        next_rob = rob if action == TAG else self.next_cell[rob, action]
+        cols = next_rob[:, None] * n + self._opp_cells
+        if action == TAG:
+            cols = np.where((rob == opp)[:, None], self.terminal, cols)
+        rows = np.repeat(s, probs.shape[1])
+        T = sp.csr_matrix((probs.ravel(), (rows, cols.ravel())), shape=(self.num_states, self.num_states))
+        T = T + sp.csr_matrix(([1.0], ([self.terminal], [self.terminal])), shape=T.shape)
+        T.sum_duplicates()
+        T.eliminate_zeros()
+        return T
+
+    def initial_belief(self) -> "LaserTagBelief":
+        return LaserTagBelief(self)
+
+
+class LaserTagBelief:
+    """The exact belief over the cell pairs (and ``terminal``): uniform at the start, then Bayes'
+    rule after each step — the transition, then the 8 beams' likelihood of what was read."""
+
+    def __init__(self, model: LaserTag):
+        self.model = model
+        self.b = np.zeros(model.num_states)
+        self.b[:model.n * model.n] = 1.0 / (model.n * model.n)
+        self._T: Dict[int, sp.csr_matrix] = {}
+
+    def sample(self, count: int, rng: np.random.Generator) -> np.ndarray:
+        """``count`` states drawn from the belief."""
+        cdf = np.cumsum(self.b)
+        draws = np.searchsorted(cdf, rng.random(count) * cdf[-1], side="right")
+        return np.minimum(draws, self.model.num_states - 1).astype(np.int64)
+
+    def update(self, action: int, observation: int) -> None:
+        """Bayes' rule after ``action`` and ``observation``.
+
+        Raises:
+            ValueError: the observation is impossible under the belief (a model mismatch)."""
+        T = self._T.get(action)
+        if T is None:
+            T = self._T[action] = self.model.transition_matrix(action).T.tocsr()
+        posterior = (T @ self.b) * self.model.observation_likelihood(observation)
+        total = posterior.sum()
+        if not total > 0:
+            raise ValueError(f"LaserTag: observation {observation} has probability 0 after {self.model.actions[action]}")
+        self.b = posterior / total
+
+
+class LaserTagBounds:
+    """LaserTag's bounds on a particle set (module doc): Manhattan above, the mode's open-loop chase below."""
+
+    def __init__(self, model: LaserTag, lower_horizon: int = 40, modes: int = 3):
+        self.model = model
+        n, g = model.n, model.discount
+        xy = np.array(model.cells)
+        dist = np.abs(xy[:, None, :] - xy[None, :, :]).sum(axis=2).reshape(-1)
+        manhattan = -(1.0 - g ** dist) / (1.0 - g) + TAG_REWARD * g ** dist
+        self.upper_values = np.concatenate([manhattan, [0.0]])
+        self.lower_horizon = int(lower_horizon)
+        #: How many of the most common particles each give a plan (the best plan's value is the bound:
+        #: choosing among plans by the particle set is still a policy of the history).
+        self.modes = int(modes)
+        self._paths: Dict[Tuple[int, int], List[int]] = {}
+        self.description = ("upper: each particle's value with the opponent standing at its Manhattan distance; "
+                            "lower: the best of the open-loop plans 'shortest path to one of the 3 most common "
+                            "particles' opponent, tag, then moves' (simulated on every particle)")
+
+    def upper(self, states):
+        return float(self.upper_values[np.asarray(states)].mean(dtype=np.float64))
+
+    def lower(self, states, rng):
+        m = self.model
+        states = np.asarray(states, dtype=np.int64)
+        live = states[states != m.terminal]
+        if live.size == 0:
+            return 0.0
+        counts = np.bincount(live)
+        best = -math.inf
+        for mode in np.argsort(-counts, kind="stable")[: self.modes]:
+            if counts[mode] == 0:
+                break
+            plan = self._path(int(mode) // m.n, int(mode) % m.n)[: self.lower_horizon - 1] + [TAG]
+            best = max(best, self._plan_value(states, plan, rng))
+        return best
+
+    def _plan_value(self, states: np.ndarray, plan: List[int], rng: np.random.Generator) -> float:
+        """The mean discounted return of ``plan`` and then moves forever (−1 a step) on every particle."""
+        m = self.model
+        current = states.copy()
+        total = np.zeros(states.shape[0])
+        for t, action in enumerate(plan):
+            uniform = rng.random((current.shape[0],))
+            current, rewards = m.transition(current, action, uniform)
+            total += m.discount ** t * rewards
+        tail = -(m.discount ** len(plan)) / (1.0 - m.discount)
+        total += np.where(current == m.terminal, 0.0, tail)
+        return float(total.mean())
+
+    def _path(self, start: int, goal: int) -> List[int]:
+        """The moves of a shortest path from cell ``start`` to ``goal`` (breadth first; [] when none)."""
+        key = (start, goal)
+        hit = self._paths.get(key)
+        if hit is not None:
+            return list(hit)
+        m = self.model
+        previous: Dict[int, Tuple[int, int]] = {start: (-1, -1)}
+        queue = deque([start])
+        while queue:
+            cell = queue.popleft()
+            if cell == goal:
+                break
+            for action in range(4):
+                nxt = int(m.next_cell[cell, action])
+                if nxt not in previous:
+                    previous[nxt] = (cell, action)
+                    queue.append(nxt)
+        moves: List[int] = []
+        if goal in previous:
+            cell = goal
+            while cell != start:
+                cell, action = previous[cell]
+                moves.append(action)
+            moves.reverse()
+        self._paths[key] = moves
+        return list(moves)
+
+
+def lasertag(discount: float = 0.95) -> LaserTag:
+    """LaserTag on our fixed map (:data:`LAYOUT`)."""
+    return LaserTag(LAYOUT, discount)
+
+
+def random_lasertag(rng: np.random.Generator, discount: float = 0.95) -> LaserTag:
+    """LaserTag on a map drawn as DESPOT's code draws one: 8 distinct cells of the 77, uniformly."""
+    picks = rng.choice(ROWS * COLUMNS, size=OBSTACLES, replace=False)
+    return LaserTag(tuple((int(p % COLUMNS), int(p // COLUMNS)) for p in picks), discount)

@@ -1,0 +1,147 @@
+"""pearl_pomdp.online.lasertag: LaserTag's dynamics, laser and belief against values worked by hand."""
+import math
+
+import numpy as np
+import pytest
+
+from pearl_pomdp.online.lasertag import (EAST, LAYOUT, NORTH, SAME_CELL, TAG, WEST, LaserTag, LaserTagBounds,
+                                         lasertag, random_lasertag)
+
+SIGMA = 2.5
+
+
+def phi(x):
+    return 0.5 * (1.0 + math.erf(x / (SIGMA * math.sqrt(2.0))))
+
+
+@pytest.fixture(scope="module")
+def model():
+    return lasertag()
+
+
+def state(m, robot, opponent):
+    return m.index[robot] * m.n + m.index[opponent]
+
+
+def test_the_fixed_map_is_the_draw_of_seed_8_and_connected(model):
+    assert random_lasertag(np.random.default_rng(8)).obstacles == LAYOUT
+    assert model.n == 77 - 8 and model.num_states == 69 * 69 + 1
+    with pytest.raises(ValueError, match="distinct cells"):
+        LaserTag(((0, 0), (0, 0)))
+
+
+def test_the_opponent_moves_away_as_worked_by_hand(model):
+    """Robot (0, 0), opponent (3, 0), level in y: away in x with 0.4, either way in y with 0.2 each
+    (y − 1 is off the grid: it stays), 0.2 stay; the robot's own move does not change it."""
+    m = model
+    s = state(m, (0, 0), (3, 0))
+    T = m.transition_matrix(NORTH).toarray()[s]
+    robot = m.index[(0, 1)]
+    expected = {robot * m.n + m.index[(4, 0)]: 0.4, robot * m.n + m.index[(3, 1)]: 0.2,
+                robot * m.n + m.index[(3, 0)]: 0.4}
+    assert {int(k): round(float(T[k]), 12) for k in np.flatnonzero(T)} == expected
+
+
+def test_a_move_into_the_wall_stays_and_a_tag_ends_only_on_the_same_cell(model):
+    m = model
+    s = state(m, (0, 0), (0, 0))
+    nxt, obs, rew = m.step(np.array([s, s]), WEST, np.full((2, m.uniforms_per_step), 0.99))
+    assert rew.tolist() == [-1.0, -1.0] and (nxt // m.n == m.index[(0, 0)]).all()
+    nxt, obs, rew = m.step(np.array([s]), TAG, np.full((1, m.uniforms_per_step), 0.5))
+    assert nxt.tolist() == [m.terminal] and rew.tolist() == [10.0] and obs.tolist() == [SAME_CELL]
+    other = state(m, (0, 0), (2, 0))
+    nxt, _, rew = m.step(np.array([other]), TAG, np.full((1, m.uniforms_per_step), 0.5))
+    assert rew.tolist() == [-10.0] and nxt[0] != m.terminal and nxt[0] // m.n == m.index[(0, 0)]
+    assert m.step(np.array([m.terminal]), EAST, np.zeros((1, m.uniforms_per_step)))[2].tolist() == [0.0]
+
+
+def test_the_laser_reads_half_normal_buckets_below_the_true_distance(model):
+    """Robot (0, 0), opponent (3, 0): East the beam stops at the opponent, 3 cells: readings 0, 1, 2
+    with 2(Φ(−2) − 0), 2(Φ(−1) − Φ(−2)), 2(Φ(0) − Φ(−1)); North-East a diagonal beam √2 a cell."""
+    m = model
+    s = state(m, (0, 0), (3, 0))
+    assert m.laser_range[s, EAST] == 3.0
+    expected = [2 * phi(-2.0), 2 * (phi(-1.0) - phi(-2.0)), 2 * (phi(0.0) - phi(-1.0))]
+    assert m._reading_p[s, EAST, :3] == pytest.approx(expected, abs=1e-12)
+    assert m._reading_p[s, EAST, 3:].sum() == 0.0 and m._reading_p[s].sum(axis=1) == pytest.approx(1.0, abs=1e-12)
+    x, y, d = 0, 0, 1
+    while (x + d, y + d) in m.index and (x + d, y + d) != (3, 0):
+        d += 1
+    assert m.laser_range[s, 4] == pytest.approx(d * math.sqrt(2.0))
+
+
+def test_step_draws_what_the_likelihood_says(model):
+    """20,000 draws of one step: the readings' frequencies per beam match the distribution, and every
+    drawn observation has the likelihood of its beams' product at the state it was drawn in."""
+    m = model
+    rng = np.random.default_rng(1)
+    s = state(m, (0, 0), (3, 0))
+    count = 20_000
+    nxt, obs, _ = m.step(np.full(count, s), EAST, rng.random((count, m.uniforms_per_step)))
+    for beam in range(8):
+        readings = (obs >> (7 * beam)) & 127
+        for dest in np.unique(nxt)[:2]:
+            seen = np.bincount(readings[nxt == dest], minlength=m._reading_p.shape[2]) / (nxt == dest).sum()
+            assert np.abs(seen - m._reading_p[dest, beam]).max() < 0.03
+    for o, n_ in zip(obs[:200], nxt[:200]):
+        like = m.observation_likelihood(int(o))
+        readings = [(int(o) >> (7 * b)) & 127 for b in range(8)]
+        assert like[n_] == pytest.approx(np.prod([m._reading_p[n_, b, r] for b, r in enumerate(readings)]),
+                                         rel=1e-12)
+        assert like[n_] > 0
+
+
+def test_the_belief_follows_bayes_rule_and_finds_the_robot(model):
+    """From the uniform start, the exact belief after a step is T then the laser's likelihood; after a
+    few steps of an episode the true state keeps positive mass and becomes likely."""
+    m = model
+    rng = np.random.default_rng(3)
+    belief = m.initial_belief()
+    truth = state(m, (2, 3), (8, 2))
+    b0 = belief.b.copy()
+    nxt, obs, _ = m.step(np.array([truth]), EAST, rng.random((1, m.uniforms_per_step)))
+    belief.update(EAST, int(obs[0]))
+    expected = (m.transition_matrix(EAST).T @ b0) * m.observation_likelihood(int(obs[0]))
+    np.testing.assert_allclose(belief.b, expected / expected.sum(), atol=1e-15)
+    current = int(nxt[0])
+    for action in (NORTH, EAST, EAST, NORTH, WEST, EAST):
+        nxt, obs, _ = m.step(np.array([current]), action, rng.random((1, m.uniforms_per_step)))
+        belief.update(action, int(obs[0]))
+        current = int(nxt[0])
+        assert belief.b[current] > 0
+    assert belief.b[current] > 20.0 / m.num_states     # far above the uniform start's 1/4762
+
+
+def test_bounds_by_hand_and_in_order(model):
+    m = model
+    bounds = LaserTagBounds(m)
+    g = m.discount
+    s = state(m, (0, 0), (2, 0))
+    assert bounds.upper(np.array([s])) == pytest.approx(-(1 - g ** 2) / (1 - g) + 10 * g ** 2)
+    same = state(m, (3, 3), (3, 3))
+    assert bounds.upper(np.array([same])) == 10.0
+    assert bounds.lower(np.array([same] * 5), np.random.default_rng(0)) == 10.0   # tag at once
+    rng = np.random.default_rng(2)
+    particles = m.initial_belief().sample(300, rng)
+    assert bounds.lower(particles, rng) <= bounds.upper(particles)
+
+
+def test_despot_plans_lasertag_within_its_budget():
+    """A short episode through the search with the trial budget the tests afford: legal actions,
+    rewards from the model's set, the belief never empties."""
+    from pearl_pomdp.online.despot import Despot, DespotSettings
+
+    m = lasertag()
+    planner = Despot(m, LaserTagBounds(m), DespotSettings(trials=20, scenarios=100))
+    rng = np.random.default_rng(5)
+    belief = m.initial_belief()
+    current = int(belief.sample(1, rng)[0])
+    for t in range(6):
+        result = planner.search(belief.sample(100, np.random.default_rng([5, t])), seed=t)
+        assert 0 <= result.action < 5
+        nxt, obs, rew = m.step(np.array([current]), result.action, rng.random((1, m.uniforms_per_step)))
+        assert rew[0] in (-1.0, -10.0, 10.0)
+        if nxt[0] == m.terminal:
+            break
+        belief.update(result.action, int(obs[0]))
+        current = int(nxt[0])
