@@ -145,3 +145,21 @@ def test_despot_plans_lasertag_within_its_budget():
             break
         belief.update(result.action, int(obs[0]))
         current = int(nxt[0])
+
+
+def test_a_set_of_one_state_takes_its_chase_exactly_and_grouped_agrees(model):
+    """The table's value of a state's own chase is the plan's expected return: 4,000 simulations of
+    the plan agree within their noise; ``grouped`` gives every set what ``lower``/``upper`` give it."""
+    bounds = LaserTagBounds(model)
+    rng = np.random.default_rng(4)
+    for s in (5, 2000, 4000):
+        simulated = bounds._plan_value(np.full(4000, s), bounds._plan(s), rng)
+        assert simulated == pytest.approx(bounds.chase_value(s), abs=0.6)
+        assert bounds.lower(np.array([s, s]), rng) == bounds.chase_value(s)
+    sets = [np.array([5]), np.array([2000, 2000, 2000]), model.initial_belief().sample(50, rng), np.array([4000])]
+    states = np.concatenate(sets)
+    starts = np.concatenate(([0], np.cumsum([len(x) for x in sets])))
+    lowers, uppers = bounds.grouped(states, starts, np.random.default_rng(9))
+    assert uppers == pytest.approx([bounds.upper(x) for x in sets], abs=1e-12)
+    assert lowers[[0, 1, 3]].tolist() == [bounds.chase_value(5), bounds.chase_value(2000), bounds.chase_value(4000)]
+    assert lowers[2] == bounds.lower(sets[2], np.random.default_rng(9))

@@ -260,7 +260,13 @@ class LaserTagBelief:
 
 
 class LaserTagBounds:
-    """LaserTag's bounds on a particle set (module doc): Manhattan above, the mode's open-loop chase below."""
+    """LaserTag's bounds on a particle set (module doc): Manhattan above, the open-loop chase below.
+
+    A set whose particles are all one state (most of a search's nodes: every particle of LaserTag
+    soon reads its own observation) takes the chase's value from a table computed once, exactly
+    (the plan's expected return under the opponent's moves, :meth:`chase_values`): the value the
+    simulation of :meth:`lower` estimates for such a set, without its noise or its cost.
+    """
 
     def __init__(self, model: LaserTag, lower_horizon: int = 40, modes: int = 3):
         self.model = model
@@ -273,10 +279,12 @@ class LaserTagBounds:
         #: How many of the most common particles each give a plan (the best plan's value is the bound:
         #: choosing among plans by the particle set is still a policy of the history).
         self.modes = int(modes)
-        self._paths: Dict[Tuple[int, int], List[int]] = {}
+        self._first_move, self._distance = self._shortest_moves()
+        self.chase_values = self._chase_table()
         self.description = ("upper: each particle's value with the opponent standing at its Manhattan distance; "
                             "lower: the best of the open-loop plans 'shortest path to one of the 3 most common "
-                            "particles' opponent, tag, then moves' (simulated on every particle)")
+                            "particles' opponent, tag, then moves' (simulated on every particle; exact for a "
+                            "set of one state)")
 
     def upper(self, states):
         return float(self.upper_values[np.asarray(states)].mean(dtype=np.float64))
@@ -287,14 +295,33 @@ class LaserTagBounds:
         live = states[states != m.terminal]
         if live.size == 0:
             return 0.0
+        if (states == states[0]).all():
+            return float(self.chase_values[states[0]])
         counts = np.bincount(live)
         best = -math.inf
         for mode in np.argsort(-counts, kind="stable")[: self.modes]:
             if counts[mode] == 0:
                 break
-            plan = self._path(int(mode) // m.n, int(mode) % m.n)[: self.lower_horizon - 1] + [TAG]
-            best = max(best, self._plan_value(states, plan, rng))
+            best = max(best, self._plan_value(states, self._plan(int(mode)), rng))
         return best
+
+    def grouped(self, states: np.ndarray, starts: np.ndarray, rng) -> Tuple[np.ndarray, np.ndarray]:
+        """``(lowers, uppers)`` of the sets ``states[starts[g]:starts[g + 1]]`` in one call: the sets of
+        one state from the table, the others as :meth:`lower` (the search's fast path)."""
+        states = np.asarray(states, dtype=np.int64)
+        first = starts[:-1]
+        sizes = np.diff(starts)
+        uppers = np.add.reduceat(self.upper_values[states], first) / sizes
+        single = np.minimum.reduceat(states, first) == np.maximum.reduceat(states, first)
+        lowers = self.chase_values[states[first]].astype(float)
+        for g in np.flatnonzero(~single):
+            lowers[g] = self.lower(states[starts[g]:starts[g + 1]], rng)
+        return lowers, uppers
+
+    def _plan(self, state: int) -> List[int]:
+        """The chase of ``state``: its robot's shortest path to its opponent (within the horizon), then ``tag``."""
+        n = self.model.n
+        return self._path(state // n, state % n)[: self.lower_horizon - 1] + [TAG]
 
     def _plan_value(self, states: np.ndarray, plan: List[int], rng: np.random.Generator) -> float:
         """The mean discounted return of ``plan`` and then moves forever (−1 a step) on every particle."""
@@ -309,33 +336,76 @@ class LaserTagBounds:
         total += np.where(current == m.terminal, 0.0, tail)
         return float(total.mean())
 
-    def _path(self, start: int, goal: int) -> List[int]:
-        """The moves of a shortest path from cell ``start`` to ``goal`` (breadth first; [] when none)."""
-        key = (start, goal)
-        hit = self._paths.get(key)
-        if hit is not None:
-            return list(hit)
+    def chase_value(self, state: int) -> float:
+        """The exact expected return of ``state``'s own chase (what :meth:`lower` gives a set of it alone)."""
+        return float(self.chase_values[state])
+
+    def _chase_table(self) -> np.ndarray:
+        """``[S]``: every state's own chase, its expected discounted return computed exactly: the
+        distribution over states pushed through the plan's actions (one sparse product per action a
+        step, the states that take it at once), the tail (−1 a step forever) where not yet tagged."""
         m = self.model
-        previous: Dict[int, Tuple[int, int]] = {start: (-1, -1)}
-        queue = deque([start])
-        while queue:
-            cell = queue.popleft()
-            if cell == goal:
-                break
-            for action in range(4):
-                nxt = int(m.next_cell[cell, action])
-                if nxt not in previous:
-                    previous[nxt] = (cell, action)
-                    queue.append(nxt)
+        n, g = m.n, m.discount
+        count = n * n
+        plans = [self._plan(s) for s in range(count)]
+        lengths = np.array([len(p) for p in plans])
+        T = [m.transition_matrix(a) for a in range(len(m.actions))]
+        rewards = np.zeros((len(m.actions), m.num_states))
+        cells = np.arange(count)
+        rewards[:TAG, :count] = -1.0
+        rewards[TAG, :count] = np.where(cells // n == cells % n, TAG_REWARD, -TAG_REWARD)
+        P = sp.identity(m.num_states, format="csr")[:count]
+        values = np.zeros(m.num_states)
+        for t in range(int(lengths.max())):
+            acts = np.array([p[t] if t < len(p) else -1 for p in plans])
+            moved = sp.diags((acts == -1).astype(float)) @ P
+            for a in range(len(m.actions)):
+                chosen = acts == a
+                if chosen.any():
+                    rows = sp.diags(chosen.astype(float)) @ P
+                    values[:count] += g ** t * (rows @ rewards[a])
+                    moved = moved + rows @ T[a]
+            P = moved.tocsr()
+            ended = np.flatnonzero(lengths == t + 1)
+            if ended.size:
+                untagged = 1.0 - P[ended][:, m.terminal].toarray().ravel()
+                values[ended] += -(g ** (t + 1)) / (1.0 - g) * untagged
+        return values
+
+    def _shortest_moves(self) -> Tuple[np.ndarray, np.ndarray]:
+        """``(first_move [goal, cell], distance [goal, cell])``: breadth first from every goal (the moves
+        are reversible), the first move of a shortest path in action order (−1: none, or at the goal)."""
+        m = self.model
+        n = m.n
+        distance = np.full((n, n), -1, dtype=np.int64)
+        first = np.full((n, n), -1, dtype=np.int64)
+        for goal in range(n):
+            distance[goal, goal] = 0
+            queue = deque([goal])
+            while queue:
+                cell = queue.popleft()
+                for action in range(4):
+                    nxt = int(m.next_cell[cell, action])
+                    if distance[goal, nxt] < 0:
+                        distance[goal, nxt] = distance[goal, cell] + 1
+                        queue.append(nxt)
+            for cell in range(n):
+                if distance[goal, cell] > 0:
+                    for action in range(4):
+                        if distance[goal, int(m.next_cell[cell, action])] == distance[goal, cell] - 1:
+                            first[goal, cell] = action
+                            break
+        return first, distance
+
+    def _path(self, start: int, goal: int) -> List[int]:
+        """The moves of a shortest path from cell ``start`` to ``goal`` ([] when none or already there)."""
         moves: List[int] = []
-        if goal in previous:
-            cell = goal
-            while cell != start:
-                cell, action = previous[cell]
-                moves.append(action)
-            moves.reverse()
-        self._paths[key] = moves
-        return list(moves)
+        cell = start
+        while self._first_move[goal, cell] >= 0:
+            action = int(self._first_move[goal, cell])
+            moves.append(action)
+            cell = int(self.model.next_cell[cell, action])
+        return moves
 
 
 def lasertag(discount: float = 0.95) -> LaserTag:
