@@ -163,3 +163,31 @@ def test_a_set_of_one_state_takes_its_chase_exactly_and_grouped_agrees(model):
     assert uppers == pytest.approx([bounds.upper(x) for x in sets], abs=1e-12)
     assert lowers[[0, 1, 3]].tolist() == [bounds.chase_value(5), bounds.chase_value(2000), bounds.chase_value(4000)]
     assert lowers[2] == bounds.lower(sets[2], np.random.default_rng(9))
+
+
+def test_a_step_with_an_action_per_particle_is_the_step_of_each(model):
+    """The bounds simulate many plans at once with ``transition_each``: with one action for all it is
+    ``transition`` bit for bit; −1 leaves a particle where it is, reward 0."""
+    m = model
+    rng = np.random.default_rng(6)
+    states = np.concatenate([m.initial_belief().sample(400, rng), [m.terminal, state(m, (3, 3), (3, 3))]])
+    uniform = rng.random(states.shape[0])
+    for action in range(5):
+        nxt, rew = m.transition(states, action, uniform)
+        each = m.transition_each(states, np.full(states.shape[0], action), uniform)
+        assert np.array_equal(each[0], nxt) and np.array_equal(each[1], rew)
+    nxt, rew = m.transition_each(states, np.full(states.shape[0], -1), uniform)
+    assert np.array_equal(nxt, states) and not rew.any()
+
+
+def test_the_lower_bound_of_a_mixed_set_is_its_best_plan_simulated(model):
+    """A set of two states, 200 particles each: its bound is the best of the two modes' plans run on
+    all 400 particles (checked against each plan's own 4,000-particle simulation), below the upper."""
+    bounds = LaserTagBounds(model)
+    a, b = state(model, (0, 0), (2, 0)), state(model, (9, 5), (1, 0))
+    particles = np.array([a] * 200 + [b] * 200)
+    got = bounds.lower(particles, np.random.default_rng(7))
+    rng = np.random.default_rng(8)
+    reference = max(bounds._plan_value(np.repeat(particles, 10), bounds._plan(s), rng) for s in (a, b))
+    assert got == pytest.approx(reference, abs=0.8)
+    assert got <= bounds.upper(particles)

@@ -172,6 +172,25 @@ class LaserTag:
         nxt = np.where(tagged | ~live, self.terminal, next_rob * n + next_opp)
         return nxt, np.where(live, rewards, 0.0)
 
+    def transition_each(self, states: np.ndarray, actions: np.ndarray,
+                        uniform: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """:meth:`transition` with an action per particle (``actions [N]``; −1: no step, reward 0), the
+        same numbers particle by particle (the bounds simulate many plans in one call)."""
+        states = np.asarray(states, dtype=np.int64)
+        n = self.n
+        acting = actions >= 0
+        live = (states != self.terminal) & acting
+        s = np.where(live, states, 0)
+        rob, opp = s // n, s % n
+        tag = actions == TAG
+        tagged = live & tag & (rob == opp)
+        rewards = np.where(tag, np.where(rob == opp, TAG_REWARD, -TAG_REWARD), -1.0)
+        next_rob = np.where(tag, rob, self.next_cell[rob, np.where(tag | ~acting, 0, actions)])
+        pick = (uniform[:, None] > self._opp_cumulative[s]).sum(axis=1)
+        next_opp = self._opp_cells[s, np.minimum(pick, self._opp_cells.shape[1] - 1)]
+        nxt = np.where(tagged, self.terminal, np.where(live, next_rob * n + next_opp, states))
+        return nxt, np.where(live, rewards, 0.0)
+
     def _observe(self, states: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
         """The laser's observation of each state (``SAME_CELL`` when both share a cell or tagged)."""
         n = self.n
@@ -290,33 +309,61 @@ class LaserTagBounds:
         return float(self.upper_values[np.asarray(states)].mean(dtype=np.float64))
 
     def lower(self, states, rng):
-        m = self.model
         states = np.asarray(states, dtype=np.int64)
-        live = states[states != m.terminal]
-        if live.size == 0:
-            return 0.0
-        if (states == states[0]).all():
-            return float(self.chase_values[states[0]])
-        counts = np.bincount(live)
-        best = -math.inf
-        for mode in np.argsort(-counts, kind="stable")[: self.modes]:
-            if counts[mode] == 0:
-                break
-            best = max(best, self._plan_value(states, self._plan(int(mode)), rng))
-        return best
+        return float(self.grouped(states, np.array([0, states.shape[0]]), rng)[0][0])
 
     def grouped(self, states: np.ndarray, starts: np.ndarray, rng) -> Tuple[np.ndarray, np.ndarray]:
-        """``(lowers, uppers)`` of the sets ``states[starts[g]:starts[g + 1]]`` in one call: the sets of
-        one state from the table, the others as :meth:`lower` (the search's fast path)."""
+        """``(lowers, uppers)`` of the sets ``states[starts[g]:starts[g + 1]]`` in one call (the search's
+        fast path): a set of one state from the table; the others' plans simulated together, every
+        particle under each of its set's plans in one vectorised pass."""
+        m = self.model
         states = np.asarray(states, dtype=np.int64)
         first = starts[:-1]
         sizes = np.diff(starts)
         uppers = np.add.reduceat(self.upper_values[states], first) / sizes
         single = np.minimum.reduceat(states, first) == np.maximum.reduceat(states, first)
         lowers = self.chase_values[states[first]].astype(float)
-        for g in np.flatnonzero(~single):
-            lowers[g] = self.lower(states[starts[g]:starts[g + 1]], rng)
+        mixed = np.flatnonzero(~single)
+        if mixed.size:
+            lowers[mixed] = self._simulated(states, starts, mixed, rng)
         return lowers, uppers
+
+    def _simulated(self, states: np.ndarray, starts: np.ndarray, sets: np.ndarray, rng) -> np.ndarray:
+        """Per set of ``sets``, the best of its modes' plans, each simulated on all its particles."""
+        m = self.model
+        plans: List[List[int]] = []
+        owner: List[int] = []          # per plan: its position in ``sets``
+        rows: List[np.ndarray] = []    # per plan: the particles it runs on
+        for k, g in enumerate(sets):
+            members = states[starts[g]:starts[g + 1]]
+            live = members[members != m.terminal]
+            counts = np.bincount(live) if live.size else np.zeros(1, dtype=np.int64)
+            for mode in np.argsort(-counts, kind="stable")[: self.modes]:
+                if counts[mode] == 0:
+                    break
+                plans.append(self._plan(int(mode)))
+                owner.append(k)
+                rows.append(members)
+        if not plans:
+            return np.zeros(sets.size)
+        length = max(len(p) for p in plans)
+        table = np.full((len(plans), length), -1, dtype=np.int64)
+        for i, plan in enumerate(plans):
+            table[i, :len(plan)] = plan
+        plan_of = np.repeat(np.arange(len(plans)), [r.size for r in rows])
+        current = np.concatenate(rows)
+        total = np.zeros(current.shape[0])
+        for t in range(length):
+            uniform = rng.random((current.shape[0],))
+            current, rewards = m.transition_each(current, table[plan_of, t], uniform)
+            total += m.discount ** t * rewards
+        # After its plan, moves forever: −1 a step where not tagged.
+        ends = np.array([len(p) for p in plans])[plan_of]
+        total += np.where(current == m.terminal, 0.0, -(m.discount ** ends) / (1.0 - m.discount))
+        means = np.bincount(plan_of, weights=total) / np.bincount(plan_of)
+        best = np.full(sets.size, -np.inf)
+        np.maximum.at(best, np.array(owner), means)
+        return np.where(np.isfinite(best), best, 0.0)
 
     def _plan(self, state: int) -> List[int]:
         """The chase of ``state``: its robot's shortest path to its opponent (within the horizon), then ``tag``."""
