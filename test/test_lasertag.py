@@ -35,7 +35,7 @@ def test_the_opponent_moves_away_as_worked_by_hand(model):
     (y − 1 is off the grid: it stays), 0.2 stay; the robot's own move does not change it."""
     m = model
     s = state(m, (0, 0), (3, 0))
-    T = m.transition_matrix(NORTH).toarray()[s]
+    T = m.transition_matrix(NORTH)[s].toarray().ravel()
     robot = m.index[(0, 1)]
     expected = {robot * m.n + m.index[(4, 0)]: 0.4, robot * m.n + m.index[(3, 1)]: 0.2,
                 robot * m.n + m.index[(3, 0)]: 0.4}
@@ -120,7 +120,7 @@ def test_bounds_by_hand_and_in_order(model):
     assert bounds.upper(np.array([s])) == pytest.approx(-(1 - g ** 2) / (1 - g) + 10 * g ** 2)
     same = state(m, (3, 3), (3, 3))
     assert bounds.upper(np.array([same])) == 10.0
-    assert bounds.lower(np.array([same] * 5), np.random.default_rng(0)) == 10.0   # tag at once
+    assert bounds.lower(np.array([same] * 5), np.random.default_rng(0)) == pytest.approx(10.0, abs=1e-9)  # tag at once
     rng = np.random.default_rng(2)
     particles = m.initial_belief().sample(300, rng)
     assert bounds.lower(particles, rng) <= bounds.upper(particles)
@@ -147,14 +147,46 @@ def test_despot_plans_lasertag_within_its_budget():
         current = int(nxt[0])
 
 
-def test_a_set_of_one_state_takes_its_chase_exactly_and_grouped_agrees(model):
-    """The table's value of a state's own chase is the plan's expected return: 4,000 simulations of
-    the plan agree within their noise; ``grouped`` gives every set what ``lower``/``upper`` give it."""
+def _chase_by_hand(model, bounds, particles, plan, rng, walk_steps=0):
+    """The chase simulated with ``transition`` one action at a time (the particles that take it):
+    tag on "same cell", else the plan's move; then the walk's table value, or ``walk_steps`` random
+    moves simulated (tag on "same cell") and −1/(1−γ) discounted past them where not tagged."""
+    g = model.discount
+    current = np.array(particles, dtype=np.int64)
+    total = np.zeros(current.size)
+    steps = list(plan) + [None] * walk_steps
+    for t, move in enumerate(steps):
+        wanted = np.full(current.size, move if move is not None else -1)
+        if move is None:
+            wanted = rng.integers(4, size=current.size)
+        wanted = np.where(bounds.same[current], TAG, wanted)
+        uniform = rng.random(current.size)
+        for action in range(5):
+            chosen = wanted == action
+            if chosen.any():
+                nxt, reward = model.transition(current[chosen], action, uniform[chosen])
+                current[chosen] = nxt
+                total[chosen] += g ** t * reward
+    alive = current != model.terminal
+    if walk_steps == 0:
+        total += g ** len(plan) * bounds.walk_values[current]
+    else:
+        total += np.where(alive, -(g ** len(steps)) / (1 - g), 0.0)
+    return float(total.mean())
+
+
+def test_the_random_walk_and_one_states_chase_are_their_simulations(model):
+    """The walk's exact value (tag on "same cell", else a random move) against 4,000 walks of 150
+    steps; a state's own chase from the table against 4,000 simulations; ``lower`` of a set of one
+    state is the table's; ``grouped`` gives every set what ``lower``/``upper`` give it."""
     bounds = LaserTagBounds(model)
     rng = np.random.default_rng(4)
-    for s in (5, 2000, 4000):
-        simulated = bounds._plan_value(np.full(4000, s), bounds._plan(s), rng)
-        assert simulated == pytest.approx(bounds.chase_value(s), abs=0.6)
+    for s in (5, 4000):
+        walked = _chase_by_hand(model, bounds, [s] * 4000, [], rng, walk_steps=150)
+        assert walked == pytest.approx(bounds.walk_values[s], abs=0.5)
+    for s in (2000, 4000):
+        chased = _chase_by_hand(model, bounds, [s] * 4000, bounds._plan(s), rng)
+        assert chased == pytest.approx(bounds.chase_value(s), abs=0.3)
         assert bounds.lower(np.array([s, s]), rng) == bounds.chase_value(s)
     sets = [np.array([5]), np.array([2000, 2000, 2000]), model.initial_belief().sample(50, rng), np.array([4000])]
     states = np.concatenate(sets)
@@ -181,13 +213,13 @@ def test_a_step_with_an_action_per_particle_is_the_step_of_each(model):
 
 
 def test_the_lower_bound_of_a_mixed_set_is_its_best_plan_simulated(model):
-    """A set of two states, 200 particles each: its bound is the best of the two modes' plans run on
-    all 400 particles (checked against each plan's own 4,000-particle simulation), below the upper."""
+    """A set of two states, 200 particles each: its bound is the best of the two modes' chases run on
+    all 400 particles (checked against each chase simulated particle by particle), below the upper."""
     bounds = LaserTagBounds(model)
     a, b = state(model, (0, 0), (2, 0)), state(model, (9, 5), (1, 0))
     particles = np.array([a] * 200 + [b] * 200)
     got = bounds.lower(particles, np.random.default_rng(7))
     rng = np.random.default_rng(8)
-    reference = max(bounds._plan_value(np.repeat(particles, 10), bounds._plan(s), rng) for s in (a, b))
+    reference = max(_chase_by_hand(model, bounds, np.repeat(particles, 10), bounds._plan(s), rng) for s in (a, b))
     assert got == pytest.approx(reference, abs=0.8)
     assert got <= bounds.upper(particles)

@@ -29,9 +29,10 @@ there is no standard map. Ours (:data:`LAYOUT`) is drawn once with ``numpy.rando
   transition and the 8 beams' likelihoods): the root's particles are drawn from it.
 * :class:`LaserTagBounds` — above, each particle's value if the opponent stood still at its
   Manhattan distance (the opponent never comes closer, so no policy tags sooner: DESPOT's
-  ``MANHATTAN`` bound); below, the best of a few open-loop plans the whole particle set follows:
-  the shortest path from one of the most common particles' robot cell to its opponent, ``tag``,
-  then moves forever (−1 a step), each simulated on every particle.
+  ``MANHATTAN`` bound); below, the best of a few chases, policies of the history: tag when the
+  laser reads "same cell", else walk the shortest path to where one of the set's most common
+  particles puts the opponent, then move at random (as the rollout policy of DESPOT's code does
+  once its path is walked).
 """
 from __future__ import annotations
 
@@ -279,31 +280,47 @@ class LaserTagBelief:
 
 
 class LaserTagBounds:
-    """LaserTag's bounds on a particle set (module doc): Manhattan above, the open-loop chase below.
+    """LaserTag's bounds on a particle set (module doc): Manhattan above, a chase below.
 
-    A set whose particles are all one state (most of a search's nodes: every particle of LaserTag
-    soon reads its own observation) takes the chase's value from a table computed once, exactly
-    (the plan's expected return under the opponent's moves, :meth:`chase_values`): the value the
-    simulation of :meth:`lower` estimates for such a set, without its noise or its cost.
+    The chase is a policy of the history: it tags when the laser last read "same cell" (so a tag
+    never misses), otherwise it follows a shortest path to where one of the set's most common
+    particles puts the opponent, and once the path is walked it moves at random (each move a
+    quarter) until the laser reads "same cell". Its value on a particle is the plan's steps
+    simulated (or, for a set of one state, pushed through exactly) and then the random walk's value
+    at the state where the plan ended, :attr:`walk_values`, solved exactly once. The bound is the
+    best of the plans of the set's :attr:`modes` most common particles.
     """
 
-    def __init__(self, model: LaserTag, lower_horizon: int = 40, modes: int = 3):
+    def __init__(self, model: LaserTag, modes: int = 3):
         self.model = model
         n, g = model.n, model.discount
         xy = np.array(model.cells)
         dist = np.abs(xy[:, None, :] - xy[None, :, :]).sum(axis=2).reshape(-1)
         manhattan = -(1.0 - g ** dist) / (1.0 - g) + TAG_REWARD * g ** dist
         self.upper_values = np.concatenate([manhattan, [0.0]])
-        self.lower_horizon = int(lower_horizon)
-        #: How many of the most common particles each give a plan (the best plan's value is the bound:
-        #: choosing among plans by the particle set is still a policy of the history).
+        #: How many of the most common particles each give a plan (choosing among plans by the
+        #: particle set is still a policy of the history).
         self.modes = int(modes)
         self._first_move, self._distance = self._shortest_moves()
+        cells = np.arange(model.num_states)
+        #: States where the laser reads "same cell" (the chase tags there).
+        self.same = (cells < n * n) & (cells // n == cells % n)
+        moves = [model.transition_matrix(a) for a in range(TAG)]
+        tag = model.transition_matrix(TAG)
+        keep = sp.diags((~self.same).astype(float))
+        on_same = sp.diags(self.same.astype(float))
+        #: Per move, its transition with the tag taken instead wherever the laser reads "same cell".
+        self._chase_T = [(keep @ T + on_same @ tag).tocsr() for T in moves]
+        live = cells != model.terminal
+        self._chase_reward = np.where(self.same, TAG_REWARD, np.where(live, -1.0, 0.0))
+        #: ``[S]``: the value of the random walk that tags on "same cell", (I − γM)⁻¹ r, exact.
+        self.walk_values = self._walk_values()
+        #: ``[S]``: each state's own chase (its plan pushed through exactly, then the walk).
         self.chase_values = self._chase_table()
         self.description = ("upper: each particle's value with the opponent standing at its Manhattan distance; "
-                            "lower: the best of the open-loop plans 'shortest path to one of the 3 most common "
-                            "particles' opponent, tag, then moves' (simulated on every particle; exact for a "
-                            "set of one state)")
+                            "lower: the best of the chases 'tag on the same-cell reading, else the shortest path to "
+                            "one of the 3 most common particles' opponent, then random moves' (the plan simulated, "
+                            "the random walk's exact value after it; exact for a set of one state)")
 
     def upper(self, states):
         return float(self.upper_values[np.asarray(states)].mean(dtype=np.float64))
@@ -316,7 +333,6 @@ class LaserTagBounds:
         """``(lowers, uppers)`` of the sets ``states[starts[g]:starts[g + 1]]`` in one call (the search's
         fast path): a set of one state from the table; the others' plans simulated together, every
         particle under each of its set's plans in one vectorised pass."""
-        m = self.model
         states = np.asarray(states, dtype=np.int64)
         first = starts[:-1]
         sizes = np.diff(starts)
@@ -329,7 +345,7 @@ class LaserTagBounds:
         return lowers, uppers
 
     def _simulated(self, states: np.ndarray, starts: np.ndarray, sets: np.ndarray, rng) -> np.ndarray:
-        """Per set of ``sets``, the best of its modes' plans, each simulated on all its particles."""
+        """Per set of ``sets``, the best of its modes' chases, each simulated on all its particles."""
         m = self.model
         plans: List[List[int]] = []
         owner: List[int] = []          # per plan: its position in ``sets``
@@ -347,76 +363,71 @@ class LaserTagBounds:
         if not plans:
             return np.zeros(sets.size)
         length = max(len(p) for p in plans)
-        table = np.full((len(plans), length), -1, dtype=np.int64)
+        table = np.full((len(plans), length + 1), -1, dtype=np.int64)
         for i, plan in enumerate(plans):
             table[i, :len(plan)] = plan
         plan_of = np.repeat(np.arange(len(plans)), [r.size for r in rows])
+        ends = np.array([len(p) for p in plans])[plan_of]
         current = np.concatenate(rows)
         total = np.zeros(current.shape[0])
         for t in range(length):
+            actions = np.where(self.same[current], TAG, table[plan_of, t])   # −1: this plan has ended
             uniform = rng.random((current.shape[0],))
-            current, rewards = m.transition_each(current, table[plan_of, t], uniform)
+            current, rewards = m.transition_each(current, actions, uniform)
             total += m.discount ** t * rewards
-        # After its plan, moves forever: −1 a step where not tagged.
-        ends = np.array([len(p) for p in plans])[plan_of]
-        total += np.where(current == m.terminal, 0.0, -(m.discount ** ends) / (1.0 - m.discount))
+        total += m.discount ** ends * self.walk_values[current]
         means = np.bincount(plan_of, weights=total) / np.bincount(plan_of)
         best = np.full(sets.size, -np.inf)
         np.maximum.at(best, np.array(owner), means)
         return np.where(np.isfinite(best), best, 0.0)
 
     def _plan(self, state: int) -> List[int]:
-        """The chase of ``state``: its robot's shortest path to its opponent (within the horizon), then ``tag``."""
+        """The moves of ``state``'s chase: its robot's shortest path to its opponent."""
         n = self.model.n
-        return self._path(state // n, state % n)[: self.lower_horizon - 1] + [TAG]
-
-    def _plan_value(self, states: np.ndarray, plan: List[int], rng: np.random.Generator) -> float:
-        """The mean discounted return of ``plan`` and then moves forever (−1 a step) on every particle."""
-        m = self.model
-        current = states.copy()
-        total = np.zeros(states.shape[0])
-        for t, action in enumerate(plan):
-            uniform = rng.random((current.shape[0],))
-            current, rewards = m.transition(current, action, uniform)
-            total += m.discount ** t * rewards
-        tail = -(m.discount ** len(plan)) / (1.0 - m.discount)
-        total += np.where(current == m.terminal, 0.0, tail)
-        return float(total.mean())
+        return self._path(state // n, state % n)
 
     def chase_value(self, state: int) -> float:
         """The exact expected return of ``state``'s own chase (what :meth:`lower` gives a set of it alone)."""
         return float(self.chase_values[state])
 
+    def _walk_values(self) -> np.ndarray:
+        """The random walk's value: tag on "same cell", else each move with ¼, solved exactly."""
+        from scipy.sparse.linalg import spsolve
+
+        m = self.model
+        walk = (self._chase_T[0] + self._chase_T[1] + self._chase_T[2] + self._chase_T[3]) / 4.0
+        system = (sp.identity(m.num_states, format="csc") - m.discount * walk.tocsc()).tocsc()
+        values = np.asarray(spsolve(system, self._chase_reward), dtype=float)
+        values[m.terminal] = 0.0
+        return values
+
     def _chase_table(self) -> np.ndarray:
         """``[S]``: every state's own chase, its expected discounted return computed exactly: the
-        distribution over states pushed through the plan's actions (one sparse product per action a
-        step, the states that take it at once), the tail (−1 a step forever) where not yet tagged."""
+        distribution over states pushed through the plan's moves (one sparse product per move a step,
+        the states that take it at once; the tag wherever the laser reads "same cell"), then the
+        random walk's value where each plan ended."""
         m = self.model
-        n, g = m.n, m.discount
-        count = n * n
+        g = m.discount
+        count = m.n * m.n
         plans = [self._plan(s) for s in range(count)]
         lengths = np.array([len(p) for p in plans])
-        T = [m.transition_matrix(a) for a in range(len(m.actions))]
-        rewards = np.zeros((len(m.actions), m.num_states))
-        cells = np.arange(count)
-        rewards[:TAG, :count] = -1.0
-        rewards[TAG, :count] = np.where(cells // n == cells % n, TAG_REWARD, -TAG_REWARD)
         P = sp.identity(m.num_states, format="csr")[:count]
         values = np.zeros(m.num_states)
-        for t in range(int(lengths.max())):
+        for t in range(int(lengths.max()) + 1):
+            ended = np.flatnonzero(lengths == t)
+            if ended.size:
+                values[ended] += g ** t * (P[ended] @ self.walk_values)
             acts = np.array([p[t] if t < len(p) else -1 for p in plans])
-            moved = sp.diags((acts == -1).astype(float)) @ P
-            for a in range(len(m.actions)):
+            if (acts < 0).all():
+                break
+            moved = sp.diags((acts < 0).astype(float)) @ P
+            for a in range(TAG):
                 chosen = acts == a
                 if chosen.any():
                     rows = sp.diags(chosen.astype(float)) @ P
-                    values[:count] += g ** t * (rows @ rewards[a])
-                    moved = moved + rows @ T[a]
+                    values[:count] += g ** t * (rows @ self._chase_reward)
+                    moved = moved + rows @ self._chase_T[a]
             P = moved.tocsr()
-            ended = np.flatnonzero(lengths == t + 1)
-            if ended.size:
-                untagged = 1.0 - P[ended][:, m.terminal].toarray().ravel()
-                values[ended] += -(g ** (t + 1)) / (1.0 - g) * untagged
         return values
 
     def _shortest_moves(self) -> Tuple[np.ndarray, np.ndarray]:
