@@ -117,7 +117,8 @@ def test_bounds_by_hand_and_in_order(model):
     bounds = LaserTagBounds(m)
     g = m.discount
     s = state(m, (0, 0), (2, 0))
-    assert bounds.upper(np.array([s])) == pytest.approx(-(1 - g ** 2) / (1 - g) + 10 * g ** 2)
+    manhattan = LaserTagBounds(m, upper="manhattan")
+    assert manhattan.upper(np.array([s])) == pytest.approx(-(1 - g ** 2) / (1 - g) + 10 * g ** 2)
     same = state(m, (3, 3), (3, 3))
     assert bounds.upper(np.array([same])) == 10.0
     assert bounds.lower(np.array([same] * 5), np.random.default_rng(0)) == pytest.approx(10.0, abs=1e-9)  # tag at once
@@ -223,3 +224,16 @@ def test_the_lower_bound_of_a_mixed_set_is_its_best_plan_simulated(model):
     reference = max(_chase_by_hand(model, bounds, np.repeat(particles, 10), bounds._plan(s), rng) for s in (a, b))
     assert got == pytest.approx(reference, abs=0.8)
     assert got <= bounds.upper(particles)
+
+
+def test_the_mdp_upper_bound_lies_between_every_chase_and_the_manhattan_bound(model):
+    """The fully observed MDP's value (it sees both cells) is at least the value of every policy of
+    the laser, each state's own chase among them, and at most the Manhattan chase's (the opponent
+    never comes closer); at the start belief it is lower than Manhattan's, so tighter."""
+    mdp, manhattan = LaserTagBounds(model), LaserTagBounds(model, upper="manhattan")
+    assert (mdp.upper_values <= manhattan.upper_values + 1e-12).all()
+    assert (mdp.chase_values <= mdp.upper_values + 1e-9).all()
+    particles = model.initial_belief().sample(500, np.random.default_rng(1))
+    assert mdp.upper(particles) < manhattan.upper(particles) - 1.0
+    with pytest.raises(ValueError, match="upper bound 'sp'"):
+        LaserTagBounds(model, upper="sp")

@@ -27,9 +27,9 @@ there is no standard map. Ours (:data:`LAYOUT`) is drawn once with ``numpy.rando
   (:mod:`pearl_pomdp.online.generative`).
 * :class:`LaserTagBelief` — the exact belief over the 69² cell pairs (Bayes' rule with the
   transition and the 8 beams' likelihoods): the root's particles are drawn from it.
-* :class:`LaserTagBounds` — above, each particle's value if the opponent stood still at its
-  Manhattan distance (the opponent never comes closer, so no policy tags sooner: DESPOT's
-  ``MANHATTAN`` bound); below, the best of a few chases, policies of the history: tag when the
+* :class:`LaserTagBounds` — above, each particle's value in the fully observed MDP (value
+  iteration from the Manhattan chase's, which is a bound too: the opponent never comes closer, so
+  no policy tags sooner; DESPOT's ``MANHATTAN``); below, the best of a few chases, policies of the history: tag when the
   laser reads "same cell", else walk the shortest path to where one of the set's most common
   particles puts the opponent, then move at random (as the rollout policy of DESPOT's code does
   once its path is walked).
@@ -291,20 +291,26 @@ class LaserTagBounds:
     best of the plans of the set's :attr:`modes` most common particles.
     """
 
-    def __init__(self, model: LaserTag, modes: int = 3):
+    def __init__(self, model: LaserTag, modes: int = 3, upper: str = "mdp"):
         self.model = model
         n, g = model.n, model.discount
+        if upper not in ("mdp", "manhattan"):
+            raise ValueError(f"upper bound {upper!r}: expected 'mdp' or 'manhattan'")
         xy = np.array(model.cells)
         dist = np.abs(xy[:, None, :] - xy[None, :, :]).sum(axis=2).reshape(-1)
         manhattan = -(1.0 - g ** dist) / (1.0 - g) + TAG_REWARD * g ** dist
+        #: ``[S]``: the upper bound per state: the fully observed MDP's value (``"mdp"``: it sees
+        #: both cells, so no policy of the laser does better), or the Manhattan chase (``"manhattan"``).
         self.upper_values = np.concatenate([manhattan, [0.0]])
+        if upper == "mdp":
+            self.upper_values = self._mdp_values(self.upper_values)
         #: How many of the most common particles each give a plan (choosing among plans by the
         #: particle set is still a policy of the history).
         self.modes = int(modes)
         self._first_move, self._distance = self._shortest_moves()
         cells = np.arange(model.num_states)
         #: States where the laser reads "same cell" (the chase tags there).
-        self.same = (cells < n * n) & (cells // n == cells % n)
+        self.same = self.same_cell(cells)
         moves = [model.transition_matrix(a) for a in range(TAG)]
         tag = model.transition_matrix(TAG)
         keep = sp.diags((~self.same).astype(float))
@@ -317,8 +323,9 @@ class LaserTagBounds:
         self.walk_values = self._walk_values()
         #: ``[S]``: each state's own chase (its plan pushed through exactly, then the walk).
         self.chase_values = self._chase_table()
-        self.description = ("upper: each particle's value with the opponent standing at its Manhattan distance; "
-                            "lower: the best of the chases 'tag on the same-cell reading, else the shortest path to "
+        self.description = (("upper: each particle's value in the fully observed MDP (value iteration); " if upper == "mdp"
+                             else "upper: each particle's value with the opponent standing at its Manhattan distance; ")
+                            + "lower: the best of the chases 'tag on the same-cell reading, else the shortest path to "
                             "one of the 3 most common particles' opponent, then random moves' (the plan simulated, "
                             "the random walk's exact value after it; exact for a set of one state)")
 
@@ -389,6 +396,32 @@ class LaserTagBounds:
     def chase_value(self, state: int) -> float:
         """The exact expected return of ``state``'s own chase (what :meth:`lower` gives a set of it alone)."""
         return float(self.chase_values[state])
+
+    def _mdp_values(self, start: np.ndarray, tolerance: float = 1e-6, max_sweeps: int = 2000) -> np.ndarray:
+        """The fully observed MDP's values by value iteration from ``start`` (an upper bound, so every
+        iterate stays one: the Bellman operator is monotone and the MDP's value is its fixed point)."""
+        m = self.model
+        T = [m.transition_matrix(a) for a in range(len(m.actions))]
+        cells = np.arange(m.num_states)
+        live = cells != m.terminal
+        rewards = np.where(live, -1.0, 0.0)
+        tag_reward = np.where(self.same_cell(cells), TAG_REWARD, np.where(live, -TAG_REWARD, 0.0))
+        values = start.copy()
+        for _ in range(max_sweeps):
+            q = [rewards + m.discount * (T[a] @ values) for a in range(TAG)]
+            q.append(tag_reward + m.discount * (T[TAG] @ values))
+            new = np.max(q, axis=0)
+            new[m.terminal] = 0.0
+            if np.abs(new - values).max() < tolerance:
+                return new
+            values = new
+        return values
+
+    def same_cell(self, states: np.ndarray) -> np.ndarray:
+        """Whether robot and opponent share a cell (the laser then reads "same cell")."""
+        n = self.model.n
+        states = np.asarray(states)
+        return (states < n * n) & (states // n == states % n)
 
     def _walk_values(self) -> np.ndarray:
         """The random walk's value: tag on "same cell", else each move with ¼, solved exactly."""
