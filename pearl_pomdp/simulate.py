@@ -68,7 +68,10 @@ class EpisodeSampler:
 
     def __init__(self, model: Pomdp) -> None:
         self.trans = [RowSampler(Ta) for Ta in model.T]
-        self.obs_cum = np.cumsum(model.O, axis=2)  # [A, S, Z]
+        # O's cumulative rows are summed when drawn, for the (action, state) pairs drawn only: the
+        # same sums as a cumulative O built here (sequential along o), without the ward's 1.9 s and
+        # 210 MB for its 15 x 233,280 x 15 entries.
+        self.O = np.asarray(model.O)  # [A, S, Z]
         self.b0 = np.asarray(model.b0, dtype=float)
 
     def start(self, u: np.ndarray) -> np.ndarray:
@@ -83,7 +86,7 @@ class EpisodeSampler:
         for a in np.unique(actions):
             rows = np.flatnonzero(actions == a)
             nxt[rows] = self.trans[a].sample(states[rows], u_state[rows])
-        cum = self.obs_cum[actions, nxt]  # [N, Z]
+        cum = np.cumsum(self.O[actions, nxt], axis=1)  # [N, Z]
         return nxt, np.minimum((cum <= (u_obs * cum[:, -1])[:, None]).sum(axis=1), cum.shape[1] - 1)
 
 

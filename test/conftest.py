@@ -124,6 +124,30 @@ def pytest_cmdline_main(config):
             option.loadscopereorder = False
 
 
+#: Files whose tests share no module- or class-scoped fixture (each test builds what it needs; the
+#: planned Pearl policy is the session's, planned once for all workers): under pytest-xdist their
+#: tests are handed out one at a time, so both workers take part. As one unit, the help examples
+#: (~140 s of independent commands on an idle machine) were the suite's largest indivisible piece of
+#: work; split, a loaded run gave one worker 125 s of them and the other 113 s.
+SPLIT_FILES = frozenset({"test/test_cli_help_examples.py"})
+
+
+@pytest.hookimpl(optionalhook=True, tryfirst=True)
+def pytest_xdist_make_scheduler(config, log):
+    """--dist loadfile (what :func:`pytest_cmdline_main` chooses), with each test of
+    :data:`SPLIT_FILES` a unit of its own."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class FileOrTestScheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            path = nodeid.split("::", 1)[0]
+            return nodeid if path in SPLIT_FILES else path
+
+    return FileOrTestScheduling(config, log)
+
+
 def pytest_collection_modifyitems(session, config, items):
     """The files with a ``slow`` test first, the rest after, each group in its collection order: with
     a file per worker at a time, the longest work starts first and the short files fill in around

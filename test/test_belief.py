@@ -112,6 +112,31 @@ def test_large_sparse_model_matches_naive_loop(fused, monkeypatch):
         np.testing.assert_allclose(batch[i], naive_update(T, O, B[i], acts[i], obs[i]), rtol=1e-12, atol=1e-15)
 
 
+def test_the_filters_of_one_model_share_its_operators_until_it_gets_new_arrays():
+    """A study builds a tracker, so a filter, per episode: the next filter on the same model reuses the
+    operators the first built (Pearl's 380 fused ones: ~60 ms), with counters of its own; another model,
+    or this one given a new O, gets operators built from its own arrays."""
+    rng = np.random.default_rng(8)
+    S, A, Z = 70, 2, 3
+    T = [sp.random(S, S, density=0.05, random_state=rng).toarray() + np.eye(S) for _ in range(A)]
+    T = [m / m.sum(axis=1, keepdims=True) for m in T]
+    O = rng.dirichlet(np.ones(Z), size=(A, S))
+    model = Pomdp.create([f"s{i}" for i in range(S)], ["a", "b"], ["x", "y", "z"], T, O, np.zeros((S, A)))
+    first, second = BeliefFilter(model), BeliefFilter(model)
+    assert first._M is not None and second._M is first._M and second._TT is first._TT
+    b = first.update(model.b0, 1, 2)
+    assert (first.updates, second.updates) == (1, 0)
+    assert BeliefFilter(Pomdp.create(model.states, model.actions, model.observations, T, O,
+                                     np.zeros((S, A))))._TT is not first._TT
+    O2 = O.copy()
+    O2[1, :, [0, 2]] = O2[1, :, [2, 0]]
+    model.O = O2
+    third = BeliefFilter(model)
+    assert third._M is not first._M
+    np.testing.assert_allclose(third.update(model.b0, 1, 2), naive_update(T, O2, model.b0, 1, 2), rtol=1e-12)
+    assert not np.allclose(third.update(model.b0, 1, 2), b)
+
+
 def test_zero_likelihood_recovers_and_counts(caplog):
     # "beep" is only ever heard in s2; the belief says we are surely in s0 and stay there.
     O = np.array([[[1.0, 0.0], [1.0, 0.0], [0.5, 0.5]], [[1.0, 0.0]] * 3])

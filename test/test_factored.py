@@ -155,6 +155,20 @@ def test_sparse_transition_build_equals_brute_force_product():
             assert np.allclose(T[s], brute)
 
 
+def test_a_compilation_reads_each_distinct_feature_table_once_and_builds_the_same_T():
+    """compile() shares each feature's factors among the actions with an equal table (Pearl: far fewer
+    tables than actions x features); its T is the one transition_matrix builds alone, bit for bit."""
+    d = load_domain(__import__("pathlib").Path(__file__).resolve().parents[1] / "config" / "pearl.domain.yaml")
+    factors: dict = {}
+    shared = [d.transition_matrix(a, factors) for a in range(len(d.actions))]
+    assert len(factors) < len(d.actions) * len(d.features) / 3
+    for a, Ta in enumerate(d.compile().T):
+        alone = d.transition_matrix(a)
+        assert Ta.shape == alone.shape == shared[a].shape
+        dense = np.asarray(Ta.toarray() if hasattr(Ta, "toarray") else Ta)
+        assert dense.tobytes() == alone.toarray().tobytes() == shared[a].toarray().tobytes()
+
+
 def edit(old, new):
     assert old in TINY, old
     return TINY.replace(old, new)

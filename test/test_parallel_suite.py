@@ -102,3 +102,24 @@ def test_the_readme_command_runs_on_every_core_and_p_no_xdist_runs_in_one_proces
     assert f"{workers} workers [1 item]" in parallel and "] [100%] PASSED" in parallel, parallel
     sequential = run("-p", "no:xdist")
     assert "workers [" not in sequential and "[gw" not in sequential and "PASSED" in sequential, sequential
+
+
+def test_the_help_examples_are_handed_out_one_by_one_and_every_other_file_whole():
+    """conftest's scheduler: the tests of SPLIT_FILES are units of their own (both workers run the help
+    examples), every other file stays one unit (its module fixtures are built once); only for
+    --dist loadfile."""
+    pytest.importorskip("xdist")
+    from types import SimpleNamespace
+
+    import conftest
+
+    loadfile = SimpleNamespace(getvalue=lambda name: {"dist": "loadfile", "tx": ["2*popen"]}[name])
+    scheduler = conftest.pytest_xdist_make_scheduler(config=loadfile, log=None)
+    plan, demo = (f"test/test_cli_help_examples.py::test_help_examples_run_as_written[{c}]" for c in ("plan", "demo"))
+    assert "test/test_cli_help_examples.py" in conftest.SPLIT_FILES
+    assert scheduler._split_scope(plan) == plan and scheduler._split_scope(demo) == demo
+    ward = ["test/test_ward_launch.py::test_the_launch_stops_cleanly[online:5]",
+            "test/test_ward_launch.py::test_the_ward_plans_online_through_the_nodes_as_the_core_does[hierarchical]"]
+    assert {scheduler._split_scope(nodeid) for nodeid in ward} == {"test/test_ward_launch.py"}
+    load = SimpleNamespace(getvalue=lambda name: {"dist": "load", "tx": ["2*popen"]}[name])
+    assert conftest.pytest_xdist_make_scheduler(config=load, log=None) is None

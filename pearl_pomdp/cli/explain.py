@@ -1,7 +1,6 @@
 """Explain a decision: the EXECUTE trace (root → … → primitive) with each subtask's value.
 
-Examples:
-  pearl plan config/pearl.domain.yaml       # once: saves out/policies/pearl
+Examples (after `pearl plan config/pearl.domain.yaml`, which saves out/policies/pearl):
   pearl explain config/pearl.domain.yaml --belief 'UserPresent=yes,ReminderGoal=physio:0.7|none:0.3'
   pearl explain config/pearl.domain.yaml out/policies/pearl --belief UserLocation=physio --json
 

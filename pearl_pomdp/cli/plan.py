@@ -2,7 +2,7 @@
 
 Examples:
   pearl plan config/pearl.domain.yaml            # saves out/policies/pearl (explain/hierarchy find it)
-  pearl plan config/pearl.domain.yaml --hierarchy config/pearl.hierarchy.yaml --out my-policies/pearl
+  pearl plan config/reception.domain.yaml --hierarchy config/reception.hierarchy.yaml --out my-policies/reception
   pearl plan config/pearl.domain.yaml --json --no-save
 
 Hierarchy: --hierarchy FILE, else DOMAIN's sibling NAME.hierarchy.yaml (for NAME.domain.yaml

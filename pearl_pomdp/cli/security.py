@@ -11,11 +11,14 @@ the operator services (named by the policy node's parameters). The topics a trac
 come from the domain's declared inputs, so a domain or launch argument that changes them changes
 the policy. docs/reliability.md ("Who may command the robot") shows how a ROS 2 install with DDS
 security turns it on; the shipped ``config/sros2/pearl.policy.xml`` is this command's output for
-``launch/pearl.launch.xml`` (test/test_sros2_policy.py regenerates and compares).
+``launch/pearl.launch.xml`` (test/test_sros2_policy.py regenerates and compares). Give it the launch
+arguments the robot is started with: with a planned ``policy:=`` the graph is up in seconds; without
+one the policy node first plans the hierarchy, as at a robot's start-up (the same SROS2 policy
+either way).
 
 Examples:
-  pearl security policy launch/pearl.launch.xml > pearl.policy.xml
-  pearl security policy launch/pearl.launch.xml speech:=true --out robot.policy.xml
+  pearl security policy launch/pearl.launch.xml policy:=out/policies/pearl > pearl.policy.xml
+  pearl security policy launch/pearl.launch.xml policy:=out/policies/pearl speech:=true --out robot.policy.xml
 """
 from __future__ import annotations
 

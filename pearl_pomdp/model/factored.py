@@ -313,11 +313,13 @@ class FactoredDomain:
         return cpt.table[tuple(sv[:, p] for p in cpt.parents)] if cpt.parents else np.broadcast_to(
             cpt.table, (self.num_states, cpt.table.shape[-1]))
 
-    def transition_matrix(self, action: Union[str, int]) -> sp.csr_matrix:
+    def transition_matrix(self, action: Union[str, int], factors: Optional[dict] = None) -> sp.csr_matrix:
         """``T[a]`` as CSR ``[S, S]``, built from the per-feature factors without a dense ``S×S`` product.
 
         Each row's support is expanded one feature at a time (only non-zero factors),
-        so the cost is proportional to the number of non-zeros of ``T[a]``.
+        so the cost is proportional to the number of non-zeros of ``T[a]``. ``factors``: a dict
+        the calls of one compilation share, so that a feature's table that several actions have
+        (the ward: 21 distinct of 150) is read over the states once.
         """
         a = self._action_index(action)
         S = self.num_states
@@ -325,13 +327,32 @@ class FactoredDomain:
         cols = np.zeros(S, dtype=np.int64)
         probs = np.ones(S, dtype=float)
         for f, stride in enumerate(self.strides):
-            M = self.feature_transition(a, f)  # [S, n_f]
-            m = M[rows]  # factor of each partial entry, [E, n_f]
-            e_idx, v = np.nonzero(m > 0.0)
-            probs = probs[e_idx] * m[e_idx, v]
+            ptr, v_all, p_all = self._state_factors(a, f, factors)
+            # Each partial entry expands into its current state's non-zero factors, in value order:
+            # the entries (e ascending, then v) that np.nonzero(M[rows] > 0) would give.
+            count = ptr[rows + 1] - ptr[rows]
+            e_idx = np.repeat(np.arange(rows.shape[0]), count)
+            k = np.repeat(ptr[rows] - (np.cumsum(count) - count), count) + np.arange(e_idx.shape[0])
+            probs = probs[e_idx] * p_all[k]
             rows = rows[e_idx]
-            cols = cols[e_idx] + v * stride
+            cols = cols[e_idx] + v_all[k] * stride
         return sp.csr_matrix((probs, (rows, cols)), shape=(S, S))
+
+    def _state_factors(self, a: int, f: int, cache: Optional[dict]) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(ptr [S+1], v, p)``: the non-zero ``P(s'_f = v | s, a) = p`` of every state ``s`` at
+        ``ptr[s]..ptr[s+1]``, values ascending; shared through ``cache`` by equal tables."""
+        cpt = self._transitions[a][f]
+        key = (tuple(cpt.parents), cpt.table.shape, cpt.table.tobytes())
+        if cache is not None and key in cache:
+            return cache[key]
+        M = self.feature_transition(a, f)  # [S, n_f]
+        s_idx, v_all = np.nonzero(M > 0.0)
+        ptr = np.zeros(self.num_states + 1, dtype=np.int64)
+        np.cumsum(np.bincount(s_idx, minlength=self.num_states), out=ptr[1:])
+        found = (ptr, v_all, M[s_idx, v_all])
+        if cache is not None:
+            cache[key] = found
+        return found
 
     def observation_matrix(self, action: Union[str, int]) -> np.ndarray:
         """``[S, Z]``: ``O[a, s', o]`` for one action."""
@@ -372,7 +393,9 @@ class FactoredDomain:
         """
         if self._compiled is None:
             S = self.num_states
-            T = [self.transition_matrix(a) for a in range(len(self.actions))]
+            factors: dict = {}
+            T = [self.transition_matrix(a, factors) for a in range(len(self.actions))]
+            del factors
             # O filled in place and handed over without a copy: at the ward's size (233,280 states,
             # 15 actions and symbols) each float64 [A, S, Z] copy is 420 MB; past LARGE_O_ENTRIES
             # it is float32 (210 MB).

@@ -168,6 +168,46 @@ done:
 }
 
 
+/* The rows of one lower_rows block at a time: each vector row G[U[j]] is read once for the
+ * block (the solver's Gamma is a few hundred vectors over hundreds of states, ~1 MB: read once
+ * per row it was the kernel's cost), and every v_k still adds its terms in ascending j, so the
+ * numbers are those of one row at a time bit for bit. The AVX2 clone (where the CPU has it) only
+ * widens the loop over k; setup.py builds with -ffp-contract=off, so no multiply-add is fused. */
+#define LOWER_BLOCK 8
+
+#if defined(__GNUC__) && defined(__x86_64__) && defined(__has_attribute)
+#if __has_attribute(target_clones)
+#define WIDE_CLONES __attribute__((target_clones("avx2", "default")))
+#endif
+#endif
+#ifndef WIDE_CLONES
+#define WIDE_CLONES
+#endif
+
+/* acc[b * nk + k] = sum_j c_b[j] GT[U[j], k0 + k] for the nb rows c_b = C + r_b * nU (zero c skipped).
+ * Returns -1, or the index j of a state out of range (with a nonzero weight). */
+WIDE_CLONES
+static Py_ssize_t lower_block(const double *C, Py_ssize_t nU, const i64 *U, const i64 *r, Py_ssize_t nb,
+                              const double *G, Py_ssize_t nG, Py_ssize_t cap, Py_ssize_t k0, Py_ssize_t nk,
+                              double *acc) {
+    for (Py_ssize_t x = 0; x < nb * nk; x++) acc[x] = 0.0;
+    for (Py_ssize_t j = 0; j < nU; j++) {
+        const double *g = G + U[j] * cap + k0;
+        int checked = 0;
+        for (Py_ssize_t b = 0; b < nb; b++) {
+            double w = C[r[b] * nU + j];
+            if (w == 0.0) continue;
+            if (!checked) {
+                if (U[j] < 0 || (U[j] + 1) * cap > nG) return j;
+                checked = 1;
+            }
+            double *a = acc + b * nk;
+            for (Py_ssize_t k = 0; k < nk; k++) a[k] += w * g[k];
+        }
+    }
+    return -1;
+}
+
 /* lower_rows(C, nU, U, rows, GT, cap, k0, K, lb, best, only_better) -> None
  *
  * For each flat row r in rows (int64): v_k = sum_j C[r, j] GT[U[j], k] for k in [k0, K)
@@ -189,7 +229,7 @@ static PyObject *lower_rows(PyObject *Py_UNUSED(self), PyObject *args) {
         goto done;
     }
     if (!check_len(&Ub, 8, nU, "U")) goto done;
-    acc = (double *)malloc(sizeof(double) * (size_t)nk);
+    acc = (double *)malloc(sizeof(double) * (size_t)nk * LOWER_BLOCK);
     if (!acc) { PyErr_NoMemory(); goto done; }
     {
         const double *C = (const double *)Cb.buf, *G = (const double *)Gb.buf;
@@ -197,29 +237,28 @@ static PyObject *lower_rows(PyObject *Py_UNUSED(self), PyObject *args) {
         double *lb = (double *)lbb.buf;
         i64 *best = (i64 *)bb.buf;
         Py_ssize_t nC = Cb.len / 8, nG = Gb.len / 8, nlb = lbb.len / 8, nb = bb.len / 8;
-        for (Py_ssize_t t = 0; t < nr; t++) {
-            i64 r = rows[t];
-            if (r < 0 || (r + 1) * nU > nC || r >= nlb || r >= nb) {
-                PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.lower_rows: row out of range");
-                goto done;
-            }
-            const double *c = C + r * nU;
-            for (Py_ssize_t k = 0; k < nk; k++) acc[k] = 0.0;
-            for (Py_ssize_t j = 0; j < nU; j++) {
-                double w = c[j];
-                if (w == 0.0) continue;
-                if ((U[j] + 1) * cap > nG) {
-                    PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.lower_rows: state out of range");
+        for (Py_ssize_t t = 0; t < nr; t += LOWER_BLOCK) {
+            Py_ssize_t n = nr - t < LOWER_BLOCK ? nr - t : LOWER_BLOCK;
+            for (Py_ssize_t b = 0; b < n; b++) {
+                i64 r = rows[t + b];
+                if (r < 0 || (r + 1) * nU > nC || r >= nlb || r >= nb) {
+                    PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.lower_rows: row out of range");
                     goto done;
                 }
-                const double *g = G + U[j] * cap + k0;
-                for (Py_ssize_t k = 0; k < nk; k++) acc[k] += w * g[k];
             }
-            Py_ssize_t jb = 0;
-            double vb = acc[0];
-            for (Py_ssize_t k = 1; k < nk; k++)
-                if (acc[k] > vb) { vb = acc[k]; jb = k; }
-            if (!only_better || vb > lb[r]) { lb[r] = vb; best[r] = k0 + jb; }
+            if (lower_block(C, nU, U, rows + t, n, G, nG, cap, k0, nk, acc) >= 0) {
+                PyErr_SetString(PyExc_IndexError, "_pointbased_kernel.lower_rows: state out of range");
+                goto done;
+            }
+            for (Py_ssize_t b = 0; b < n; b++) {
+                const double *a = acc + b * nk;
+                i64 r = rows[t + b];
+                Py_ssize_t jb = 0;
+                double vb = a[0];
+                for (Py_ssize_t k = 1; k < nk; k++)
+                    if (a[k] > vb) { vb = a[k]; jb = k; }
+                if (!only_better || vb > lb[r]) { lb[r] = vb; best[r] = k0 + jb; }
+            }
         }
     }
     ret = Py_None;

@@ -11,7 +11,7 @@ ws://127.0.0.1:8765 for Foxglove (layout: config/foxglove/pearl.layout.json) and
 
 Examples:
   pearl demo --scenario config/scenarios/table4_dialog.yaml --seed 3
-  pearl plan config/pearl.domain.yaml && pearl demo --json      # uses out/policies/pearl
+  pearl demo --json                                              # uses out/policies/pearl, saved by `pearl plan`
   pearl demo --scenario config/scenarios/figure4_recogniser.yaml # real speech: espeak-ng, noise, pocketsphinx
   pearl demo --domain config/reception.domain.yaml               # the reception robot (docs/reception.md)
 """
