@@ -1,0 +1,99 @@
+"""What the ward's beliefs carry: their support (states with b(s) > 0) along the study's episodes; one JSON object.
+
+Compiles ``config/ward.domain.yaml`` (233,280 states), plans ``config/ward.hierarchy.yaml`` (the
+study's hierarchical policy) and runs the episodes of the study file through the core executive in
+the simulated ward (``pearl_sim.ward.study.run_ward_episode``, the study's world and noise), keeping
+the support of ``b0`` and of every belief the tracker closes a step with. Reports per episode and
+pooled the support as a fraction of the states (p50 / p90 / max) and the belief's bytes on
+``/pearl/belief`` as the complete vector (8 bytes a state) and as its support (4 + 8 bytes a state in
+it), the smaller of which the tracker sends (docs/ros-nodes.md, ``/pearl/belief``).
+
+    OMP_NUM_THREADS=1 .venv/bin/python bench/ward_belief_support.py [--episodes quiet_morning,busy_ward]
+        [--noise 0.1] [--seed-index 0]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+def _fractions(values, total: int) -> dict:
+    import numpy as np
+
+    v = np.asarray(values, dtype=float) / total
+    return {"p50": round(float(np.percentile(v, 50)), 4), "p90": round(float(np.percentile(v, 90)), 4),
+            "max": round(float(v.max()), 4), "min": round(float(v.min()), 4), "n": int(v.size)}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--domain", default=str(REPO / "config/ward.domain.yaml"))
+    ap.add_argument("--hierarchy", default=str(REPO / "config/ward.hierarchy.yaml"))
+    ap.add_argument("--params", default=str(REPO / "config/ward_nodes.yaml"))
+    ap.add_argument("--study", default=str(REPO / "config/scenarios/ward/study.yaml"))
+    ap.add_argument("--episodes", default="", help="episodes of the study file, comma-separated (default: all)")
+    ap.add_argument("--noise", type=float, default=0.1, help="recogniser word error rate")
+    ap.add_argument("--seed-index", type=int, default=0, help="k: the world's seed is the episode's + 1000 k")
+    ap.add_argument("--seed", type=int, default=0, help="the planner's seed")
+    args = ap.parse_args()
+
+    import numpy as np
+
+    from pearl_pomdp.hierarchy import load_hierarchy, plan
+    from pearl_pomdp.model.domain_yaml import load_domain
+    from pearl_sim.planning import Controller
+    from pearl_sim.ward.scenario import load_ward_scenarios
+    from pearl_sim.ward.study import run_ward_episode
+
+    load_start = os.getloadavg()
+    domain = load_domain(args.domain)
+    model = domain.compile()
+    t0 = time.perf_counter()
+    policy = plan(domain, load_hierarchy(args.hierarchy, domain), seed=args.seed)
+    plan_s = time.perf_counter() - t0
+    scenarios = load_ward_scenarios(args.study)
+    wanted = [n for n in args.episodes.split(",") if n]
+    unknown = sorted(set(wanted) - {s.name for s in scenarios})
+    if unknown:
+        ap.error(f"--episodes: {', '.join(unknown)} not in {args.study}")
+    S = model.num_states
+    episodes, pooled = [], []
+    for scenario in scenarios:
+        if wanted and scenario.name not in wanted:
+            continue
+        support = [int(np.count_nonzero(model.b0 > 0))]
+
+        def on_step(world, result, waits, executive):
+            support.append(int(np.count_nonzero(executive.belief > 0)))
+
+        episode = run_ward_episode(scenario, Controller("hierarchical", policy), domain, args.params,
+                                   seed=scenario.seed + 1000 * args.seed_index, word_error_rate=args.noise,
+                                   model=model, on_step=on_step)
+        pooled.extend(support)
+        episodes.append({"name": scenario.name, "steps": episode.steps, "beliefs": len(support),
+                         "support_fraction": _fractions(support, S), "support_states_first": support[:6],
+                         "support_states_last": support[-1]})
+    dense = 8 * S
+    sparse = [4 + 12 * k for k in pooled]        # the support's indices and values (+ its length's 4 bytes)
+    print(json.dumps({
+        "bench": "ward_belief_support", "domain": args.domain, "states": S, "noise": args.noise,
+        "plan_s": round(plan_s, 1), "episodes": episodes,
+        "pooled": {"beliefs": len(pooled), "support_fraction": _fractions(pooled, S),
+                   "dense_bytes": dense,
+                   "sparse_bytes": {"p50": int(np.percentile(sparse, 50)), "p90": int(np.percentile(sparse, 90)),
+                                    "max": int(max(sparse))},
+                   "sparse_smaller": f"{sum(s < dense for s in sparse)}/{len(sparse)}"},
+        "load": {"start": [round(x, 2) for x in load_start], "end": [round(x, 2) for x in os.getloadavg()]},
+    }, indent=1 if sys.stdout.isatty() else None))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
