@@ -4,9 +4,11 @@ Compiles ``config/ward.domain.yaml`` (233,280 states), plans ``config/ward.hiera
 study's hierarchical policy) and runs the episodes of the study file through the core executive in
 the simulated ward (``pearl_sim.ward.study.run_ward_episode``, the study's world and noise), keeping
 the support of ``b0`` and of every belief the tracker closes a step with. Reports per episode and
-pooled the support as a fraction of the states (p50 / p90 / max) and the belief's bytes on
-``/pearl/belief`` as the complete vector (8 bytes a state) and as its support (4 + 8 bytes a state in
-it), the smaller of which the tracker sends (docs/ros-nodes.md, ``/pearl/belief``).
+pooled the support as a fraction of the states (p50 / p90 / max), the states ``/pearl/belief``
+lists (those that differ from ``outside_support``: 0, or the smallest value when every state is
+above 0 — after a zero-likelihood recovery's uniform floor) and the belief's bytes there: the
+complete vector (8 bytes a state) or the listed states (4 + 8 bytes each), whichever is smaller —
+what the tracker sends (docs/ros-nodes.md, "The belief on the wire").
 
     OMP_NUM_THREADS=1 .venv/bin/python bench/ward_belief_support.py [--episodes quiet_morning,busy_ward]
         [--noise 0.1] [--seed-index 0]
@@ -64,32 +66,40 @@ def main() -> int:
     if unknown:
         ap.error(f"--episodes: {', '.join(unknown)} not in {args.study}")
     S = model.num_states
-    episodes, pooled = [], []
+    episodes, pooled, pooled_listed = [], [], []
     for scenario in scenarios:
         if wanted and scenario.name not in wanted:
             continue
-        support = [int(np.count_nonzero(model.b0 > 0))]
+        support, listed = [], []
+
+        def count(b):
+            support.append(int(np.count_nonzero(b > 0)))
+            listed.append(support[-1] if support[-1] < b.size else int(np.count_nonzero(b != b.min())))
+
+        count(model.b0)
 
         def on_step(world, result, waits, executive):
-            support.append(int(np.count_nonzero(executive.belief > 0)))
+            count(executive.belief)
 
         episode = run_ward_episode(scenario, Controller("hierarchical", policy), domain, args.params,
                                    seed=scenario.seed + 1000 * args.seed_index, word_error_rate=args.noise,
                                    model=model, on_step=on_step)
         pooled.extend(support)
+        pooled_listed.extend(listed)
         episodes.append({"name": scenario.name, "steps": episode.steps, "beliefs": len(support),
-                         "support_fraction": _fractions(support, S), "support_states_first": support[:6],
-                         "support_states_last": support[-1]})
+                         "support_fraction": _fractions(support, S), "listed_fraction": _fractions(listed, S),
+                         "support_states_first": support[:6], "support_states_last": support[-1]})
     dense = 8 * S
-    sparse = [4 + 12 * k for k in pooled]        # the support's indices and values (+ its length's 4 bytes)
+    # On the wire: the listed states' indices and values, or the complete vector, whichever is smaller.
+    wire = [min(4 + 12 * k, dense) for k in pooled_listed]
     print(json.dumps({
         "bench": "ward_belief_support", "domain": args.domain, "states": S, "noise": args.noise,
         "plan_s": round(plan_s, 1), "episodes": episodes,
         "pooled": {"beliefs": len(pooled), "support_fraction": _fractions(pooled, S),
-                   "dense_bytes": dense,
-                   "sparse_bytes": {"p50": int(np.percentile(sparse, 50)), "p90": int(np.percentile(sparse, 90)),
-                                    "max": int(max(sparse))},
-                   "sparse_smaller": f"{sum(s < dense for s in sparse)}/{len(sparse)}"},
+                   "listed_fraction": _fractions(pooled_listed, S), "complete_bytes": dense,
+                   "wire_bytes": {"p50": int(np.percentile(wire, 50)), "p90": int(np.percentile(wire, 90)),
+                                  "p99": int(np.percentile(wire, 99)), "max": int(max(wire))},
+                   "listed_smaller": f"{sum(w < dense for w in wire)}/{len(wire)}"},
         "load": {"start": [round(x, 2) for x in load_start], "end": [round(x, 2) for x in os.getloadavg()]},
     }, indent=1 if sys.stdout.isatty() else None))
     return 0

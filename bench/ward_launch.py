@@ -128,11 +128,15 @@ def main() -> int:
     # before the typed interfaces, when the marginals were a second, small message after the belief.
     def on_belief(m):
         marginals.append(time.perf_counter())
-        # What the message carried: its vectors' bytes, and its support (a message without
-        # ``support`` carries the complete belief: its support is counted).
+        # What the message carried: its vectors' bytes, and the belief's support (b > 0): a message
+        # without ``support`` carries the complete belief (its support is counted); one with it lists
+        # the support, or, with ``outside_support`` above 0, every state is in it.
         support = getattr(m, "support", ())
-        counted = len(support) if len(support) else int(np.count_nonzero(np.frombuffer(m.probabilities, dtype=float)))
         states = getattr(m, "num_states", 0) or len(m.probabilities)
+        if not len(support):
+            counted = int(np.count_nonzero(np.frombuffer(m.probabilities, dtype=float)))
+        else:
+            counted = len(support) if m.outside_support == 0.0 else states
         carried.append((8 * len(m.probabilities) + 4 * len(support), counted / states))
 
     node.create_subscription(cv.BeliefMsg, "/pearl/belief", on_belief, LATCHED_QOS)
