@@ -13,7 +13,7 @@ reading on the other side — a belief's whole way from the tracker to the polic
 one-state belief's round trip is the floor (the answer's way back and the executors). Reports
 p50 / p99 / max in ms per form, the serialised bytes, and the machine's load.
 
-    OMP_NUM_THREADS=1 .venv/bin/python bench/belief_transfer.py [--episodes quiet_morning,busy_ward]
+    OMP_NUM_THREADS=1 .venv/bin/python bench/belief_transfer.py [--episodes quiet_morning,busy_ward] [--noise 0.1]
 """
 from __future__ import annotations
 
@@ -29,6 +29,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
 
 #: The echo process: argv = number of states. Answers each belief with its step once it has read it.
 _ECHO = r'''
@@ -62,36 +63,19 @@ def _stats(values):
 
 
 def main() -> int:
+    from ward_belief_support import add_study_arguments, study_beliefs
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--domain", default=str(REPO / "config/ward.domain.yaml"))
-    ap.add_argument("--hierarchy", default=str(REPO / "config/ward.hierarchy.yaml"))
-    ap.add_argument("--params", default=str(REPO / "config/ward_nodes.yaml"))
-    ap.add_argument("--study", default=str(REPO / "config/scenarios/ward/study.yaml"))
-    ap.add_argument("--episodes", default="quiet_morning,busy_ward", help="episodes of the study file, comma-separated")
+    add_study_arguments(ap, episodes="quiet_morning,busy_ward")
     ap.add_argument("--fastdds-profile", type=Path, default=REPO / "config" / "fastdds_profile.xml")
     args = ap.parse_args()
 
     import numpy as np
 
-    from pearl_pomdp.hierarchy import load_hierarchy, plan
-    from pearl_pomdp.model.domain_yaml import load_domain
-    from pearl_sim.planning import Controller
-    from pearl_sim.ward.scenario import load_ward_scenarios
-    from pearl_sim.ward.study import run_ward_episode
-
-    domain = load_domain(args.domain)
-    model = domain.compile()
-    policy = plan(domain, load_hierarchy(args.hierarchy, domain), seed=0)
-    wanted = [n for n in args.episodes.split(",") if n]
-    beliefs = []
-    for scenario in load_ward_scenarios(args.study):
-        if scenario.name in wanted:
-            beliefs.append(np.array(model.b0))
-            run_ward_episode(scenario, Controller("hierarchical", policy), domain, args.params, seed=scenario.seed,
-                             word_error_rate=0.1, model=model,
-                             on_step=lambda world, result, waits, ex: beliefs.append(np.array(ex.belief)))
-    S = model.num_states
-    del policy, model            # (the echo process needs the memory more)
+    beliefs: list = []
+    walk = study_beliefs(ap, args, lambda name, b: beliefs.append(np.array(b)))
+    S = walk["states"]
+    wanted = list(walk["steps"])
 
     import rclpy
     from rclpy.context import Context

@@ -34,27 +34,34 @@ def _fractions(values, total: int) -> dict:
             "max": round(float(v.max()), 4), "min": round(float(v.min()), 4), "n": int(v.size)}
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_ward_files(ap: argparse.ArgumentParser) -> None:
+    """The ward's domain, hierarchy, node parameters and study file as ``ap``'s options."""
     ap.add_argument("--domain", default=str(REPO / "config/ward.domain.yaml"))
     ap.add_argument("--hierarchy", default=str(REPO / "config/ward.hierarchy.yaml"))
     ap.add_argument("--params", default=str(REPO / "config/ward_nodes.yaml"))
     ap.add_argument("--study", default=str(REPO / "config/scenarios/ward/study.yaml"))
-    ap.add_argument("--episodes", default="", help="episodes of the study file, comma-separated (default: all)")
+
+
+def add_study_arguments(ap: argparse.ArgumentParser, episodes: str = "") -> None:
+    """The ward study's files, episodes, noise and seeds as ``ap``'s options (``episodes``: the default)."""
+    add_ward_files(ap)
+    ap.add_argument("--episodes", default=episodes,
+                    help=f"episodes of the study file, comma-separated (default: {episodes or 'all'})")
     ap.add_argument("--noise", type=float, default=0.1, help="recogniser word error rate")
     ap.add_argument("--seed-index", type=int, default=0, help="k: the world's seed is the episode's + 1000 k")
     ap.add_argument("--seed", type=int, default=0, help="the planner's seed")
-    args = ap.parse_args()
 
-    import numpy as np
 
+def study_beliefs(ap: argparse.ArgumentParser, args: argparse.Namespace, on_belief) -> dict:
+    """Plan the hierarchy and run the episodes ``args`` names (:func:`add_study_arguments`), calling
+    ``on_belief(episode_name, belief)`` with ``b0`` and each belief the tracker closes a step with.
+    Returns ``{"states", "plan_s", "steps": {episode: steps}}``."""
     from pearl_pomdp.hierarchy import load_hierarchy, plan
     from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.planning import Controller
     from pearl_sim.ward.scenario import load_ward_scenarios
     from pearl_sim.ward.study import run_ward_episode
 
-    load_start = os.getloadavg()
     domain = load_domain(args.domain)
     model = domain.compile()
     t0 = time.perf_counter()
@@ -65,30 +72,45 @@ def main() -> int:
     unknown = sorted(set(wanted) - {s.name for s in scenarios})
     if unknown:
         ap.error(f"--episodes: {', '.join(unknown)} not in {args.study}")
-    S = model.num_states
-    episodes, pooled, pooled_listed = [], [], []
+    steps = {}
     for scenario in scenarios:
         if wanted and scenario.name not in wanted:
             continue
-        support, listed = [], []
-
-        def count(b):
-            support.append(int(np.count_nonzero(b > 0)))
-            listed.append(support[-1] if support[-1] < b.size else int(np.count_nonzero(b != b.min())))
-
-        count(model.b0)
-
-        def on_step(world, result, waits, executive):
-            count(executive.belief)
-
+        on_belief(scenario.name, model.b0)
         episode = run_ward_episode(scenario, Controller("hierarchical", policy), domain, args.params,
                                    seed=scenario.seed + 1000 * args.seed_index, word_error_rate=args.noise,
-                                   model=model, on_step=on_step)
-        pooled.extend(support)
-        pooled_listed.extend(listed)
-        episodes.append({"name": scenario.name, "steps": episode.steps, "beliefs": len(support),
-                         "support_fraction": _fractions(support, S), "listed_fraction": _fractions(listed, S),
-                         "support_states_first": support[:6], "support_states_last": support[-1]})
+                                   model=model,
+                                   on_step=lambda world, result, waits, ex, name=scenario.name: on_belief(name, ex.belief))
+        steps[scenario.name] = episode.steps
+    return {"states": model.num_states, "plan_s": plan_s, "steps": steps}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_study_arguments(ap)
+    args = ap.parse_args()
+
+    import numpy as np
+
+    load_start = os.getloadavg()
+    support: dict = {}
+    listed: dict = {}
+
+    def count(name, b):
+        k = int(np.count_nonzero(b > 0))
+        support.setdefault(name, []).append(k)
+        listed.setdefault(name, []).append(k if k < b.size else int(np.count_nonzero(b != b.min())))
+
+    walk = study_beliefs(ap, args, count)
+    S, plan_s = walk["states"], walk["plan_s"]
+    episodes, pooled, pooled_listed = [], [], []
+    for name, steps in walk["steps"].items():
+        pooled.extend(support[name])
+        pooled_listed.extend(listed[name])
+        episodes.append({"name": name, "steps": steps, "beliefs": len(support[name]),
+                         "support_fraction": _fractions(support[name], S),
+                         "listed_fraction": _fractions(listed[name], S),
+                         "support_states_first": support[name][:6], "support_states_last": support[name][-1]})
     dense = 8 * S
     # On the wire: the listed states' indices and values, or the complete vector, whichever is smaller.
     wire = [min(4 + 12 * k, dense) for k in pooled_listed]
