@@ -19,14 +19,14 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
 
 
 def main() -> int:
+    from ward_belief_support import add_ward_files
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--domain", default=str(REPO / "config/ward.domain.yaml"))
-    ap.add_argument("--hierarchy", default=str(REPO / "config/ward.hierarchy.yaml"))
-    ap.add_argument("--params", default=str(REPO / "config/ward_nodes.yaml"))
-    ap.add_argument("--study", default=str(REPO / "config/scenarios/ward/study.yaml"))
+    add_ward_files(ap)
     ap.add_argument("--episode", default="quiet_morning", help="an episode of the study file")
     ap.add_argument("--noise", type=float, default=0.1, help="recogniser word error rate")
     ap.add_argument("--seed-index", type=int, default=0, help="k: the world's seed is the episode's + 1000 k")

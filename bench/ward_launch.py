@@ -6,8 +6,9 @@ over DDS on a private domain, localhost discovery), waits for the first action (
 and bounds, reported), then plays a robot for ``--steps`` steps: a drive is answered with its
 arrival, any other action with a call button or a spoken need in turn. Reports per step the
 publish → action wall time (tracker update + belief + decision + action over DDS) and the policy
-node's own decision latency (``latency_s`` of ``/pearl/decision``): p50/p99/max in ms, and the
-machine's load. Issue 24 part 2's target: decision p99 ≤ 100 ms. ``--policy hierarchical`` launches
+node's own decision latency (``latency_s`` of ``/pearl/decision``): p50/p99/max in ms, the
+belief messages' vectors on the wire (``probabilities`` and ``support``, bytes) and their support
+(states with b > 0, as a fraction of the states), and the machine's load. Issue 24 part 2's target: decision p99 ≤ 100 ms. ``--policy hierarchical`` launches
 with ``policy:=`` empty instead, so the policy node plans ``config/ward.hierarchy.yaml`` at start-up
 (its online root, 20 DESPOT trials a decision, and the residents' subtasks) and answers with it.
 
@@ -41,6 +42,17 @@ def _stats(values):
     v = np.asarray(values) * 1000.0
     return {"p50": round(float(np.percentile(v, 50)), 1), "p99": round(float(np.percentile(v, 99)), 1),
             "max": round(float(v.max()), 1), "n": int(v.size)}
+
+
+def _spread(values, scale, digits=0):
+    """p50/p90/max of ``values`` × ``scale`` (``None`` when there are none)."""
+    import numpy as np
+
+    if not values:
+        return None
+    v = np.asarray(values, dtype=float) * scale
+    return {"p50": round(float(np.percentile(v, 50)), digits), "p90": round(float(np.percentile(v, 90)), digits),
+            "max": round(float(v.max()), digits), "n": int(v.size)}
 
 
 def _with_shared_memory(profile: Path, segment: int, out: Path) -> Path:
@@ -78,6 +90,7 @@ def main() -> int:
                          "goes through shared memory instead of UDP")
     args = ap.parse_args()
 
+    import numpy as np
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -107,14 +120,26 @@ def main() -> int:
     node = rclpy.create_node("ward_latency_probe", context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    actions, decisions, marginals = [], [], []
+    actions, decisions, marginals, carried = [], [], [], []
     node.create_subscription(cv.ActionMsg, "/pearl/action", lambda m: actions.append((time.perf_counter(), m)), LATCHED_QOS)
     # The belief's arrival here splits a step's time into publish_to_marginals_ms (the tracker's
     # update of the belief and its publication, marginals included: one pearl_interfaces/Belief) and
     # marginals_to_action_ms (the policy node's decision, the action back). The names are kept from
     # before the typed interfaces, when the marginals were a second, small message after the belief.
-    node.create_subscription(cv.BeliefMsg, "/pearl/belief", lambda m: marginals.append(time.perf_counter()),
-                             LATCHED_QOS)
+    def on_belief(m):
+        marginals.append(time.perf_counter())
+        # What the message carried: its vectors' bytes, and the belief's support (b > 0): a message
+        # without ``support`` carries the complete belief (its support is counted); one with it lists
+        # the support, or, with ``outside_support`` above 0, every state is in it.
+        support = getattr(m, "support", ())
+        states = getattr(m, "num_states", 0) or len(m.probabilities)
+        if not len(support):
+            counted = int(np.count_nonzero(np.frombuffer(m.probabilities, dtype=float)))
+        else:
+            counted = len(support) if m.outside_support == 0.0 else states
+        carried.append((8 * len(m.probabilities) + 4 * len(support), counted / states))
+
+    node.create_subscription(cv.BeliefMsg, "/pearl/belief", on_belief, LATCHED_QOS)
     node.create_subscription(cv.DecisionMsg, "/pearl/decision", lambda m: decisions.append(m), EVENT_QOS)
     pubs = {t: node.create_publisher(cv.RecognisedSpeechMsg if t == "/ward/speech" else cv.TextMsg, t, INPUT_QOS)
             for t in ("/ward/arrived", "/ward/call_button", "/ward/speech")}
@@ -160,6 +185,8 @@ def main() -> int:
                   "policy_node_decision_ms": _stats([x for x in node_latency if x is not None]),
                   "publish_to_marginals_ms": _stats(tracker) if tracker else None,
                   "marginals_to_action_ms": _stats(rest) if rest else None,
+                  "belief_vector_bytes": _spread([c[0] for c in carried], 1),
+                  "belief_support_fraction": _spread([c[1] for c in carried], 1.0, 4),
                   "target_p99_ms": 100.0, "load_avg_1min": os.getloadavg()[0], "cpus": os.cpu_count(),
                   "fastdds_profile": str(args.fastdds_profile), "shm_segment_bytes": args.shm_segment}
         report["meets_target"] = report["observation_to_action_ms"]["p99"] <= 100.0

@@ -13,6 +13,7 @@ from rclpy.serialization import deserialize_message, serialize_message  # noqa: 
 
 from pearl_pomdp.errors import BeliefError  # noqa: E402
 from pearl_pomdp.nodes import conversions as cv  # noqa: E402
+from ros_helpers import REPO  # noqa: E402
 
 
 def test_belief_layout_and_round_trip_through_cdr():
@@ -25,29 +26,162 @@ def test_belief_layout_and_round_trip_through_cdr():
     np.testing.assert_array_equal(cv.msg_to_belief(wire, num_states=4), b)  # float64 on the wire: exact
     assert cv.msg_to_marginals(wire) == {"step": 2, "action": "Go", "observation": "seen",
                                          "marginals": {"A": {"x": 0.3, "y": 0.7}}}
-    # A model larger than MAX_NAMED_STATES: the vector goes out whole, its states unnamed.
+    # A model larger than MAX_NAMED_STATES: its states unnamed (this uniform belief goes by its first
+    # state and the value of all the others).
     big = np.full(cv.MAX_NAMED_STATES + 1, 1.0 / (cv.MAX_NAMED_STATES + 1))
     msg = cv.belief_to_msg(big, state_names=[f"s{i}" for i in range(big.size)])
-    assert list(msg.state_names) == [] and len(msg.probabilities) == big.size
+    assert list(msg.state_names) == [] and msg.num_states == big.size and list(msg.support) == [0]
+    assert cv.msg_to_belief(msg).tobytes() == big.tobytes()
 
 
 @pytest.mark.parametrize("mutate, problem", [
     (lambda m: setattr(m, "state_names", ["a", "b", "c"]), "names 3 states but carries 4 values"),
-    (lambda m: (setattr(m, "probabilities", []), setattr(m, "state_names", [])), "not a distribution"),
+    (lambda m: (setattr(m, "probabilities", []), setattr(m, "state_names", [])),
+     r"num_states is 4 but probabilities \(complete: support is empty\) holds 0 values"),
+    (lambda m: (setattr(m, "probabilities", []), setattr(m, "state_names", []), setattr(m, "num_states", 0)),
+     "not a distribution"),
     (lambda m: setattr(m, "probabilities", [0.5, 0.5, 0.5, 0.5]), "not a distribution"),
     (lambda m: setattr(m, "probabilities", [1.5, -0.5, 0.0, 0.0]), "not a distribution"),
     (lambda m: setattr(m, "probabilities", [math.nan, 0.5, 0.5, 0.0]), "not a distribution"),
 ])
 def test_bad_belief_messages_are_rejected_with_the_reason(mutate, problem):
-    msg = cv.belief_to_msg([0.25] * 4, state_names=["a", "b", "c", "d"])
+    msg = cv.belief_to_msg([0.1, 0.2, 0.3, 0.4], state_names=["a", "b", "c", "d"])   # complete
+    assert list(msg.support) == []
     mutate(msg)
     with pytest.raises(BeliefError, match=problem):
         cv.msg_to_belief(msg)
 
 
+def _pearl_b0():
+    from pearl_pomdp.model.domain_yaml import load_domain
+
+    return load_domain(REPO / "config" / "pearl.domain.yaml").compile().b0
+
+
+def test_a_belief_goes_by_its_support_when_that_is_smaller_and_round_trips_bit_for_bit():
+    b0 = _pearl_b0()                       # Pearl's b0: 2 of its 576 states (b = 0.9, 0.1)
+    msg = cv.belief_to_msg(b0, step=0)
+    assert msg.num_states == 576 and list(msg.support) == np.flatnonzero(b0).tolist() and len(msg.support) == 2
+    assert list(msg.probabilities) == [0.9, 0.1]
+    assert len(serialize_message(msg)) < 200 < 8 * 576
+    wire = deserialize_message(serialize_message(msg), cv.BeliefMsg)
+    assert cv.msg_to_belief(wire, num_states=576).tobytes() == b0.tobytes()
+    # Complete when the support is not smaller: 12 bytes a state in it against 8 a state.
+    b = np.zeros(6)
+    b[:4] = [0.1, 0.2, 0.3, 0.4]           # 4 of 6: not below two thirds
+    msg = cv.belief_to_msg(b)
+    assert list(msg.support) == [] and len(msg.probabilities) == 6 and msg.num_states == 6
+    b[3], b[2] = 0.0, 0.7                  # 3 of 6: by its support
+    msg = cv.belief_to_msg(b)
+    assert list(msg.support) == [0, 1, 2] and list(msg.probabilities) == [0.1, 0.2, 0.7]
+    assert cv.msg_to_belief(deserialize_message(serialize_message(msg), cv.BeliefMsg)).tobytes() == b.tobytes()
+
+
+def test_a_belief_with_a_floor_goes_by_the_states_above_it():
+    """After a zero-likelihood recovery every state has b > 0 (the uniform floor), most of them the same
+    smallest value: the message lists the others and gives that value once, and reads back bit for bit."""
+    from pearl_pomdp.belief import BeliefFilter
+    from pearl_pomdp.model.domain_yaml import load_domain
+
+    model = load_domain(REPO / "config" / "pearl.domain.yaml").compile()
+    tracker = BeliefFilter(model, log_recoveries=False)
+    b, recovered = model.b0, None
+    for a in range(model.num_actions):          # the first action and observation the belief rules out
+        for o in range(model.num_observations):
+            after = tracker.update(b, a, o) if recovered is None else None
+            if after is not None and np.count_nonzero(after) == after.size:
+                recovered = after
+    assert recovered is not None and np.count_nonzero(recovered) == recovered.size == 576
+    floor = recovered.min()
+    listed = np.flatnonzero(recovered != floor)
+    assert 0 < listed.size < 576 * 2 / 3
+    msg = cv.belief_to_msg(recovered)
+    assert msg.outside_support == floor > 0 and list(msg.support) == listed.tolist()
+    wire = deserialize_message(serialize_message(msg), cv.BeliefMsg)
+    assert cv.msg_to_belief(wire, 576).tobytes() == recovered.tobytes()
+    # A uniform belief: its first state listed, the others at its value.
+    uniform = cv.belief_to_msg(np.full(576, 1 / 576))
+    assert list(uniform.support) == [0] and uniform.outside_support == 1 / 576
+    assert cv.msg_to_belief(uniform).tobytes() == np.full(576, 1 / 576).tobytes()
+    # Most states at no one value: complete.
+    spread = np.linspace(1.0, 2.0, 9)
+    assert list(cv.belief_to_msg(spread / spread.sum()).support) == []
+
+
+def test_a_belief_by_its_support_and_the_complete_one_read_the_same():
+    b0 = _pearl_b0()
+    by_support = cv.belief_to_msg(b0, step=3, run=5)
+    complete = cv.belief_to_msg(b0, step=3, run=5)
+    complete.support = []
+    complete.probabilities = b0.tolist()
+    assert len(by_support.support) == 2 and len(complete.probabilities) == 576
+    assert cv.msg_to_belief(by_support, 576).tobytes() == cv.msg_to_belief(complete, 576).tobytes() == b0.tobytes()
+    complete.num_states = 0                # as recorded before num_states: the length of probabilities
+    assert cv.msg_to_belief(complete, 576).tobytes() == b0.tobytes()
+
+
+def _by_support(support, probabilities, num_states=4, outside_support=0.0):
+    msg = cv.belief_to_msg([0.1, 0.2, 0.3, 0.4])
+    msg.support, msg.probabilities, msg.num_states = support, probabilities, num_states
+    msg.outside_support = outside_support
+    return msg
+
+
+@pytest.mark.parametrize("msg, problem, model_states", [
+    (_by_support([0, 4], [0.5, 0.5]), r"support\[1\] = 4 is not a state \(num_states 4\)", None),
+    (_by_support([0, 1], [1.0]), "support has 2 indices but probabilities 1 values", None),
+    (_by_support([2, 1], [0.5, 0.5]), r"support is not increasing: support\[0\] = 2, support\[1\] = 1", None),
+    (_by_support([1, 1], [0.5, 0.5]), r"support is not increasing: support\[0\] = 1, support\[1\] = 1", None),
+    (_by_support([1], [1.0], num_states=0), "support has 1 indices but num_states is 0", None),
+    (_by_support([], [0.25] * 4, num_states=5), r"num_states is 5 but probabilities \(complete", None),
+    (_by_support([0, 1], [0.5, 0.25]), "not a distribution", None),
+    (_by_support([0, 1], [0.5, 0.5], outside_support=math.nan), "outside_support is nan, not a probability", None),
+    (_by_support([0, 1], [0.5, 0.5], outside_support=-0.25), "outside_support is -0.25, not a probability", None),
+    (_by_support([1], [1.0], num_states=4), "num_states is 4, the model has 576", 576),
+])
+def test_a_bad_belief_by_its_support_is_refused_naming_the_field(msg, problem, model_states):
+    with pytest.raises(BeliefError, match=problem):
+        cv.msg_to_belief(msg, model_states)
+
+
+def test_a_message_recorded_before_the_support_reads_as_the_complete_belief():
+    """The shipped bags were recorded with Belief as it was before num_states and support: the bag's own
+    definition says so, and their bytes read as complete beliefs — the same values a decoder of that
+    definition alone (mcap-ros2-support) reads."""
+    from mcap.records import Schema
+    from mcap_ros2.decoder import DecoderFactory
+
+    from pearl_pomdp.bags.reader import BagReader
+
+    reader = BagReader(REPO / "bags" / "figure4_guidance")
+    topic = reader.topics["/pearl/belief"]
+    assert "support" not in topic.definition and "float64[] probabilities" in topic.definition
+    data = next(reader.read_messages(["/pearl/belief"])).data
+    with pytest.raises(Exception, match="deserialize"):   # today's layout is longer
+        deserialize_message(data, cv.BeliefMsg)
+    msg = cv.recorded_belief_msg(data, topic.definition)
+    assert msg.num_states == 0 and list(msg.support) == [] and msg.step == 0
+    alone = DecoderFactory().decoder_for("cdr", Schema(id=1, name=topic.type, encoding="ros2msg",
+                                                       data=topic.definition.encode()))(data)
+    assert list(msg.probabilities) == list(alone.probabilities) and len(alone.probabilities) == 576
+    assert cv.msg_to_belief(msg, 576).tobytes() == np.array(alone.probabilities).tobytes()
+    # A message recorded with today's definition reads as it is, by its support.
+    from pearl_pomdp.bags.msgdefs import message_definition
+
+    today = message_definition("pearl_interfaces/msg/Belief")      # what a bag records now
+    b0 = _pearl_b0()
+    now = cv.recorded_belief_msg(serialize_message(cv.belief_to_msg(b0)), today)
+    assert len(now.support) == 2 and cv.msg_to_belief(now, 576).tobytes() == b0.tobytes()
+    with pytest.raises(BeliefError, match="/pearl/belief: recorded as a pearl_interfaces/Belief with the fields "
+                                          "stamp, step, belief"):
+        cv.recorded_belief_msg(data, "builtin_interfaces/Time stamp\nuint32 step\nfloat64[] belief\n")
+
+
 def test_belief_size_must_match_the_model():
     with pytest.raises(BeliefError, match="has 4 states, the model has 576"):
-        cv.msg_to_belief(cv.belief_to_msg([0.25] * 4), num_states=576)
+        cv.msg_to_belief(cv.belief_to_msg([0.1, 0.2, 0.3, 0.4]), num_states=576)            # complete
+    with pytest.raises(BeliefError, match="num_states is 4, the model has 576"):
+        cv.msg_to_belief(cv.belief_to_msg([0.5, 0.5, 0.0, 0.0]), num_states=576)            # by its support
     with pytest.raises(BeliefError, match="one-dimensional"):
         cv.belief_to_msg(np.eye(2) / 2)
 

@@ -45,7 +45,8 @@ def test_every_interface_of_the_source_folder_is_installed_with_its_fields():
     assert msgs.Belief.get_fields_and_field_types() == {
         "stamp": "builtin_interfaces/Time", "step": "uint32", "run": "uint32", "action": "string",
         "observation": "string", "marginals": "sequence<pearl_interfaces/FeatureMarginal>",
-        "state_names": "sequence<string>", "probabilities": "sequence<double>"}
+        "state_names": "sequence<string>", "probabilities": "sequence<double>", "num_states": "uint32",
+        "support": "sequence<uint32>", "outside_support": "double"}
     assert msgs.OperatorEvent.get_fields_and_field_types()["step"] == "int32"   # -1: before the first belief
     assert msgs.Action.get_fields_and_field_types() == {"stamp": "builtin_interfaces/Time", "name": "string"}
     assert msgs.RecognisedSpeech.get_fields_and_field_types() == {

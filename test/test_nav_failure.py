@@ -304,7 +304,7 @@ def test_over_dds_the_drive_closes_at_its_deadline_diagnostics_say_why_and_actio
         every = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
         listener.create_subscription(Belief, "/pearl/belief",
-                                     lambda m: beliefs.append(np.array(m.probabilities, dtype=float)), every)
+                                     lambda m: beliefs.append(cv.msg_to_belief(m)), every)
         listener.create_subscription(DiagnosticArray, "/diagnostics",
                                      lambda m: statuses.extend(s for s in m.status if "belief_tracker" in s.name), 50)
         assert graph.spin_until(lambda: beliefs and graph.tracker.diag_pub.get_subscription_count() >= 1,

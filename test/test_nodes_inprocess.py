@@ -277,3 +277,74 @@ def test_pearl_inputs_map_to_modality_symbols(ros_context, pearl_policy):
         assert _steps(g, probe, 3)
         assert cv.msg_to_marginals(probe.received["/pearl/belief"][-1])["observation"] == "unknown"
         assert g.tracker.counters()["unknown_speech"] == 1
+
+
+class _Seen:
+    """A decider that keeps every belief the policy node hands it, then decides as ``inner``."""
+
+    def __init__(self, inner):
+        self.inner = inner
+        self.seen: List[np.ndarray] = []
+
+    def execute(self, belief):
+        self.seen.append(np.array(belief))
+        return self.inner.execute(belief)
+
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+
+def test_pearl_beliefs_cross_dds_by_their_support_bit_for_bit_and_bad_ones_are_refused(ros_context, pearl_policy):
+    """Pearl's beliefs have few states with b > 0 (b0: 2 of 576): the tracker sends them by their support,
+    and the probe and the policy node read, through DDS, the tracker's belief bit for bit. A message whose
+    support is out of range, disagrees in length with its values, is not increasing or has another number
+    of states is refused by the policy node, logged with the topic and field, and the node answers the next."""
+    from pearl_pomdp.hierarchy import load_hierarchical_policy
+    from pearl_pomdp.model.domain_yaml import load_domain
+    from ros_helpers import DOMAIN
+
+    context, _ = ros_context
+    domain = load_domain(DOMAIN)
+    model = domain.compile()
+    decider = _Seen(load_hierarchical_policy(pearl_policy, domain))
+    with PearlGraph(context=context, domain=domain, model=model, decider=decider,
+                    overrides={"belief_tracker": {"step_timeout": 0.0}}) as g:
+        probe = _probe(g)
+        _set_clock(g, probe, 50.0)
+        assert _steps(g, probe, 1)
+        _say(probe, "speech", "Could you tell me what TIME it is?", g)
+        assert _steps(g, probe, 2) and g.spin_until(lambda: len(decider.seen) == 2, 10.0)
+        tracked = [model.b0, g.tracker.core.belief]
+        for msg, belief, seen in zip(probe.received["/pearl/belief"], tracked, decider.seen):
+            support = np.flatnonzero(belief)
+            assert support.size < 576 * 2 / 3 and list(msg.support) == support.tolist() and msg.num_states == 576
+            assert len(msg.probabilities) == support.size
+            assert cv.msg_to_belief(msg, 576).tobytes() == belief.tobytes() == seen.tobytes()
+
+        errors: List[str] = []
+        logger = g.policy.get_logger()
+        original_error = logger.error
+        logger.error = lambda text, **kw: (errors.append(text), original_error(text, **kw))[1]
+        bad = probe.publisher("/pearl/belief", cv.BeliefMsg, LATCHED_QOS)
+        assert g.spin_until(lambda: not probe.unmatched([g.policy]), 10.0)
+
+        def sent(support, values, states=576, step=90):
+            msg = cv.belief_to_msg(model.b0, step=step)
+            msg.support, msg.probabilities, msg.num_states = support, values, states
+            return msg
+
+        refusals = [(sent([0, 576], [0.5, 0.5]), "support[1] = 576 is not a state (num_states 576)"),
+                    (sent([0, 1], [1.0]), "support has 2 indices but probabilities 1 values"),
+                    (sent([7, 3], [0.5, 0.5]), "support is not increasing: support[0] = 7, support[1] = 3"),
+                    (sent([3, 3], [0.5, 0.5]), "support is not increasing: support[0] = 3, support[1] = 3"),
+                    (sent([3], [1.0], states=4), "num_states is 4, the model has 576")]
+        for k, (msg, problem) in enumerate(refusals, start=1):
+            bad.publish(msg)
+            assert g.spin_until(lambda: g.policy.rejected == k, 10.0), errors
+            assert errors[-1] == f"rejected belief on /pearl/belief: belief message: {problem}"
+        answered = g.policy.beliefs_answered
+        good = cv.belief_to_msg(g.tracker.core.belief, step=91)
+        assert len(good.support) > 0
+        bad.publish(good)
+        assert g.spin_until(lambda: g.policy.beliefs_answered == answered + 1, 10.0)
+        assert decider.seen[-1].tobytes() == g.tracker.core.belief.tobytes()

@@ -85,7 +85,7 @@ def on_graph(domain, model, decider, scenario, seed, tmp_path):
         every = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
         listener.create_subscription(Belief, "/pearl/belief",
-                                     lambda m: beliefs.append(np.array(m.probabilities, dtype=float)), every)
+                                     lambda m: beliefs.append(cv.msg_to_belief(m)), every)
         assert graph.spin_until(lambda: graph.tracker.belief_pub.get_subscription_count() >= 2 and beliefs,
                                 timeout_sec=20.0), "the listener never got b0"
         driver = SimClockDriver(graph, wait_s=20.0)

@@ -86,6 +86,12 @@ def test_cli_replay_json(tmp_path, capsys):
     assert out["messages_per_second"] > 0
 
 
+def _add_topic_as_recorded(out: BagWriter, topic) -> None:
+    """``topic`` of a bag read (``TopicInfo``) registered in ``out`` with its recorded definition and hash."""
+    out.add_topic(topic.name, topic.type, qos=topic.offered_qos_profiles, definition=topic.definition,
+                  type_hash=topic.type_description_hash)
+
+
 def _copy_bag(src: Path, dst: Path, *, action_override=None, custom=None, retype=None) -> Path:
     """Rewrite ``src`` to ``dst`` (absolute custom_data paths), optionally altering it."""
     from rclpy.serialization import serialize_message
@@ -100,7 +106,10 @@ def _copy_bag(src: Path, dst: Path, *, action_override=None, custom=None, retype
         data = custom
     with BagWriter(dst, custom_data=data) as out:
         for name, t in reader.topics.items():
-            out.add_topic(name, (retype or {}).get(name, t.type), qos=t.offered_qos_profiles)
+            if name in (retype or {}):
+                out.add_topic(name, retype[name], qos=t.offered_qos_profiles)
+            else:   # as recorded: its definition says how to read its messages (an old Belief: complete)
+                _add_topic_as_recorded(out, t)
         k = 0
         for m in reader.messages:
             payload = m.data
@@ -126,8 +135,8 @@ def _with_drive_progress(src: Path, dst: Path, at_s: float, distance: float) -> 
     at_ns = int(at_s * 1e9)
     progress = serialize_message(cv.drive_progress_to_msg("GotoPatientRoom", "room", distance, distance / 0.5, at_s))
     with BagWriter(dst, custom_data=data) as out:
-        for name, t in reader.topics.items():
-            out.add_topic(name, t.type, qos=t.offered_qos_profiles)
+        for t in reader.topics.values():
+            _add_topic_as_recorded(out, t)
         out.add_topic("/pearl/drive_progress", "pearl_interfaces/msg/DriveProgress")
         pending = True
         for m in reader.messages:

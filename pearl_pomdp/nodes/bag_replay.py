@@ -60,7 +60,7 @@ from typing import Any, Dict, List, Optional, Union
 
 from pearl_pomdp.bags import well_known as wk
 from pearl_pomdp.bags.reader import BagError, BagReader
-from pearl_pomdp.errors import PearlError
+from pearl_pomdp.errors import BeliefError, PearlError
 from pearl_pomdp.operator import BY_SERVICE
 
 ACTION_TOPIC = "/pearl/action"
@@ -168,8 +168,10 @@ def _clock_ns(data: bytes) -> int:
 
 
 def recorded_beliefs(reader: BagReader) -> List[List[float]]:
-    """The ``/pearl/belief`` messages recorded in the bag, in order: pearl_interfaces/msg/Belief's
-    probabilities, or the std_msgs/msg/Float64MultiArray of a bag recorded before the typed interfaces."""
+    """The ``/pearl/belief`` messages recorded in the bag, in order, each the complete ``b(s)``:
+    pearl_interfaces/msg/Belief's (complete or by its support; a bag recorded before the support
+    holds complete ones, read by the definition it stores: ``conversions.recorded_belief_msg``), or the
+    std_msgs/msg/Float64MultiArray of a bag recorded before the typed interfaces."""
     from rclpy.serialization import deserialize_message
 
     if BELIEF_TOPIC not in reader.topics:
@@ -180,7 +182,13 @@ def recorded_beliefs(reader: BagReader) -> List[List[float]]:
         return [_belief_values(deserialize_message(m.data, Float64MultiArray)) for m in reader.read_messages([BELIEF_TOPIC])]
     from pearl_pomdp.nodes import conversions as cv
 
-    return [list(deserialize_message(m.data, cv.BeliefMsg).probabilities) for m in reader.read_messages([BELIEF_TOPIC])]
+    where = f"{reader.path}: topic {BELIEF_TOPIC}"
+    definition = reader.topics[BELIEF_TOPIC].definition
+    try:
+        return [cv.msg_to_belief(cv.recorded_belief_msg(m.data, definition, where)).tolist()
+                for m in reader.read_messages([BELIEF_TOPIC])]
+    except BeliefError as err:
+        raise BagError(str(err) if str(err).startswith(where) else f"{where}: {err}") from None
 
 
 def _belief_values(msg) -> List[float]:
@@ -463,8 +471,8 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
         # Transient-local: b0, published when the tracker activated, arrives on matching.
         keep_all = QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        belief_sub = node.create_subscription(cv.BeliefMsg, BELIEF_TOPIC, lambda m: beliefs.append(list(m.probabilities)),
-                                              keep_all)
+        belief_sub = node.create_subscription(cv.BeliefMsg, BELIEF_TOPIC,
+                                              lambda m: beliefs.append(cv.msg_to_belief(m).tolist()), keep_all)
         core = graph.tracker.core
         assert core is not None  # the graph's tracker is configured (autostart)
         # The inputs are the tracker's (its domain's declarations, as its parameters remap them).

@@ -9,10 +9,15 @@ Wire formats (common_interfaces, and this project's pearl_interfaces):
 
 * **belief** — ``pearl_interfaces/Belief``: the step it closes, that step's action and observation
   (empty for ``b0``), one ``FeatureMarginal`` per feature (value names and probabilities; a flat
-  model without features reports one pseudo-feature ``"state"``), and the full belief
-  ``probabilities[s] = b(s)`` in the model's state order (for a factored domain: mixed radix,
-  first feature most significant); :func:`belief_to_msg` names the states in ``state_names`` when
+  model without features reports one pseudo-feature ``"state"``), the model's ``num_states`` and the
+  belief in the model's state order (for a factored domain: mixed radix, first feature most
+  significant): complete (``probabilities[s] = b(s)``, ``support`` empty) or, when fewer than
+  :data:`SPARSE_BELOW` of the states differ from one value — 0, or the uniform floor's after a
+  zero-likelihood recovery —, by the states that do (``probabilities[i] = b(support[i])``, every
+  other state ``outside_support``). :func:`belief_to_msg` names the states in ``state_names`` when
   asked (up to :data:`MAX_NAMED_STATES`), the tracker does not (the marginals name them already).
+  A message recorded before ``num_states``, ``support`` and ``outside_support`` reads as complete
+  (:func:`recorded_belief_msg`).
 * **speech** — ``pearl_interfaces/RecognisedSpeech``: the recognised text, the recogniser's
   confidence in [0, 1] and, when the recogniser mapped it, the speech symbol; stamped. (Bags recorded
   before it hold the JSON ``{"text", "confidence"}`` in a ``std_msgs/String``.)
@@ -72,7 +77,7 @@ from pearl_pomdp.speech import Utterance, parse_speech_message, utterance
 __all__ = [
     "MAX_NAMED_STATES", "ActionMsg", "BeliefMsg", "TextMsg", "DecisionMsg", "OperatorEventMsg", "OperatorProposalMsg",
     "operator_event_to_msg", "msg_to_operator_event", "proposal_to_msg", "msg_to_proposal", "PoseMsg", "DiagnosticsMsg", "ClockMsg",
-    "belief_to_msg", "msg_to_belief", "msg_to_belief_key", "msg_to_marginals",
+    "SPARSE_BELOW", "belief_to_msg", "msg_to_belief", "msg_to_belief_key", "msg_to_marginals", "recorded_belief_msg",
     "text_to_msg", "msg_to_text", "action_to_msg", "msg_to_action",
     "decision_to_msg", "msg_to_decision", "pose_to_msg", "msg_to_pose",
     "diagnostics_to_msg", "msg_to_diagnostics", "seconds_to_time", "time_to_seconds",
@@ -91,6 +96,16 @@ ClockMsg = Clock
 #: A belief message names its states (``state_names``) up to this many; a larger model's order is
 #: the mixed radix of its features (first most significant), as the marginals list them.
 MAX_NAMED_STATES = 4096
+
+#: A belief goes by the states that differ from ``outside_support`` (index and value, 12 bytes a
+#: state) when they are fewer than this fraction of its states; otherwise complete (8 bytes a state),
+#: whichever is smaller.
+SPARSE_BELOW = 2.0 / 3.0
+
+#: The fields ``pearl_interfaces/Belief`` gained after bags were recorded with it, all at its end, with
+#: their CDR (size, alignment): a message recorded before them is the prefix of today's layout
+#: (:func:`recorded_belief_msg`).
+BELIEF_FIELDS_ADDED = {"num_states": (4, 4), "support": (4, 4), "outside_support": (8, 8)}
 
 #: ``DiagnosticStatus`` levels as ints (the message field is one byte).
 DIAG_OK, DIAG_WARN, DIAG_ERROR = (DiagnosticStatus.OK[0], DiagnosticStatus.WARN[0], DiagnosticStatus.ERROR[0])
@@ -120,7 +135,10 @@ def belief_to_msg(belief: np.ndarray, marginals: Optional[Mapping[str, Mapping[s
                   action: Optional[str] = None, observation: Optional[str] = None,
                   state_names: Sequence[str] = (), stamp_s: float = 0.0, run: int = 0) -> BeliefMsg:
     """A ``[S]`` belief as a ``pearl_interfaces/Belief``: ``probabilities`` in the model's state order
-    (named by ``state_names`` when given and at most :data:`MAX_NAMED_STATES` long), the per-feature
+    (named by ``state_names`` when given and at most :data:`MAX_NAMED_STATES` long) — the states with
+    ``b(s) != 0`` (or, when every state is above 0, those above the smallest value, ``outside_support``)
+    and their ``support`` when they are fewer than :data:`SPARSE_BELOW` of the states, else every state,
+    ``support`` empty (the values are ``b``'s, bit for bit) —, the per-feature
     ``marginals`` ``{feature: {value: p}}``, the step it closes and that step's action and observation;
     ``run`` the tracker's run (0: none), so a policy answers each ``(run, step)`` once even when a
     restarted tracker publishes it again (docs/reliability.md, "Crashes")."""
@@ -130,9 +148,21 @@ def belief_to_msg(belief: np.ndarray, marginals: Optional[Mapping[str, Mapping[s
     if run < 0:
         raise BeliefError(f"belief run must be a whole number >= 0, got {run}")
     msg = BeliefMsg(stamp=seconds_to_time(max(0.0, stamp_s)), step=int(step), action=action or "",
-                    observation=observation or "", run=int(run))
-    # array('d') is taken as is by the generated setter (a list is checked element by element).
-    msg.probabilities = array.array("d", np.ascontiguousarray(b).tobytes())
+                    observation=observation or "", run=int(run), num_states=b.size)
+    support = np.flatnonzero(b)
+    outside = 0.0
+    if support.size == b.size:
+        # Every state > 0 (a zero-likelihood recovery's uniform floor): most may share the smallest value.
+        outside = float(b.min())
+        # (A uniform belief lists its first state: an empty support would say "complete".)
+        support = np.flatnonzero(b != outside) if (b != outside).any() else np.zeros(1, dtype=np.int64)
+    # array('d') / array('I') are taken as is by the generated setters (a list is checked element by element).
+    if support.size < SPARSE_BELOW * b.size:
+        msg.support = array.array("I", support.astype(np.uint32).tobytes())
+        msg.probabilities = array.array("d", b[support].tobytes())
+        msg.outside_support = outside
+    else:
+        msg.probabilities = array.array("d", np.ascontiguousarray(b).tobytes())
     if state_names and len(state_names) <= MAX_NAMED_STATES:
         msg.state_names = [str(n) for n in state_names]
     msg.marginals = [FeatureMarginalMsg(feature=str(f), values=[str(v) for v in vals],
@@ -148,13 +178,29 @@ def msg_to_belief_key(msg: BeliefMsg) -> Optional[Tuple[int, int]]:
 
 
 def msg_to_belief(msg: BeliefMsg, num_states: Optional[int] = None) -> np.ndarray:
-    """The ``[S]`` belief of a ``pearl_interfaces/Belief`` (its ``probabilities``).
+    """The ``[S]`` belief of a ``pearl_interfaces/Belief``: its ``probabilities``, complete or by its
+    ``support`` (every state outside it ``outside_support``). A message without ``num_states`` and
+    ``support`` (decoded with a definition from before them) is complete.
 
     Raises:
-        BeliefError: the state names disagree in number with the probabilities, the size disagrees
-            with ``num_states``, or the data is not a distribution.
+        BeliefError: (naming the field) ``support`` and ``probabilities`` differ in length, an index of
+            ``support`` is not below ``num_states`` or not above the one before it, ``num_states``
+            disagrees with a complete ``probabilities``, the state names disagree in number with the
+            states, the size disagrees with ``num_states``, or the data is not a distribution.
     """
-    b = np.asarray(msg.probabilities, dtype=float)
+    values = np.asarray(msg.probabilities, dtype=float)
+    support = getattr(msg, "support", ())
+    states = int(getattr(msg, "num_states", 0))
+    if len(support):
+        if num_states is not None and states != num_states:   # (checked before a vector of that size is made)
+            raise BeliefError(f"belief message: num_states is {states}, the model has {num_states}")
+        b = _from_support(np.asarray(support, dtype=np.int64), values, states,
+                          float(getattr(msg, "outside_support", 0.0)))
+    else:
+        b = values
+        if states and b.size != states:
+            raise BeliefError(f"belief message: num_states is {states} but probabilities (complete: support is empty) "
+                              f"holds {b.size} values")
     if len(msg.state_names) and len(msg.state_names) != b.size:
         raise BeliefError(f"belief message names {len(msg.state_names)} states but carries {b.size} values")
     if num_states is not None and b.size != num_states:
@@ -162,6 +208,75 @@ def msg_to_belief(msg: BeliefMsg, num_states: Optional[int] = None) -> np.ndarra
     if b.size == 0 or not np.isfinite(b).all() or (b < -1e-12).any() or abs(b.sum() - 1.0) > 1e-6:
         raise BeliefError(f"belief message is not a distribution (sum {b.sum():.9g}, min {b.min(initial=0):.3g})")
     return b
+
+
+def _from_support(support: np.ndarray, values: np.ndarray, states: int, outside: float) -> np.ndarray:
+    """The ``[states]`` belief with ``values`` at ``support`` and ``outside`` elsewhere (BeliefError
+    naming the field)."""
+    if support.size != values.size:
+        raise BeliefError(f"belief message: support has {support.size} indices but probabilities {values.size} values")
+    if states <= 0:
+        raise BeliefError(f"belief message: support has {support.size} indices but num_states is 0")
+    outside_range = (support >= states) | (support < 0)
+    if outside_range.any():
+        i = int(np.flatnonzero(outside_range)[0])
+        raise BeliefError(f"belief message: support[{i}] = {int(support[i])} is not a state (num_states {states})")
+    steps = np.diff(support)
+    if (steps <= 0).any():
+        i = int(np.flatnonzero(steps <= 0)[0]) + 1
+        raise BeliefError(f"belief message: support is not increasing: support[{i - 1}] = {int(support[i - 1])}, "
+                          f"support[{i}] = {int(support[i])}")
+    if not (math.isfinite(outside) and outside >= 0.0):
+        raise BeliefError(f"belief message: outside_support is {outside}, not a probability")
+    b = np.full(states, outside)
+    b[support] = values
+    return b
+
+
+def _root_fields(definition: str) -> Tuple[str, ...]:
+    """The field names of a ``.msg`` definition as rosbag2 stores it (the root type's part, before the
+    first ``====`` line of its dependencies; comments, constants and blank lines left out)."""
+    names = []
+    for line in definition.splitlines():
+        if line.startswith("=" * 10):
+            break
+        text = line.split("#", 1)[0].strip()
+        parts = text.split()
+        if len(parts) >= 2 and "=" not in parts[1] and "=" not in parts[0]:
+            names.append(parts[1])
+    return tuple(names)
+
+
+def recorded_belief_msg(data: bytes, definition: str, where: str = "/pearl/belief") -> BeliefMsg:
+    """A recorded ``pearl_interfaces/Belief`` (its CDR bytes) read as today's message, by the definition
+    the bag stores for it (``BagReader``'s ``TopicInfo.definition``): a message recorded before
+    :data:`BELIEF_FIELDS_ADDED` lacks only those, at its end, so it reads with them at their defaults
+    (``num_states`` 0, ``support`` empty, ``outside_support`` 0: its ``probabilities`` are the complete
+    belief).
+
+    Raises:
+        BeliefError: (naming ``where``) the definition has other fields than today's or today's
+            without the added ones, or the bytes do not decode as the message.
+    """
+    from rclpy.serialization import deserialize_message
+
+    current = tuple(BeliefMsg.get_fields_and_field_types())
+    older = tuple(f for f in current if f not in BELIEF_FIELDS_ADDED)
+    recorded = _root_fields(definition) if definition.strip() else current
+    if recorded == older:
+        # Each added field at its default (zero bytes), aligned as CDR aligns it: from the payload's
+        # start, after the 4-byte encapsulation header.
+        out = bytearray(data)
+        for size, align in BELIEF_FIELDS_ADDED.values():
+            out += b"\0" * ((-(len(out) - 4)) % align + size)
+        data = bytes(out)
+    elif recorded != current:
+        raise BeliefError(f"{where}: recorded as a pearl_interfaces/Belief with the fields {', '.join(recorded)}; "
+                          f"this version reads {', '.join(current)} (or without {', '.join(BELIEF_FIELDS_ADDED)})")
+    try:
+        return deserialize_message(data, BeliefMsg)
+    except Exception as err:   # rclpy's RMWError: the bytes are not this layout
+        raise BeliefError(f"{where}: a recorded message does not decode as pearl_interfaces/Belief ({err})") from None
 
 
 def msg_to_marginals(msg: BeliefMsg) -> dict:
