@@ -4,14 +4,17 @@ The policy decides along its own episodes in the flat model compiled from the do
 (:func:`pearl_pomdp.simulate.simulate` calls ``action(belief)`` once per step and episode, so
 the beliefs are the ones a robot running this policy meets, in the order it meets them, and
 the per-marginal cache works as it does on the robot). Each call's ``HierarchicalPolicy.execute``
-is timed with ``time.perf_counter``. Reported per root search depth (``--lookahead 0,1``: the
+is timed with ``time.perf_counter``. With ``--beliefs FILE.npy`` the beliefs are those of the file
+instead (``bench/latency.py --mode inprocess --save-beliefs FILE.npy`` saves the ones its simulated
+resident leads the policy node to, wide ones the per-marginal cache rarely serves), each decided
+once at the policy's own root depth. Otherwise reported per root search depth (``--lookahead 0,1``: the
 root's ``lookahead``, the children's offers searched that many more steps within
 ``--expansions`` expanded beliefs): p50/p90/p99/max/mean in ms and the expansions per decision
 (``Decision.expansions``). Start-up (loading or planning the policy, compiling the model) is
 reported apart and is not in the per-decision figures. Issue 21's target: p99 ≤ 2 ms.
 
     OMP_NUM_THREADS=1 .venv/bin/python bench/decision_time.py [--policy DIR] [--episodes 10]
-        [--steps 100] [--lookahead 0,1] [--expansions 256]
+        [--steps 100] [--lookahead 0,1] [--expansions 256] [--beliefs FILE.npy]
 """
 from __future__ import annotations
 
@@ -58,6 +61,10 @@ def main() -> int:
     ap.add_argument("--lookahead", default="0,1", help="root search depths to time, comma-separated")
     ap.add_argument("--expansions", type=int, default=256, help="expanded beliefs per decision at depth > 0")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--beliefs", metavar="FILE.npy",
+                    help="time EXECUTE on these beliefs ([N, S], e.g. bench/latency.py --mode inprocess "
+                         "--save-beliefs: the resident's, wide ones the per-marginal cache rarely serves) "
+                         "instead of the policy's own episodes; each once, in order, from a cold cache")
     args = ap.parse_args()
 
     t0 = time.perf_counter()
@@ -72,7 +79,23 @@ def main() -> int:
     startup = time.perf_counter() - t0
     root = policy.subtasks[policy.root]
     rows = []
-    for depth in [int(d) for d in args.lookahead.split(",") if d]:
+    if args.beliefs:
+        beliefs = np.load(args.beliefs)
+        if beliefs.ndim != 2 or beliefs.shape[1] != model.num_states:
+            ap.error(f"--beliefs {args.beliefs}: shape {beliefs.shape}, expected [N, {model.num_states}]")
+        policy._pick_cache.clear()
+        seconds = []
+        for b in beliefs:
+            t1 = time.perf_counter()
+            policy.execute(b)
+            seconds.append(time.perf_counter() - t1)
+        ms = np.array(seconds) * 1000.0
+        rows.append({"beliefs": args.beliefs, "decisions": int(ms.size),
+                     "support_mean": round(float((beliefs > 0).sum(axis=1).mean()), 1),
+                     "p50_ms": round(float(np.percentile(ms, 50)), 3), "p90_ms": round(float(np.percentile(ms, 90)), 3),
+                     "p99_ms": round(float(np.percentile(ms, 99)), 3), "max_ms": round(float(ms.max()), 3),
+                     "mean_ms": round(float(ms.mean()), 3)})
+    for depth in ([] if args.beliefs else [int(d) for d in args.lookahead.split(",") if d]):
         root.search_depth, root.expansions = 1 + depth, args.expansions
         policy._pick_cache.clear()   # each depth starts cold, as a freshly started node does
         timed = _TimedPolicy(policy)

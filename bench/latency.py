@@ -134,7 +134,19 @@ def _drive(probe_node, executor, steps, warmup, timeout=10.0, on_measure=None):
     return latencies
 
 
-def run_inprocess(policy_dir, steps, warmup):
+class _RecordingDecider:
+    """The policy's ``execute``, keeping every belief it was asked about (``--save-beliefs``)."""
+
+    def __init__(self, policy):
+        self.policy = policy
+        self.beliefs = []
+
+    def execute(self, belief):
+        self.beliefs.append(np.array(belief, dtype=float))
+        return self.policy.execute(belief)
+
+
+def run_inprocess(policy_dir, steps, warmup, save_beliefs=None):
     import rclpy
 
     from pearl_pomdp.hierarchy import load_hierarchical_policy
@@ -144,6 +156,20 @@ def run_inprocess(policy_dir, steps, warmup):
     domain = load_domain(REPO / "config" / "pearl.domain.yaml")
     model = domain.compile()
     decider = load_hierarchical_policy(policy_dir, domain)
+    if save_beliefs:
+        decider = _RecordingDecider(decider)
+    try:
+        return _run_graph(domain, model, decider, steps, warmup)
+    finally:
+        if save_beliefs:
+            np.save(save_beliefs, np.array(decider.beliefs))
+
+
+def _run_graph(domain, model, decider, steps, warmup):
+    import rclpy
+
+    from pearl_pomdp.nodes.graph import PearlGraph
+
     with PearlGraph(domain_id=_domain_id(1), domain=domain, model=model, decider=decider, use_sim_time=False,
                     parameter_services=PARAMETER_SERVICES,
                     args=["--ros-args", "--log-level", "error"],
@@ -332,6 +358,9 @@ def main(argv=None):
                         help="in-process: build the nodes without parameter services (fewer entities per spin)")
     parser.add_argument("--journal-sync", choices=["fsync", "background", "none"], default=None,
                         help="multi-process: the tracker's and the policy's journal_sync (default: the nodes' own)")
+    parser.add_argument("--save-beliefs", metavar="FILE.npy",
+                        help="in-process: save every belief the policy decided on ([N, S]; for "
+                             "bench/decision_time.py --beliefs)")
     parser.add_argument("--no-journal", action="store_true",
                         help="multi-process: launch with journal:=false (no crash journal)")
     args = parser.parse_args(argv)
@@ -349,7 +378,7 @@ def main(argv=None):
            "load_before": [round(x, 2) for x in os.getloadavg()]}
     if args.mode in ("inprocess", "both"):
         print("in-process ...", file=sys.stderr)
-        out["inprocess"] = _stats(run_inprocess(policy, args.steps, args.warmup))
+        out["inprocess"] = _stats(run_inprocess(policy, args.steps, args.warmup, args.save_beliefs))
     if args.mode in ("multiprocess", "both"):
         print("multi-process ...", file=sys.stderr)
         out["multiprocess"] = _stats(run_multiprocess(policy, args.steps, args.warmup))
