@@ -156,26 +156,17 @@ def run_inprocess(policy_dir, steps, warmup, save_beliefs=None):
     domain = load_domain(REPO / "config" / "pearl.domain.yaml")
     model = domain.compile()
     decider = load_hierarchical_policy(policy_dir, domain)
-    if save_beliefs:
-        decider = _RecordingDecider(decider)
+    recorder = _RecordingDecider(decider) if save_beliefs else None
     try:
-        return _run_graph(domain, model, decider, steps, warmup)
+        with PearlGraph(domain_id=_domain_id(1), domain=domain, model=model, decider=recorder or decider,
+                        use_sim_time=False, parameter_services=PARAMETER_SERVICES,
+                        args=["--ros-args", "--log-level", "error"],
+                        overrides={"belief_tracker": {"step_timeout": 0.0}}) as g:
+            node = g.add_node(rclpy.create_node("latency_probe", context=g.context))
+            return _drive(node, g.executor, steps, warmup)
     finally:
-        if save_beliefs:
-            np.save(save_beliefs, np.array(decider.beliefs))
-
-
-def _run_graph(domain, model, decider, steps, warmup):
-    import rclpy
-
-    from pearl_pomdp.nodes.graph import PearlGraph
-
-    with PearlGraph(domain_id=_domain_id(1), domain=domain, model=model, decider=decider, use_sim_time=False,
-                    parameter_services=PARAMETER_SERVICES,
-                    args=["--ros-args", "--log-level", "error"],
-                    overrides={"belief_tracker": {"step_timeout": 0.0}}) as g:
-        node = g.add_node(rclpy.create_node("latency_probe", context=g.context))
-        return _drive(node, g.executor, steps, warmup)
+        if recorder is not None:
+            np.save(save_beliefs, np.array(recorder.beliefs))
 
 
 def _domain_id(offset):

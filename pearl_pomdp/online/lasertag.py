@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict, deque
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -154,29 +154,14 @@ class LaserTag:
 
     def transition(self, states, action: int, uniform: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """``(next_states, rewards)`` of :meth:`step` without the observation (``uniform [N]``: the
-        opponent's move)."""
+        opponent's move): :meth:`transition_each` with ``action`` for every particle."""
         states = np.asarray(states, dtype=np.int64)
-        n = self.n
-        live = states != self.terminal
-        s = np.where(live, states, 0)
-        rob, opp = s // n, s % n
-        if action == TAG:
-            tagged = live & (rob == opp)
-            rewards = np.where(tagged, TAG_REWARD, -TAG_REWARD)
-            next_rob = rob
-        else:
-            tagged = np.zeros(states.shape, dtype=bool)
-            rewards = np.full(states.shape, -1.0)
-            next_rob = self.next_cell[rob, action]
-        pick = (uniform[:, None] > self._opp_cumulative[s]).sum(axis=1)
-        next_opp = self._opp_cells[s, np.minimum(pick, self._opp_cells.shape[1] - 1)]
-        nxt = np.where(tagged | ~live, self.terminal, next_rob * n + next_opp)
-        return nxt, np.where(live, rewards, 0.0)
+        return self.transition_each(states, np.full(states.shape, action, dtype=np.int64), uniform)
 
     def transition_each(self, states: np.ndarray, actions: np.ndarray,
                         uniform: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-        """:meth:`transition` with an action per particle (``actions [N]``; −1: no step, reward 0), the
-        same numbers particle by particle (the bounds simulate many plans in one call)."""
+        """``(next_states, rewards)`` with an action per particle (``actions [N]``; −1: no step, reward
+        0): the bounds simulate many plans in one call, :meth:`transition` one action."""
         states = np.asarray(states, dtype=np.int64)
         n = self.n
         acting = actions >= 0
@@ -293,7 +278,7 @@ class LaserTagBounds:
 
     def __init__(self, model: LaserTag, modes: int = 3, upper: str = "mdp"):
         self.model = model
-        n, g = model.n, model.discount
+        g = model.discount
         if upper not in ("mdp", "manhattan"):
             raise ValueError(f"upper bound {upper!r}: expected 'mdp' or 'manhattan'")
         xy = np.array(model.cells)
@@ -307,7 +292,7 @@ class LaserTagBounds:
         #: How many of the most common particles each give a plan (choosing among plans by the
         #: particle set is still a policy of the history).
         self.modes = int(modes)
-        self._first_move, self._distance = self._shortest_moves()
+        self._first_move = self._shortest_moves()
         cells = np.arange(model.num_states)
         #: States where the laser reads "same cell" (the chase tags there).
         self.same = self.same_cell(cells)
@@ -463,9 +448,9 @@ class LaserTagBounds:
             P = moved.tocsr()
         return values
 
-    def _shortest_moves(self) -> Tuple[np.ndarray, np.ndarray]:
-        """``(first_move [goal, cell], distance [goal, cell])``: breadth first from every goal (the moves
-        are reversible), the first move of a shortest path in action order (−1: none, or at the goal)."""
+    def _shortest_moves(self) -> np.ndarray:
+        """``[goal, cell]``: the first move of a shortest path from ``cell`` to ``goal`` in action order
+        (−1: none, or at the goal), breadth first from every goal (the moves are reversible)."""
         m = self.model
         n = m.n
         distance = np.full((n, n), -1, dtype=np.int64)
@@ -486,7 +471,7 @@ class LaserTagBounds:
                         if distance[goal, int(m.next_cell[cell, action])] == distance[goal, cell] - 1:
                             first[goal, cell] = action
                             break
-        return first, distance
+        return first
 
     def _path(self, start: int, goal: int) -> List[int]:
         """The moves of a shortest path from cell ``start`` to ``goal`` ([] when none or already there)."""
