@@ -99,19 +99,20 @@ def _ci(values):
 
 
 def run_rocksample(name: str, budget: float, episodes: int, steps: int, seed: int, max_minutes: float,
-                   clock: str = "wall", layouts: str = "fixed", first_episode: int = 0) -> dict:
+                   clock: str = "wall", layouts: str = "fixed", first_episode: int = 0, lower: str = "check") -> dict:
     """Episodes ``first_episode … first_episode + episodes - 1`` (each seeded by its index alone, so a
     run of episodes 65–99 continues one of 0–64 exactly as a single run of 0–99 would).
     ``layouts="random"``: every episode on its own layout drawn as DESPOT's code draws one
     (:func:`~pearl_pomdp.online.rocksample.random_rocksample`, seeded per episode), its bounds
-    rebuilt each time (their set-up is not in the decision times)."""
+    rebuilt each time (their set-up is not in the decision times). ``lower``: the bounds' lower bound
+    (:class:`~pearl_pomdp.online.rocksample.RockSampleBounds`: ``check`` or ``tour``)."""
     def instance(ep):
         if layouts == "random":
             n, k = (int(v) for v in name.split("_"))
             return random_rocksample(n, k, np.random.default_rng([seed, ep, 7919]))
         return rocksample(name)
 
-    return _run_generative(instance, RockSampleBounds, budget, episodes, steps, seed, max_minutes, clock,
+    return _run_generative(instance, lambda model: RockSampleBounds(model, lower=lower), budget, episodes, steps, seed, max_minutes, clock,
                            layouts, first_episode)
 
 
@@ -528,6 +529,9 @@ def main(argv=None) -> int:
                     help="seconds for the offline point-based policy (0: skip)")
     ap.add_argument("--tag-lower", default="blind",
                     help="Tag's lower bound: blind, or pointbased:SECONDS (offline α-vectors)")
+    ap.add_argument("--rs-lower", choices=["check", "tour"], default="check",
+                    help="RockSample's lower bound: the best of East, the open-loop tour and tours that check "
+                         "each rock on arrival (check), or East and the open-loop tour only (tour)")
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="wall",
                     help="what a budget measures: wall (a robot's wait) or process (CPU seconds, "
                          "as DESPOT's own code counts them: the same work per decision whatever the load)")
@@ -579,7 +583,7 @@ def main(argv=None) -> int:
                                      args.layouts, args.first_episode)
                 else:
                     r = run_rocksample(p[2:], budget, args.episodes, args.steps, args.seed, args.max_minutes,
-                                       args.clock, args.layouts, args.first_episode)
+                                       args.clock, args.layouts, args.first_episode, args.rs_lower)
                 out["results"][p][f"{budget:g}s"] = r
                 print(f"{p} {budget:g}s: {r['mean']:.2f} ± {r['ci95']:.2f} over {r['episodes']} episodes, "
                       f"p99 {r['decision_s_p99']:.3f} s", file=sys.stderr, flush=True)

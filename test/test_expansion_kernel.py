@@ -1,4 +1,5 @@
-"""DESPOT's expansion in C (``pearl_pomdp/online/_step_kernel.c``: ``group_outcomes``, ``group_max_means``).
+"""DESPOT's expansion in C (``pearl_pomdp/online/_step_kernel.c``: ``group_outcomes``, ``group_max_means``,
+``rock_tours``).
 
 * ``group_outcomes`` equals, bit for bit, the numpy grouping the search did before it: one stable
   sort of an expansion's ``[A, N]`` outcomes by (action, observation), the children in action then
@@ -8,6 +9,8 @@
 * ``group_max_means`` equals ``np.add.reduceat`` of the gathered rows over each set's size, then the
   largest column, bit for bit (the α-vector bounds DESPOT asks for at every expansion:
   ``AlphaBounds.grouped``).
+* ``rock_tours`` (RockSample's tour lower bounds) is checked against tours stepped through the model
+  in ``test_online.py``; here, its refusals.
 * Bad input is a ValueError naming the argument.
 
 The search built on them builds the trees it built before, to the bit of the root's bounds: the
@@ -141,3 +144,40 @@ def test_group_max_means_rejects_bad_input_naming_the_argument(states, starts, o
     with pytest.raises(ValueError, match=msg):
         _step_kernel.group_max_means(np.array(states, dtype=np.int64), np.array(starts, dtype=np.int64),
                                      np.zeros((4, 2)), np.empty(out))
+
+
+def _rock_tour_args(**override):
+    """A valid ``rock_tours`` call on RockSample(4,1)-like input (one rock at (2, 1)), then ``override``."""
+    k, n = 1, 4
+    args = dict(states=np.array([(5 << k) | 1, (5 << k)], dtype=np.int64), starts=np.array([0, 2], dtype=np.int64),
+                k=k, n=n, rocks=np.array([[2, 1]], dtype=np.int64), visit=np.array([[0, 1]], dtype=np.int64),
+                blind=np.array([[0, 0]], dtype=np.int64), powers=0.95 ** np.arange(40.0), out=np.empty(1))
+    args.update(override)
+    return args
+
+
+def test_rock_tours_values_a_checking_tour_by_hand():
+    """The rover at cell 5 = (1, 1), the rock at (2, 1): one particle has it good, one bad. The checking
+    tour moves East (step 0), checks (step 1), samples the good one (+10 at step 2) and drives East
+    from x = 2 (+10 at step 3 + 1 = 4 after the sample, at step 3 without); East at once: +10 at step 2."""
+    args = _rock_tour_args()
+    _step_kernel.rock_tours(*args.values())
+    good, bad = 10 * 0.95 ** 2 + 10 * 0.95 ** 4, 10 * 0.95 ** 3
+    assert args["out"][0] == pytest.approx((good + bad) / 2, abs=1e-12)
+    args = _rock_tour_args(visit=np.array([[0]], dtype=np.int64), blind=np.array([[0]], dtype=np.int64))
+    _step_kernel.rock_tours(*args.values())
+    assert args["out"][0] == pytest.approx(10 * 0.95 ** 2, abs=1e-12)
+
+
+@pytest.mark.parametrize("override,msg", [
+    (dict(starts=np.array([0, 1], dtype=np.int64)), r"starts must run from 0 to len\(states\) = 2, got 0 .. 1"),
+    (dict(starts=np.array([0, 2, 2], dtype=np.int64)), "out has 1 entries, visit"),
+    (dict(rocks=np.array([[4, 1]], dtype=np.int64)), r"rock 0 at \(4, 1\) is off the 4 x 4 grid"),
+    (dict(states=np.array([16 << 1, 0], dtype=np.int64)), "set 0's first state 32 is not on the grid"),
+    (dict(powers=0.95 ** np.arange(3.0)), "powers has 3 entries, too few for set 0's tour"),
+    (dict(blind=np.array([[0]], dtype=np.int64)), r"blind \(1, 1\)"),
+    (dict(visit=np.array([[0, 1]], dtype=np.int32)), "visit must hold int64"),
+])
+def test_rock_tours_rejects_bad_input_naming_the_argument(override, msg):
+    with pytest.raises(ValueError, match=msg):
+        _step_kernel.rock_tours(*_rock_tour_args(**override).values())

@@ -39,6 +39,7 @@
 #include <Python.h>
 #include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 
 /* The element kinds this kernel reads. */
@@ -652,6 +653,136 @@ done:
     return ret;
 }
 
+/* rock_tours: RockSample's tour policies valued on G particle sets (pearl_pomdp/online/rocksample.py,
+ * RockSampleBounds). Set g is states[starts[g]] .. states[starts[g + 1] - 1], all at one cell (the
+ * rover's position is known: the set's first state gives it); a state is (cell << k) | bits, rock i
+ * good when bit i is set. A tour (candidate c of set g) visits the rocks of visit[g, c], nearest first
+ * by Manhattan distance (the lower index on a tie), then drives East off the grid (+10). At a rock
+ * of blind[g, c] it samples at once (+10 good, -10 bad, one step); at any other it checks first
+ * (one step; exact at distance 0) and samples only a good rock. Each particle's discounted return,
+ * gamma^t read from powers[t], is summed over the set in order and divided by the set's size;
+ * out[g] is the largest over the candidates (the first largest). The rocks' order is found again
+ * for every set and candidate: k^2 comparisons at most, less than reading its particles.
+ * Why C: the checking tours are valued particle by particle (a particle's sample times depend on
+ * how many good rocks it sampled before), and numpy's [particles, k] temporaries cost ~2 ms an
+ * expansion on RockSample(11,11), three times the rest of the search. */
+static PyObject *rock_tours(PyObject *Py_UNUSED(self), PyObject *args) {
+    PyObject *o_st, *o_gs, *o_rk, *o_vi, *o_bl, *o_pw, *o_out;
+    Py_ssize_t k, n;
+    if (!PyArg_ParseTuple(args, "OOnnOOOOO:rock_tours", &o_st, &o_gs, &k, &n, &o_rk, &o_vi, &o_bl, &o_pw, &o_out))
+        return NULL;
+    Py_buffer st = {0}, gs = {0}, rk = {0}, vi = {0}, bl = {0}, pw = {0}, out = {0};
+    Py_buffer *all[] = {&st, &gs, &rk, &vi, &bl, &pw, &out};
+    PyObject *ret = NULL;
+    const unsigned I64 = 1u << K_I64, F64 = 1u << K_F64;
+    if (take("rock_tours", o_st, &st, 0, 1, I64, "states") < 0
+        || take("rock_tours", o_gs, &gs, 0, 1, I64, "starts") < 0
+        || take("rock_tours", o_rk, &rk, 0, 2, I64, "rocks") < 0
+        || take("rock_tours", o_vi, &vi, 0, 2, I64, "visit") < 0
+        || take("rock_tours", o_bl, &bl, 0, 2, I64, "blind") < 0
+        || take("rock_tours", o_pw, &pw, 0, 1, F64, "powers") < 0
+        || take("rock_tours", o_out, &out, 1, 1, F64, "out") < 0)
+        goto done;
+    Py_ssize_t M = st.shape[0], G = gs.shape[0] - 1, C = vi.shape[1], T = pw.shape[0];
+    if (k < 1 || k > 62 || n < 1 || rk.shape[0] != k || rk.shape[1] != 2) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.rock_tours: rocks has shape (%zd, %zd) with k = %zd, n = %zd: "
+                     "expected [k, 2] with 1 <= k <= 62 and n >= 1", rk.shape[0], rk.shape[1], k, n);
+        goto done;
+    }
+    if (G < 0 || out.shape[0] != G || vi.shape[0] != G || bl.shape[0] != G || bl.shape[1] != C || C < 1) {
+        PyErr_Format(PyExc_ValueError, "_step_kernel.rock_tours: out has %zd entries, visit (%zd, %zd), blind (%zd, %zd), "
+                     "starts %zd: expected G = len(starts) - 1 rows each and C >= 1 candidates", out.shape[0],
+                     vi.shape[0], C, bl.shape[0], bl.shape[1], gs.shape[0]);
+        goto done;
+    }
+    {
+        const int64_t *s = (const int64_t *)st.buf, *g = (const int64_t *)gs.buf, *r = (const int64_t *)rk.buf;
+        const int64_t *visit = (const int64_t *)vi.buf, *blind = (const int64_t *)bl.buf;
+        const double *powers = (const double *)pw.buf;
+        double *o = (double *)out.buf;
+        Py_ssize_t bad_set = -1, bad_cell = -1, bad_rock = -1, short_powers = -1;
+        Py_BEGIN_ALLOW_THREADS
+        if (G > 0 && (g[0] != 0 || g[G] != M)) bad_set = G;
+        for (Py_ssize_t q = 0; bad_set < 0 && q < G; q++)
+            if (g[q + 1] <= g[q]) bad_set = q;
+        for (Py_ssize_t i = 0; bad_set < 0 && i < k; i++)
+            if (r[2 * i] < 0 || r[2 * i] >= n || r[2 * i + 1] < 0 || r[2 * i + 1] >= n) { bad_rock = i; break; }
+        for (Py_ssize_t q = 0; bad_set < 0 && bad_rock < 0 && bad_cell < 0 && short_powers < 0 && q < G; q++) {
+            int64_t cell = s[g[q]] >> k;
+            if (s[g[q]] < 0 || cell >= (int64_t)n * n) { bad_cell = q; break; }
+            double best = 0.0;
+            for (Py_ssize_t c = 0; c < C && short_powers < 0; c++) {
+                int64_t todo = visit[q * C + c] & (((int64_t)1 << k) - 1), at_blind = blind[q * C + c];
+                int order[62], moved[62];
+                int count = 0;
+                int64_t x = cell % n, y = cell / n;
+                while (todo) {
+                    int pick = -1;
+                    int64_t d_pick = 0;
+                    for (int i = 0; i < k; i++)
+                        if (todo >> i & 1) {
+                            int64_t d = llabs(r[2 * i] - x) + llabs(r[2 * i + 1] - y);
+                            if (pick < 0 || d < d_pick) { pick = i; d_pick = d; }
+                        }
+                    todo &= ~((int64_t)1 << pick);
+                    order[count] = pick;
+                    moved[count++] = (int)d_pick;
+                    x = r[2 * pick];
+                    y = r[2 * pick + 1];
+                }
+                int64_t to_exit = n - 1 - x, longest = to_exit;
+                for (int j = 0; j < count; j++) longest += moved[j] + 2;   /* a check and a sample each */
+                if (longest >= T) { short_powers = q; break; }
+                double sum = 0.0;
+                for (int64_t p = g[q]; p < g[q + 1]; p++) {
+                    int64_t t = 0, bits = s[p];
+                    double v = 0.0;
+                    for (int j = 0; j < count; j++) {
+                        int i = order[j];
+                        int good = (int)(bits >> i & 1);
+                        t += moved[j];
+                        if (at_blind >> i & 1) {
+                            v += good ? 10.0 * powers[t] : -10.0 * powers[t];
+                            t += 1;
+                        } else {
+                            t += 1;                       /* the check */
+                            if (good) { v += 10.0 * powers[t]; t += 1; }
+                        }
+                    }
+                    sum += v + 10.0 * powers[t + to_exit];
+                }
+                double mean = sum / (double)(g[q + 1] - g[q]);
+                if (c == 0 || mean > best) best = mean;
+            }
+            o[q] = best;
+        }
+        Py_END_ALLOW_THREADS
+        if (bad_set == G)
+            PyErr_Format(PyExc_ValueError, "_step_kernel.rock_tours: starts must run from 0 to len(states) = %zd, "
+                         "got %lld .. %lld", M, (long long)g[0], (long long)g[G]);
+        else if (bad_set >= 0)
+            PyErr_Format(PyExc_ValueError, "_step_kernel.rock_tours: set %zd is empty or reversed (starts[%zd] = %lld, "
+                         "starts[%zd] = %lld)", bad_set, bad_set, (long long)g[bad_set], bad_set + 1,
+                         (long long)g[bad_set + 1]);
+        else if (bad_rock >= 0)
+            PyErr_Format(PyExc_ValueError, "_step_kernel.rock_tours: rock %zd at (%lld, %lld) is off the %zd x %zd grid",
+                         bad_rock, (long long)r[2 * bad_rock], (long long)r[2 * bad_rock + 1], n, n);
+        else if (bad_cell >= 0)
+            PyErr_Format(PyExc_ValueError, "_step_kernel.rock_tours: set %zd's first state %lld is not on the grid (cell "
+                         "= state >> k must be below n * n = %zd)", bad_cell, (long long)s[g[bad_cell]], n * n);
+        else if (short_powers >= 0)
+            PyErr_Format(PyExc_ValueError, "_step_kernel.rock_tours: powers has %zd entries, too few for set %zd's tour",
+                         T, short_powers);
+        else {
+            ret = Py_None;
+            Py_INCREF(ret);
+        }
+    }
+done:
+    release_all(all, sizeof all / sizeof all[0]);
+    return ret;
+}
+
 static PyMethodDef methods[] = {
     {"row_tables", row_tables, METH_VARARGS,
      "row_tables(indptr, data, mass, ends, peaks) -> None\n\n"
@@ -679,6 +810,12 @@ static PyMethodDef methods[] = {
      "out[g] = max over the columns of table [S, C] float64 of the column's mean over states[starts[g]:starts[g+1]]\n"
      "(states int64, starts [G+1] int64 from 0 to len(states), no set empty; sums as numpy's add.reduceat).\n"
      "Raises ValueError on bad input."},
+    {"rock_tours", rock_tours, METH_VARARGS,
+     "rock_tours(states, starts, k, n, rocks, visit, blind, powers, out) -> None\n\n"
+     "RockSample's tour policies on particle sets (see the comment above the function): states int64 (cell << k |\n"
+     "bits), starts [G+1] int64 from 0 to len(states), no set empty, rocks [k, 2] int64 (x, y), visit and blind\n"
+     "[G, C] int64 rock masks per candidate tour, powers [T] float64 (gamma^t); out[g] = the best candidate's\n"
+     "mean discounted return over set g. Raises ValueError on bad input."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -1,5 +1,6 @@
 """Type stub of the C kernel ``_step_kernel.c``: :meth:`pearl_pomdp.online.generative.ExplicitModel.step`, and
-DESPOT's expansion (``group_outcomes``; ``group_max_means``, :meth:`~pearl_pomdp.online.generative.AlphaBounds.grouped`).
+DESPOT's expansion (``group_outcomes``; ``group_max_means``, :meth:`~pearl_pomdp.online.generative.AlphaBounds.grouped`;
+``rock_tours``, :meth:`~pearl_pomdp.online.rocksample.RockSampleBounds.many`).
 
 Arrays are C-contiguous numpy arrays, read in place: ``indptr``/``indices`` of ``T[action]`` as CSR
 (int32 or int64), ``data`` and ``O[A, S, Z]`` float32 or float64, and T[action]'s tables from
@@ -29,4 +30,10 @@ def group_outcomes(next_states: np.ndarray, observations: np.ndarray, scenarios:
 
 def group_max_means(states: np.ndarray, starts: np.ndarray, table: np.ndarray, out: np.ndarray) -> None:
     """``out[g]`` = the largest column mean of ``table[S, C]`` (float64) over ``states[starts[g]:starts[g + 1]]``."""
+    ...
+
+def rock_tours(states: np.ndarray, starts: np.ndarray, k: int, n: int, rocks: np.ndarray, visit: np.ndarray,
+               blind: np.ndarray, powers: np.ndarray, out: np.ndarray) -> None:
+    """``out[g]`` = the best of RockSample's candidate tours ``visit[g, c]`` / ``blind[g, c]`` (rock masks) valued on
+    the particles ``states[starts[g]:starts[g + 1]]`` (all at one cell), ``powers[t]`` = γ^t; see the C source."""
     ...
