@@ -16,8 +16,8 @@ action that shares it (tied parameters, :func:`tied_groups`): the model says tho
 not act on the feature, so nothing that happened while one of them ran is credited to it.
 ``--untied`` fits each action's copy on its own data.
 
-* **With the true state** (a simulator's bag carries it on ``/pearl/sim/truth``; a
-  ``.jsonl`` episode may list ``states``) the counts are counted.
+* **With the true state** (a simulator's bag carries it on its world's ``/WORLD/sim/truth``, e.g.
+  ``/pearl/sim/truth``; a ``.jsonl`` episode may list ``states``) the counts are counted.
 * **Without it** (a real robot's bag) they are *expected* counts from the forward-backward
   pass over the compiled model (EM over the DBN): E-step with the current tables, M-step
   the formula above, repeated until the log-likelihood stops rising. Each iteration cannot
@@ -25,8 +25,8 @@ not act on the feature, so nothing that happened while one of them ran is credit
   :attr:`FitResult.history` records it.
 
 Episodes: a bag directory (``/pearl/belief`` gives each closed step's action and
-observation as the tracker saw them (a bag recorded before the typed interfaces: ``/pearl/belief_marginals``) — timeouts included; ``/pearl/sim/truth`` the true
-state at the start of each action) or a ``.jsonl`` file, one episode per line:
+observation as the tracker saw them (a bag recorded before the typed interfaces: ``/pearl/belief_marginals``) — timeouts included; ``/WORLD/sim/truth`` the true
+state at the start of each action, :mod:`pearl_pomdp.world_truth`) or a ``.jsonl`` file, one episode per line:
 ``{"actions": [a_0 …], "observations": [o_1 …], "states": [{feature: value} …]}`` (states
 optional; ``len(states) == len(actions) + 1``).
 """
@@ -125,41 +125,32 @@ class FitResult:
 
 
 # ------------------------------------------------------------------ episodes
-def _string_data(data: bytes) -> str:
-    import struct
-
-    (n,) = struct.unpack_from("<I" if data[1] == 1 else ">I", data, 4)
-    return data[8:8 + n - 1].decode("utf-8")
-
-
 def episodes_from_bag(path: Union[str, Path]) -> Episode:
     """The episode of a bag: steps from ``/pearl/belief`` (``pearl_interfaces/msg/Belief``; a bag
-    recorded before the typed interfaces: its ``/pearl/belief_marginals`` JSON), truth from
-    ``/pearl/sim/truth`` if recorded.
+    recorded before the typed interfaces: its ``/pearl/belief_marginals`` JSON), the true states from
+    the world's truth topic ``/WORLD/sim/truth`` if one was recorded (``pearl_interfaces/msg/WorldTruth``,
+    or the JSON of a bag recorded before it: :mod:`pearl_pomdp.world_truth`).
 
     Raises:
-        PearlError: the bag has neither (names the bag and what is missing).
+        PearlError: the bag has no steps, several truth topics, or a message that does not decode
+            (names the bag, the topic and what is wrong).
     """
-    from pearl_pomdp.bags.reader import BagReader
+    from pearl_pomdp.bags.reader import BagReader, cdr_string
+    from pearl_pomdp.world_truth import truth_records, truth_topics
 
     reader = BagReader(path)
     info = reader.topics.get("/pearl/belief")
     if info is not None and info.type == "pearl_interfaces/msg/Belief":
         # Decoded from the bag's own message definition (mcap-ros2-support): no ROS import in the core.
-        from mcap.records import Schema
-        from mcap_ros2.decoder import DecoderFactory
-
-        schema = Schema(id=1, name=info.type, encoding="ros2msg", data=info.definition.encode("utf-8"))
-        cdr = DecoderFactory().decoder_for("cdr", schema)
-        assert cdr is not None   # (the factory decodes every cdr + ros2msg channel)
+        belief = reader.decoder("/pearl/belief")
 
         def decode(data: bytes) -> dict:
-            msg = cdr(data)
+            msg = belief(data)
             return {"step": int(msg.step), "action": msg.action or None, "observation": msg.observation or None}
 
         topic = "/pearl/belief"
     elif "/pearl/belief_marginals" in reader.topics:
-        topic, decode = "/pearl/belief_marginals", lambda data: json.loads(_string_data(data))  # noqa: E731
+        topic, decode = "/pearl/belief_marginals", lambda data: json.loads(cdr_string(data))  # noqa: E731
     else:
         raise PearlError(f"{path}: no /pearl/belief topic of type pearl_interfaces/msg/Belief: record it (pearl demo "
                          "and `pearl record` with the default topics do) so the fit knows each step's action and "
@@ -173,9 +164,12 @@ def episodes_from_bag(path: Union[str, Path]) -> Episode:
     actions = [a for _, a, _ in steps]
     observations = [o for _, _, o in steps]
     states = None
-    if "/pearl/sim/truth" in reader.topics:
-        truth = [json.loads(_string_data(m.data)) for m in reader.read_messages(["/pearl/sim/truth"])]
-        starts = [t["state"] for t in truth if t.get("phase") == "start"]
+    worlds = truth_topics(reader)
+    if len(worlds) > 1:
+        raise PearlError(f"{path}: {len(worlds)} truth topics ({', '.join(worlds)}): a bag of one episode has "
+                         "one world's truth")
+    if worlds:
+        starts = [t["state"] for t in truth_records(reader, worlds[0]) if t.get("phase") == "start"]
         if len(starts) >= len(actions) + 1:
             states = starts[:len(actions) + 1]
     return Episode(actions, observations, states, str(path))

@@ -56,7 +56,9 @@ class StudyWorld:
         raise NotImplementedError
 
     def truth_record(self, phase: str, action: str = "", result: Optional[StepResult] = None) -> dict:
-        """The true state now as a JSON body (``phase`` ``start``/``end`` of an action)."""
+        """The true state now as a truth record (``phase`` ``start``/``end`` of an action; with ``result``,
+        the action's ``events`` and ``wrong``): :mod:`pearl_pomdp.world_truth` describes it, a
+        simulator publishes it as ``pearl_interfaces/WorldTruth`` on ``/WORLD/sim/truth``."""
         body = {"time": self.time, "phase": phase, "action": action, "state": self.truth()}
         if result is not None:
             body.update(events=result.events, wrong=result.wrong)

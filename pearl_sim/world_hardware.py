@@ -4,20 +4,21 @@ Nothing here names a topic or a message type: every input of the domain (``modal
 gets a publisher on its topic with its type, and a world message of modality ``M`` goes out on it —
 text as ``std_msgs/String``, a number channel's reading in the field the tracker reads
 (``BatteryState.percentage`` …). What a person actually said and the true state go to
-``/WORLD/sim/said`` and ``/WORLD/sim/truth`` (JSON; ``WORLD`` the world's name, e.g.
-``/reception/sim/truth``) for the bag and transcripts. Every world of the frame's ``pearl demo``
+``/WORLD/sim/said`` (``std_msgs/String``) and ``/WORLD/sim/truth`` (``pearl_interfaces/WorldTruth``,
+:func:`pearl_pomdp.nodes.conversions.truth_to_msg`; ``WORLD`` the world's name, e.g.
+``/reception/sim/truth``) for the bag, transcripts and ``pearl fit``. Every world of the frame's ``pearl demo``
 (:mod:`pearl_sim.world_demo`) uses it, the nursing home with the robot's pose
 (:class:`pearl_sim.nodes.SimulatedHardware`).
 """
 from __future__ import annotations
 
-import json
 import math
 from typing import Any, Dict, Optional, Tuple
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
+from pearl_pomdp.world_truth import truth_topic
 from pearl_sim.messages import Message, StepResult
 
 __all__ = ["WorldHardware", "said_topic", "truth_topic"]
@@ -28,11 +29,6 @@ RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durabili
 def said_topic(world_name: str) -> str:
     """Where what a person actually said goes (JSON-free text)."""
     return f"/{world_name}/sim/said"
-
-
-def truth_topic(world_name: str) -> str:
-    """Where the world's true state goes (JSON, :meth:`StudyWorld.truth_record`)."""
-    return f"/{world_name}/sim/truth"
 
 
 def _set(msg: Any, path: str, value: float) -> None:
@@ -73,7 +69,9 @@ class WorldHardware:
             self._readers[channel.modality] = reader
             self.publishers[channel.modality] = self.node.create_publisher(reader.msg_type, channel.topic, RELIABLE)
         self.said = self.node.create_publisher(String, said_topic(name), RELIABLE)
-        self.truth = self.node.create_publisher(String, truth_topic(name), RELIABLE)
+        from pearl_pomdp.nodes.conversions import WorldTruthMsg
+
+        self.truth = self.node.create_publisher(WorldTruthMsg, truth_topic(name), RELIABLE)
         self._domain_file = domain.source
         self.pose = None
         if pose_topic:
@@ -104,12 +102,15 @@ class WorldHardware:
         self.said.publish(String(data=said))
 
     def publish_truth(self, t: float, phase: str, action: str = "", result: Optional[StepResult] = None) -> None:
-        """The true state (JSON) at the start or end of an action (``phase`` ``start``: the state an
-        action starts in, which ``pearl fit`` counts transitions between; ``end``: after it, with its
-        events and whether it was wrong), and the robot's pose when there is a pose topic."""
+        """The true state (a ``WorldTruth`` stamped ``t``, sim seconds) at the start or end of an action
+        (``phase`` ``start``: the state an action starts in, which ``pearl fit`` counts transitions
+        between; ``end``: after it, with its events and whether it was wrong), and the robot's pose
+        when there is a pose topic."""
+        from pearl_pomdp.nodes.conversions import truth_to_msg
+
         if self.pose is not None:
             self.publish_pose(t)
-        self.truth.publish(String(data=json.dumps(self.world.truth_record(phase, action, result))))
+        self.truth.publish(truth_to_msg(self.world.truth_record(phase, action, result), t))
 
     def publish_pose(self, t: float) -> None:
         """The robot's place in the scenario's map, stamped ``t`` (sim seconds)."""

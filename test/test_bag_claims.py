@@ -8,7 +8,6 @@ must change with it.
 """
 from __future__ import annotations
 
-import json
 import re
 
 import pytest
@@ -34,11 +33,10 @@ def claims():
 
 
 def truth(bag):
-    from rclpy.serialization import deserialize_message
-    from std_msgs.msg import String
+    """The world's truth records in ``bag`` (WorldTruth, or the JSON String of the bags recorded before it)."""
+    from pearl_pomdp.world_truth import truth_records
 
-    return [json.loads(deserialize_message(m.data, String).data) for m in BagReader(bag).messages
-            if m.topic == "/pearl/sim/truth"]
+    return truth_records(BagReader(bag), "/pearl/sim/truth")
 
 
 def test_every_bag_in_the_table_has_claims_and_every_claim_a_bag():

@@ -304,7 +304,7 @@ def test_pearl_record_sigkilled_keeps_what_it_wrote(tmp_path):
     from ros_helpers import Proc, allocate_domain_id, ros_env, wait_for
 
     from pearl_pomdp.bags.reader import BagReader
-    from pearl_pomdp.nodes.bag_replay import _string_data
+    from pearl_pomdp.bags.reader import cdr_string as string_data
 
     env = ros_env(allocate_domain_id(), tmp_path / "log")
     bag = tmp_path / "rec"
@@ -328,7 +328,7 @@ def test_pearl_record_sigkilled_keeps_what_it_wrote(tmp_path):
         publisher.stop(5)
         recorder.stop(5)
     reader = BagReader(bag)
-    texts = [_string_data(m.data) for m in reader.messages]
+    texts = [string_data(m.data) for m in reader.messages]
     assert len(texts) >= seen
     # Reliable, in order: the recorded messages are n0, n1, ... with no gap and nothing invented.
     assert texts == [f"n{i}" for i in range(len(texts))]
@@ -384,7 +384,7 @@ def test_a_chunked_pearl_record_sigkilled_loses_at_most_its_open_chunk(tmp_path)
     from ros_helpers import Proc, allocate_domain_id, ros_env, wait_for
 
     from pearl_pomdp.bags.reader import BagReader
-    from pearl_pomdp.nodes.bag_replay import _string_data
+    from pearl_pomdp.bags.reader import cdr_string as string_data
 
     count, chunk = 1500, 4096
     env = ros_env(allocate_domain_id(), tmp_path / "log")
@@ -417,7 +417,7 @@ def test_a_chunked_pearl_record_sigkilled_loses_at_most_its_open_chunk(tmp_path)
     info = subprocess.run([pearl, "bag-info", str(bag), "--json"], capture_output=True, text=True, timeout=60)
     assert info.returncode == 0, info.stderr
     reader = BagReader(bag, salvage=True)
-    texts = [_string_data(m.data) for m in reader.messages]
+    texts = [string_data(m.data) for m in reader.messages]
     assert json.loads(info.stdout)["message_count"] == len(texts) > 0
     assert texts == [f"n{i}" for i in range(len(texts))]
     missing = [f"n{i}" for i in range(len(texts), count)]

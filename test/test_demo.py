@@ -70,6 +70,31 @@ def test_every_pearl_message_of_the_demo_bag_decodes_with_mcap_ros2_support_alon
     assert decision["action"] == result.steps[0].action and decision["trace"][-1]["choice"] == decision["action"]
     speech = topics["/pearl/speech"]["first"]
     assert isinstance(speech["text"], str) and 0.0 <= speech["confidence"] <= 1.0 and not speech["text"].startswith("{")
+    truth = topics["/pearl/sim/truth"]["first"]    # issue 40: the world's truth typed too
+    assert types["/pearl/sim/truth"] == "pearl_interfaces/msg/WorldTruth"
+    assert (truth["phase"], truth["action"], truth["has_outcome"]) == ("start", result.steps[0].action, False)
+    assert dict(zip(truth["feature_names"], truth["feature_values"]))["RobotLocation"] == "home"
+
+
+def test_the_demo_bag_holds_the_worlds_truth_and_the_fit_counts_from_it(demo):
+    """Issue 40: the truth of every action's start and end, as the world saw it, and the fit's true states."""
+    from pearl_pomdp.bags.reader import BagReader
+    from pearl_pomdp.fit import episodes_from_bag
+    from pearl_pomdp.world_truth import truth_records
+
+    result, _ = demo
+    records = truth_records(BagReader(result.bag), "/pearl/sim/truth")
+    starts = [r for r in records if r["phase"] == "start"]
+    ends = [r for r in records if r["phase"] == "end"]
+    actions = [s.action for s in result.steps]
+    assert [r["action"] for r in starts] == actions + [""] and [r["action"] for r in ends] == actions
+    assert [r["wrong"] for r in ends] == [s.wrong for s in result.steps]
+    answered = sum(e.endswith("question answered") for r in ends for e in r["events"])
+    assert answered == result.metrics["questions_answered"] >= 1
+    guided = actions.index("GuideToPhysio")
+    assert ends[guided]["state"]["UserLocation"] == "physio" and starts[guided]["state"]["UserLocation"] == "room"
+    episode = episodes_from_bag(result.bag)
+    assert episode.states == [r["state"] for r in starts][:len(episode.actions) + 1]
 
 
 def test_demo_bag_replays_to_the_same_actions(demo):

@@ -32,7 +32,7 @@ def test_every_interface_of_the_source_folder_is_installed_with_its_fields():
     srvs = importlib.import_module("pearl_interfaces.srv")
     assert _interface_names("msg") == ["Action", "Belief", "Decision", "DriveProgress", "FeatureMarginal",
                                        "GuidePace", "OperatorEvent", "OperatorProposal", "RecognisedSpeech",
-                                       "SearchAction", "SearchBranch", "SearchStats", "TraceStep"]
+                                       "SearchAction", "SearchBranch", "SearchStats", "TraceStep", "WorldTruth"]
     assert _interface_names("srv") == ["Command", "SetAutonomy", "Veto"]   # confirm: std_srvs/SetBool
     for name in _interface_names("msg"):
         assert hasattr(msgs, name), name
@@ -51,6 +51,10 @@ def test_every_interface_of_the_source_folder_is_installed_with_its_fields():
     assert msgs.Action.get_fields_and_field_types() == {"stamp": "builtin_interfaces/Time", "name": "string"}
     assert msgs.RecognisedSpeech.get_fields_and_field_types() == {
         "stamp": "builtin_interfaces/Time", "text": "string", "confidence": "float", "symbol": "string"}
+    assert msgs.WorldTruth.get_fields_and_field_types() == {
+        "stamp": "builtin_interfaces/Time", "world_time": "double", "phase": "string", "action": "string",
+        "feature_names": "sequence<string>", "feature_values": "sequence<string>", "has_outcome": "boolean",
+        "events": "sequence<string>", "wrong": "string"}
     assert msgs.DriveProgress.get_fields_and_field_types() == {
         "stamp": "builtin_interfaces/Time", "action": "string", "place": "string", "distance_remaining": "float",
         "estimated_time_remaining": "float"}

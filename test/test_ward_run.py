@@ -61,6 +61,15 @@ def test_the_ward_demo_runs_an_episode_through_the_graph_and_writes_a_readable_b
     assert summary["outcome"].startswith(f"outcome: {summary['requests_met']}/{summary['requests']} request(s) met")
     topics = {m.topic for m in open_bag(tmp_path / "demo" / "bag").read_messages()}
     assert {"/pearl/action", "/pearl/belief", "/pearl/decision", "/ward/sim/truth"} <= topics
+    # The ward's truth is typed (issue 40) and the fit counts from it: a true ward state per action.
+    from pearl_pomdp.fit import episodes_from_bag
+
+    assert open_bag(tmp_path / "demo" / "bag").topics["/ward/sim/truth"].type == "pearl_interfaces/msg/WorldTruth"
+    episode = episodes_from_bag(tmp_path / "demo" / "bag")
+    assert episode.actions[:6] == summary["actions"] and episode.states is not None
+    assert len(episode.states) == len(episode.actions) + 1 and episode.states[0]["RobotAt"] == "station"
+    ward = load_domain(DOMAIN)
+    assert all(0 <= ward.state_index(state) < ward.compile().num_states for state in episode.states)
 
 
 def test_the_flat_options_and_a_bad_online_spec_are_one_line_errors(tmp_path):

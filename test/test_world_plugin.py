@@ -62,6 +62,13 @@ def test_a_world_registered_by_entry_point_runs_demo_and_experiment(tmp_path):
 
     topics = {m.topic for m in open_bag(tmp_path / "demo" / "bag").read_messages()}
     assert {"/pearl/action", "/pearl/belief", "/kiosk/sim/truth"} <= topics
+    # The kiosk's truth is typed (issue 40): the start and end of every action the world carried out.
+    from pearl_pomdp.world_truth import truth_records
+
+    truth = truth_records(open_bag(tmp_path / "demo" / "bag"), "/kiosk/sim/truth")
+    assert [t["action"] for t in truth if t["phase"] == "start"] == summary["actions"] + [""]
+    assert [t["action"] for t in truth if t["phase"] == "end"] == summary["actions"]
+    assert truth[0]["state"] == {"Customer": "none"} and {t["state"]["Customer"] for t in truth} == {"none", "waiting"}
     assert (tmp_path / "demo" / "policy" / "hierarchy.json").is_file()   # the flat hierarchy, planned and saved
     # The bag replays on its own: the graph, rebuilt from its custom_data (the world has no params file:
     # the nodes' code defaults, recorded as such), takes the recorded actions with the same beliefs.

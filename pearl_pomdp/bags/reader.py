@@ -23,7 +23,7 @@ import os
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, Iterable, Iterator, List, Optional, Sequence, Union
+from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Sequence, Union
 
 from pearl_pomdp.bags import metadata as md
 from pearl_pomdp.bags import well_known as wk
@@ -149,6 +149,27 @@ class BagReader:
         for m in self.messages:
             if wanted is None or m.topic in wanted:
                 yield m
+
+    def decoder(self, topic: str) -> Callable[[bytes], Any]:
+        """``bytes -> message`` for ``topic``: an object with the message's fields, decoded from the
+        definition the bag itself holds (``mcap-ros2-support``; no ROS import, and the type need not
+        be installed).
+
+        Raises:
+            BagError: ``topic`` is not in the bag or its schema holds no definition (names bag and topic).
+        """
+        from mcap.records import Schema
+        from mcap_ros2.decoder import DecoderFactory
+
+        info = self.topics.get(topic)
+        if info is None:
+            raise BagError(f"{self.path}: no topic {topic} (topics: {', '.join(self.topics) or 'none'})")
+        if not info.definition.strip():
+            raise BagError(f"{self.path}: topic {topic}: its schema {info.type} holds no message definition")
+        schema = Schema(id=1, name=info.type, encoding=info.schema_encoding, data=info.definition.encode("utf-8"))
+        decode = DecoderFactory().decoder_for(wk.MESSAGE_ENCODING, schema)
+        assert decode is not None   # (the factory decodes every cdr + ros2msg channel)
+        return decode
 
     # -- locating files ---------------------------------------------------------------------
     def _resolve(self) -> List[Path]:
@@ -394,6 +415,22 @@ def _file_order(path: Path):
     """A split bag's files in the order written (``NAME_2.mcap`` before ``NAME_10.mcap``), then by name."""
     stem, _, index = path.stem.rpartition("_")
     return (stem, int(index), path.name) if index.isdigit() else (path.stem, -1, path.name)
+
+
+def cdr_string(data: bytes, offset: int = 0) -> str:
+    """The ``data`` field of a CDR-encoded std_msgs/String (no ROS import needed); ``offset``: bytes
+    of the message before its string (8 for ``pearl_interfaces/Action``, whose stamp comes first).
+
+    Raises:
+        ValueError: the bytes are too short for the string they announce.
+    """
+    start = 4 + offset
+    if len(data) < start + 4:
+        raise ValueError("shorter than its CDR string")
+    (n,) = struct.unpack_from("<I" if data[1] == 1 else ">I", data, start)
+    if n == 0 or start + 4 + n > len(data):
+        raise ValueError(f"string length {n} does not fit in {len(data)} bytes")
+    return data[start + 4:start + 4 + n - 1].decode("utf-8")
 
 
 def open_bag(path: PathLike, *, salvage: bool = True) -> BagReader:

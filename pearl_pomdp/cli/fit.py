@@ -5,7 +5,7 @@
 
 EPISODES are bag directories (``pearl demo`` / ``pearl record`` output: each closed step's
 action and observation from /pearl/belief (older bags: /pearl/belief_marginals), the true
-state from /pearl/sim/truth when a simulator recorded it) or ``.jsonl`` files with one episode per line
+state from the world's /WORLD/sim/truth, e.g. /pearl/sim/truth, when a simulator recorded it) or ``.jsonl`` files with one episode per line
 (``{"actions": [...], "observations": [...], "states": [...]}``, states optional).
 
 Each table row (one configuration of the row's parents) becomes

@@ -59,7 +59,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional, Union
 
 from pearl_pomdp.bags import well_known as wk
-from pearl_pomdp.bags.reader import BagError, BagReader
+from pearl_pomdp.bags.reader import BagError, BagReader, cdr_string
 from pearl_pomdp.errors import BeliefError, PearlError
 from pearl_pomdp.operator import BY_SERVICE
 
@@ -142,20 +142,6 @@ class ReplayResult:
         return out
 
 
-def _string_data(data: bytes, offset: int = 0) -> str:
-    """The ``data`` field of a CDR-encoded std_msgs/String (no ROS import needed); ``offset``: bytes
-    of the message before its string (8 for ``pearl_interfaces/Action``, whose stamp comes first)."""
-    import struct
-
-    start = 4 + offset
-    if len(data) < start + 4:
-        raise ValueError("shorter than its CDR string")
-    (n,) = struct.unpack_from("<I" if data[1] == 1 else ">I", data, start)
-    if n == 0 or start + 4 + n > len(data):
-        raise ValueError(f"string length {n} does not fit in {len(data)} bytes")
-    return data[start + 4:start + 4 + n - 1].decode("utf-8")
-
-
 def _clock_ns(data: bytes) -> int:
     """The time in a CDR-encoded rosgraph_msgs/Clock, in ns."""
     import struct
@@ -208,7 +194,7 @@ def expected_actions(reader: BagReader) -> List[str]:
     out = []
     for i, m in enumerate(reader.read_messages([ACTION_TOPIC])):
         try:
-            out.append(_string_data(m.data, offset).strip())
+            out.append(cdr_string(m.data, offset).strip())
         except (ValueError, UnicodeDecodeError) as err:
             raise BagError(f"{reader.path}: topic {ACTION_TOPIC}: message {i} (log time {m.log_time}) "
                            f"is not a {recorded}: {err}") from None
@@ -359,7 +345,7 @@ def _plain_decoder(reader: BagReader, topic: str, msg_type_name: str, to_plain) 
     ``conversions``, read by ``to_plain``), or the JSON std_msgs/String of a bag recorded before the
     typed interfaces."""
     if reader.topics[topic].type == wk.STRING_TYPE:
-        return lambda data: json.loads(_string_data(data))
+        return lambda data: json.loads(cdr_string(data))
     from rclpy.serialization import deserialize_message
 
     from pearl_pomdp.nodes import conversions as cv

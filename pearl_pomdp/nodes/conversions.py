@@ -30,6 +30,10 @@ Wire formats (common_interfaces, and this project's pearl_interfaces):
   subtask, choice, value; NaN: no α-vector), the forward search's expansions, ``latency_s`` (belief
   received → action published, wall clock) and an online search's ``SearchStats`` (``has_search``);
   ``step`` counts the beliefs this policy node answered before (0 for ``b0``).
+* **world truth** — ``pearl_interfaces/WorldTruth`` (``/WORLD/sim/truth``, a simulator's): a world's
+  truth record (:mod:`pearl_pomdp.world_truth`) field by field — its time, phase, action, the state as
+  parallel feature-name and value arrays and, closing an action, its events and why it was wrong;
+  stamped with the sim clock. (Bags recorded before it hold the record as JSON in a ``std_msgs/String``.)
 * **nav goal** — ``geometry_msgs/PoseStamped`` (position x, y; orientation from yaw).
 * **guide pace** — ``pearl_interfaces/GuidePace``: the guide_pace node's filter state (the guidance,
   the state, speeds, how far behind she is — NaN: not seen —, the wait, the times lost), stamped.
@@ -67,12 +71,14 @@ from pearl_interfaces.msg import SearchAction as SearchActionMsg
 from pearl_interfaces.msg import SearchBranch as SearchBranchMsg
 from pearl_interfaces.msg import SearchStats as SearchStatsMsg
 from pearl_interfaces.msg import TraceStep as TraceStepMsg
+from pearl_interfaces.msg import WorldTruth as WorldTruthMsg
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from pearl_pomdp.channels import SPEECH_TYPE, TEXT_TYPE
 from pearl_pomdp.errors import BeliefError
 from pearl_pomdp.speech import Utterance, parse_speech_message, utterance
+from pearl_pomdp.world_truth import truth_from_msg
 
 __all__ = [
     "MAX_NAMED_STATES", "ActionMsg", "BeliefMsg", "TextMsg", "DecisionMsg", "OperatorEventMsg", "OperatorProposalMsg",
@@ -85,6 +91,7 @@ __all__ = [
     "DriveProgressMsg", "drive_progress_to_msg", "msg_to_drive_progress",
     "RecognisedSpeechMsg", "speech_to_msg", "msg_to_speech", "input_to_msg",
     "GuidePaceMsg", "guide_pace_to_msg", "msg_to_guide_pace",
+    "WorldTruthMsg", "truth_to_msg", "msg_to_truth",
 ]
 
 #: Message classes used by the nodes (import them from here, not from the message packages).
@@ -335,6 +342,25 @@ def input_to_msg(type_name: str, data: str) -> Any:
     if type_name == TEXT_TYPE:
         return String(data=str(data))
     raise ValueError(f"an input of type {type_name} is not fed text (expected {SPEECH_TYPE} or {TEXT_TYPE})")
+
+
+# ----------------------------------------------------------------- world truth
+def truth_to_msg(record: Mapping[str, Any], stamp_s: float = 0.0) -> WorldTruthMsg:
+    """A world's truth record (:mod:`pearl_pomdp.world_truth`: ``time``, ``phase``, ``action``, ``state``
+    and, closing an action, ``events`` and ``wrong``) as a ``pearl_interfaces/WorldTruth`` stamped
+    ``stamp_s`` (the sim clock); :func:`msg_to_truth` gives the record back."""
+    state = record["state"]
+    outcome = "events" in record or "wrong" in record
+    return WorldTruthMsg(stamp=seconds_to_time(max(0.0, stamp_s)), world_time=float(record["time"]),
+                         phase=str(record["phase"]), action=str(record.get("action") or ""),
+                         feature_names=[str(f) for f in state], feature_values=[str(v) for v in state.values()],
+                         has_outcome=outcome, events=[str(e) for e in record.get("events") or []],
+                         wrong=str(record.get("wrong") or ""))
+
+
+def msg_to_truth(msg: WorldTruthMsg) -> Dict[str, Any]:
+    """The truth record of a ``pearl_interfaces/WorldTruth`` (:func:`pearl_pomdp.world_truth.truth_from_msg`)."""
+    return truth_from_msg(msg, "WorldTruth")
 
 
 def decision_to_msg(step: int, action_name: str, trace: Sequence, latency_s: float, expansions: int = 0,

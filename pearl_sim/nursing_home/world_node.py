@@ -37,8 +37,9 @@ starts afresh.
 
 Publishers: ``/clock`` (rosgraph_msgs/Clock), ``/pearl/speech`` (pearl_interfaces/RecognisedSpeech,
 as Pearl's domain declares it), ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder``
-(std_msgs/String), all reliable, ``/pearl/pose``
-(geometry_msgs/PoseStamped, the robot's place in the scenario's map).
+(std_msgs/String), ``/pearl/sim/truth`` (pearl_interfaces/WorldTruth, the true state at the start and
+end of every action), all reliable, ``/pearl/pose`` (geometry_msgs/PoseStamped, the robot's place in
+the scenario's map).
 Subscribers: ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL like the policy's publisher), and
 ``/pearl/belief`` (pearl_interfaces/Belief: the steps the tracker closed).
 """
@@ -65,7 +66,6 @@ def _make_node_class():
             super().__init__("pearl_sim_world", **kwargs)
             from geometry_msgs.msg import PoseStamped
             from rosgraph_msgs.msg import Clock
-            from std_msgs.msg import String
 
             from pearl_pomdp.nodes.common import resolve_path
             from pearl_pomdp.nodes.bag_recorder import message_class
@@ -103,7 +103,7 @@ def _make_node_class():
                 ident = Path(path).read_bytes() + f"\nseed={self.world.seed}".encode()
                 self.journal = Journal(where, "pearl_sim_world", str(path), domain_hash(ident),
                                        max_age=journal_max_age, sync="none")
-            self._String, self._Clock, self._Pose = String, Clock, PoseStamped
+            self._Clock, self._Pose = Clock, PoseStamped
             self.clock_pub = self.create_publisher(Clock, "/clock", 10)
             self.types_by_modality = {m: SPEECH_TYPE if m == "Speech" else "std_msgs/msg/String"
                                       for m in MODALITY_TOPICS}
@@ -113,7 +113,10 @@ def _make_node_class():
             self.pose_pub = self.create_publisher(PoseStamped, "/pearl/pose", 10)
             # The true state at the start and end of every action, as pearl demo records it
             # (pearl fit counts from it when this topic is recorded).
-            self.truth_pub = self.create_publisher(String, "/pearl/sim/truth", RELIABLE)
+            from pearl_pomdp.nodes.conversions import WorldTruthMsg
+            from pearl_pomdp.world_truth import truth_topic
+
+            self.truth_pub = self.create_publisher(WorldTruthMsg, truth_topic("pearl"), RELIABLE)
             from pearl_interfaces.msg import Action
 
             self.create_subscription(Action, "/pearl/action", self._on_action, LATCHED_QOS)
@@ -198,7 +201,9 @@ def _make_node_class():
                 input_to_msg(self.types_by_modality[message.modality], message.text))
 
         def _publish_truth(self, phase: str, action: str, result=None) -> None:
-            self.truth_pub.publish(self._String(data=json.dumps(self.world.truth_record(phase, action, result))))
+            from pearl_pomdp.nodes.conversions import truth_to_msg
+
+            self.truth_pub.publish(truth_to_msg(self.world.truth_record(phase, action, result), self.now))
 
         def _publish_clock(self) -> None:
             msg = self._Clock()
