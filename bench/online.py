@@ -46,7 +46,7 @@ import platform
 import sys
 import time
 from pathlib import Path
-from typing import Dict, List, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -54,6 +54,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from pearl_pomdp.online.despot import CLOCKS, Despot, DespotSettings  # noqa: E402
+from pearl_pomdp.online.lasertag import COLUMNS as COLUMNS_LASERTAG  # noqa: E402
+from pearl_pomdp.online.lasertag import ROWS as ROWS_LASERTAG  # noqa: E402
 from pearl_pomdp.online.lasertag import LaserTagBounds, lasertag, random_lasertag  # noqa: E402
 from pearl_pomdp.online.rocksample import RockSampleBounds, random_rocksample, rocksample  # noqa: E402
 
@@ -130,10 +132,12 @@ def run_lasertag(budget: float, episodes: int, steps: int, seed: int, max_minute
 
 
 def _run_generative(instance, make_bounds, budget: float, episodes: int, steps: int, seed: int,
-                    max_minutes: float, clock: str, layouts: str, first_episode: int) -> dict:
+                    max_minutes: float, clock: str, layouts: str, first_episode: int,
+                    start_state: Optional[Callable[[int], int]] = None) -> dict:
     """Episodes of a generative model with an exact belief (``model.initial_belief()``: ``sample``,
-    ``update``): ``instance(ep)`` gives the episode's model (the same one for ``layouts="fixed"``),
-    ``make_bounds(model)`` its bounds."""
+    ``update``): ``instance(ep)`` gives the episode's model (the same one for ``layouts="fixed"``,
+    built again for each episode otherwise), ``make_bounds(model)`` its bounds. The true start state
+    is drawn from the start belief, or is ``start_state(ep)`` when given (a peer's episode replayed)."""
     settings = DespotSettings(trials=None, time_limit=GUARD_SHARE * budget, clock=clock)
     now = CLOCKS[clock]
 
@@ -145,18 +149,19 @@ def _run_generative(instance, make_bounds, budget: float, episodes: int, steps: 
 
     model, bounds, bound_seconds = build(first_episode)
     planner = Despot(model, bounds, settings)
-    returns, times, walls, trials, gaps, nodes = [], [], [], [], [], []
+    returns, starts, times, walls, trials, gaps, nodes = [], [], [], [], [], [], []
     start = time.perf_counter()
     for ep in range(first_episode, first_episode + episodes):
         if (time.perf_counter() - start) / 60.0 > max_minutes:
             break
-        if layouts == "random" and ep > first_episode:
+        if layouts != "fixed" and ep > first_episode:
             model, bounds, seconds = build(ep)
             bound_seconds += seconds
             planner = Despot(model, bounds, settings)
         world = np.random.default_rng([seed, ep])       # the true state and the world's noise
         belief = model.initial_belief()
-        state = int(belief.sample(1, world)[0])
+        state = int(belief.sample(1, world)[0]) if start_state is None else int(start_state(ep))
+        starts.append(state)
         total = 0.0
         for t in range(steps):
             if model.is_terminal(np.array([state]))[0]:
@@ -177,7 +182,8 @@ def _run_generative(instance, make_bounds, budget: float, episodes: int, steps: 
     mean, half = _ci(returns)
     return {"states": model.num_states, "actions": len(model.actions), "bounds": bounds.description,
             "bound_setup_seconds": round(bound_seconds, 2), "budget_s": budget, "episodes": len(returns),
-            "first_episode": first_episode, "returns": returns, "layouts": layouts, "mean": mean, "ci95": half,
+            "first_episode": first_episode, "returns": returns, "start_states": starts, "layouts": layouts,
+            "mean": mean, "ci95": half,
             "clock": clock, **_timing(times, budget),
             "wall_decision_s_p99": float(np.percentile(walls, 99)), "mean_trials": float(np.mean(trials)),
             "mean_nodes": float(np.mean(nodes)), "mean_root_gap": float(np.mean(gaps)),
@@ -442,6 +448,84 @@ def run_despot_peer(binary: str, problem: str, budget: float, runs: int, steps: 
     return out
 
 
+def parse_despot_lasertag_rounds(text: str) -> List[dict]:
+    """Every round of a printout of DESPOT's ``laser_tag`` example (run without ``--silence``): its
+    map's obstacles ``(x, y)``, the true start's robot and opponent cells, and the round's
+    discounted return. The code prints a state with the row ``y = 6`` first
+    (``BaseTag::PrintState``): ``#`` an obstacle, ``R`` the robot, ``O`` the opponent, ``Q`` both.
+    Raises ``ValueError`` naming the round and what is wrong when the printout is not that."""
+    import re
+
+    rounds = []
+    for number, chunk in enumerate(text.split("Initial state:")[1:]):
+        lines = [line.strip() for line in chunk.strip().splitlines()]
+        grid = lines[:ROWS_LASERTAG]
+        if len(grid) != ROWS_LASERTAG or any(len(row) != COLUMNS_LASERTAG or set(row) - set(".#ROQ") for row in grid):
+            raise ValueError(f"DESPOT laser_tag round {number}: 'Initial state:' is not followed by "
+                             f"{ROWS_LASERTAG} rows of {COLUMNS_LASERTAG} cells of . # R O Q: {grid}")
+        cells: Dict[str, List[Tuple[int, int]]] = {c: [] for c in "#ROQ"}
+        for i, row in enumerate(grid):
+            for x, c in enumerate(row):
+                if c in cells:
+                    cells[c].append((x, ROWS_LASERTAG - 1 - i))
+        robots, opponents = cells["R"] + cells["Q"], cells["O"] + cells["Q"]
+        if len(robots) != 1 or len(opponents) != 1:
+            raise ValueError(f"DESPOT laser_tag round {number}: the start shows {len(robots)} robot(s) and "
+                             f"{len(opponents)} opponent(s), not one each: {grid}")
+        found = re.search(r"Total discounted reward = ([-\d.eE+]+)", chunk)
+        if found is None:
+            raise ValueError(f"DESPOT laser_tag round {number}: no 'Total discounted reward' line")
+        rounds.append({"obstacles": sorted(cells["#"]), "robot": robots[0], "opponent": opponents[0],
+                       "return": float(found.group(1))})
+    return rounds
+
+
+def run_lasertag_paired(binary: str, budget: float, runs: int, steps: int, seed: int, max_minutes: float,
+                        clock: str = "process") -> dict:
+    """LaserTag side by side with DESPOT's own ``laser_tag``, episode by episode: each run of its code
+    (one process, seed ``seed + 1 + i``) draws a map and a true start; ours then plays an episode on
+    that map from that start (its own random stream for the opponent and the laser, seeded by
+    ``[seed, i]``: the two codes cannot share one). Returns both sides, and the paired difference
+    ours − DESPOT with Student's t 95 % interval over the episodes. No new pair is started after
+    ``max_minutes``; both sides count ``budget`` in CPU seconds of their own process by default."""
+    import subprocess
+
+    from pearl_pomdp.online.lasertag import LaserTag
+    from pearl_sim.stats import t_ci
+
+    t0 = time.perf_counter()
+    rounds, commands = [], []
+    while len(rounds) < runs and (time.perf_counter() - t0) / 60.0 <= max_minutes / 2:
+        cmd = [binary, "-t", f"{budget:g}", "-s", str(steps), "--runs", "1", "-r", str(seed + 1 + len(rounds))]
+        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        if done.returncode != 0:
+            raise RuntimeError(f"{' '.join(cmd)}: exit {done.returncode}: {done.stderr.strip()[-300:]}")
+        (played,) = parse_despot_lasertag_rounds(done.stdout)
+        rounds.append(played)
+        commands.append(" ".join(cmd))
+        print(f"DESPOT lasertag {budget:g}s: {len(rounds)} runs, this one {played['return']:.2f}",
+              file=sys.stderr, flush=True)
+    models: Dict[int, LaserTag] = {}
+
+    def instance(ep):
+        models[ep] = LaserTag(rounds[ep]["obstacles"])
+        return models[ep]
+
+    def start_state(ep):
+        model = models[ep]
+        return model.index[tuple(rounds[ep]["robot"])] * model.n + model.index[tuple(rounds[ep]["opponent"])]
+
+    ours = _run_generative(instance, LaserTagBounds, budget, len(rounds), steps, seed,
+                           max(max_minutes - (time.perf_counter() - t0) / 60.0, 0.0), clock, "despot", 0, start_state)
+    played = rounds[:ours["episodes"]]
+    peer = [r["return"] for r in played]
+    differences = [a - b for a, b in zip(ours["returns"], peer)]
+    return {"ours": ours, "despot": {"runs": len(peer), "returns": peer, "commands": commands,
+                                     "maps_and_starts": [{k: r[k] for k in ("obstacles", "robot", "opponent")} for r in played],
+                                     "budget_clock": "process (DESPOT's clock())", **t_ci(peer)},
+            "paired_difference": t_ci(differences)}
+
+
 def versus_published(problem: str, result: dict) -> dict:
     """Our mean against every published DESPOT figure for ``problem``: within its interval or above
     it (``mean >= figure - half``). ``within_or_above`` is ``None`` (not judged, never a pass) when no
@@ -546,6 +630,9 @@ def main(argv=None) -> int:
                     help="DESPOT's own laser_tag example (built as --despot is): run on lasertag, --despot-runs "
                          "episodes each, on its own maps (compare with --layouts random)")
     ap.add_argument("--despot-runs", type=int, default=30)
+    ap.add_argument("--paired", action="store_true",
+                    help="with --despot-lasertag: ours plays each of DESPOT's runs again, on its map from its true "
+                         "start, and the paired difference is reported (ours takes no episodes of its own)")
     ap.add_argument("--sarsop", metavar="PATH",
                     help="APPL SARSOP's pomdpsol (built outside this repository): its offline policy on rs7_8 and "
                          "tag (the explicit files), --sarsop-time seconds, simulated on the same seeds")
@@ -574,6 +661,19 @@ def main(argv=None) -> int:
     for p in problems:
         out["results"][p] = {}
         for budget in budgets:
+            if args.paired and p == "lasertag":
+                if not args.despot_lasertag:
+                    ap.error("--paired needs --despot-lasertag PATH (DESPOT's laser_tag, built outside this repository)")
+                pair = run_lasertag_paired(args.despot_lasertag, budget, args.despot_runs, args.steps, args.seed,
+                                           args.max_minutes, args.clock)
+                out["results"][p][f"{budget:g}s"] = r = pair["ours"]
+                out.setdefault("paired", {}).setdefault(p, {})[f"{budget:g}s"] = {
+                    "despot": pair["despot"], "difference": pair["paired_difference"]}
+                d = pair["paired_difference"]
+                print(f"{p} {budget:g}s paired over {d['n']} of DESPOT's runs: ours {r['mean']:.2f}, DESPOT "
+                      f"{pair['despot']['mean']:.2f}, ours − DESPOT {d['mean']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]",
+                      file=sys.stderr, flush=True)
+                continue
             if not args.despot_only:
                 if p == "tag":
                     r = run_tag(budget, args.episodes, args.steps, args.seed, args.max_minutes, args.tag_lower,

@@ -78,3 +78,80 @@ def test_combine_judges_the_pooled_result(online_bench, tmp_path):
     (tmp_path / "slow.json").write_text(json.dumps({"results": {"rs15_15": {"1s": slow}}}))
     out = online_bench.combine([*paths, str(tmp_path / "slow.json")])
     assert out["acceptance"]["p99_within_budget_plus_10pct"] == {"rs15_15 1s": False}
+
+
+# A round of DESPOT's laser_tag printout as it ran here (`despot_laser_tag --runs 1 -r 1 -t 0.1`,
+# AdaCompNUS/despot 37a3e21), its middle steps cut: the start, the first step and the end.
+DESPOT_LASERTAG_ROUND = """\
+####################################### Round 0 #######################################
+Initial state: 
+...#.......
+.....##..O.
+...R......#
+#..........
+......#....
+..#........
+..#........
+
+-----------------------------------Round 0 Step 0-----------------------------------
+- Action = West
+- State:
+...#.....O.
+.....##....
+..R.......#
+#..........
+......#....
+..#........
+..#........
+- Observation = 1 6 0 0 2 5 4 2 
+- ObsProb = 1.58808e-05
+- Reward = -1
+- Current rewards:
+  discounted / undiscounted = -1 / -1
+Simulation terminated in 22 steps
+Total discounted reward = -9.78315
+Total undiscounted reward = -11
+"""
+
+
+def test_despot_lasertag_printout_gives_its_map_start_and_return(online_bench):
+    (got,) = online_bench.parse_despot_lasertag_rounds(DESPOT_LASERTAG_ROUND)
+    # The printout's top row is y = 6 (BaseTag::PrintState), so the '#' in its first row is (3, 6).
+    assert got["obstacles"] == sorted([(3, 6), (5, 5), (6, 5), (10, 4), (0, 3), (6, 2), (2, 1), (2, 0)])
+    assert got["robot"] == (3, 4) and got["opponent"] == (9, 5)
+    assert got["return"] == -9.78315
+    # Two rounds, the second starting with both in one cell ('Q').
+    second = DESPOT_LASERTAG_ROUND.replace("...R......#", "..........#").replace(".....##..O.", ".....##..Q.")
+    first, both = online_bench.parse_despot_lasertag_rounds(DESPOT_LASERTAG_ROUND + second)
+    assert first == got and both["robot"] == both["opponent"] == (9, 5)
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda t: t.replace("...R......#", "...R.......#"), "7 rows of 11 cells"),
+    (lambda t: t.replace("...R......#", "..........#"), "0 robot"),
+    (lambda t: t.replace("Total discounted reward", "Total reward"), "no 'Total discounted reward'"),
+])
+def test_despot_lasertag_printout_that_is_not_one_is_refused_naming_the_round(online_bench, edit, message):
+    with pytest.raises(ValueError, match="round 0") as err:
+        online_bench.parse_despot_lasertag_rounds(edit(DESPOT_LASERTAG_ROUND))
+    assert message in str(err.value)
+
+
+def test_paired_lasertag_replays_each_peer_run_on_its_map_from_its_start(online_bench, tmp_path):
+    """The peer here is a script that prints the round above whatever its seed (DESPOT's code is not
+    built in the suite); ours plays that map from that start, and the difference pairs them."""
+    peer = tmp_path / "laser_tag"
+    (tmp_path / "round.txt").write_text(DESPOT_LASERTAG_ROUND)
+    peer.write_text(f"#!/bin/sh\ncat {tmp_path / 'round.txt'}\n")
+    peer.chmod(0o755)
+    out = online_bench.run_lasertag_paired(str(peer), budget=0.01, runs=2, steps=3, seed=0, max_minutes=5)
+    assert out["despot"]["returns"] == [-9.78315, -9.78315]
+    assert out["despot"]["maps_and_starts"][0]["robot"] == (3, 4)
+    from pearl_pomdp.online.lasertag import LaserTag
+
+    model = LaserTag(out["despot"]["maps_and_starts"][0]["obstacles"])
+    assert out["ours"]["start_states"] == [model.index[(3, 4)] * model.n + model.index[(9, 5)]] * 2
+    ours = out["ours"]["returns"]
+    assert len(ours) == 2 and all(-3.0 <= r <= 10.0 for r in ours)   # 3 steps: −1 a move, ±10 a tag
+    assert out["paired_difference"]["n"] == 2
+    assert out["paired_difference"]["mean"] == pytest.approx(float(np.mean(ours)) + 9.78315)

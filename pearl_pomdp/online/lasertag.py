@@ -44,7 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy import special
 
-__all__ = ["LaserTag", "LaserTagBelief", "LaserTagBounds", "lasertag", "random_lasertag", "LAYOUT",
+__all__ = ["LaserTag", "LaserTagBelief", "LaserTagBounds", "lasertag", "random_lasertag", "LAYOUT", "ROWS", "COLUMNS",
            "SAME_CELL", "NORTH", "EAST", "SOUTH", "WEST", "TAG"]
 
 ROWS, COLUMNS, OBSTACLES = 7, 11, 8
