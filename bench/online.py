@@ -101,7 +101,8 @@ def _ci(values):
 
 
 def run_rocksample(name: str, budget: float, episodes: int, steps: int, seed: int, max_minutes: float,
-                   clock: str = "wall", layouts: str = "fixed", first_episode: int = 0, lower: str = "check") -> dict:
+                   clock: str = "wall", layouts: str = "fixed", first_episode: int = 0, lower: str = "check",
+                   regularization: float = 0.0) -> dict:
     """Episodes ``first_episode … first_episode + episodes - 1`` (each seeded by its index alone, so a
     run of episodes 65–99 continues one of 0–64 exactly as a single run of 0–99 would).
     ``layouts="random"``: every episode on its own layout drawn as DESPOT's code draws one
@@ -114,12 +115,12 @@ def run_rocksample(name: str, budget: float, episodes: int, steps: int, seed: in
             return random_rocksample(n, k, np.random.default_rng([seed, ep, 7919]))
         return rocksample(name)
 
-    return _run_generative(instance, lambda model: RockSampleBounds(model, lower=lower), budget, episodes, steps, seed, max_minutes, clock,
-                           layouts, first_episode)
+    return _run_generative(instance, lambda model: RockSampleBounds(model, lower=lower), budget, episodes, steps, seed,
+                           max_minutes, clock, layouts, first_episode, regularization=regularization)
 
 
 def run_lasertag(budget: float, episodes: int, steps: int, seed: int, max_minutes: float, clock: str = "wall",
-                 layouts: str = "fixed", first_episode: int = 0) -> dict:
+                 layouts: str = "fixed", first_episode: int = 0, regularization: float = 0.0) -> dict:
     """LaserTag (:mod:`pearl_pomdp.online.lasertag`) as :func:`run_rocksample` runs RockSample: our
     fixed map, or with ``layouts="random"`` every episode on its own map drawn as DESPOT's code draws one."""
     def instance(ep):
@@ -128,17 +129,18 @@ def run_lasertag(budget: float, episodes: int, steps: int, seed: int, max_minute
         return lasertag()
 
     return _run_generative(instance, LaserTagBounds, budget, episodes, steps, seed, max_minutes, clock,
-                           layouts, first_episode)
+                           layouts, first_episode, regularization=regularization)
 
 
 def _run_generative(instance, make_bounds, budget: float, episodes: int, steps: int, seed: int,
                     max_minutes: float, clock: str, layouts: str, first_episode: int,
-                    start_state: Optional[Callable[[int], int]] = None) -> dict:
+                    start_state: Optional[Callable[[int], int]] = None, regularization: float = 0.0) -> dict:
     """Episodes of a generative model with an exact belief (``model.initial_belief()``: ``sample``,
     ``update``): ``instance(ep)`` gives the episode's model (the same one for ``layouts="fixed"``,
     built again for each episode otherwise), ``make_bounds(model)`` its bounds. The true start state
-    is drawn from the start belief, or is ``start_state(ep)`` when given (a peer's episode replayed)."""
-    settings = DespotSettings(trials=None, time_limit=GUARD_SHARE * budget, clock=clock)
+    is drawn from the start belief, or is ``start_state(ep)`` when given (a peer's episode replayed).
+    ``regularization``: the search's λ (:class:`DespotSettings`)."""
+    settings = DespotSettings(trials=None, time_limit=GUARD_SHARE * budget, clock=clock, regularization=regularization)
     now = CLOCKS[clock]
 
     def build(ep):
@@ -255,7 +257,8 @@ def absorbing_states(model) -> np.ndarray:
         done = closed
 
 
-def run_tag(budget, episodes, steps, seed, max_minutes, lower: str = "blind", clock: str = "wall") -> dict:
+def run_tag(budget, episodes, steps, seed, max_minutes, lower: str = "blind", clock: str = "wall",
+            regularization: float = 0.0) -> dict:
     """Tag through OnlineDecider. ``lower``: ``"blind"`` (blind-policy vectors) or
     ``"pointbased:SECONDS"`` (the α-vectors of the project's point-based solver run that long offline:
     the issue's "point-based lower" — online search on top of an offline policy). ``clock``: what the
@@ -274,7 +277,7 @@ def run_tag(budget, episodes, steps, seed, max_minutes, lower: str = "blind", cl
         bounds = alpha_bounds(model, lower_alphas=offline.policy.alphas)
     else:
         raise SystemExit(f"bench/online.py: error: --tag-lower: {lower!r}: expected blind or pointbased:SECONDS")
-    settings = DespotSettings(trials=None, time_limit=GUARD_SHARE * budget, clock=clock)
+    settings = DespotSettings(trials=None, time_limit=GUARD_SHARE * budget, clock=clock, regularization=regularization)
     decider = OnlineDecider(model, bounds=bounds, settings=settings, seed=seed)
     bound_seconds = time.perf_counter() - t_bounds
     trials, gaps, nodes = [], [], []
@@ -481,7 +484,7 @@ def parse_despot_lasertag_rounds(text: str) -> List[dict]:
 
 
 def run_lasertag_paired(binary: str, budget: float, runs: int, steps: int, seed: int, max_minutes: float,
-                        clock: str = "process") -> dict:
+                        clock: str = "process", regularization: float = 0.0) -> dict:
     """LaserTag side by side with DESPOT's own ``laser_tag``, episode by episode: each run of its code
     (one process, seed ``seed + 1 + i``) draws a map and a true start; ours then plays an episode on
     that map from that start (its own random stream for the opponent and the laser, seeded by
@@ -516,7 +519,8 @@ def run_lasertag_paired(binary: str, budget: float, runs: int, steps: int, seed:
         return model.index[tuple(rounds[ep]["robot"])] * model.n + model.index[tuple(rounds[ep]["opponent"])]
 
     ours = _run_generative(instance, LaserTagBounds, budget, len(rounds), steps, seed,
-                           max(max_minutes - (time.perf_counter() - t0) / 60.0, 0.0), clock, "despot", 0, start_state)
+                           max(max_minutes - (time.perf_counter() - t0) / 60.0, 0.0), clock, "despot", 0, start_state,
+                           regularization)
     played = rounds[:ours["episodes"]]
     peer = [r["return"] for r in played]
     differences = [a - b for a, b in zip(ours["returns"], peer)]
@@ -630,6 +634,9 @@ def main(argv=None) -> int:
                     help="DESPOT's own laser_tag example (built as --despot is): run on lasertag, --despot-runs "
                          "episodes each, on its own maps (compare with --layouts random)")
     ap.add_argument("--despot-runs", type=int, default=30)
+    ap.add_argument("--regularization", type=float, default=DespotSettings().regularization,
+                    help="our search's λ, the price of a policy node (DespotSettings; DESPOT's code ships 0.01 for "
+                         "Tag and LaserTag, 0 for RockSample)")
     ap.add_argument("--paired", action="store_true",
                     help="with --despot-lasertag: ours plays each of DESPOT's runs again, on its map from its true "
                          "start, and the paired difference is reported (ours takes no episodes of its own)")
@@ -654,7 +661,7 @@ def main(argv=None) -> int:
                  "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                              "load_avg_1min_at_start": os.getloadavg()[0]},
                  "settings": {"scenarios": DespotSettings().scenarios, "depth": DespotSettings().depth,
-                              "xi": DespotSettings().xi, "regularization": DespotSettings().regularization,
+                              "xi": DespotSettings().xi, "regularization": args.regularization,
                               "steps": args.steps, "seed": args.seed},
                  "results": {}, "offline": {}, "published": PUBLISHED}
     t_all = time.perf_counter()
@@ -665,7 +672,7 @@ def main(argv=None) -> int:
                 if not args.despot_lasertag:
                     ap.error("--paired needs --despot-lasertag PATH (DESPOT's laser_tag, built outside this repository)")
                 pair = run_lasertag_paired(args.despot_lasertag, budget, args.despot_runs, args.steps, args.seed,
-                                           args.max_minutes, args.clock)
+                                           args.max_minutes, args.clock, args.regularization)
                 out["results"][p][f"{budget:g}s"] = r = pair["ours"]
                 out.setdefault("paired", {}).setdefault(p, {})[f"{budget:g}s"] = {
                     "despot": pair["despot"], "difference": pair["paired_difference"]}
@@ -677,13 +684,14 @@ def main(argv=None) -> int:
             if not args.despot_only:
                 if p == "tag":
                     r = run_tag(budget, args.episodes, args.steps, args.seed, args.max_minutes, args.tag_lower,
-                                args.clock)
+                                args.clock, args.regularization)
                 elif p == "lasertag":
                     r = run_lasertag(budget, args.episodes, args.steps, args.seed, args.max_minutes, args.clock,
-                                     args.layouts, args.first_episode)
+                                     args.layouts, args.first_episode, args.regularization)
                 else:
                     r = run_rocksample(p[2:], budget, args.episodes, args.steps, args.seed, args.max_minutes,
-                                       args.clock, args.layouts, args.first_episode, args.rs_lower)
+                                       args.clock, args.layouts, args.first_episode, args.rs_lower,
+                                       args.regularization)
                 out["results"][p][f"{budget:g}s"] = r
                 print(f"{p} {budget:g}s: {r['mean']:.2f} ± {r['ci95']:.2f} over {r['episodes']} episodes, "
                       f"p99 {r['decision_s_p99']:.3f} s", file=sys.stderr, flush=True)

@@ -155,3 +155,19 @@ def test_paired_lasertag_replays_each_peer_run_on_its_map_from_its_start(online_
     assert len(ours) == 2 and all(-3.0 <= r <= 10.0 for r in ours)   # 3 steps: −1 a move, ±10 a tag
     assert out["paired_difference"]["n"] == 2
     assert out["paired_difference"]["mean"] == pytest.approx(float(np.mean(ours)) + 9.78315)
+
+
+def test_regularization_reaches_the_search_and_the_report(online_bench, monkeypatch, capsys):
+    seen = []
+    real = online_bench.Despot
+
+    def recording(model, bounds, settings):
+        seen.append(settings.regularization)
+        return real(model, bounds, settings)
+
+    monkeypatch.setattr(online_bench, "Despot", recording)
+    online_bench.main(["--problems", "lasertag", "--budgets", "0.01", "--episodes", "1", "--steps", "2",
+                       "--clock", "process", "--regularization", "0.01"])
+    out = json.loads(capsys.readouterr().out)
+    assert seen and set(seen) == {0.01}
+    assert out["settings"]["regularization"] == 0.01
