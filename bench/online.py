@@ -9,7 +9,9 @@ Problems (the models and where each comes from: docs/online.md "Benchmark"):
 * ``lasertag`` — LaserTag (Somani, Ye, Hsu & Lee, NIPS 2013) as the generative model
   :mod:`pearl_pomdp.online.lasertag` (the dynamics and laser model of the DESPOT code; our map is
   drawn from a fixed seed, the code draws one per run: ``--layouts random``), its exact belief and
-  bounds (Manhattan upper, open-loop chase of the most common particles lower).
+  bounds (the fully observed MDP above, the random walk that tags on "same cell" below; the chase
+  of the most common particles with ``--lasertag-lower chase``). ``--paired --despot-lasertag PATH``
+  plays each of DESPOT's runs again on its map from its start.
 * ``tag`` — Tag (Pineau, Gordon & Thrun, IJCAI 2003), the explicit file
   ``test/data/pomdp/TagAvoid.pomdp`` (870 states) through :class:`~pearl_pomdp.online.decider.OnlineDecider`:
   exact belief at the root, FIB upper and blind-policy lower bounds (``--tag-lower blind``), or
@@ -120,16 +122,18 @@ def run_rocksample(name: str, budget: float, episodes: int, steps: int, seed: in
 
 
 def run_lasertag(budget: float, episodes: int, steps: int, seed: int, max_minutes: float, clock: str = "wall",
-                 layouts: str = "fixed", first_episode: int = 0, regularization: float = 0.0) -> dict:
+                 layouts: str = "fixed", first_episode: int = 0, regularization: float = 0.0,
+                 lower: str = "walk") -> dict:
     """LaserTag (:mod:`pearl_pomdp.online.lasertag`) as :func:`run_rocksample` runs RockSample: our
-    fixed map, or with ``layouts="random"`` every episode on its own map drawn as DESPOT's code draws one."""
+    fixed map, or with ``layouts="random"`` every episode on its own map drawn as DESPOT's code draws one.
+    ``lower``: the bounds' lower bound (:class:`~pearl_pomdp.online.lasertag.LaserTagBounds`)."""
     def instance(ep):
         if layouts == "random":
             return random_lasertag(np.random.default_rng([seed, ep, 7919]))
         return lasertag()
 
-    return _run_generative(instance, LaserTagBounds, budget, episodes, steps, seed, max_minutes, clock,
-                           layouts, first_episode, regularization=regularization)
+    return _run_generative(instance, lambda model: LaserTagBounds(model, lower=lower), budget, episodes, steps, seed,
+                           max_minutes, clock, layouts, first_episode, regularization=regularization)
 
 
 def _run_generative(instance, make_bounds, budget: float, episodes: int, steps: int, seed: int,
@@ -484,7 +488,7 @@ def parse_despot_lasertag_rounds(text: str) -> List[dict]:
 
 
 def run_lasertag_paired(binary: str, budget: float, runs: int, steps: int, seed: int, max_minutes: float,
-                        clock: str = "process", regularization: float = 0.0) -> dict:
+                        clock: str = "process", regularization: float = 0.0, lower: str = "walk") -> dict:
     """LaserTag side by side with DESPOT's own ``laser_tag``, episode by episode: each run of its code
     (one process, seed ``seed + 1 + i``) draws a map and a true start; ours then plays an episode on
     that map from that start (its own random stream for the opponent and the laser, seeded by
@@ -518,7 +522,7 @@ def run_lasertag_paired(binary: str, budget: float, runs: int, steps: int, seed:
         model = models[ep]
         return model.index[tuple(rounds[ep]["robot"])] * model.n + model.index[tuple(rounds[ep]["opponent"])]
 
-    ours = _run_generative(instance, LaserTagBounds, budget, len(rounds), steps, seed,
+    ours = _run_generative(instance, lambda model: LaserTagBounds(model, lower=lower), budget, len(rounds), steps, seed,
                            max(max_minutes - (time.perf_counter() - t0) / 60.0, 0.0), clock, "despot", 0, start_state,
                            regularization)
     played = rounds[:ours["episodes"]]
@@ -620,6 +624,9 @@ def main(argv=None) -> int:
     ap.add_argument("--rs-lower", choices=["check", "tour"], default="check",
                     help="RockSample's lower bound: the best of East, the open-loop tour and tours that check "
                          "each rock on arrival (check), or East and the open-loop tour only (tour)")
+    ap.add_argument("--lasertag-lower", choices=["walk", "chase"], default="walk",
+                    help="LaserTag's lower bound: the random walk that tags on the same-cell reading (walk), or the "
+                         "best chase of the set's most common particles (chase, the bound before 2026-12-07)")
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="wall",
                     help="what a budget measures: wall (a robot's wait) or process (CPU seconds, "
                          "as DESPOT's own code counts them: the same work per decision whatever the load)")
@@ -672,7 +679,7 @@ def main(argv=None) -> int:
                 if not args.despot_lasertag:
                     ap.error("--paired needs --despot-lasertag PATH (DESPOT's laser_tag, built outside this repository)")
                 pair = run_lasertag_paired(args.despot_lasertag, budget, args.despot_runs, args.steps, args.seed,
-                                           args.max_minutes, args.clock, args.regularization)
+                                           args.max_minutes, args.clock, args.regularization, args.lasertag_lower)
                 out["results"][p][f"{budget:g}s"] = r = pair["ours"]
                 out.setdefault("paired", {}).setdefault(p, {})[f"{budget:g}s"] = {
                     "despot": pair["despot"], "difference": pair["paired_difference"]}
@@ -687,7 +694,7 @@ def main(argv=None) -> int:
                                 args.clock, args.regularization)
                 elif p == "lasertag":
                     r = run_lasertag(budget, args.episodes, args.steps, args.seed, args.max_minutes, args.clock,
-                                     args.layouts, args.first_episode, args.regularization)
+                                     args.layouts, args.first_episode, args.regularization, args.lasertag_lower)
                 else:
                     r = run_rocksample(p[2:], budget, args.episodes, args.steps, args.seed, args.max_minutes,
                                        args.clock, args.layouts, args.first_episode, args.rs_lower,

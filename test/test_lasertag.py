@@ -180,7 +180,7 @@ def test_the_random_walk_and_one_states_chase_are_their_simulations(model):
     """The walk's exact value (tag on "same cell", else a random move) against 4,000 walks of 150
     steps; a state's own chase from the table against 4,000 simulations; ``lower`` of a set of one
     state is the table's; ``grouped`` gives every set what ``lower``/``upper`` give it."""
-    bounds = LaserTagBounds(model)
+    bounds = LaserTagBounds(model, lower="chase")
     rng = np.random.default_rng(4)
     for s in (5, 4000):
         walked = _chase_by_hand(model, bounds, [s] * 4000, [], rng, walk_steps=150)
@@ -216,7 +216,7 @@ def test_a_step_with_an_action_per_particle_is_the_step_of_each(model):
 def test_the_lower_bound_of_a_mixed_set_is_its_best_plan_simulated(model):
     """A set of two states, 200 particles each: its bound is the best of the two modes' chases run on
     all 400 particles (checked against each chase simulated particle by particle), below the upper."""
-    bounds = LaserTagBounds(model)
+    bounds = LaserTagBounds(model, lower="chase")
     a, b = state(model, (0, 0), (2, 0)), state(model, (9, 5), (1, 0))
     particles = np.array([a] * 200 + [b] * 200)
     got = bounds.lower(particles, np.random.default_rng(7))
@@ -230,10 +230,28 @@ def test_the_mdp_upper_bound_lies_between_every_chase_and_the_manhattan_bound(mo
     """The fully observed MDP's value (it sees both cells) is at least the value of every policy of
     the laser, each state's own chase among them, and at most the Manhattan chase's (the opponent
     never comes closer); at the start belief it is lower than Manhattan's, so tighter."""
-    mdp, manhattan = LaserTagBounds(model), LaserTagBounds(model, upper="manhattan")
+    mdp, manhattan = LaserTagBounds(model, lower="chase"), LaserTagBounds(model, upper="manhattan")
     assert (mdp.upper_values <= manhattan.upper_values + 1e-12).all()
     assert (mdp.chase_values <= mdp.upper_values + 1e-9).all()
     particles = model.initial_belief().sample(500, np.random.default_rng(1))
     assert mdp.upper(particles) < manhattan.upper(particles) - 1.0
     with pytest.raises(ValueError, match="upper bound 'sp'"):
         LaserTagBounds(model, upper="sp")
+    with pytest.raises(ValueError, match="lower bound 'mode'"):
+        LaserTagBounds(model, lower="mode")
+
+
+def test_the_walk_lower_bound_is_each_sets_mean_walk_value_whatever_its_particles_know(model):
+    """The default lower bound: per set the mean of the walk's exact values, so a set of one state
+    gets the walk's value there, not the chase that walks straight to that state's opponent."""
+    walk, chase = LaserTagBounds(model), LaserTagBounds(model, lower="chase")
+    assert walk.walk_values == pytest.approx(chase.walk_values, abs=0.0)
+    rng = np.random.default_rng(11)
+    sets = [np.array([2000]), model.initial_belief().sample(60, rng), np.array([4000, 4000, 5])]
+    states = np.concatenate(sets)
+    starts = np.concatenate(([0], np.cumsum([len(x) for x in sets])))
+    lowers, uppers = walk.grouped(states, starts, rng)
+    assert lowers.tolist() == pytest.approx([walk.walk_values[x].mean() for x in sets], abs=1e-12)
+    assert uppers.tolist() == pytest.approx([walk.upper(x) for x in sets], abs=1e-12)
+    # One state's chase knows where its opponent is: it is worth more than the walk there.
+    assert chase.chase_value(2000) > walk.lower(np.array([2000]), rng) + 1.0

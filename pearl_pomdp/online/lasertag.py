@@ -265,22 +265,33 @@ class LaserTagBelief:
 
 
 class LaserTagBounds:
-    """LaserTag's bounds on a particle set (module doc): Manhattan above, a chase below.
+    """LaserTag's bounds on a particle set (module doc): the fully observed MDP (or Manhattan) above,
+    a policy of the history below.
 
-    The chase is a policy of the history: it tags when the laser last read "same cell" (so a tag
-    never misses), otherwise it follows a shortest path to where one of the set's most common
-    particles puts the opponent, and once the path is walked it moves at random (each move a
-    quarter) until the laser reads "same cell". Its value on a particle is the plan's steps
-    simulated (or, for a set of one state, pushed through exactly) and then the random walk's value
-    at the state where the plan ended, :attr:`walk_values`, solved exactly once. The bound is the
-    best of the plans of the set's :attr:`modes` most common particles.
+    ``lower="walk"`` (the default): the random walk that tags when the laser reads "same cell" and
+    otherwise moves at random (each move a quarter); its value :attr:`walk_values` is solved exactly
+    once, and a set's bound is its particles' mean. It uses nothing a set's particles know.
+
+    ``lower="chase"``: the best of chases: tag on "same cell", otherwise follow a shortest path to
+    where one of the set's :attr:`modes` most common particles puts the opponent, then the walk. Its
+    value on a particle is the plan's steps simulated (or, for a set of one state, pushed through
+    exactly) and then the walk's value where the plan ended. Choosing a plan by the set's particles
+    is a policy of the history in DESPOT's sense, but with ~10⁸ observations almost every node below
+    the root holds one scenario, whose "most common particle" is the scenario's own state: the bound
+    then chases an opponent it has been told where to find, every action looks as informed as
+    every other, and the search learns nothing about looking (docs/online.md, LaserTag). Kept to
+    compare.
     """
 
-    def __init__(self, model: LaserTag, modes: int = 3, upper: str = "mdp"):
+    def __init__(self, model: LaserTag, modes: int = 3, upper: str = "mdp", lower: str = "walk"):
         self.model = model
         g = model.discount
         if upper not in ("mdp", "manhattan"):
             raise ValueError(f"upper bound {upper!r}: expected 'mdp' or 'manhattan'")
+        if lower not in ("walk", "chase"):
+            raise ValueError(f"lower bound {lower!r}: expected 'walk' or 'chase'")
+        #: ``"walk"`` or ``"chase"`` (class doc).
+        self.lower_kind = lower
         xy = np.array(model.cells)
         dist = np.abs(xy[:, None, :] - xy[None, :, :]).sum(axis=2).reshape(-1)
         manhattan = -(1.0 - g ** dist) / (1.0 - g) + TAG_REWARD * g ** dist
@@ -306,13 +317,16 @@ class LaserTagBounds:
         self._chase_reward = np.where(self.same, TAG_REWARD, np.where(live, -1.0, 0.0))
         #: ``[S]``: the value of the random walk that tags on "same cell", (I − γM)⁻¹ r, exact.
         self.walk_values = self._walk_values()
-        #: ``[S]``: each state's own chase (its plan pushed through exactly, then the walk).
-        self.chase_values = self._chase_table()
+        #: ``[S]``: each state's own chase (its plan pushed through exactly, then the walk); only
+        #: ``lower="chase"`` reads it, so only that builds it.
+        self.chase_values = self._chase_table() if lower == "chase" else np.full(model.num_states, np.nan)
         self.description = (("upper: each particle's value in the fully observed MDP (value iteration); " if upper == "mdp"
                              else "upper: each particle's value with the opponent standing at its Manhattan distance; ")
-                            + "lower: the best of the chases 'tag on the same-cell reading, else the shortest path to "
-                            "one of the 3 most common particles' opponent, then random moves' (the plan simulated, "
-                            "the random walk's exact value after it; exact for a set of one state)")
+                            + ("lower: the random walk that tags on the same-cell reading (its exact value)"
+                               if lower == "walk" else
+                               "lower: the best of the chases 'tag on the same-cell reading, else the shortest path to "
+                               "one of the 3 most common particles' opponent, then random moves' (the plan simulated, "
+                               "the random walk's exact value after it; exact for a set of one state)"))
 
     def upper(self, states):
         return float(self.upper_values[np.asarray(states)].mean(dtype=np.float64))
@@ -323,12 +337,15 @@ class LaserTagBounds:
 
     def grouped(self, states: np.ndarray, starts: np.ndarray, rng) -> Tuple[np.ndarray, np.ndarray]:
         """``(lowers, uppers)`` of the sets ``states[starts[g]:starts[g + 1]]`` in one call (the search's
-        fast path): a set of one state from the table; the others' plans simulated together, every
-        particle under each of its set's plans in one vectorised pass."""
+        fast path): the walk's values averaged per set; or (``lower="chase"``) a set of one state from
+        the table, the others' plans simulated together, every particle under each of its set's plans
+        in one vectorised pass."""
         states = np.asarray(states, dtype=np.int64)
         first = starts[:-1]
         sizes = np.diff(starts)
         uppers = np.add.reduceat(self.upper_values[states], first) / sizes
+        if self.lower_kind == "walk":
+            return np.add.reduceat(self.walk_values[states], first) / sizes, uppers
         single = np.minimum.reduceat(states, first) == np.maximum.reduceat(states, first)
         lowers = self.chase_values[states[first]].astype(float)
         mixed = np.flatnonzero(~single)
