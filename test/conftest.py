@@ -47,7 +47,7 @@ def benchmarks_dir(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def ward_domain():
     """``config/ward.domain.yaml`` loaded once for the session. Its ``compile()`` is cached on it, so the
-    tests that need the flat ward (233,280 states: ~7 s and ~0.5 GB to compile) share one compilation.
+    tests that need the flat ward (233,280 states: ~2 s CPU and ~0.5 GB to compile) share one compilation.
     Nothing may change it: the tests read the model and build their own objects from it."""
     from pearl_pomdp.model.domain_yaml import load_domain
 

@@ -112,6 +112,31 @@ def test_large_sparse_model_matches_naive_loop(fused, monkeypatch):
         np.testing.assert_allclose(batch[i], naive_update(T, O, B[i], acts[i], obs[i]), rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.parametrize("sparse", [False, True])
+def test_a_batch_of_one_action_gives_the_rows_a_mixed_batch_gives_them(sparse):
+    """update_batch takes a batch whose rows share one action in one product and normalises in place:
+    each row is the bits the same row gets in a batch of several actions (computed per action group),
+    for C- and Fortran-ordered input alike, and the input beliefs are left as they were."""
+    rng = np.random.default_rng(11)
+    S, A, Z = 40, 2, 3
+    T = [m / m.sum(axis=1, keepdims=True) for m in rng.random((A, S, S)) * (rng.random((A, S, S)) < 0.2) + np.eye(S)]
+    O = rng.dirichlet(np.ones(Z), size=(A, S))
+    f = BeliefFilter(Pomdp.create([f"s{i}" for i in range(S)], ["a", "b"], list("xyz"), T, O, np.zeros((S, A)),
+                                  sparse=sparse))
+    B = rng.dirichlet(np.ones(S), size=5) * (rng.random((5, S)) < 0.5)
+    B /= B.sum(axis=1, keepdims=True)
+    kept = B.copy()
+    observations = np.array([0, 1, 2, 0, 1])
+    one_action = f.update_batch(B, np.zeros(5, dtype=int), observations)
+    mixed = f.update_batch(np.vstack([B, B]), np.r_[np.zeros(5, dtype=int), np.ones(5, dtype=int)],
+                           np.r_[observations, observations])
+    assert one_action.tobytes() == mixed[:5].tobytes()
+    assert f.update_batch(np.asfortranarray(B), np.zeros(5, dtype=int), observations).tobytes() == one_action.tobytes()
+    assert B.tobytes() == kept.tobytes()
+    for i in range(5):
+        np.testing.assert_allclose(one_action[i], naive_update(T, O, B[i], 0, observations[i]), rtol=1e-12, atol=1e-15)
+
+
 def test_the_filters_of_one_model_share_its_operators_until_it_gets_new_arrays():
     """A study builds a tracker, so a filter, per episode: the next filter on the same model reuses the
     operators the first built (Pearl's 380 fused ones: ~60 ms), with counters of its own; another model,

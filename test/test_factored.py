@@ -4,6 +4,7 @@ import textwrap
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from pearl_pomdp.errors import SpecError
 from pearl_pomdp.model.domain_yaml import load_domain, parse_domain
@@ -167,6 +168,54 @@ def test_a_compilation_reads_each_distinct_feature_table_once_and_builds_the_sam
         assert Ta.shape == alone.shape == shared[a].shape
         dense = np.asarray(Ta.toarray() if hasattr(Ta, "toarray") else Ta)
         assert dense.tobytes() == alone.toarray().tobytes() == shared[a].toarray().tobytes()
+
+
+def _expanded_feature_by_feature(d, a):
+    """T[a] as the numpy build before the C kernel made it (kept here as the reference): each entry
+    expanded into its state's non-zero factors of the next feature, in value order."""
+    S = d.num_states
+    rows, cols, probs = np.arange(S, dtype=np.int64), np.zeros(S, dtype=np.int64), np.ones(S)
+    for f, stride in enumerate(d.strides):
+        ptr, v_all, p_all = d._state_factors(a, f, None)
+        count = ptr[rows + 1] - ptr[rows]
+        e_idx = np.repeat(np.arange(rows.shape[0]), count)
+        k = np.repeat(ptr[rows] - (np.cumsum(count) - count), count) + np.arange(e_idx.shape[0])
+        probs, rows, cols = probs[e_idx] * p_all[k], rows[e_idx], cols[e_idx] + v_all[k] * stride
+    return sp.csr_matrix((probs, (rows, cols)), shape=(S, S))
+
+
+@pytest.mark.parametrize("name", ["pearl", "pearl_day", "reception"])
+def test_the_c_build_of_t_is_the_feature_by_feature_expansion_bit_for_bit(name):
+    """transition_matrix's rows come from _step_kernel.product_rows: the same entries in the same order,
+    the same products to the last bit and the same index types as the numpy expansion it replaced."""
+    d = load_domain(__import__("pathlib").Path(__file__).resolve().parents[1] / "config" / f"{name}.domain.yaml")
+    for a in range(len(d.actions)):
+        built, reference = d.transition_matrix(a), _expanded_feature_by_feature(d, a)
+        assert built.nnz > d.num_states       # rows of several entries: products of several factors
+        for part in ("indptr", "indices", "data"):
+            got, want = getattr(built, part), getattr(reference, part)
+            assert got.dtype == want.dtype and got.tobytes() == want.tobytes(), (d.actions[a], part)
+
+
+def test_product_rows_refuses_inconsistent_input():
+    from pearl_pomdp.online._step_kernel import product_rows
+
+    # two states, one feature of two values: state 0 stays (p 1), state 1 moves to 0 or stays (0.25, 0.75)
+    ptrs, values, probs = np.array([[0, 1, 3]]), np.array([0, 0, 1]), np.array([1.0, 0.25, 0.75])
+    strides, indptr = np.array([1]), np.array([0, 1, 3])
+    indices, data = np.empty(3, dtype=np.int32), np.empty(3)
+    product_rows(ptrs, values, probs, strides, indptr, indices, data)
+    assert indices.tolist() == [0, 0, 1] and data.tolist() == [1.0, 0.25, 0.75]
+    with pytest.raises(ValueError, match=r"indptr does not hold the rows' sizes .* first wrong at state 1"):
+        product_rows(ptrs, values, probs, strides, np.array([0, 1, 2]), indices[:2], data[:2])
+    with pytest.raises(ValueError, match=r"feature 0's factors of state 1, ptrs\[0, 1:1 \+ 2\] = \[1, 4\]"):
+        product_rows(np.array([[0, 1, 4]]), values, probs, strides, indptr, indices, data)
+    with pytest.raises(ValueError, match=r"state 1 has an entry in column 2, not a state \(0 \.\. 1\)"):
+        product_rows(ptrs, np.array([0, 0, 2]), probs, strides, indptr, indices, data)
+    with pytest.raises(ValueError, match=r"shapes disagree"):
+        product_rows(ptrs, values, probs[:2], strides, indptr, indices, data)
+    with pytest.raises(ValueError, match=r"indices_out must hold int32 or int64"):
+        product_rows(ptrs, values, probs, strides, indptr, data, data)
 
 
 def edit(old, new):

@@ -232,7 +232,7 @@ def test_ward_hierarchy_has_an_online_root_over_per_resident_subtasks():
 @pytest.mark.slow
 def test_care_ann_keeps_her_features_and_the_robot_place_only(ward_domain):
     """Bob's and Cleo's every-action costs are separable from CareAnn (docs/hierarchy.md): its abstraction
-    keeps RobotAt and Ann's three features, 5 x 36 = 180 states (compiling the ward takes ~7 s)."""
+    keeps RobotAt and Ann's three features, 5 x 36 = 180 states (compiling the ward takes ~2 s)."""
     from pearl_pomdp.hierarchy.abstraction import abstract_subtask, separable_reward_terms
     from pearl_pomdp.hierarchy.parameterize import StateFactors, parameterize
     from pearl_pomdp.hierarchy.spec import SubtaskSpec

@@ -7,7 +7,7 @@ every drive with its arrival and otherwise presses call buttons and speaks, and 
 against the core's Bayes filter and every action against the core's decider on it — OnlineDecider
 with the same trials, or the hierarchy planned here from the same files (a decision depends on the
 belief alone). The test's reference is built while the nodes start, on the other core. Decision
-times through the nodes are measured by ``bench/ward_launch.py``; start-up (compile 6 s, QMDP and blind
+times through the nodes are measured by ``bench/ward_launch.py``; start-up (compile ~2 s CPU, QMDP and blind
 bounds by policy iteration ~2 s, in the node and again here; the test's compilation is the session's
 ``ward_domain``, shared by both launches) makes it the suite's slowest setup, so the test is marked slow."""
 from __future__ import annotations
@@ -33,7 +33,7 @@ from pearl_pomdp.nodes.common import EVENT_QOS, INPUT_QOS, LATCHED_QOS  # noqa: 
 REPO = Path(__file__).resolve().parents[1]
 PEARL = str(Path(sys.executable).parent / "pearl")
 DOMAIN = REPO / "config" / "ward.domain.yaml"
-STARTUP = 600.0      # s: compile (6 s) and the online bounds (~2 s idle): a guard for a heavily loaded machine
+STARTUP = 600.0      # s: compile (~2 s) and the online bounds (~2 s idle): a guard for a heavily loaded machine
 
 
 @pytest.fixture(scope="module", params=["online:5", "hierarchical"])

@@ -1,6 +1,6 @@
 """Type stub of the C kernel ``_step_kernel.c``: :meth:`pearl_pomdp.online.generative.ExplicitModel.step`, and
 DESPOT's expansion (``group_outcomes``; ``group_max_means``, :meth:`~pearl_pomdp.online.generative.AlphaBounds.grouped`;
-``rock_tours``, :meth:`~pearl_pomdp.online.rocksample.RockSampleBounds.many`).
+``rock_tours``, :meth:`~pearl_pomdp.online.rocksample.RockSampleBounds.many`), and a factored domain's ``T[a]`` (``product_rows``).
 
 Arrays are C-contiguous numpy arrays, read in place: ``indptr``/``indices`` of ``T[action]`` as CSR
 (int32 or int64), ``data`` and ``O[A, S, Z]`` float32 or float64, and T[action]'s tables from
@@ -36,4 +36,12 @@ def rock_tours(states: np.ndarray, starts: np.ndarray, k: int, n: int, rocks: np
                blind: np.ndarray, powers: np.ndarray, out: np.ndarray) -> None:
     """``out[g]`` = the best of RockSample's candidate tours ``visit[g, c]`` / ``blind[g, c]`` (rock masks) valued on
     the particles ``states[starts[g]:starts[g + 1]]`` (all at one cell), ``powers[t]`` = γ^t; see the C source."""
+    ...
+
+def product_rows(ptrs: np.ndarray, values: np.ndarray, probs: np.ndarray, strides: np.ndarray, indptr: np.ndarray,
+                 indices_out: np.ndarray, data_out: np.ndarray) -> None:
+    """A factored domain's ``T[a]`` as CSR (:meth:`pearl_pomdp.model.factored.FactoredDomain.transition_matrix`):
+    each state's row holds the products of its features' non-zero factors (``ptrs[F, S + 1]`` int64 into
+    ``values``/``probs``), columns ``Σ_f v_f · strides[f]``; ``indptr[S + 1]`` int64 gives the rows' sizes; writes
+    ``indices_out`` (int32 or int64) and ``data_out`` (float64); see the C source."""
     ...
