@@ -624,9 +624,10 @@ def main(argv=None) -> int:
     ap.add_argument("--rs-lower", choices=["check", "tour"], default="check",
                     help="RockSample's lower bound: the best of East, the open-loop tour and tours that check "
                          "each rock on arrival (check), or East and the open-loop tour only (tour)")
-    ap.add_argument("--lasertag-lower", choices=["walk", "chase"], default="walk",
-                    help="LaserTag's lower bound: the random walk that tags on the same-cell reading (walk), or the "
-                         "best chase of the set's most common particles (chase, the bound before 2026-12-07)")
+    ap.add_argument("--lasertag-lower", choices=["walk", "chase", "target"], default="walk",
+                    help="LaserTag's lower bound: the random walk that tags on the same-cell reading (walk), the "
+                         "best chase of the set's most common particles (chase, the bound before 2026-12-07), or the "
+                         "walk and moves towards the root belief's likeliest opponent cells (target)")
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="wall",
                     help="what a budget measures: wall (a robot's wait) or process (CPU seconds, "
                          "as DESPOT's own code counts them: the same work per decision whatever the load)")

@@ -255,3 +255,31 @@ def test_the_walk_lower_bound_is_each_sets_mean_walk_value_whatever_its_particle
     assert uppers.tolist() == pytest.approx([walk.upper(x) for x in sets], abs=1e-12)
     # One state's chase knows where its opponent is: it is worth more than the walk there.
     assert chase.chase_value(2000) > walk.lower(np.array([2000]), rng) + 1.0
+
+
+def test_target_bounds_head_for_the_opponent_cells_the_planned_belief_favours(model):
+    """``lower="target"``: the search tells the bounds its root particles first (``begin_search``);
+    the targets are the opponent's most common cells there, and a set's bound is the best over them
+    of "tag on same cell, else a shortest move towards the target, then the walk" on its particles."""
+    from pearl_pomdp.online.despot import Despot, DespotSettings
+
+    bounds = LaserTagBounds(model, lower="target")
+    cells = [state(model, (0, 0), opp) for opp in [(3, 3)] * 5 + [(9, 5)] * 3 + [(1, 0)] * 2 + [(10, 6)]]
+    bounds.begin_search(np.array(cells))
+    assert bounds.targets == [model.index[c] for c in [(3, 3), (9, 5), (1, 0)]]
+    s = state(model, (0, 0), (3, 5))
+    for target in ((9, 5), (0, 6)):
+        bounds.targets = [model.index[target]]
+        got = bounds._toward_targets(np.array([s] * 4000), np.array([0, 4000]), np.random.default_rng(3))
+        plan = bounds._path(model.index[(0, 0)], model.index[target])
+        assert got[0] == pytest.approx(_chase_by_hand(model, bounds, [s] * 4000, plan, np.random.default_rng(4)), abs=0.3)
+    seen = []
+
+    class Recording(LaserTagBounds):
+        def begin_search(self, root_states):
+            seen.append(root_states.copy())
+            super().begin_search(root_states)
+
+    roots = model.initial_belief().sample(100, np.random.default_rng(5))
+    Despot(model, Recording(model, lower="target"), DespotSettings(trials=3, scenarios=100)).search(roots, seed=1)
+    assert len(seen) == 1 and np.array_equal(seen[0], roots)

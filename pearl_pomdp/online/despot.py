@@ -226,6 +226,11 @@ class Despot:
         self._deadline = None if st.time_limit is None else t0 + st.time_limit
         self._slowest = 0.0      # the longest expansion of this search (the guard's look-ahead)
         states = np.ascontiguousarray(root_states, dtype=np.int64)
+        # Bounds whose default policy depends on the belief being planned for (not on a node's own
+        # scenarios) hear of it first; the others have no such method and see no change.
+        begin = getattr(self.bounds, "begin_search", None)
+        if begin is not None:
+            begin(states)
         lowers, uppers, terminal = self._initial_bounds(states, np.array([0, K], dtype=np.int64))
         root = _Belief(states, np.arange(K, dtype=np.int64), 0, lowers[0], uppers[0], terminal[0])
         trials, stop = 0, "trials"

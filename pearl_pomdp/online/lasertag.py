@@ -281,6 +281,12 @@ class LaserTagBounds:
     then chases an opponent it has been told where to find, every action looks as informed as
     every other, and the search learns nothing about looking (docs/online.md, LaserTag). Kept to
     compare.
+
+    ``lower="target"``: the best of the walk and, per target cell, "tag on "same cell", else a
+    shortest move towards the target, then the walk", simulated on the set's particles; the
+    targets are the opponent's most common cells among the root's particles, which the search
+    hands over first (:meth:`begin_search`), so no node heads for what its own scenarios know
+    (after DESPOT's ``TagSHRPolicy``, which heads for the exact belief's mode).
     """
 
     def __init__(self, model: LaserTag, modes: int = 3, upper: str = "mdp", lower: str = "walk"):
@@ -288,8 +294,11 @@ class LaserTagBounds:
         g = model.discount
         if upper not in ("mdp", "manhattan"):
             raise ValueError(f"upper bound {upper!r}: expected 'mdp' or 'manhattan'")
-        if lower not in ("walk", "chase"):
-            raise ValueError(f"lower bound {lower!r}: expected 'walk' or 'chase'")
+        if lower not in ("walk", "chase", "target"):
+            raise ValueError(f"lower bound {lower!r}: expected 'walk', 'chase' or 'target'")
+        #: ``lower="target"``: the opponent cells the plans head for, from the belief the search
+        #: plans for (:meth:`begin_search`), not from a node's own scenarios.
+        self.targets: List[int] = []
         #: ``"walk"`` or ``"chase"`` (class doc).
         self.lower_kind = lower
         xy = np.array(model.cells)
@@ -344,14 +353,53 @@ class LaserTagBounds:
         first = starts[:-1]
         sizes = np.diff(starts)
         uppers = np.add.reduceat(self.upper_values[states], first) / sizes
-        if self.lower_kind == "walk":
+        if self.lower_kind == "walk" or (self.lower_kind == "target" and not self.targets):
             return np.add.reduceat(self.walk_values[states], first) / sizes, uppers
+        if self.lower_kind == "target":
+            walk = np.add.reduceat(self.walk_values[states], first) / sizes
+            return np.maximum(walk, self._toward_targets(states, starts, rng)), uppers
         single = np.minimum.reduceat(states, first) == np.maximum.reduceat(states, first)
         lowers = self.chase_values[states[first]].astype(float)
         mixed = np.flatnonzero(~single)
         if mixed.size:
             lowers[mixed] = self._simulated(states, starts, mixed, rng)
         return lowers, uppers
+
+    def begin_search(self, root_states: np.ndarray) -> None:
+        """``lower="target"``: the opponent's :attr:`modes` most common cells among the root's
+        particles (the belief planned for) become the cells every node's plans head for."""
+        if self.lower_kind != "target":
+            return
+        m = self.model
+        live = np.asarray(root_states)[np.asarray(root_states) != m.terminal]
+        counts = np.bincount(live % m.n, minlength=m.n) if live.size else np.zeros(m.n, dtype=np.int64)
+        self.targets = [int(c) for c in np.argsort(-counts, kind="stable")[: self.modes] if counts[c] > 0]
+
+    def _toward_targets(self, states: np.ndarray, starts: np.ndarray, rng) -> np.ndarray:
+        """Per set, the best over :attr:`targets` of "tag on the same-cell reading, else a shortest
+        move towards the target cell; there, the walk", simulated on every particle of the set."""
+        m = self.model
+        n, g = m.n, m.discount
+        T = len(self.targets)
+        targets = np.repeat(np.asarray(self.targets, dtype=np.int64)[None, :], states.shape[0], axis=0).reshape(-1)
+        current = np.repeat(states, T)
+        total = np.zeros(current.shape[0])
+        active = current != m.terminal
+        for t in range(2 * n):
+            if not active.any():
+                break
+            robot = np.where(active, current // n, 0)
+            move = self._first_move[targets, robot]
+            arrived = active & (move < 0) & ~self.same[current]
+            total[arrived] += g ** t * self.walk_values[current[arrived]]
+            active &= ~arrived
+            actions = np.where(self.same[current], TAG, np.where(active, move, -1))
+            current, rewards = m.transition_each(current, actions, rng.random(current.shape[0]))
+            total += np.where(active, g ** t * rewards, 0.0)
+            active &= current != m.terminal
+        total[active] += g ** (2 * n) * self.walk_values[current[active]]
+        per_target = np.add.reduceat(total.reshape(-1, T), starts[:-1], axis=0) / np.diff(starts)[:, None]
+        return per_target.max(axis=1)
 
     def _simulated(self, states: np.ndarray, starts: np.ndarray, sets: np.ndarray, rng) -> np.ndarray:
         """Per set of ``sets``, the best of its modes' chases, each simulated on all its particles."""
