@@ -507,10 +507,10 @@ def run_lasertag_paired(binary: str, budget: float, runs: int, steps: int, seed:
         done = subprocess.run(cmd, capture_output=True, text=True, check=False)
         if done.returncode != 0:
             raise RuntimeError(f"{' '.join(cmd)}: exit {done.returncode}: {done.stderr.strip()[-300:]}")
-        (played,) = parse_despot_lasertag_rounds(done.stdout)
-        rounds.append(played)
+        (this_run,) = parse_despot_lasertag_rounds(done.stdout)
+        rounds.append(this_run)
         commands.append(" ".join(cmd))
-        print(f"DESPOT lasertag {budget:g}s: {len(rounds)} runs, this one {played['return']:.2f}",
+        print(f"DESPOT lasertag {budget:g}s: {len(rounds)} runs, this one {this_run['return']:.2f}",
               file=sys.stderr, flush=True)
     models: Dict[int, LaserTag] = {}
 

@@ -417,7 +417,6 @@ class BeliefFilter:
             out[i] = self._recover(predicted[i], int(actions[i]), int(observations[i]))
         return out
 
-
     def _predict_rows(self, a: int, Ba: np.ndarray) -> np.ndarray:
         """``Ba T[a]`` for the beliefs ``Ba [n, S]`` (on their support when T[a] is CSR)."""
         Ta = self._T_rows[a]

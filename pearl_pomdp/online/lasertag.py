@@ -299,7 +299,7 @@ class LaserTagBounds:
         #: ``lower="target"``: the opponent cells the plans head for, from the belief the search
         #: plans for (:meth:`begin_search`), not from a node's own scenarios.
         self.targets: List[int] = []
-        #: ``"walk"`` or ``"chase"`` (class doc).
+        #: ``"walk"``, ``"chase"`` or ``"target"`` (class doc).
         self.lower_kind = lower
         xy = np.array(model.cells)
         dist = np.abs(xy[:, None, :] - xy[None, :, :]).sum(axis=2).reshape(-1)
@@ -331,11 +331,12 @@ class LaserTagBounds:
         self.chase_values = self._chase_table() if lower == "chase" else np.full(model.num_states, np.nan)
         self.description = (("upper: each particle's value in the fully observed MDP (value iteration); " if upper == "mdp"
                              else "upper: each particle's value with the opponent standing at its Manhattan distance; ")
-                            + ("lower: the random walk that tags on the same-cell reading (its exact value)"
-                               if lower == "walk" else
-                               "lower: the best of the chases 'tag on the same-cell reading, else the shortest path to "
+                            + {"walk": "lower: the random walk that tags on the same-cell reading (its exact value)",
+                               "target": "lower: the best of the random walk that tags on the same-cell reading and moves towards the 3 "
+                               "opponent cells most common among the root's particles, then the walk (simulated)",
+                               "chase": "lower: the best of the chases 'tag on the same-cell reading, else the shortest path to "
                                "one of the 3 most common particles' opponent, then random moves' (the plan simulated, "
-                               "the random walk's exact value after it; exact for a set of one state)"))
+                               "the random walk's exact value after it; exact for a set of one state)"}[lower])
 
     def upper(self, states):
         return float(self.upper_values[np.asarray(states)].mean(dtype=np.float64))
@@ -353,11 +354,11 @@ class LaserTagBounds:
         first = starts[:-1]
         sizes = np.diff(starts)
         uppers = np.add.reduceat(self.upper_values[states], first) / sizes
-        if self.lower_kind == "walk" or (self.lower_kind == "target" and not self.targets):
-            return np.add.reduceat(self.walk_values[states], first) / sizes, uppers
-        if self.lower_kind == "target":
+        if self.lower_kind != "chase":
             walk = np.add.reduceat(self.walk_values[states], first) / sizes
-            return np.maximum(walk, self._toward_targets(states, starts, rng)), uppers
+            if self.lower_kind == "target" and self.targets:
+                return np.maximum(walk, self._toward_targets(states, starts, rng)), uppers
+            return walk, uppers
         single = np.minimum.reduceat(states, first) == np.maximum.reduceat(states, first)
         lowers = self.chase_values[states[first]].astype(float)
         mixed = np.flatnonzero(~single)
@@ -381,7 +382,7 @@ class LaserTagBounds:
         m = self.model
         n, g = m.n, m.discount
         T = len(self.targets)
-        targets = np.repeat(np.asarray(self.targets, dtype=np.int64)[None, :], states.shape[0], axis=0).reshape(-1)
+        targets = np.tile(np.asarray(self.targets, dtype=np.int64), states.shape[0])   # particle-major, as current
         current = np.repeat(states, T)
         total = np.zeros(current.shape[0])
         active = current != m.terminal
