@@ -125,15 +125,20 @@ class FitResult:
 
 
 # ------------------------------------------------------------------ episodes
-def episodes_from_bag(path: Union[str, Path]) -> Episode:
+def episodes_from_bag(path: Union[str, Path], truth: bool = True) -> Episode:
     """The episode of a bag: steps from ``/pearl/belief`` (``pearl_interfaces/msg/Belief``; a bag
     recorded before the typed interfaces: its ``/pearl/belief_marginals`` JSON), the true states from
     the world's truth topic ``/WORLD/sim/truth`` if one was recorded (``pearl_interfaces/msg/WorldTruth``,
     or the JSON of a bag recorded before it: :mod:`pearl_pomdp.world_truth`).
 
+    With ``truth`` false the truth topic is not read (``states`` is ``None``: the fit runs EM).
+    A bag cut after its last action began (no state after it) loses that last step. The states are
+    counted against the steps, never dropped in silence: a truth topic that does not cover the steps is an
+    error.
+
     Raises:
-        PearlError: the bag has no steps, several truth topics, or a message that does not decode
-            (names the bag, the topic and what is wrong).
+        PearlError: the bag has no steps, several truth topics, fewer true states than steps, or a
+            message that does not decode (names the bag, the topic and what is wrong).
     """
     from pearl_pomdp.bags.reader import BagReader, cdr_string
     from pearl_pomdp.world_truth import truth_records, truth_topics
@@ -168,15 +173,24 @@ def episodes_from_bag(path: Union[str, Path]) -> Episode:
     if len(worlds) > 1:
         raise PearlError(f"{path}: {len(worlds)} truth topics ({', '.join(worlds)}): a bag of one episode has "
                          "one world's truth")
-    if worlds:
+    if worlds and truth:
         starts = [t["state"] for t in truth_records(reader, worlds[0]) if t.get("phase") == "start"]
-        if len(starts) >= len(actions) + 1:
-            states = starts[:len(actions) + 1]
+        if len(starts) == len(actions) and actions:
+            # Cut after the last action began (a run stopped before the world's last state): that
+            # action's successor is unknown, so its step is not counted; every other step is.
+            actions, observations = actions[:-1], observations[:-1]
+        if len(starts) < len(actions) + 1:
+            raise PearlError(f"{path}: {worlds[0]} holds {len(starts)} true state(s) at the start of an action for "
+                             f"{len(actions)} step(s) on {topic} (the fit needs one before each action and one after "
+                             "the last): the world and the manager disagree on the steps, or the truth was recorded "
+                             "late; record again, or fit without the truth (pearl fit --no-truth: EM)")
+        states = starts[:len(actions) + 1]
     return Episode(actions, observations, states, str(path))
 
 
-def load_episodes(paths: Sequence[Union[str, Path]]) -> List[Episode]:
-    """Episodes from bag directories and ``.jsonl`` files (see the module doc).
+def load_episodes(paths: Sequence[Union[str, Path]], truth: bool = True) -> List[Episode]:
+    """Episodes from bag directories and ``.jsonl`` files (see the module doc); with ``truth`` false
+    their true states are left out (the fit runs EM).
 
     Raises:
         PearlError: a file that is neither, or an episode with mismatched lengths (names file and line).
@@ -190,12 +204,12 @@ def load_episodes(paths: Sequence[Union[str, Path]]) -> List[Episode]:
                     continue
                 try:
                     obj = json.loads(line)
-                    ep = Episode(list(obj["actions"]), list(obj["observations"]), obj.get("states"), f"{p}:{i}")
+                    ep = Episode(list(obj["actions"]), list(obj["observations"]), obj.get("states") if truth else None, f"{p}:{i}")
                 except (ValueError, KeyError, TypeError) as err:
                     raise PearlError(f"{p}:{i}: not an episode object with actions and observations ({err})") from None
                 out.append(ep)
         elif p.is_dir() or p.suffix == ".mcap":
-            out.append(episodes_from_bag(p))
+            out.append(episodes_from_bag(p, truth=truth))
         elif not p.exists():
             raise PearlError(f"{p}: no such episode file or bag")
         else:

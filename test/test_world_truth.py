@@ -205,3 +205,44 @@ def test_the_separate_process_simulator_publishes_the_typed_truth_over_dds(ros_c
     assert records[3]["wrong"] is None and "events" not in records[2]
     stamps = [m.stamp.sec + m.stamp.nanosec * 1e-9 for m in got]
     assert stamps == sorted(stamps) and abs(stamps[-1] - node.now) < 1e-6
+
+
+def _without_last_truth(source: Path, out: Path, drop: int) -> Path:
+    """``source`` with its last ``drop`` truth messages left out (a run stopped before the world said them)."""
+    reader = BagReader(source)
+    truth = [m for m in reader.messages if m.topic == TRUTH]
+    keep = set(id(m) for m in truth[:len(truth) - drop])
+    with BagWriter(out) as bag:
+        for name, info in reader.topics.items():
+            bag.add_topic(name, info.type, definition=info.definition, type_hash=info.type_description_hash)
+        for m in reader.messages:
+            if m.topic != TRUTH or id(m) in keep:
+                bag.write(m.topic, m.data, m.log_time, m.publish_time)
+    return out
+
+
+def test_a_bag_cut_before_the_last_state_loses_its_last_step_and_a_short_truth_is_refused(tmp_path):
+    """The shipped bag holds 30 steps and 31 starts. Without the world's last state the last step's
+    successor is unknown: 29 steps are counted against 30 states. With a whole action's records gone
+    too, the truth no longer covers the steps: refused, naming the bag, the topic and the counts —
+    and `--no-truth` (EM) still fits it."""
+    whole = episodes_from_bag(OLD_BAGS[1])
+    assert len(whole.actions) == 30 and len(whole.states) == 31
+    cut = episodes_from_bag(_without_last_truth(OLD_BAGS[1], tmp_path / "cut", drop=1))
+    assert cut.actions == whole.actions[:29] and cut.observations == whole.observations[:29]
+    assert cut.states == whole.states[:30]
+    short = _without_last_truth(OLD_BAGS[1], tmp_path / "short", drop=3)
+    with pytest.raises(PearlError, match=r"short: /pearl/sim/truth holds 29 true state\(s\) at the start of an action "
+                                         r"for 30 step\(s\) on /pearl/belief.*pearl fit --no-truth"):
+        episodes_from_bag(short)
+    untold = episodes_from_bag(short, truth=False)
+    assert untold.states is None and untold.actions == whole.actions
+    domain = load_domain(REPO / "config" / "pearl.domain.yaml")
+    assert not fit_domain(domain, [untold], em_iterations=2).with_truth
+    from pearl_pomdp.cli import main
+
+    out = tmp_path / "fitted.yaml"
+    assert main(["fit", str(REPO / "config" / "pearl.domain.yaml"), str(short), "--out", str(out)]) == 2
+    assert main(["fit", str(REPO / "config" / "pearl.domain.yaml"), str(short), "--out", str(out), "--no-truth",
+                 "--em-iterations", "2"]) == 0
+    assert "EM without the true state" in out.read_text()

@@ -53,6 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="rows with less data keep the designer's row (default 5)")
     parser.add_argument("--em-iterations", type=int, default=30, metavar="I",
                         help="EM iterations at most, without true states (default 30)")
+    parser.add_argument("--no-truth", action="store_true",
+                        help="fit by EM even where the episodes record the true state (a bag whose truth does not "
+                             "cover its steps)")
     parser.add_argument("--untied", action="store_true",
                         help="fit each action's copy of a table written once under defaults.effects (or a persisting "
                              "feature) on that action's data alone; by default they are estimated together")
@@ -78,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.episodes:
         raise PearlError("EPISODES: give bag directories or .jsonl episode files (or --speech CHANNEL.json)")
     domain = load_domain(args.domain)
-    episodes = load_episodes(args.episodes)
+    episodes = load_episodes(args.episodes, truth=not args.no_truth)
     result = fit_domain(domain, episodes, prior_strength=args.prior_strength, min_count=args.min_count,
                         em_iterations=args.em_iterations, tied=not args.untied)
     out = write_fitted(args.domain, result, args.out, args.prior_strength)
