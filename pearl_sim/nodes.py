@@ -102,8 +102,10 @@ class GraphBackend:
         from pearl_pomdp.errors import PearlError
         from pearl_sim.loop import clock_ns
 
-        self._advance(clock_ns(message.time))
+        # Counted before the clock moves: a deadline the move reaches decides an action too (the loop
+        # takes it, as it takes the core executive's).
         before = len(self.driver.actions)
+        self._advance(clock_ns(message.time))
         if message.said:
             self.hardware.publish_said(message.said)
         publisher, msg = self.hardware.outgoing(message)

@@ -143,3 +143,14 @@ def test_figure4_completes_at_zero_noise():
     assert result.guidance_completed and result.wrong_actions == 0
     assert result.goals_achieved == 3           # reminder, guidance, the weather question
     assert "TellWeather" in result.actions and result.actions.index("GuideToPhysio") < result.actions.index("TellWeather")
+
+
+@pytest.mark.parametrize("reading", ["battery_low", "battery_ok"])
+def test_a_battery_reading_that_closes_a_ring_is_not_her_answer(bt, reading):
+    """The day domain's battery driver (docs/day.md, protocol 3) may close any step: the tree hears it as
+    the robot's own reading, so a ring it closes made no contact and the tree rings again."""
+    bt.observe("DoNothing", "g_physio")
+    assert step(bt, "atRoom") == "GotoPatientRoom"
+    assert step(bt, reading) == "RingDoorBell"
+    assert bt.snapshot()["contact"] is False
+    assert step(bt) == "RingDoorBell"                          # Retry: the ring was not answered

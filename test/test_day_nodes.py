@@ -51,8 +51,17 @@ def test_the_bag_is_split_every_five_minutes_and_replays(day):
     from pearl_pomdp.bags.reader import BagReader
     from pearl_pomdp.nodes.bag_replay import replay_bag
 
-    # 08:00-08:05, -08:10, -08:15, and the second of /clock the run adds after 08:15 (as the demo's).
-    assert day["bag_files"] == ["bag_0.mcap", "bag_1.mcap", "bag_2.mcap", "bag_3.mcap"]
+    # A file holds at most five minutes of log time from its first message: the 15-minute morning (and
+    # the second of /clock the run adds after it, as the demo's) in three or four files, in order.
+    files = day["bag_files"]
+    assert files == [f"bag_{k}.mcap" for k in range(len(files))] and len(files) in (3, 4)
+    spans = []
+    for name in files:
+        times = [m.log_time for m in BagReader(Path(day["bag"]) / name).messages]
+        spans.append((min(times), max(times)))
+    assert all(last - first < SPLIT * 1e9 for first, last in spans)
+    assert all(spans[k][1] < spans[k + 1][0] for k in range(len(spans) - 1))   # split in time order
+    assert spans[-1][1] - spans[0][0] >= (UNTIL - 10.0) * 1e9                   # the whole morning is there
     reader = BagReader(day["bag"])
     assert not reader.salvaged and reader.message_count == day["bag_messages"]
     replay = replay_bag(day["bag"], domain_id=allocate_domain_id())

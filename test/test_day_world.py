@@ -243,3 +243,42 @@ def test_without_the_dock_rule_the_tree_never_charges_and_the_battery_runs_out()
     # It still goes home, but never docks: 4 h of idle drain empty the battery by midday.
     assert c["docked_at_end"] is False and c["battery_empty"] is True
     assert day_score(c) < day_score(_run_tree_day(3, day_rules=True).checklist()) - 10
+
+
+def test_the_battery_driver_reports_every_30_s_only_to_a_domain_that_reads_it():
+    """Protocol 3: with the day domain (a BatteryState input) the world publishes the driver's percentage
+    every BATTERY_PERIOD s, the level it has then; the episode domain declares no such input and hears none."""
+    from pearl_pomdp.model.domain_yaml import load_domain
+    from pearl_sim.nursing_home.day import BATTERY_PERIOD
+
+    plan = _plan(appointment=6 * 3600.0)
+    fields = {"name": "Mrs B", "walking_speed": 0.5, "willingness": 1.0, "answers_door": 1.0, "touchscreen": 0.0}
+    w = DayWorld(day_scenario(fields, 0.0, 0, plan=plan), plan, domain=load_domain(REPO / "config/pearl_day.domain.yaml"))
+    w.docked = False                                     # idle off the dock: it drains
+    readings = []
+    while w.time < 125.0 - 1e-9:
+        readings += [(m.time, float(m.text)) for m in w.wait(125.0).messages if m.modality == "Charge"]
+    assert [t for t, _ in readings] == [1.0, 1.0 + BATTERY_PERIOD, 1.0 + 2 * BATTERY_PERIOD, 1.0 + 3 * BATTERY_PERIOD,
+                                        1.0 + 4 * BATTERY_PERIOD]
+    assert all(level == pytest.approx(1.0 - t * IDLE_DRAIN, abs=1e-4) for t, level in readings)
+    e = _world(plan=plan)                                # the episode domain: no battery input
+    e.docked = False
+    heard = []
+    while e.time < 125.0 - 1e-9:
+        heard += e.wait(125.0).messages
+    assert not [m for m in heard if m.modality == "Charge"]
+
+
+def test_the_day_domain_reads_the_battery_low_below_20_and_ok_again_at_25_percent():
+    """The Charge input's bins and hysteresis say what protocol 3 fixed: a reading observes a change of
+    bin only; low below 20 %, ok again at 25 %, so a level dithering at 20 % does not flap."""
+    from pearl_pomdp.model.domain_yaml import load_domain
+    from pearl_pomdp.tracking.readers import NumberReader
+
+    charge = next(ch for ch in load_domain(REPO / "config/pearl_day.domain.yaml").inputs if ch.modality == "Charge")
+    assert (charge.kind, charge.type, charge.topic) == ("number", "sensor_msgs/msg/BatteryState", "/battery_state")
+    reader = NumberReader(charge)
+    heard = [reader.read(f"{x:.4f}")[:2] for x in (0.9, 0.21, 0.2001, 0.1999, 0.2100, 0.2499, 0.25, 0.2)]
+    assert heard == [("battery_ok", "number"), ("battery_ok", "unchanged"), ("battery_ok", "unchanged"),
+                     ("battery_low", "number"), ("battery_low", "unchanged"), ("battery_low", "unchanged"),
+                     ("battery_ok", "number"), ("battery_ok", "unchanged")]

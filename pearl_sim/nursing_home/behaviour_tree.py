@@ -105,6 +105,8 @@ LANDMARKS = {"atHome": "home", "atRoom": "room", "atPhysio": "physio"}
 QUESTIONS = {"time": "time", "t_time": "time", "weather": "weather", "t_weather": "weather"}
 REMIND = {"physio": "RemindPhysioAppt", "vitamin": "RemindVitamin", "checklist": "UpdateChecklist"}
 TELL = {"time": "TellTime", "weather": "TellWeather"}
+#: The battery driver's readings (the day domain's Charge input, docs/day.md protocol 3): the robot's own.
+BATTERY_READINGS = ("battery_low", "battery_ok")
 MOVES = ("GotoPatientRoom", "GuideToPhysio", "GoHome")
 
 #: Every blackboard key the tree uses (relative to the tree's own namespace).
@@ -115,8 +117,9 @@ _instances = itertools.count()
 
 
 def _answered(heard: str) -> bool:
-    """Someone replied (speech or touch): not silence, not the scheduler, not the laser."""
-    return heard != TIMEOUT and not heard.startswith("g_") and heard not in LANDMARKS
+    """Someone replied (speech or touch): not silence, not the scheduler, not the laser, not the battery."""
+    return (heard != TIMEOUT and not heard.startswith("g_") and heard not in LANDMARKS
+            and heard not in BATTERY_READINGS)
 
 
 # ------------------------------------------------------------------ behaviours

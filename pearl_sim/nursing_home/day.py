@@ -23,7 +23,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from pearl_sim.messages import StepResult
+from pearl_sim.messages import Message, StepResult
 from pearl_sim.nursing_home.world import LOW_BATTERY, SPEAK_SECONDS, Metrics, World
 
 __all__ = ["DAY_SECONDS", "DayPlan", "DayMetrics", "DayWorld", "plan_day", "day_scenario", "day_score",
@@ -36,6 +36,10 @@ DAY_SECONDS = 12 * 3600
 IDLE_DRAIN = 1.0 / (4 * 3600)
 DRIVE_DRAIN = 1.0 / (2.5 * 3600)
 CHARGE_RATE = 1.0 / (2.5 * 3600)
+#: The battery driver publishes its percentage this often (s), when the domain reads it (protocol 3).
+BATTERY_PERIOD = 30.0
+#: The message type of a battery driver's reading.
+BATTERY_TYPE = "sensor_msgs/msg/BatteryState"
 #: A reminder delivered within this many seconds of falling due is on time.
 ON_TIME_SECONDS = 600.0
 #: Questions arise at 0.5 an hour while she is awake in her room, are kept 30 min unvoiced.
@@ -199,6 +203,12 @@ class DayWorld(World):
         #: The domain tells a robot on its dock from a charged one off it (the day domain's Battery):
         #: the truth then says ``docked`` whenever it charges at home.
         self._reports_dock = battery is not None and "docked" in battery.values
+        #: The modality of the domain's battery reading (a ``number`` input of a BatteryState), if any:
+        #: the world then publishes the driver's percentage every BATTERY_PERIOD s (docs/day.md,
+        #: protocol 3); a domain without one sees the world protocol 2 saw.
+        self._battery_modality = next((ch.modality for ch in (domain if domain is not None else default_domain()).inputs
+                                       if ch.kind == "number" and ch.type == BATTERY_TYPE), None)
+        self._next_reading = 0.0        # the driver's first reading comes at once
         super().__init__(scenario, seed=seed, domain=domain)
         self.metrics: DayMetrics = DayMetrics()
         self._question_rng = np.random.default_rng([self.seed, 3])
@@ -313,6 +323,7 @@ class DayWorld(World):
             events.append("the battery is empty: the robot stops")
 
     def _live(self, dt, moving, events):
+        self._read_battery()
         self._apply_routine(events)
         self._physiotherapy(events)
         self._questions_arise(dt, events)
@@ -323,6 +334,13 @@ class DayWorld(World):
             m.nothing_wanted_s += dt
             if self.robot_at == "home" and not moving:
                 m.at_station_s += dt
+
+    def _read_battery(self) -> None:
+        """The battery driver's reading, queued like the scheduler's announcements (heard when the
+        robot is not mid-action); the tracker observes a change of bin only."""
+        if self._battery_modality is not None and self.time >= self._next_reading - 1e-9:
+            self._next_reading = self.time + BATTERY_PERIOD
+            self._scheduler_queue.append(Message(self.time, self._battery_modality, f"{self.battery:.4f}"))
 
     def _raise_due(self, events):
         before = set(self.due)

@@ -142,7 +142,9 @@ def run_day_graph(domain_path, policy_dir, resident: Dict[str, Any], articulatio
             "pearl.domain": os.path.relpath(out / "domain.yaml", bag_dir),
             "pearl.policy": os.path.relpath(local_policy, bag_dir),
             "pearl.tracker_params": json.dumps(tracker_params)})
-        recorder = Recorder(rec_node, writer, topics=RECORDED_TOPICS)
+        # Every input the domain declares (the day domain's battery driver too), so the bag replays.
+        recorder = Recorder(rec_node, writer, topics=RECORDED_TOPICS + [c.topic for c in domain.inputs
+                                                                         if c.topic not in RECORDED_TOPICS])
         recorder.wait_until_recording(graph.spin_until, wall_timeout)
         driver = SimClockDriver(graph, wait_s=wall_timeout)
         backend = GraphBackend(graph, sim, driver)
