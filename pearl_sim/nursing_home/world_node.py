@@ -40,8 +40,20 @@ as Pearl's domain declares it), ``/pearl/touchscreen``, ``/pearl/laser``, ``/pea
 (std_msgs/String), ``/pearl/sim/truth`` (pearl_interfaces/WorldTruth, the true state at the start and
 end of every action), all reliable, ``/pearl/pose`` (geometry_msgs/PoseStamped, the robot's place in
 the scenario's map).
-Subscribers: ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL like the policy's publisher), and
-``/pearl/belief`` (pearl_interfaces/Belief: the steps the tracker closed).
+Subscribers: ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL like the policy's publisher, but
+keeping up to :data:`ACTIONS_KEPT` actions not yet taken: every action is carried out, also two that
+come back to back), and ``/pearl/belief`` (pearl_interfaces/Belief: the steps the tracker closed).
+
+Why every action must arrive: the world tells "the policy is deciding" (hold the clock) from "the
+step is running" by counting, the tracker's closed steps against the actions it carried out. Had it
+missed one action, then once it carried out the next its count would equal the tracker's closed
+steps: it would hold the clock for an answer while the tracker's open step waits for an
+observation or a deadline under that very clock, and nothing would move. The policy's publisher
+keeps only its latest action (depth 1, for late joiners); a reader of depth 1 keeps only the second
+of two actions that arrive before its executor takes the first. Two come that close whenever the
+tracker closes a step the moment an action opens it (an observation was queued: the reminder heard
+while no step was open) and the policy answers at once — well within a millisecond, so on a loaded
+machine often before the world's process runs again.
 """
 from __future__ import annotations
 
@@ -51,7 +63,11 @@ import time
 from collections import deque
 from typing import Deque, List, Optional
 
-__all__ = ["SimWorldNode", "main"]
+__all__ = ["SimWorldNode", "main", "ACTIONS_KEPT"]
+
+#: Actions the world's ``/pearl/action`` reader keeps until it takes them (see the module doc); far
+#: more than a policy answering one step at a time ever has in flight.
+ACTIONS_KEPT = 100
 
 
 def _make_node_class():
@@ -117,9 +133,13 @@ def _make_node_class():
             from pearl_pomdp.world_truth import truth_topic
 
             self.truth_pub = self.create_publisher(WorldTruthMsg, truth_topic("pearl"), RELIABLE)
+            from rclpy.qos import QoSProfile
+
             from pearl_interfaces.msg import Action
 
-            self.create_subscription(Action, "/pearl/action", self._on_action, LATCHED_QOS)
+            every_action = QoSProfile(depth=ACTIONS_KEPT, history=LATCHED_QOS.history,
+                                      reliability=LATCHED_QOS.reliability, durability=LATCHED_QOS.durability)
+            self.create_subscription(Action, "/pearl/action", self._on_action, every_action)
             # The tracker's step count: a step it closed is answered by the policy; while that
             # answer is in flight the clock stands still (as the lock-step driver of pearl demo
             # does), so no time passes that the fast path would not have.
