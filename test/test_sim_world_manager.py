@@ -1,10 +1,12 @@
 """``pearl_sim_world`` (its own process, as under launch/pearl_sim.launch.xml) against a manager played by
 the test: it carries out every action the manager publishes, also two that come back to back (the
 tracker closes a step the moment an action opens it when an observation was queued, and the policy
-answers at once)."""
+answers at once), and when a closed step gets no action it ends with exit 1 and one line naming
+/pearl/action and the step within ``answer_timeout`` wall seconds instead of holding its clock forever."""
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 from typing import List
 
@@ -104,3 +106,18 @@ def test_the_world_carries_out_two_actions_that_come_back_to_back(world_and_mana
     assert manager.wait(lambda: len(manager.ended()) >= 3, 15.0), (manager.ended(), world.stderr()[-2000:])
     assert manager.ended() == ["DoNothing", "RingDoorBell", "CheckUserPresent"]
     assert world.returncode is None     # still running: the clock goes on (step 3 is open)
+
+
+def test_a_world_whose_manager_never_answers_a_step_ends_with_one_line(world_and_manager):
+    world, manager = world_and_manager("answer_timeout:=2.0")
+    manager.belief(1)                   # step 1 closed; the policy never answers it
+    closed = time.monotonic()
+    code = world.wait(20.0)
+    waited = time.monotonic() - closed
+    err = world.stderr()
+    assert code == 1, err[-2000:]
+    assert 2.0 <= waited < 10.0
+    lines = [line for line in err.splitlines() if line.startswith("pearl_sim_world: error:")]
+    assert lines == ["pearl_sim_world: error: no action on /pearl/action answered step 1 (closed on /pearl/belief) "
+                     "within answer_timeout 2 wall seconds; the world carried out 1 action(s), the last 'DoNothing'"], \
+        err[-2000:]
