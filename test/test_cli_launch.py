@@ -178,14 +178,20 @@ def _respawn_setup(tmp_path, code: str = "1", on_exit: str = ""):
     return launch, env
 
 
-def test_a_node_that_keeps_dying_is_respawned_a_bounded_number_of_times_then_left_down(tmp_path):
-    launch, env = _respawn_setup(tmp_path)
-    proc = subprocess.Popen([PEARL, "launch", str(launch), "--respawn-max-retries", "2"], env=env,
+def _launch_until_left_down(launch, env, retries: int):
+    """``pearl launch`` started; returns once the crasher was left down (or after 30 s): ``(proc, stderr lines)``."""
+    proc = subprocess.Popen([PEARL, "launch", str(launch), "--respawn-max-retries", str(retries)], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     lines = []
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline and not any("left down" in line for line in lines):
         lines.append(proc.stderr.readline())
+    return proc, lines
+
+
+def test_a_node_that_keeps_dying_is_respawned_a_bounded_number_of_times_then_left_down(tmp_path):
+    launch, env = _respawn_setup(tmp_path)
+    proc, lines = _launch_until_left_down(launch, env, 2)
     # The others keep running: polite is still there when the crasher is left down.
     time.sleep(0.5)
     assert proc.poll() is None, "".join(lines)
@@ -222,12 +228,7 @@ def test_a_node_whose_exit_shuts_the_launch_down_ends_it_with_its_code_instead_o
 
 def test_a_node_whose_exit_shuts_the_launch_down_is_still_respawned_when_a_signal_killed_it(tmp_path):
     launch, env = _respawn_setup(tmp_path, code="SIGKILL", on_exit=' on_exit="shutdown"')
-    proc = subprocess.Popen([PEARL, "launch", str(launch), "--respawn-max-retries", "1"], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    lines = []
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline and not any("left down" in line for line in lines):
-        lines.append(proc.stderr.readline())
+    proc, lines = _launch_until_left_down(launch, env, 1)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=30)
     text = "".join(lines) + err
