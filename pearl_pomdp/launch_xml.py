@@ -10,7 +10,7 @@ is exactly what ``ros2 launch`` understands for these elements, so one file serv
 * ``<let name value/>`` — sets a variable for the following elements.
 * ``<group [scoped="true"]>`` with ``<push-ros-namespace namespace="…"/>`` — a scope
   (``let``/``arg`` inside a scoped group do not leak out), optionally namespaced.
-* ``<node pkg exec [name] [namespace] [output] [args] [ros_args] [respawn] [respawn_delay]>`` with children
+* ``<node pkg exec [name] [namespace] [output] [args] [ros_args] [respawn] [respawn_delay] [on_exit="shutdown"]>`` with children
   ``<param name value/>`` (nested ``<param name>`` groups make dotted names),
   ``<param from="params.yaml"/>`` and ``<remap from to/>``.
 * ``if="…"`` / ``unless="…"`` on any element (``true``/``false``/``1``/``0``).
@@ -94,6 +94,8 @@ class LaunchNode:
         extra_ros_args: the ``ros_args`` attribute, split.
         respawn, respawn_delay: start the node again when it dies, after that many seconds
             (``pearl launch`` bounds the restarts: ``--respawn-max-retries``).
+        shutdown_on_exit: ``on_exit="shutdown"``: the node's own exit, whatever its code, ends the
+            launch; with ``respawn`` it is started again only when a signal killed it.
         line: the ``<node>`` element's line in the file.
     """
 
@@ -108,6 +110,7 @@ class LaunchNode:
     extra_ros_args: List[str] = field(default_factory=list)
     respawn: bool = False
     respawn_delay: float = 0.0
+    shutdown_on_exit: bool = False
     line: int = 0
 
     @property
@@ -396,9 +399,12 @@ def _node(el: _Element, scope: _Scope, namespace: Optional[str]) -> LaunchNode:
                       name=scope.attr(el, "name"), output=scope.need(el, "output", default="log"), line=el.line)
     if node.output not in ("screen", "log", "both"):
         raise scope.error(el, "output", f"must be screen, log or both, got {node.output!r}")
-    # ros2 launch ends the launch when such a node exits; pearl launch always does.
-    if "on_exit" in el.attrib and scope.attr(el, "on_exit") != "shutdown":
-        raise scope.error(el, "on_exit", f"only 'shutdown' is supported, got {scope.attr(el, 'on_exit')!r}")
+    # ros2 launch ends the launch when such a node exits; so does pearl launch (a respawn node only
+    # when it exits by itself: killed by a signal it is started again).
+    if "on_exit" in el.attrib:
+        if scope.attr(el, "on_exit") != "shutdown":
+            raise scope.error(el, "on_exit", f"only 'shutdown' is supported, got {scope.attr(el, 'on_exit')!r}")
+        node.shutdown_on_exit = True
     own_ns = scope.attr(el, "namespace")
     if own_ns and own_ns.startswith("/"):
         node.namespace = own_ns

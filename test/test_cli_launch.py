@@ -150,12 +150,16 @@ def test_the_launch_removes_the_shared_memory_its_stopped_nodes_left(tmp_path):
 
 
 #: Dies with exit code 1 at once, every time (a node that crashes at start); counts its starts.
+#: CRASH_CODE: that exit code instead; "SIGKILL": killed by that signal.
 CRASHING = """#!{python} -S
-import os, sys
+import os, signal, sys
 with open(os.environ["CRASH_COUNT"], "a") as f:
     f.write("start\\n")
 print("crashing", flush=True)
-sys.exit(int(os.environ.get("CRASH_CODE", "1")))
+code = os.environ.get("CRASH_CODE", "1")
+if code == "SIGKILL":
+    os.kill(os.getpid(), signal.SIGKILL)
+sys.exit(int(code))
 """
 
 RESPAWN_LAUNCH = """<launch>
@@ -164,24 +168,30 @@ RESPAWN_LAUNCH = """<launch>
 </launch>"""
 
 
-def _respawn_setup(tmp_path, code: str = "1"):
+def _respawn_setup(tmp_path, code: str = "1", on_exit: str = ""):
     launch, env = _setup(tmp_path, "polite_node")
     crasher = tmp_path / "bin" / "crashing_node"
     crasher.write_text(CRASHING.format(python=sys.executable))
     crasher.chmod(0o755)
-    launch.write_text(RESPAWN_LAUNCH)
+    launch.write_text(RESPAWN_LAUNCH.replace('respawn="true"', f'respawn="true"{on_exit}'))
     env.update(CRASH_COUNT=str(tmp_path / "starts"), CRASH_CODE=code)
     return launch, env
 
 
-def test_a_node_that_keeps_dying_is_respawned_a_bounded_number_of_times_then_left_down(tmp_path):
-    launch, env = _respawn_setup(tmp_path)
-    proc = subprocess.Popen([PEARL, "launch", str(launch), "--respawn-max-retries", "2"], env=env,
+def _launch_until_left_down(launch, env, retries: int):
+    """``pearl launch`` started; returns once the crasher was left down (or after 30 s): ``(proc, stderr lines)``."""
+    proc = subprocess.Popen([PEARL, "launch", str(launch), "--respawn-max-retries", str(retries)], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     lines = []
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline and not any("left down" in line for line in lines):
         lines.append(proc.stderr.readline())
+    return proc, lines
+
+
+def test_a_node_that_keeps_dying_is_respawned_a_bounded_number_of_times_then_left_down(tmp_path):
+    launch, env = _respawn_setup(tmp_path)
+    proc, lines = _launch_until_left_down(launch, env, 2)
     # The others keep running: polite is still there when the crasher is left down.
     time.sleep(0.5)
     assert proc.poll() is None, "".join(lines)
@@ -204,3 +214,24 @@ def test_a_start_up_error_is_not_respawned_and_stops_the_launch(tmp_path):
     assert done.returncode == 2, done.stderr
     assert (tmp_path / "starts").read_text().count("start") == 1
     assert "[launch] crasher exited with code 2; stopping the others" in done.stderr
+
+
+def test_a_node_whose_exit_shuts_the_launch_down_ends_it_with_its_code_instead_of_a_respawn(tmp_path):
+    """on_exit="shutdown" with respawn (the simulator): its own exit (exit 1, its verdict) ends the launch."""
+    launch, env = _respawn_setup(tmp_path, code="1", on_exit=' on_exit="shutdown"')
+    done = subprocess.run([PEARL, "launch", str(launch)], env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1, done.stderr
+    assert (tmp_path / "starts").read_text().count("start") == 1
+    assert "[launch] crasher exited with code 1; stopping the others" in done.stderr
+    assert "respawning" not in done.stderr
+
+
+def test_a_node_whose_exit_shuts_the_launch_down_is_still_respawned_when_a_signal_killed_it(tmp_path):
+    launch, env = _respawn_setup(tmp_path, code="SIGKILL", on_exit=' on_exit="shutdown"')
+    proc, lines = _launch_until_left_down(launch, env, 1)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    text = "".join(lines) + err
+    assert (tmp_path / "starts").read_text().count("start") == 2      # the first start and its respawn
+    assert text.count("[launch] crasher exited with code -9; respawning in 0.1 s") == 1
+    assert "[launch] crasher exited with code -9: death 2 within 60 s" in text

@@ -11,7 +11,9 @@ after its ``respawn_delay``, with one line; a node that dies more than ``--respa
 times within ``--respawn-window`` seconds is left down, with one line, and the others keep
 running (never a restart loop; ``ros2 launch`` has no such bound in its XML). The launch then
 ends with exit code 1. The lifecycle supervisor (``lifecycle_supervisor``) configures and
-activates a respawned managed node again.
+activates a respawned managed node again. A ``respawn`` node with ``on_exit="shutdown"`` is started
+again only when a signal killed it: any exit of its own ends the launch with its exit code (the
+simulator's verdict, such as ``pearl_sim_world``'s timeouts with exit 1, is not a crash to mend).
 
 Shutdown: on SIGINT or SIGTERM, or when a node without respawn exits by itself, every node still running
 gets SIGINT; after ``--shutdown-timeout`` seconds the ones left get SIGTERM, then SIGKILL
@@ -309,7 +311,7 @@ def _watch(children: List[_Child], args: argparse.Namespace, env: dict, log_dir:
                 children[i] = _Child(child.node, child.cmd, env, log_dir, deaths=child.deaths)
                 _say(f"respawned {child.label} (pid {children[i].proc.pid})")
             continue
-        if not child.node.respawn or code in (0, 2):
+        if not child.node.respawn or code in (0, 2) or (child.node.shutdown_on_exit and code > 0):
             return child
         why = f" ({child.last_err})" if child.last_err and code > 0 else ""
         child.deaths = [t for t in child.deaths if now - t <= args.respawn_window] + [now]

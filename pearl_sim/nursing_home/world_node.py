@@ -20,6 +20,9 @@ Parameters: ``scenario`` (str, a scenario file; relative paths also in the packa
 directory), ``seed`` (int, −1: the scenario's), ``rate`` (double, 1–1000, default 10),
 ``clock_period`` (double, 0.005–1 s, default 0.02), ``start_timeout`` (double, s, default 120:
 the manager must publish its first action within this, or the node exits 1),
+``answer_timeout`` (double, s, default 30: while the clock stands still for the policy, a step the
+tracker closed (``/pearl/belief``) must get its action on ``/pearl/action`` within this many wall
+seconds, or the node exits 1 with one line naming the step),
 ``wall_timeout`` (double, s, default 600: the episode must end within this, else exit 1),
 ``journal`` (str, ``auto``: ``$ROS_HOME/pearl/journal/domain<ID>/pearl_sim_world.json``; ``''``: none)
 and ``journal_max_age`` (double, s, default 120).
@@ -40,8 +43,22 @@ as Pearl's domain declares it), ``/pearl/touchscreen``, ``/pearl/laser``, ``/pea
 (std_msgs/String), ``/pearl/sim/truth`` (pearl_interfaces/WorldTruth, the true state at the start and
 end of every action), all reliable, ``/pearl/pose`` (geometry_msgs/PoseStamped, the robot's place in
 the scenario's map).
-Subscribers: ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL like the policy's publisher), and
-``/pearl/belief`` (pearl_interfaces/Belief: the steps the tracker closed).
+Subscribers: ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL like the policy's publisher, but
+keeping up to :data:`ACTIONS_KEPT` actions not yet taken: every action is carried out, also two that
+come back to back), and ``/pearl/belief`` (pearl_interfaces/Belief: the steps the tracker closed).
+
+Why every action must arrive: the world tells "the policy is deciding" (hold the clock) from "the
+step is running" by counting, the tracker's closed steps against the actions it carried out. Had it
+missed one action, then once it carried out the next its count would equal the tracker's closed
+steps: it would hold the clock for an answer while the tracker's open step waits for an
+observation or a deadline under that very clock, and nothing would move. The policy's publisher
+keeps only its latest action (depth 1, for late joiners); a reader of depth 1 keeps only the second
+of two actions that arrive before its executor takes the first. Two come that close whenever the
+tracker closes a step the moment an action opens it (an observation was queued: the reminder heard
+while no step was open) and the policy answers at once — well within a millisecond, so on a loaded
+machine often before the world's process runs again. ``answer_timeout`` bounds whatever else leaves
+a closed step unanswered (a policy that died and was not brought back, an operator who never
+confirms).
 """
 from __future__ import annotations
 
@@ -51,7 +68,11 @@ import time
 from collections import deque
 from typing import Deque, List, Optional
 
-__all__ = ["SimWorldNode", "main"]
+__all__ = ["SimWorldNode", "main", "ACTIONS_KEPT"]
+
+#: Actions the world's ``/pearl/action`` reader keeps until it takes them (see the module doc); far
+#: more than a policy answering one step at a time ever has in flight.
+ACTIONS_KEPT = 100
 
 
 def _make_node_class():
@@ -79,11 +100,13 @@ def _make_node_class():
             self.rate = float(declare("rate", 10.0).value)
             self.clock_period = float(declare("clock_period", 0.02).value)
             self.start_timeout = float(declare("start_timeout", 120.0).value)
+            self.answer_timeout = float(declare("answer_timeout", 30.0).value)
             self.wall_timeout = float(declare("wall_timeout", 600.0).value)
             journal_path = str(declare("journal", "auto").value).strip()
             journal_max_age = float(declare("journal_max_age", 120.0).value)
             for name, value, lo, hi in (("rate", self.rate, 1.0, 1000.0), ("clock_period", self.clock_period, 0.005, 1.0),
                                         ("start_timeout", self.start_timeout, 1.0, 86400.0),
+                                        ("answer_timeout", self.answer_timeout, 1.0, 86400.0),
                                         ("wall_timeout", self.wall_timeout, 1.0, 86400.0)):
                 if not lo <= value <= hi:
                     raise ValueError(f"parameter {name}: {value} is outside [{lo}, {hi}]")
@@ -117,9 +140,13 @@ def _make_node_class():
             from pearl_pomdp.world_truth import truth_topic
 
             self.truth_pub = self.create_publisher(WorldTruthMsg, truth_topic("pearl"), RELIABLE)
+            from rclpy.qos import QoSProfile
+
             from pearl_interfaces.msg import Action
 
-            self.create_subscription(Action, "/pearl/action", self._on_action, LATCHED_QOS)
+            every_action = QoSProfile(depth=ACTIONS_KEPT, history=LATCHED_QOS.history,
+                                      reliability=LATCHED_QOS.reliability, durability=LATCHED_QOS.durability)
+            self.create_subscription(Action, "/pearl/action", self._on_action, every_action)
             # The tracker's step count: a step it closed is answered by the policy; while that
             # answer is in flight the clock stands still (as the lock-step driver of pearl demo
             # does), so no time passes that the fast path would not have.
@@ -133,6 +160,7 @@ def _make_node_class():
             self.calls: List[list] = []       # every act/wait call on the world, in order (the journal)
             self.last_taken_stamp: Optional[List[int]] = None
             self.now = 0.0
+            self.held_since: Optional[float] = None   # wall clock when the clock last stopped for the policy
             self.started = False
             self.resumed = False
             self.finished = False
@@ -256,7 +284,9 @@ def _make_node_class():
                 self._finish(None)
                 return
             if answered and not self.actions:
-                return   # the policy is deciding: hold the clock until its action arrives
+                self._hold()   # the policy is deciding: hold the clock until its action arrives
+                return
+            self.held_since = None
             self.now += self.rate * self.clock_period
             self._publish_clock()
             # Messages that fell due: the world produced them at these times.
@@ -284,6 +314,16 @@ def _make_node_class():
                     self._publish(self.pending.popleft())
             elif self.world.time < self.now:
                 self._idle(self.now)
+
+        def _hold(self) -> None:
+            """The clock stands still for the policy's answer: at most ``answer_timeout`` wall seconds."""
+            if self.held_since is None:
+                self.held_since = time.monotonic()
+            elif time.monotonic() - self.held_since > self.answer_timeout:
+                last = f", the last {self.taken[-1]!r}" if self.taken else ""
+                self._finish(f"no action on /pearl/action answered step {self.closed_steps} (closed on /pearl/belief) "
+                             f"within answer_timeout {self.answer_timeout:g} wall seconds; the world carried out "
+                             f"{len(self.taken)} action(s){last}")
 
         def _idle(self, until: float) -> None:
             """The robot waits: the world lives on (the scheduler may speak) until ``until``."""
