@@ -177,3 +177,15 @@ def test_speech_nodes_are_off_unless_asked():
     rec = next(n for n in on.nodes if n.executable == "speech_recognizer")
     assert "speech_synthesizer" in [n.executable for n in on.nodes]
     assert ("value", "source", "microphone") in rec.parameters
+
+
+def test_the_sim_launch_passes_answer_timeout_to_the_simulator(tmp_path):
+    """`answer_timeout:=` reaches pearl_sim_world's parameters (an operator confirming actions needs more)."""
+    sim = REPO / "launch" / "pearl_sim.launch.xml"
+    for given, expected in ((None, 30.0), ("240.0", 240.0)):
+        world = next(n for n in parse_launch_file(sim, {} if given is None else {"answer_timeout": given}).nodes
+                     if n.executable == "pearl_sim_world")
+        args = world.ros_args(tmp_path)
+        files = [args[i + 1] for i, a in enumerate(args) if a == "--params-file"]
+        written = yaml.safe_load(Path(files[-1]).read_text())
+        assert written["/pearl_sim_world"]["ros__parameters"]["answer_timeout"] == expected
