@@ -8,8 +8,8 @@ against the core's Bayes filter and every action against the core's decider on i
 with the same trials, or the hierarchy planned here from the same files (a decision depends on the
 belief alone). The test's reference is built while the nodes start, on the other core. Decision
 times through the nodes are measured by ``bench/ward_launch.py``; start-up (compile ~2 s CPU, QMDP and blind
-bounds by policy iteration ~2 s, in the node and again here; the test's compilation is the session's
-``ward_domain``, shared by both launches) makes it the suite's slowest setup, so the test is marked slow."""
+bounds by policy iteration ~2 s, in the node and once here for both references; the test's compilation is
+the session's ``ward_domain``, shared by both launches) makes it the suite's slowest setup, so the test is marked slow."""
 from __future__ import annotations
 
 import json
@@ -36,7 +36,14 @@ DOMAIN = REPO / "config" / "ward.domain.yaml"
 STARTUP = 600.0      # s: compile (~2 s) and the online bounds (~2 s idle): a guard for a heavily loaded machine
 
 
-@pytest.fixture(scope="module", params=["online:5", "hierarchical"])
+#: The core's search bounds for the session's compiled ward (QMDP above, blind policies below: ~3 s of
+#: CPU), computed once for both references: the hierarchical plan computes them for its online root
+#: (``default_bounds`` of the full model), and the online decider takes the same ones. The hierarchical
+#: launch runs first so that its plan's bounds are there when the online one needs them.
+_REFERENCE_BOUNDS: dict = {}
+
+
+@pytest.fixture(scope="module", params=["hierarchical", "online:5"])
 def launched(request, tmp_path_factory, ward_domain):
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -78,8 +85,12 @@ def launched(request, tmp_path_factory, ward_domain):
             from pearl_pomdp.hierarchy import load_hierarchy, plan
 
             g["decider"] = plan(domain, load_hierarchy(REPO / "config" / "ward.hierarchy.yaml", domain))
+            _REFERENCE_BOUNDS.setdefault("ward", g["decider"].online_root.bounds)
         else:
-            g["decider"] = OnlineDecider(model, settings=DespotSettings(trials=5))
+            from pearl_pomdp.online.decider import default_bounds
+
+            bounds = _REFERENCE_BOUNDS.get("ward") or _REFERENCE_BOUNDS.setdefault("ward", default_bounds(model))
+            g["decider"] = OnlineDecider(model, bounds=bounds, settings=DespotSettings(trials=5))
         ready = g["wait"](lambda: launch.returncode is not None or (
             all(g[k].get_subscription_count() >= 1 for k in ("arrived", "call", "speech"))
             and len(g["actions"]) >= 1 and len(g["beliefs"]) >= 1), STARTUP)
