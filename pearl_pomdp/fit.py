@@ -204,7 +204,8 @@ def load_episodes(paths: Sequence[Union[str, Path]], truth: bool = True) -> List
                     continue
                 try:
                     obj = json.loads(line)
-                    ep = Episode(list(obj["actions"]), list(obj["observations"]), obj.get("states") if truth else None, f"{p}:{i}")
+                    ep = Episode(list(obj["actions"]), list(obj["observations"]),
+                                 obj.get("states") if truth else None, f"{p}:{i}")
                 except (ValueError, KeyError, TypeError) as err:
                     raise PearlError(f"{p}:{i}: not an episode object with actions and observations ({err})") from None
                 out.append(ep)

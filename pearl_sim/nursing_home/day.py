@@ -198,15 +198,15 @@ class DayWorld(World):
         self._due_at: Dict[str, float] = {}
         from pearl_sim.nursing_home.scenario import default_domain
 
-        battery = next((f for f in (domain if domain is not None else default_domain()).features
-                        if f.name == "Battery"), None)
+        speaks = domain if domain is not None else default_domain()     # the terms the world speaks
+        battery = next((f for f in speaks.features if f.name == "Battery"), None)
         #: The domain tells a robot on its dock from a charged one off it (the day domain's Battery):
         #: the truth then says ``docked`` whenever it charges at home.
         self._reports_dock = battery is not None and "docked" in battery.values
         #: The modality of the domain's battery reading (a ``number`` input of a BatteryState), if any:
         #: the world then publishes the driver's percentage every BATTERY_PERIOD s (docs/day.md,
         #: protocol 3); a domain without one sees the world protocol 2 saw.
-        self._battery_modality = next((ch.modality for ch in (domain if domain is not None else default_domain()).inputs
+        self._battery_modality = next((ch.modality for ch in speaks.inputs
                                        if ch.kind == "number" and ch.type == BATTERY_TYPE), None)
         self._next_reading = 0.0        # the driver's first reading comes at once
         super().__init__(scenario, seed=seed, domain=domain)
