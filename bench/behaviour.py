@@ -33,6 +33,8 @@ def main() -> int:
     ap.add_argument("--domain", default=str(REPO / "config/pearl.domain.yaml"))
     ap.add_argument("--hierarchy", default=str(REPO / "config/pearl.hierarchy.yaml"))
     ap.add_argument("--policy", default="", help="a planned policy directory (default: plan now)")
+    ap.add_argument("--until-left", action="store_true",
+                    help="run each episode until Pearl leaves for its station (or LEAVE_LIMIT s), as pearl demo")
     args = ap.parse_args()
     domain = load_domain(args.domain)
     t0 = time.perf_counter()
@@ -40,7 +42,7 @@ def main() -> int:
                else plan(domain, load_hierarchy(args.hierarchy, domain)))
     plan_s = time.perf_counter() - t0
     controller = Controller("hierarchical", decider)
-    out = {"plan_seconds": round(plan_s, 2), "seeds": args.seeds, "scenarios": {}}
+    out = {"plan_seconds": round(plan_s, 2), "seeds": args.seeds, "until_left": args.until_left, "scenarios": {}}
     for path in args.scenarios:
         for sc in load_scenarios(path):
             rows = []
@@ -51,14 +53,16 @@ def main() -> int:
                     if result.action == "RingDoorBell" and world.robot_at != world.resident_at:
                         habits["doorbell_away"] += 1
 
-                r = run_episode(sc, controller, domain, seed=sc.seed + 1000 * seed, on_step=on_step)
+                r = run_episode(sc, controller, domain, seed=sc.seed + 1000 * seed, on_step=on_step,
+                                until_left=args.until_left)
                 rows.append({"unprompted": r.unprompted_questions,
                              "offers": r.actions.count("ConfirmGuideToPhysio"),
                              "doorbell_away": habits["doorbell_away"], "wrong": r.wrong_actions,
                              "raised": r.questions_raised, "answered": r.questions_answered,
                              "guided": r.guidance_completed, "needed": r.guidance_needed,
                              "wanted": r.guidance_wanted,
-                             "ends_home": _ends_home(r.actions)})
+                             "ends_home": _ends_home(r.actions), "seconds": r.seconds,
+                             "left": any(a in ("GotoPatientRoom", "GuideToPhysio") for a in r.actions)})
             n = len(rows)
             needed = [x for x in rows if x["needed"]]
             out["scenarios"][sc.name] = {
@@ -68,6 +72,10 @@ def main() -> int:
                 "doorbell_away_per_episode": sum(x["doorbell_away"] for x in rows) / n,
                 "wrong_per_episode": sum(x["wrong"] for x in rows) / n,
                 "ends_at_home": sum(x["ends_home"] for x in rows) / n,
+                # The acceptance's share: of the episodes in which the robot left its station at all.
+                "ends_at_home_where_it_left": (sum(x["ends_home"] for x in rows if x["left"])
+                                               / max(1, sum(x["left"] for x in rows))),
+                "seconds_per_episode": sum(x["seconds"] for x in rows) / n,
                 "questions_raised_per_episode": sum(x["raised"] for x in rows) / n,
                 "questions_answered_per_episode": sum(x["answered"] for x in rows) / n,
                 "guidance_success": (sum(x["guided"] for x in needed) / len(needed)) if needed else None,

@@ -17,6 +17,7 @@ import argparse
 import json
 import os
 import shutil
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -140,6 +141,8 @@ class WorldDemo:
         outcome: those scores -> the one-line outcome (``outcome: …``).
         describe_step: ``(step, scenario)`` -> the step's transcript lines (default :func:`describe_step`).
         stop_when: the world -> a test that ends the episode early (``None``: the scenario's steps end it).
+        until_stop: ``True``: the scenario's step budget does not end the episode, only ``stop_when``
+            does (which then holds a time limit of its own: the nursing home runs until Pearl leaves).
         pose_topic: where the simulated hardware publishes the robot's pose (``None``: nowhere).
         hierarchy: the hierarchy file planned with when ``--hierarchy`` is not given (``None``:
             ``NAME.hierarchy.yaml`` beside the domain, else the flat hierarchy).
@@ -153,6 +156,7 @@ class WorldDemo:
     outcome: Callable[[Dict[str, Any]], str]
     describe_step: Callable[[DemoStep, Any], str] = describe_step
     stop_when: Optional[Callable[[Any], Callable[[], bool]]] = None
+    until_stop: bool = False
     pose_topic: Optional[str] = None
     hierarchy: Optional[str] = None
     plot: Optional[Callable[[DemoRun, Any], Path]] = None
@@ -347,7 +351,7 @@ def run_world_demo(name: str, demo: WorldDemo, scenario_path: Path, out_dir: Pat
             if echo is not None:
                 echo(result.lines[-1])
 
-        run_episode(world, backend, on_action=on_action,
+        run_episode(world, backend, on_action=on_action, max_steps=sys.maxsize if demo.until_stop else None,
                     stop_when=demo.stop_when(world) if demo.stop_when is not None else None,
                     before_action=lambda action: hardware.publish_truth(backend.now_ns * 1e-9, "start", action))
         hardware.publish_truth(backend.now_ns * 1e-9, "start")   # the state after the last action

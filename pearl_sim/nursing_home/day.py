@@ -24,7 +24,8 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from pearl_sim.messages import Message, StepResult
-from pearl_sim.nursing_home.world import LOW_BATTERY, SPEAK_SECONDS, Metrics, World
+from pearl_sim.nursing_home.world import (LOW_BATTERY, REMINDER_LEAD, SESSION_SECONDS, SETTLE_SECONDS,  # noqa: F401 (the day's too)
+                                          SPEAK_SECONDS, Metrics, World)
 
 __all__ = ["DAY_SECONDS", "DayPlan", "DayMetrics", "DayWorld", "plan_day", "day_scenario", "day_score",
            "SCORE_WEIGHTS", "clock"]
@@ -45,11 +46,8 @@ ON_TIME_SECONDS = 600.0
 #: Questions arise at 0.5 an hour while she is awake in her room, are kept 30 min unvoiced.
 QUESTION_RATE = 0.5 / 3600
 QUESTION_KEEP_SECONDS = 1800.0
-#: The physiotherapy session (NICE CG162: 45 min of each therapy) and what surrounds it.
-SESSION_SECONDS = 45 * 60.0
-SETTLE_SECONDS = 120.0           # she settles in before a session: time for her arrival question
+#: What surrounds the physiotherapy session (the session itself: the episode world's SESSION_SECONDS …).
 STAFF_TAKE_AFTER = 600.0         # not at the department 10 min after her appointment: the staff take her
-REMINDER_LEAD = 900.0            # the physio reminder falls due 15 min before the appointment
 ARRIVAL_QUESTION = 0.5           # half of the paper's guidances were followed by a question
 #: The appointment slots (morning list after breakfast, afternoon list after the activity hour).
 APPOINTMENT_SLOTS = (10 * 3600, 10.5 * 3600, 11 * 3600, 16.5 * 3600)
@@ -189,10 +187,6 @@ class DayWorld(World):
         self.docked = True              # the day starts on the charger, full
         self.dead = False
         self.activity: Optional[str] = None
-        self.in_session = False
-        self._arrived_at: Optional[float] = None
-        self._session_at: Optional[float] = None
-        self._session_done = False
         self._latent: Optional[Tuple[str, float]] = None
         self._voiced_at: Optional[float] = None
         self._due_at: Dict[str, float] = {}
@@ -210,6 +204,7 @@ class DayWorld(World):
                                        if ch.kind == "number" and ch.type == BATTERY_TYPE), None)
         self._next_reading = 0.0        # the driver's first reading comes at once
         super().__init__(scenario, seed=seed, domain=domain)
+        self.appointment_at = self.plan.appointment
         self.metrics: DayMetrics = DayMetrics()
         self._question_rng = np.random.default_rng([self.seed, 3])
         self._apply_routine([])
@@ -374,11 +369,10 @@ class DayWorld(World):
             events.append(f"a visitor comes to see {name}")
 
     def _physiotherapy(self, events: List[str]) -> None:
-        name = self.scenario.resident.name
-        plan = self.plan
-        if self._session_done:
-            return
-        if (self._arrived_at is None and self.time >= plan.appointment + STAFF_TAKE_AFTER
+        """The episode world's session, and the staff: not at the department
+        :data:`STAFF_TAKE_AFTER` after her appointment, she is taken there (not by the robot)."""
+        if (not self._session_done and self._arrived_at is None
+                and self.time >= self.plan.appointment + STAFF_TAKE_AFTER
                 and self._follower is None and self.resident_at != "physio"):
             self.resident_at, self.engaged = "physio", False
             self.metrics.staff_walks += 1
@@ -386,31 +380,17 @@ class DayWorld(World):
             self._lapse_reminder("physio", events)
             self._physio_questions = []          # she asks the staff, not the robot
             self.activity = None
-            events.append(f"the staff take {name} to physiotherapy")
-        if self.resident_at == "physio" and self._arrived_at is None:
-            self._arrived_at = self.time
-            self._session_at = max(plan.appointment, self.time + SETTLE_SECONDS)
-        if not self.in_session and self._session_at is not None and self.time >= self._session_at:
-            self.in_session, self.engaged = True, False
-            self._lapse_reminder("physio", events)
-            if self.info_goal is not None:
-                events.append(f"{name}'s question goes unanswered: her session starts")
-                self.info_goal, self._voiced_at = None, None
-            events.append(f"{name}'s physiotherapy session starts")
-        if self.in_session and self._session_at is not None and self.time >= self._session_at + SESSION_SECONDS:
-            self.in_session, self._session_done = False, True
-            self.wants_guidance = False
-            self.resident_at = "corridor"
-            self._return_at = self.time + self.scenario.distance("physio", "room") / self.scenario.resident.walking_speed
-            events.append(f"{name}'s session ends; she walks back to her room")
+            events.append(f"the staff take {self.scenario.resident.name} to physiotherapy")
+        super()._physiotherapy(events)
 
     def _lapse_reminder(self, kind: str, events: List[str]) -> None:
-        """A reminder no longer worth delivering (she is at her appointment): it stays missed."""
         if kind in self.due:
-            self.due.remove(kind)
             self._due_at.pop(kind, None)
-            self._last_announce.pop(kind, None)
-            events.append(f"{kind} reminder lapsed undelivered")
+        super()._lapse_reminder(kind, events)
+
+    def _question_lapses(self) -> None:
+        super()._question_lapses()
+        self._voiced_at = None
 
     def _questions_arise(self, dt: float, events: List[str]) -> None:
         name = self.scenario.resident.name

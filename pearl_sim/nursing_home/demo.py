@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional
 
 from pearl_sim.nursing_home.scenario import Scenario, load_scenarios
-from pearl_sim.nursing_home.world import World
+from pearl_sim.nursing_home.world import World, until_pearl_leaves
 from pearl_sim.world_demo import DemoRun, DemoStep, DemoWatcher, WorldDemo, run_world_demo, trace_path
 
 __all__ = ["DEMO", "LiveViewWatcher", "run_demo", "plot_belief", "plotted_features", "outcome_line",
@@ -103,22 +103,6 @@ def describe_step(step: DemoStep, scenario: Scenario) -> str:
     if step.marginals:
         lines.append(f"           belief: {_top(step.marginals)}")
     return "\n".join(lines)
-
-
-def _pearl_leaves(world: World) -> Callable[[], bool]:
-    """Figure 4(f), "Pearl leaves": once the robot has been out and is back at its station with
-    nothing wanted and no appointment still to come, the episode is over (else the scenario's
-    max_steps end it)."""
-    went_out = {"yes": False}
-
-    def left() -> bool:
-        if world.robot_at != "home":
-            went_out["yes"] = True
-            return False
-        return (went_out["yes"] and not world.due and not world.wants_guidance and world.info_goal is None
-                and all(a.at <= world.time for a in world.scenario.appointments))
-
-    return left
 
 
 #: Feature values worth plotting for each thing a scenario can involve.
@@ -250,7 +234,7 @@ class LiveViewWatcher(DemoWatcher):
 #: What the nursing home brings to the frame's ``pearl demo``.
 DEMO = WorldDemo(load_scenarios=load_scenarios,
                  make_world=lambda scenario, seed, domain: World(scenario, seed=seed, domain=domain),
-                 metrics=_metrics, outcome=outcome_line, describe_step=describe_step, stop_when=_pearl_leaves,
+                 metrics=_metrics, outcome=outcome_line, describe_step=describe_step, stop_when=until_pearl_leaves, until_stop=True,
                  pose_topic="/pearl/pose", hierarchy="config/pearl.hierarchy.yaml",
                  plot=lambda run, scenario: plot_belief(run.steps, run.out_dir / "belief.png",
                                                         f"{scenario.name}: {scenario.description}", scenario),

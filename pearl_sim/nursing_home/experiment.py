@@ -14,6 +14,7 @@ paper's fixed-pace guidance against walking-pace adaptation.
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field, replace
 from typing import Callable, List, Optional, Sequence
 
@@ -64,14 +65,17 @@ def episode_executive(controller, domain, scenario: Scenario, model=None):
 
 
 def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Optional[int] = None,
-                pace_adaptation: Optional[bool] = None, on_step: Optional[Callable] = None) -> EpisodeResult:
+                pace_adaptation: Optional[bool] = None, on_step: Optional[Callable] = None,
+                until_left: bool = False) -> EpisodeResult:
     """Run ``agent`` (a :class:`~pearl_sim.nursing_home.agents.Controller`) in a fresh :class:`World` through the step loop.
 
     The loop is :func:`pearl_sim.loop.run_episode` with the core executive as the robot —
     the tracker rules of the ``belief_tracker`` node. The return is Σ_t γ^t R[s_t, a_t] with
     R and γ from ``domain`` (a FactoredDomain) and s_t the world's true state, mapped onto
     the domain's features, when a_t starts. ``keyword_filter`` is unused (the tracker builds
-    the domain's own); it stays for callers of the old signature.
+    the domain's own); it stays for callers of the old signature. ``until_left``: the episode
+    runs until Pearl leaves (:func:`~pearl_sim.nursing_home.world.until_pearl_leaves`, as ``pearl
+    demo``) instead of for the scenario's step budget.
     """
     from pearl_sim.loop import ExecutiveBackend, run_episode as run_loop
 
@@ -92,7 +96,13 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
         returns["discount"] *= model.discount
 
     callback = (lambda result, waits: on_step(world, result, waits, executive)) if on_step is not None else None
-    trace = run_loop(world, backend, on_action=callback, before_action=score)
+    if until_left:
+        from pearl_sim.nursing_home.world import until_pearl_leaves
+
+        trace = run_loop(world, backend, on_action=callback, before_action=score, max_steps=sys.maxsize,
+                         stop_when=until_pearl_leaves(world))
+    else:
+        trace = run_loop(world, backend, on_action=callback, before_action=score)
     m = world.metrics
     needed = any(a.kind == "physio" for a in scenario.appointments)
     return EpisodeResult(

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional
+from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
@@ -57,11 +57,42 @@ ANSWER_SECONDS = 2.0
 REANNOUNCE_SECONDS = 60.0
 #: Battery fraction below which the battery counts as low.
 LOW_BATTERY = 0.2
+#: Her physiotherapy appointment and **the session** (docs/day.md, Part 1): the physio reminder falls
+#: due 15 minutes before the appointment; the session starts at the appointment, or 2 minutes after she
+#: arrives at the department if that is later (she settles in: the time for her arrival question), and
+#: lasts 45 minutes (NICE CG162: 45 min of each therapy a day). During it she is with the therapist and
+#: neither hears nor needs the robot; afterwards she walks back to her room (an aide goes with her).
+REMINDER_LEAD = 900.0
+SETTLE_SECONDS = 120.0
+SESSION_SECONDS = 45 * 60.0
 
 #: The domain feature whose value a drive sets: the robot's place (home, room, physio).
 ROBOT_PLACE = "RobotLocation"
 #: The Laser landmark the navigation reports on arrival at each place.
 LANDMARKS = {"home": "atHome", "room": "atRoom", "physio": "atPhysio"}
+
+#: Seconds of simulated time an episode run "until Pearl leaves" lasts at most (``pearl demo``,
+#: ``bench/behaviour.py --until-left``; docs/day.md, protocol 4): her session starts 15 minutes after the
+#: physio reminder, and the limit leaves the robot as long again to notice that nobody needs it.
+LEAVE_LIMIT = 1800.0
+
+
+def until_pearl_leaves(world: "World", limit: float = LEAVE_LIMIT) -> Callable[[], bool]:
+    """The end of an episode run until Figure 4(f), "Pearl leaves": a test, asked before each action,
+    that is true once the robot has been out and is back at its station with nothing wanted and no
+    appointment still to come — or once ``limit`` seconds of simulated time have passed."""
+    went_out = {"yes": False}
+
+    def left() -> bool:
+        if world.time >= limit:
+            return True
+        if world.robot_at != "home":
+            went_out["yes"] = True
+            return False
+        return (went_out["yes"] and not world.due and not world.wants_guidance and world.info_goal is None
+                and all(a.at <= world.time for a in world.scenario.appointments))
+
+    return left
 
 
 @functools.lru_cache(maxsize=1)
@@ -184,6 +215,13 @@ class World(StudyWorld):
         self._follower: Optional[dict] = None   # a resident walking behind/after the robot
         self._return_at: Optional[float] = None  # a lost resident gets back to her room then
         self._stuck = False              # a drive stopped by a blocked corridor is still under way
+        physio = [a.at for a in scenario.appointments if a.kind == "physio"]
+        #: When her physiotherapy appointment is (its reminder falls due REMINDER_LEAD before); None: none.
+        self.appointment_at: Optional[float] = physio[0] + REMINDER_LEAD if physio else None
+        self.in_session = False
+        self._arrived_at: Optional[float] = None
+        self._session_at: Optional[float] = None
+        self._session_done = False
         self.metrics = Metrics()
         self._advance(0.0, [])
 
@@ -290,6 +328,8 @@ class World(StudyWorld):
     def _act_RingDoorBell(self, listening, events):
         if self.engaged:
             return "yes", None   # rude (the domain charges -5) but not a wrong task action
+        if self.in_session:
+            return None, None    # she is with her therapist
         if self.robot_at == self.resident_at and self.rng.random() < self.scenario.resident.answers_door:
             self.engaged = True
             events.append(f"{self.scenario.resident.name} comes to the door")
@@ -542,8 +582,43 @@ class World(StudyWorld):
             self.battery = max(0.0, self.battery - dt / self.scenario.battery_seconds)
 
     def _live(self, dt: float, moving: bool, events: List[str]) -> None:
-        """What else happens in each second (nothing in an episode; the working day's routine:
-        :class:`pearl_sim.nursing_home.day.DayWorld`)."""
+        """What else happens in each second: her physiotherapy session (the working day adds her
+        routine: :class:`pearl_sim.nursing_home.day.DayWorld`)."""
+        self._physiotherapy(events)
+
+    def _physiotherapy(self, events: List[str]) -> None:
+        """The session at the department (see :data:`SESSION_SECONDS`): it starts at the appointment or
+        :data:`SETTLE_SECONDS` after her arrival, whichever is later, and ends with her walk back."""
+        if self._session_done or self.appointment_at is None:
+            return
+        name = self.scenario.resident.name
+        if self.resident_at == "physio" and self._arrived_at is None:
+            self._arrived_at = self.time
+            self._session_at = max(self.appointment_at, self.time + SETTLE_SECONDS)
+        if not self.in_session and self._session_at is not None and self.time >= self._session_at:
+            self.in_session, self.engaged = True, False
+            self._lapse_reminder("physio", events)
+            if self.info_goal is not None:
+                events.append(f"{name}'s question goes unanswered: her session starts")
+                self._question_lapses()
+            events.append(f"{name}'s physiotherapy session starts")
+        if self.in_session and self._session_at is not None and self.time >= self._session_at + SESSION_SECONDS:
+            self.in_session, self._session_done = False, True
+            self.wants_guidance = False
+            self.resident_at = "corridor"
+            self._return_at = self.time + self.scenario.distance("physio", "room") / self.scenario.resident.walking_speed
+            events.append(f"{name}'s session ends; she walks back to her room")
+
+    def _lapse_reminder(self, kind: str, events: List[str]) -> None:
+        """A reminder no longer worth delivering (she is at her appointment): it stays missed."""
+        if kind in self.due:
+            self.due.remove(kind)
+            self._last_announce.pop(kind, None)
+            events.append(f"{kind} reminder lapsed undelivered")
+
+    def _question_lapses(self) -> None:
+        """Her question is gone unanswered (she went into her session)."""
+        self.info_goal = None
 
     def _raise_due(self, events: List[str]) -> None:
         while self._appointments and self._appointments[0].at <= self.time:
@@ -557,7 +632,8 @@ class World(StudyWorld):
             if last is None or self.time - last >= REANNOUNCE_SECONDS:
                 self._last_announce[kind] = self.time
                 self._scheduler_queue.append(Message(self.time, "Reminder", f"g_{kind}"))
-        while self._questions and self._questions[0].at <= self.time:
+        # A question falling due while she is in her session waits until it ends.
+        while self._questions and self._questions[0].at <= self.time and not self.in_session:
             self.info_goal = self._questions.pop(0).ask
             self.metrics.questions_raised += 1
             events.append(f"{self.scenario.resident.name} wants to know the {self.info_goal}")
