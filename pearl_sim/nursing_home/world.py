@@ -79,8 +79,9 @@ LEAVE_LIMIT = 1800.0
 
 def until_pearl_leaves(world: "World", limit: float = LEAVE_LIMIT) -> Callable[[], bool]:
     """The end of an episode run until Figure 4(f), "Pearl leaves": a test, asked before each action,
-    that is true once the robot has been out and is back at its station with nothing wanted and no
-    appointment still to come — or once ``limit`` seconds of simulated time have passed."""
+    that is true once the robot has been out and is back at its station with nothing wanted and nothing
+    of the scenario still to come (no appointment, no scheduled question: docs/day.md, amendment 11) —
+    or once ``limit`` seconds of simulated time have passed."""
     went_out = {"yes": False}
 
     def left() -> bool:
@@ -90,7 +91,7 @@ def until_pearl_leaves(world: "World", limit: float = LEAVE_LIMIT) -> Callable[[
             went_out["yes"] = True
             return False
         return (went_out["yes"] and not world.due and not world.wants_guidance and world.info_goal is None
-                and all(a.at <= world.time for a in world.scenario.appointments))
+                and all(a.at <= world.time for a in world.scenario.appointments) and not world._questions)
 
     return left
 
