@@ -103,6 +103,9 @@ def test_wanted_walks_are_completed(walk_runs, path):
 #: her room for questions (0 of 12 answered on afternoon_questions), so it was not adopted: the
 #: domain needs the missing part (her way back from the department, the ward's other demands),
 #: not a number tuned to this check. Left failing on purpose, with this diagnosis.
+#: Protocol 4 (docs/day.md): with her session in the episode world and the episode run until Pearl leaves
+#: (1,800 s), this domain still ends at home in 0 of 20 episodes on each of six scenarios — it waits
+#: beside her, then at the empty department; the day domain, which `pearl demo` runs, goes home (below).
 @pytest.mark.xfail(strict=True, reason="the converged plan stays with her at the department (see the comment above)")
 @pytest.mark.parametrize("path", WALK)
 def test_the_robot_goes_home_after_the_walk(walk_runs, path):
@@ -147,3 +150,35 @@ def test_the_unseen_scenarios_make_no_unprompted_walk_offers(fresh_runs, path):
     runs = fresh_runs[path]
     offers = sum(o for _r, _rings, o in runs) / len(runs)
     assert offers <= 0.1, f"{path}: {offers:.2f} unprompted walk offers per episode"
+
+
+#: The six episode scenarios of docs/day.md, protocol 4 (two of them truly unseen).
+EPISODES = WALK + FRESH + ["test/data/scenarios/no_walk_questions.yaml", "test/data/scenarios/checklist_quiet.yaml"]
+
+
+@pytest.fixture(scope="module")
+def day_domain_runs():
+    """`pearl demo`'s domain (fitted on working days) with its shipped plan, each episode run until Pearl
+    leaves, as the demo runs it: 20 seeds per scenario (~7 s in all)."""
+    domain = load_domain(REPO / "config/pearl_day.domain.yaml")
+    controller = Controller("hierarchical", load_hierarchical_policy(REPO / "config/plans/pearl_day", domain))
+    runs = {}
+    for path in EPISODES:
+        scenario = load_scenarios(REPO / path)[0]
+        runs[path] = [run_episode(scenario, controller, domain, seed=scenario.seed + 1000 * k, until_left=True)
+                      for k in range(FRESH_SEEDS)]
+    return runs
+
+
+@pytest.mark.parametrize("path", EPISODES)
+def test_the_demo_domain_goes_home_after_its_work(day_domain_runs, path):
+    """Figure 4(f) on every episode scenario: ≥ 90 % of the episodes in which the robot left its station
+    end with it back there (measured: 20 of 20 on each), and every walk she wanted is completed."""
+    runs = day_domain_runs[path]
+    drives = [[a for a in r.actions if a in ("GotoPatientRoom", "GuideToPhysio", "GoHome")] for r in runs]
+    left = [d for d in drives if d]
+    home = sum(d[-1] == "GoHome" for d in left)
+    assert left and home >= 0.9 * len(left), f"{path}: back at the station in {home} of {len(left)} episodes"
+    wanted = [r for r in runs if r.guidance_wanted]
+    assert all(r.guidance_completed for r in wanted), f"{path}: a wanted walk was not completed"
+    assert sum(r.wrong_actions for r in runs) / len(runs) <= 0.1

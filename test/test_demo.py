@@ -11,15 +11,17 @@ pytestmark = pytest.mark.ros
 
 
 @pytest.fixture(scope="module")
-def demo(tmp_path_factory, pearl_policy):
+def demo(tmp_path_factory):
+    """What `pearl demo` runs: Figure 4 with the day domain and its shipped plan."""
     from pearl_sim.nursing_home.demo import run_demo
 
     tmp = tmp_path_factory.mktemp("demo")
     configure_test_process(tmp)
     lines = []
-    result = run_demo(REPO / "config/scenarios/figure4.yaml", tmp / "out", domain_path=REPO / "config/pearl.domain.yaml",
-                      hierarchy_path=REPO / "config/pearl.hierarchy.yaml", policy=str(pearl_policy), seed=4,
-                      domain_id=allocate_domain_id(), echo=lines.append)
+    result = run_demo(REPO / "config/scenarios/figure4.yaml", tmp / "out",
+                      domain_path=REPO / "config/pearl_day.domain.yaml",
+                      hierarchy_path=REPO / "config/pearl.hierarchy.yaml", policy=str(REPO / "config/plans/pearl_day"),
+                      seed=4, domain_id=allocate_domain_id(), echo=lines.append)
     return result, lines
 
 
@@ -27,6 +29,8 @@ def test_demo_transcript_shows_the_completed_guidance(demo):
     result, lines = demo
     text = result.transcript.read_text()
     assert text.splitlines()[-1].startswith("outcome: guidance completed")
+    # Figure 4(f), "Pearl leaves": it answers her weather question, then drives back to its station.
+    assert "1/1 question(s) answered" in text.splitlines()[-1] and "ended at home" in text.splitlines()[-1]
     assert result.metrics["guidances_completed"] == 1 and result.metrics["residents_lost"] == 0
     # No clarification here since issue 21: after the reminder and her 'sure' (and a 'yes' on the
     # screen) the converged plan is confident enough to guide, and on arrival it listens for her
@@ -110,7 +114,7 @@ def test_demo_bag_replays_to_the_same_actions(demo):
     from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_pomdp.nodes.bag_replay import recorded_beliefs
 
-    b0 = load_domain(REPO / "config" / "pearl.domain.yaml").compile().b0
+    b0 = load_domain(REPO / "config" / "pearl_day.domain.yaml").compile().b0
     first = recorded_beliefs(BagReader(result.bag))[0]
     assert max(abs(x - y) for x, y in zip(first, b0)) < 1e-12
     assert replay.beliefs_match and replay.beliefs == replay.expected_beliefs

@@ -37,9 +37,10 @@ def _url(proc: Proc, timeout: float = 30.0) -> str:
     raise AssertionError(f"pearl demo printed no live-view URL:\n{proc.stderr()[-2000:]}")
 
 
-def test_pearl_demo_foxglove_streams_the_episode(tmp_path, pearl_policy):
+def test_pearl_demo_foxglove_streams_the_episode(tmp_path):
+    # The default domain and its shipped plan, as a user runs it.
     cmd = [str(PEARL), "demo", "--foxglove", "--foxglove-port", "0", "--foxglove-wait", "60", "--json",
-           "--policy", str(pearl_policy), "--out", str(tmp_path / "out"), "--seed", "4",
+           "--out", str(tmp_path / "out"), "--seed", "4",
            "--scenario", str(REPO / "config/scenarios/figure4.yaml")]
     proc = Proc(cmd, ros_env(allocate_domain_id(), tmp_path), tmp_path, "demo")
     try:

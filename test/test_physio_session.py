@@ -93,3 +93,30 @@ def test_an_episode_without_a_physio_appointment_has_no_session():
     assert w.appointment_at is None
     _until(w, 4000)
     assert not w.in_session
+
+
+def test_until_pearl_leaves_waits_for_her_scheduled_questions_then_for_the_robot_at_home():
+    from pearl_sim.nursing_home.world import until_pearl_leaves
+
+    w = World(_figure4(appointments=[], questions=[Question(ask="time", at=300.0)]), seed=4)
+    left = until_pearl_leaves(w)
+    assert not left()                                   # never been out
+    w.act("GotoPatientRoom")
+    assert not left()
+    w.act("GoHome")
+    assert w.robot_at == "home" and not left()          # home, but her question is still to come
+    _until(w, 310)
+    assert w.info_goal == "time" and not left()         # she wants the time: nothing is over
+    w.info_goal = None                                  # (answered by someone)
+    assert left()
+
+
+def test_until_pearl_leaves_ends_at_its_time_limit_wherever_the_robot_is():
+    from pearl_sim.nursing_home.world import until_pearl_leaves
+
+    w = World(_figure4(), seed=4)
+    left = until_pearl_leaves(w, limit=100.0)
+    w.act("GotoPatientRoom")
+    assert not left()
+    _until(w, 101)
+    assert w.robot_at == "room" and left()

@@ -160,24 +160,30 @@ def _clock_seconds(text: str) -> float:
 SHIPPED_DAY_PLAN = "config/plans/pearl_day"
 
 
-def _planned_policy_dir(args, domain) -> Optional[Path]:
-    """``--policy-dir``, else the shipped day plan when the domain and the hierarchy are the shipped
-    ones and the plan was planned for this domain (its model fingerprint), else ``None`` (plan now)."""
+def shipped_day_plan(domain_path, hierarchy_path, domain) -> Optional[Path]:
+    """The shipped day plan when ``domain_path`` and ``hierarchy_path`` are the shipped day domain and
+    Pearl's hierarchy and the plan was planned for ``domain`` (its model fingerprint), else ``None``
+    (``pearl day`` and ``pearl demo`` then plan)."""
     from pearl_pomdp.errors import PolicyError
     from pearl_pomdp.hierarchy import load_hierarchical_policy
     from pearl_sim.worlds import share_path
 
-    if args.policy_dir:
-        return Path(args.policy_dir)
     shipped = Path(share_path(SHIPPED_DAY_PLAN))
     defaults = (share_path("config/pearl_day.domain.yaml"), share_path("config/pearl.hierarchy.yaml"))
-    if (Path(args.domain).resolve(), Path(args.hierarchy).resolve()) != tuple(Path(p).resolve() for p in defaults):
+    if (Path(domain_path).resolve(), Path(hierarchy_path).resolve()) != tuple(Path(p).resolve() for p in defaults):
         return None
     try:
         load_hierarchical_policy(shipped, domain)
     except (PolicyError, OSError):
         return None   # a refitted domain the shipped plan is not for: plan it now
     return shipped
+
+
+def _planned_policy_dir(args, domain) -> Optional[Path]:
+    """``--policy-dir``, else the shipped day plan (:func:`shipped_day_plan`), else ``None`` (plan now)."""
+    if args.policy_dir:
+        return Path(args.policy_dir)
+    return shipped_day_plan(args.domain, args.hierarchy, domain)
 
 
 def _run_nodes(args, domain, profile, case, until: float, out: Path) -> dict:

@@ -29,9 +29,10 @@ HELP = "run a scenario through the full graph (Pearl nodes + simulated hardware)
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", default=None,
                         help="scenario file (default: the domain's world's, config/scenarios/figure4.yaml for Pearl)")
-    parser.add_argument("--domain", default=share_path("config/pearl.domain.yaml"),
+    parser.add_argument("--domain", default=share_path("config/pearl_day.domain.yaml"),
                         help="factored domain; its name chooses the simulated world (pearl_sim/worlds.py: pearl, "
-                             "reception)")
+                             "reception, ward; default: Pearl's domain fitted on working days, whose plan ships "
+                             "in config/plans/pearl_day)")
     parser.add_argument("--hierarchy", default=None, help="action hierarchy (default: NAME.hierarchy.yaml beside the domain)")
     parser.add_argument("--policy", default="",
                         help="planned policy folder (default: the one `pearl plan` saved in out/policies/NAME "
@@ -54,28 +55,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _saved_policy(args: argparse.Namespace) -> str:
-    """The policy `pearl plan DOMAIN` saved (out/policies/NAME), when it fits the domain and
-    --replan was not given; else '' (the demo plans)."""
+    """The policy to run when --policy is not given: the one `pearl plan DOMAIN` saved
+    (out/policies/NAME) when it fits the domain; else the shipped day plan when the domain is the
+    shipped day domain (:func:`pearl_sim.cli.day.shipped_day_plan`); else '' (the demo plans).
+    --replan: always ''."""
     if getattr(args, "replan", False):
         return ""
-    from pearl_pomdp.cli.plan import DEFAULT_POLICY_ROOT
+    from pearl_pomdp.cli.plan import DEFAULT_POLICY_ROOT, resolve_hierarchy_path
     from pearl_pomdp.errors import PolicyError
     from pearl_pomdp.hierarchy import load_hierarchical_policy
     from pearl_pomdp.model.domain_yaml import load_domain
+    from pearl_sim.cli.day import shipped_day_plan
+
+    def say(line: str) -> None:
+        if not args.json:
+            print(f"pearl demo: {line}", flush=True)
 
     domain = load_domain(args.domain)
     candidate = DEFAULT_POLICY_ROOT / domain.name
-    if not (candidate / "hierarchy.json").is_file():
-        return ""
-    try:
-        load_hierarchical_policy(candidate, domain)
-    except PolicyError as err:
-        if not args.json:
-            print(f"pearl demo: {candidate} does not fit {args.domain} ({err}); planning instead", flush=True)
-        return ""
-    if not args.json:
-        print(f"pearl demo: using the policy `pearl plan` saved in {candidate} (--replan to plan anew)", flush=True)
-    return str(candidate)
+    if (candidate / "hierarchy.json").is_file():
+        try:
+            load_hierarchical_policy(candidate, domain)
+        except PolicyError as err:
+            say(f"{candidate} does not fit {args.domain} ({err})")
+        else:
+            say(f"using the policy `pearl plan` saved in {candidate} (--replan to plan anew)")
+            return str(candidate)
+    hierarchy = resolve_hierarchy_path(args.domain, args.hierarchy)
+    shipped = shipped_day_plan(args.domain, hierarchy, domain) if hierarchy is not None else None
+    if shipped is not None:
+        say(f"using the plan shipped with the domain, {shipped} (--replan to plan anew)")
+        return str(shipped)
+    return ""
 
 
 def run(args: argparse.Namespace) -> int:
