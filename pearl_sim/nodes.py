@@ -51,8 +51,8 @@ class SimulatedHardware(WorldHardware):
         node: the rclpy node to publish from (``pearl_sim_world``'s own); ``None``: a node ``sim_pearl``.
 
     Attributes:
-        nodes: the rclpy nodes, to add to an executor. ``/clock`` is published by the
-            graph's :class:`~pearl_pomdp.nodes.sim_clock.SimClockDriver`, not here.
+        nodes: the rclpy nodes, to add to an executor (none when given ``node``). ``/clock`` is published
+            by the graph's :class:`~pearl_pomdp.nodes.sim_clock.SimClockDriver` (or ``pearl_sim_world``), not here.
     """
 
     def __init__(self, context, world, domain=None, node=None):
