@@ -17,18 +17,16 @@ modality's input at its time, with ``/clock`` moved there first by the graph's
 moves to the tracker's own deadline and its timer closes the step (docs/design.md §6).
 Everything is seeded, so a scenario replays identically.
 
-``MODALITY_TOPICS``, ``SPEECH_TYPE`` and ``RELIABLE`` are what the separate-process simulator
-(``pearl_sim_world``, :mod:`pearl_sim.nursing_home.world_node`) publishes with.
+The separate-process simulator (``pearl_sim_world``, :mod:`pearl_sim.nursing_home.world_node`) publishes
+through the same :class:`SimulatedHardware`, from its own node. ``MODALITY_TOPICS``, ``SPEECH_TYPE`` and
+``RELIABLE`` are those inputs and their QoS as Pearl's domain declares them, for a reader standing in for
+the tracker (the tests' manager).
 """
 from __future__ import annotations
 
 from typing import List
 
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
-from pearl_sim.world_hardware import WorldHardware
-
-RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+from pearl_sim.world_hardware import RELIABLE, WorldHardware
 
 #: The message type of ``/pearl/speech``: what Pearl's domains declare.
 SPEECH_TYPE = "pearl_interfaces/msg/RecognisedSpeech"
@@ -50,18 +48,19 @@ class SimulatedHardware(WorldHardware):
         world: the simulated nursing home.
         domain: the domain the graph runs, whose inputs the publishers follow (default: the shipped
             ``config/pearl.domain.yaml``).
+        node: the rclpy node to publish from (``pearl_sim_world``'s own); ``None``: a node ``sim_pearl``.
 
     Attributes:
-        nodes: the rclpy nodes, to add to an executor. ``/clock`` is published by the
-            graph's :class:`~pearl_pomdp.nodes.sim_clock.SimClockDriver`, not here.
+        nodes: the rclpy nodes, to add to an executor (none when given ``node``). ``/clock`` is published
+            by the graph's :class:`~pearl_pomdp.nodes.sim_clock.SimClockDriver` (or ``pearl_sim_world``), not here.
     """
 
-    def __init__(self, context, world, domain=None):
+    def __init__(self, context, world, domain=None, node=None):
         if domain is None:
             from pearl_sim.nursing_home.scenario import default_domain
 
             domain = default_domain()
-        super().__init__(context, world, domain, "pearl", pose_topic="/pearl/pose")
+        super().__init__(context, world, domain, "pearl", pose_topic="/pearl/pose", node=node)
 
 
 class GraphBackend:

@@ -8,11 +8,11 @@ text as ``std_msgs/String``, a number channel's reading in the field the tracker
 :func:`pearl_pomdp.nodes.conversions.truth_to_msg`; ``WORLD`` the world's name, e.g.
 ``/reception/sim/truth``) for the bag, transcripts and ``pearl fit``. Every world of the frame's ``pearl demo``
 (:mod:`pearl_sim.world_demo`) uses it, the nursing home with the robot's pose
-(:class:`pearl_sim.nodes.SimulatedHardware`).
+(:class:`pearl_sim.nodes.SimulatedHardware`), and so does the separate-process simulator
+``pearl_sim_world`` (:mod:`pearl_sim.nursing_home.world_node`), from its own node.
 """
 from __future__ import annotations
 
-import math
 from typing import Any, Dict, Optional, Tuple
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -39,29 +39,32 @@ def _set(msg: Any, path: str, value: float) -> None:
 
 
 class WorldHardware:
-    """The sensors of a world's robot as one rclpy node (``sim_NAME``) on ``context``.
+    """The sensors of a world's robot as one rclpy node (``sim_NAME``) on ``context``, or on ``node``.
 
     Args:
-        context: an initialised rclpy context (the graph's).
+        context: an initialised rclpy context (the graph's); unused when ``node`` is given.
         world: the simulated world (a :class:`~pearl_sim.world_base.StudyWorld`) whose messages go out.
         domain: the FactoredDomain whose inputs (topics, types) the publishers follow.
         name: the world's name (the node's and the said/truth topics').
         pose_topic: where the robot's pose goes with every true state (``geometry_msgs/PoseStamped``
             in the ``map`` frame, from the scenario's ``map`` of places; the nursing home's
             ``/pearl/pose``, which the live view draws); ``None``: none.
+        node: the rclpy node to publish from (a simulator that is a node itself, ``pearl_sim_world``):
+            its owner spins and destroys it, so :attr:`nodes` is empty; ``None``: a node of its own.
 
     Raises:
         PearlError: a world message of a modality the domain declares no input for (names both).
     """
 
-    def __init__(self, context, world, domain, name: str, pose_topic: Optional[str] = None):
+    def __init__(self, context, world, domain, name: str, pose_topic: Optional[str] = None, node: Any = None):
         import rclpy
 
         from pearl_pomdp.nodes.channel_messages import reader_for
 
         self.world = world
-        self.node = rclpy.create_node(f"sim_{name}", context=context)
-        self.nodes = [self.node]
+        self._own_node = node is None
+        self.node = rclpy.create_node(f"sim_{name}", context=context) if node is None else node
+        self.nodes = [self.node] if self._own_node else []
         self.publishers: Dict[str, Any] = {}
         self._readers: Dict[str, Any] = {}
         for channel in domain.inputs:
@@ -116,14 +119,19 @@ class WorldHardware:
         """The robot's place in the scenario's map, stamped ``t`` (sim seconds)."""
         if self.pose is None:
             return
+        from pearl_pomdp.nodes.conversions import seconds_to_time
+
         x, y = self.world.scenario.map[self.world.robot_at]
         msg = self._Pose()
         msg.header.frame_id = "map"
-        sec = int(math.floor(t))
-        msg.header.stamp.sec, msg.header.stamp.nanosec = sec, int(round((t - sec) * 1e9)) % 1_000_000_000
+        # Rounded to the nanosecond as a whole, like the truth's stamp: a time a hair below a second
+        # (1.9999999999999998, as a clock summed in ticks has) is 2 s, not 1 s.
+        msg.header.stamp = seconds_to_time(t)
         msg.pose.position.x, msg.pose.position.y = float(x), float(y)
         msg.pose.orientation.w = 1.0
         self.pose.publish(msg)
 
     def destroy(self) -> None:
-        self.node.destroy_node()
+        """Destroy its own node (a node it was given is its owner's)."""
+        if self._own_node:
+            self.node.destroy_node()

@@ -207,6 +207,69 @@ def test_the_separate_process_simulator_publishes_the_typed_truth_over_dds(ros_c
     assert stamps == sorted(stamps) and abs(stamps[-1] - node.now) < 1e-6
 
 
+def test_the_separate_process_simulator_publishes_through_the_frames_hardware(ros_context):
+    """``pearl_sim_world`` publishes from its own node through ``pearl demo``'s simulated hardware
+    (:class:`pearl_sim.nodes.SimulatedHardware`): the robot's pose with every true state, stamped
+    alike, and what the resident said beside the recogniser's text; it brings no node of its own."""
+    import time
+
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from pearl_interfaces.msg import Action, RecognisedSpeech
+    from pearl_pomdp.nodes.conversions import WorldTruthMsg
+    from pearl_sim.nodes import RELIABLE
+    from pearl_sim.nursing_home.world_node import _make_node_class
+
+    context, _ = ros_context
+    node = _make_node_class()(context=context, parameter_overrides=[
+        Parameter("scenario", value=str(REPO / "config" / "scenarios" / "figure4.yaml")),
+        Parameter("journal", value=""), Parameter("rate", value=20.0)])
+    listener = rclpy.create_node("hardware_listener", context=context)
+    got: dict = {"truth": [], "pose": [], "said": [], "speech": []}
+    listener.create_subscription(WorldTruthMsg, TRUTH, got["truth"].append, RELIABLE)
+    listener.create_subscription(PoseStamped, "/pearl/pose", got["pose"].append, 10)
+    listener.create_subscription(String, "/pearl/sim/said", got["said"].append, RELIABLE)
+    listener.create_subscription(RecognisedSpeech, "/pearl/speech", got["speech"].append, RELIABLE)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(listener)
+
+    def spin_until(done, what):
+        deadline = time.monotonic() + 20.0
+        while not done():
+            assert time.monotonic() < deadline, what
+            executor.spin_once(timeout_sec=0.05)
+
+    try:
+        assert node.hardware.nodes == [] and node.hardware.node is node
+        spin_until(lambda: all(p.get_subscription_count() > 0 for p in
+                               [node.truth_pub, node.hardware.pose, node.hardware.said, node.hardware.publishers["Speech"]]),
+                   "the listener never matched the simulator's topics")
+        node.started = True
+        actions = ["DoNothing", "GotoPatientRoom", "RingDoorBell"]     # RingDoorBell: she answers "ok"
+        for i, name in enumerate(actions):
+            node._on_action(Action(name=name))
+            while len(node.taken) <= i:
+                node._tick()
+            if i < len(actions) - 1:
+                node.closed_steps = len(node.taken)   # the last step stays open: the clock runs to her answer
+        while node.pending:
+            node._tick()
+        spin_until(lambda: len(got["truth"]) == 6 and len(got["pose"]) == 6 and got["said"] and got["speech"],
+                   f"{[(k, len(v)) for k, v in got.items()]} arrived")
+    finally:
+        executor.shutdown()
+        listener.destroy_node()
+        node.destroy_node()
+    assert [(p.header.stamp.sec, p.header.stamp.nanosec) for p in got["pose"]] == \
+        [(t.stamp.sec, t.stamp.nanosec) for t in got["truth"]]
+    xy = [(p.pose.position.x, p.pose.position.y) for p in got["pose"]]
+    places = node.scenario.map
+    assert xy == [tuple(map(float, places[w])) for w in ("home", "home", "home", "room", "room", "room")]
+    assert [m.data for m in got["said"]] == ["ok"] and [m.text for m in got["speech"]] == ["ok"]
+
+
 def _without_last_truth(source: Path, out: Path, drop: int) -> Path:
     """``source`` with its last ``drop`` truth messages left out (a run stopped before the world said them)."""
     reader = BagReader(source)

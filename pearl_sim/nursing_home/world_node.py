@@ -38,11 +38,13 @@ the journal's, the latched last action is not carried out twice, and the manager
 pause. The journal is removed when the episode ends or the node is stopped cleanly, so a new launch
 starts afresh.
 
-Publishers: ``/clock`` (rosgraph_msgs/Clock), ``/pearl/speech`` (pearl_interfaces/RecognisedSpeech,
-as Pearl's domain declares it), ``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder``
-(std_msgs/String), ``/pearl/sim/truth`` (pearl_interfaces/WorldTruth, the true state at the start and
-end of every action), all reliable, ``/pearl/pose`` (geometry_msgs/PoseStamped, the robot's place in
-the scenario's map).
+Publishers: ``/clock`` (rosgraph_msgs/Clock) and the nursing home's simulated hardware, the frame's
+(:class:`pearl_sim.nodes.SimulatedHardware`, as ``pearl demo`` has it, here publishing from this node):
+``/pearl/speech`` (pearl_interfaces/RecognisedSpeech, as Pearl's domain declares it),
+``/pearl/touchscreen``, ``/pearl/laser``, ``/pearl/reminder`` (std_msgs/String), ``/pearl/sim/said``
+(std_msgs/String: what the resident actually said), ``/pearl/sim/truth`` (pearl_interfaces/WorldTruth,
+the true state at the start and end of every action), all reliable, and with each true state
+``/pearl/pose`` (geometry_msgs/PoseStamped, the robot's place in the scenario's map).
 Subscribers: ``/pearl/action`` (pearl_interfaces/Action, TRANSIENT_LOCAL like the policy's publisher, but
 keeping up to :data:`ACTIONS_KEPT` actions not yet taken: every action is carried out, also two that
 come back to back), and ``/pearl/belief`` (pearl_interfaces/Belief: the steps the tracker closed).
@@ -85,12 +87,10 @@ def _make_node_class():
 
         def __init__(self, **kwargs):
             super().__init__("pearl_sim_world", **kwargs)
-            from geometry_msgs.msg import PoseStamped
             from rosgraph_msgs.msg import Clock
 
             from pearl_pomdp.nodes.common import resolve_path
-            from pearl_pomdp.nodes.bag_recorder import message_class
-            from pearl_sim.nodes import MODALITY_TOPICS, RELIABLE, SPEECH_TYPE
+            from pearl_sim.nodes import SimulatedHardware
             from pearl_sim.nursing_home.scenario import load_scenarios
             from pearl_sim.nursing_home.world import World
 
@@ -126,20 +126,11 @@ def _make_node_class():
                 ident = Path(path).read_bytes() + f"\nseed={self.world.seed}".encode()
                 self.journal = Journal(where, "pearl_sim_world", str(path), domain_hash(ident),
                                        max_age=journal_max_age, sync="none")
-            self._Clock, self._Pose = Clock, PoseStamped
+            self._Clock = Clock
             self.clock_pub = self.create_publisher(Clock, "/clock", 10)
-            self.types_by_modality = {m: SPEECH_TYPE if m == "Speech" else "std_msgs/msg/String"
-                                      for m in MODALITY_TOPICS}
-            self.publishers_by_modality = {m: self.create_publisher(message_class(self.types_by_modality[m]), t,
-                                                                    RELIABLE)
-                                           for m, t in MODALITY_TOPICS.items()}
-            self.pose_pub = self.create_publisher(PoseStamped, "/pearl/pose", 10)
-            # The true state at the start and end of every action, as pearl demo records it
-            # (pearl fit counts from it when this topic is recorded).
-            from pearl_pomdp.nodes.conversions import WorldTruthMsg
-            from pearl_pomdp.world_truth import truth_topic
-
-            self.truth_pub = self.create_publisher(WorldTruthMsg, truth_topic("pearl"), RELIABLE)
+            # The world's inputs, said text, true state and pose go out as pearl demo's do: one hardware for both.
+            self.hardware = SimulatedHardware(self.context, self.world, node=self)
+            self.truth_pub = self.hardware.truth   # what pearl fit counts from when /pearl/sim/truth is recorded
             from rclpy.qos import QoSProfile
 
             from pearl_interfaces.msg import Action
@@ -223,37 +214,22 @@ def _make_node_class():
             self.closed_steps = max(self.closed_steps, int(msg.step))
 
         def _publish(self, message) -> None:
-            from pearl_pomdp.nodes.conversions import input_to_msg
-
-            self.publishers_by_modality[message.modality].publish(
-                input_to_msg(self.types_by_modality[message.modality], message.text))
-
-        def _publish_truth(self, phase: str, action: str, result=None) -> None:
-            from pearl_pomdp.nodes.conversions import truth_to_msg
-
-            self.truth_pub.publish(truth_to_msg(self.world.truth_record(phase, action, result), self.now))
+            # As pearl demo's GraphBackend delivers one: what was said first, then the input.
+            if message.said:
+                self.hardware.publish_said(message.said)
+            publisher, msg = self.hardware.outgoing(message)
+            publisher.publish(msg)
 
         def _publish_clock(self) -> None:
-            msg = self._Clock()
-            ns = int(round(self.now * 1e9))
-            msg.clock.sec, msg.clock.nanosec = ns // 1_000_000_000, ns % 1_000_000_000
-            self.clock_pub.publish(msg)
+            from pearl_pomdp.nodes.conversions import seconds_to_time
 
-        def _publish_pose(self) -> None:
-            x, y = self.scenario.map[self.world.robot_at]
-            pose = self._Pose()
-            pose.header.frame_id = "map"
-            ns = int(round(self.now * 1e9))
-            pose.header.stamp.sec, pose.header.stamp.nanosec = ns // 1_000_000_000, ns % 1_000_000_000
-            pose.pose.position.x, pose.pose.position.y = float(x), float(y)
-            pose.pose.orientation.w = 1.0
-            self.pose_pub.publish(pose)
+            self.clock_pub.publish(self._Clock(clock=seconds_to_time(self.now)))
 
         # ----------------------------------------------------------------- loop
         def _ready(self) -> bool:
             """The manager answered b0 (or, resumed, is still there) and our inputs reach its tracker."""
             return (bool(self.actions) or self.resumed) and all(p.get_subscription_count() > 0
-                                                                for p in self.publishers_by_modality.values())
+                                                                for p in self.hardware.publishers.values())
 
         def _tick(self) -> None:
             if self.finished:
@@ -299,16 +275,15 @@ def _make_node_class():
                 self.last_taken_stamp = stamp
                 if self.world.time < self.now:
                     self._idle(self.now)       # the time the manager took to answer
-                self._publish_truth("start", action)
+                self.hardware.publish_truth(self.now, "start", action)
                 try:
                     result = self.world.act(action)
                     self.calls.append(["act", action])
                 except ValueError as err:
                     self._finish(f"/pearl/action {action!r}: {err}")
                     return
-                self._publish_truth("end", action, result)
+                self.hardware.publish_truth(self.now, "end", action, result)
                 self.taken.append(action)
-                self._publish_pose()
                 self.pending.extend(result.messages)
                 while self.pending and self.pending[0].time <= self.now + 1e-9:
                     self._publish(self.pending.popleft())
