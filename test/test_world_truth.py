@@ -3,6 +3,7 @@ world's truth record and back, and every reader — ``pearl fit``, the bag claim
 ``std_msgs/String`` that bags recorded before it hold, giving the same records and the same fit."""
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 
@@ -25,6 +26,27 @@ REPO = Path(__file__).resolve().parents[1]
 #: Recorded before WorldTruth: the truth is JSON in a std_msgs/String (and, in the first, the belief too).
 OLD_BAGS = [REPO / "test" / "data" / "bag_before_typed" / "figure4_guidance", REPO / "bags" / "figure4_guidance"]
 TRUTH = "/pearl/sim/truth"
+
+
+def _figure4_sim_world(context):
+    """``pearl_sim_world`` on Figure 4 in this process, without a journal, at 20 times real time."""
+    from rclpy.parameter import Parameter
+
+    from pearl_sim.nursing_home.world_node import _make_node_class
+
+    return _make_node_class()(context=context, parameter_overrides=[
+        Parameter("scenario", value=str(REPO / "config" / "scenarios" / "figure4.yaml")),
+        Parameter("journal", value=""), Parameter("rate", value=20.0)])
+
+
+def _spin_until(executor, done, what, timeout=20.0):
+    """Spin ``executor`` until ``done()``; fail with ``what`` after ``timeout`` s."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not done():
+        assert time.monotonic() < deadline, what
+        executor.spin_once(timeout_sec=0.05)
 
 
 def figure4_records():
@@ -158,31 +180,21 @@ def test_a_truth_topic_of_another_type_is_named(tmp_path):
 
 def test_the_separate_process_simulator_publishes_the_typed_truth_over_dds(ros_context):
     """``pearl_sim_world`` (the nursing home as its own node) sends the same records as WorldTruth."""
-    import time
-
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
 
     from pearl_interfaces.msg import Action
     from pearl_pomdp.nodes.conversions import WorldTruthMsg
     from pearl_sim.nodes import RELIABLE
-    from pearl_sim.nursing_home.world_node import _make_node_class
 
     context, _ = ros_context
-    node = _make_node_class()(context=context, parameter_overrides=[
-        Parameter("scenario", value=str(REPO / "config" / "scenarios" / "figure4.yaml")),
-        Parameter("journal", value=""), Parameter("rate", value=20.0)])
+    node = _figure4_sim_world(context)
     listener = rclpy.create_node("truth_listener", context=context)
     got = []
     listener.create_subscription(WorldTruthMsg, TRUTH, got.append, RELIABLE)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(listener)
 
-    def spin_until(done, what):
-        deadline = time.monotonic() + 20.0
-        while not done():
-            assert time.monotonic() < deadline, what
-            executor.spin_once(timeout_sec=0.05)
+    spin_until = functools.partial(_spin_until, executor)
 
     try:
         spin_until(lambda: node.truth_pub.get_subscription_count() > 0, "the listener never matched /pearl/sim/truth")
@@ -211,21 +223,15 @@ def test_the_separate_process_simulator_publishes_through_the_frames_hardware(ro
     """``pearl_sim_world`` publishes from its own node through ``pearl demo``'s simulated hardware
     (:class:`pearl_sim.nodes.SimulatedHardware`): the robot's pose with every true state, stamped
     alike, and what the resident said beside the recogniser's text; it brings no node of its own."""
-    import time
-
     from geometry_msgs.msg import PoseStamped
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
 
     from pearl_interfaces.msg import Action, RecognisedSpeech
     from pearl_pomdp.nodes.conversions import WorldTruthMsg
     from pearl_sim.nodes import RELIABLE
-    from pearl_sim.nursing_home.world_node import _make_node_class
 
     context, _ = ros_context
-    node = _make_node_class()(context=context, parameter_overrides=[
-        Parameter("scenario", value=str(REPO / "config" / "scenarios" / "figure4.yaml")),
-        Parameter("journal", value=""), Parameter("rate", value=20.0)])
+    node = _figure4_sim_world(context)
     listener = rclpy.create_node("hardware_listener", context=context)
     got: dict = {"truth": [], "pose": [], "said": [], "speech": []}
     listener.create_subscription(WorldTruthMsg, TRUTH, got["truth"].append, RELIABLE)
@@ -235,11 +241,7 @@ def test_the_separate_process_simulator_publishes_through_the_frames_hardware(ro
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(listener)
 
-    def spin_until(done, what):
-        deadline = time.monotonic() + 20.0
-        while not done():
-            assert time.monotonic() < deadline, what
-            executor.spin_once(timeout_sec=0.05)
+    spin_until = functools.partial(_spin_until, executor)
 
     try:
         assert node.hardware.nodes == [] and node.hardware.node is node
