@@ -2,7 +2,9 @@
 
 The Pearl nodes and simulated hardware run in one process under simulated time;
 prints a transcript, writes a bag, the transcript and a belief plot into --out,
-and ends with a one-line outcome. The policy is the one `pearl plan` saved in
+and ends with a one-line outcome. The episode runs until Pearl has left for its station or
+30 minutes of simulated time (Figure 4(f)); the default domain is Pearl's as fitted on working
+days, whose plan ships with it (config/plans/pearl_day). The policy is the one `pearl plan` saved in
 out/policies/NAME when it fits the domain (else the demo plans; --replan forces it); a copy
 goes beside the bag so that `pearl replay` needs nothing else. With --foxglove the demo
 serves a live view (belief marginals, actions, EXECUTE traces, transcript, robot pose) on
@@ -10,7 +12,7 @@ ws://127.0.0.1:8765 for Foxglove (layout: config/foxglove/pearl.layout.json) and
 --foxglove-wait s for a client to subscribe before the episode starts.
 
 Examples:
-  pearl demo --scenario config/scenarios/table4_dialog.yaml --seed 3
+  pearl demo --scenario config/scenarios/table4_dialog.yaml --domain config/pearl.domain.yaml --seed 3  # the episode domain: it stays and answers
   pearl demo --json                                              # uses out/policies/pearl, saved by `pearl plan`
   pearl demo --scenario config/scenarios/figure4_recogniser.yaml # real speech: espeak-ng, noise, pocketsphinx
   pearl demo --domain config/reception.domain.yaml               # the reception robot (docs/reception.md)
