@@ -18,25 +18,14 @@ moves to the tracker's own deadline and its timer closes the step (docs/design.m
 Everything is seeded, so a scenario replays identically.
 
 The separate-process simulator (``pearl_sim_world``, :mod:`pearl_sim.nursing_home.world_node`) publishes
-through the same :class:`SimulatedHardware`, from its own node. ``MODALITY_TOPICS``, ``SPEECH_TYPE`` and
-``RELIABLE`` are those inputs and their QoS as Pearl's domain declares them, for a reader standing in for
-the tracker (the tests' manager).
+through the same :class:`SimulatedHardware`, from its own node. Which inputs there are, on which topics
+and of which types, the domain declares (``modalities.<M>.input``); ``RELIABLE`` is their QoS.
 """
 from __future__ import annotations
 
 from typing import List
 
-from pearl_sim.world_hardware import RELIABLE, WorldHardware
-
-#: The message type of ``/pearl/speech``: what Pearl's domains declare.
-SPEECH_TYPE = "pearl_interfaces/msg/RecognisedSpeech"
-
-MODALITY_TOPICS = {
-    "Speech": "/pearl/speech",
-    "Touchscreen": "/pearl/touchscreen",
-    "Laser": "/pearl/laser",
-    "Reminder": "/pearl/reminder",
-}
+from pearl_sim.world_hardware import RELIABLE, WorldHardware  # noqa: F401  (RELIABLE: re-exported, the inputs' QoS)
 
 
 class SimulatedHardware(WorldHardware):

@@ -34,7 +34,8 @@ class Manager:
         from pearl_pomdp.nodes.common import LATCHED_QOS
         from pearl_pomdp.nodes.bag_recorder import message_class
         from pearl_pomdp.nodes.conversions import WorldTruthMsg
-        from pearl_sim.nodes import MODALITY_TOPICS, RELIABLE, SPEECH_TYPE
+        from pearl_pomdp.model.domain_yaml import load_domain
+        from pearl_sim.nodes import RELIABLE
 
         self._Action, self._Belief = Action, Belief
         self.node = rclpy.create_node("fake_manager", context=context)
@@ -43,9 +44,11 @@ class Manager:
         self.truth: List = []
         self.truth_sub = self.node.create_subscription(WorldTruthMsg, "/pearl/sim/truth", self.truth.append, RELIABLE)
         # The world starts its clock once its inputs have readers: created after the truth reader.
-        self.inputs = [self.node.create_subscription(message_class(SPEECH_TYPE if m == "Speech" else
-                                                                   "std_msgs/msg/String"), t, lambda _: None, RELIABLE)
-                       for m, t in MODALITY_TOPICS.items()]
+        # One reader per input Pearl's domain declares, as the tracker has them (the simulator's scenario
+        # runs that domain).
+        inputs = load_domain(Path(__file__).resolve().parents[1] / "config" / "pearl.domain.yaml").inputs
+        self.inputs = [self.node.create_subscription(message_class(ch.type), ch.topic, lambda _: None, RELIABLE)
+                       for ch in inputs]
         self.action_pub = self.node.create_publisher(Action, "/pearl/action", LATCHED_QOS)
         self.belief_pub = self.node.create_publisher(Belief, "/pearl/belief", LATCHED_QOS)
 
