@@ -39,6 +39,12 @@ BAD = [
     (["belief_tracker", "--ros-args", "-p", "step_timeout:=soon"],
      "belief_tracker: error: Trying to set parameter 'step_timeout' to 'soon' of type 'STRING', expecting type "
      "'DOUBLE': step_timeout"),
+    (["belief_tracker", "--ros-args", "-p", "step_timeout:=8"],
+     "belief_tracker: error: Trying to set parameter 'step_timeout' to '8' of type 'INTEGER', expecting type "
+     "'DOUBLE': step_timeout (a whole number where a decimal is declared: write it with a decimal point, e.g. 8.0)"),
+    (["pearl_sim_world", "--ros-args", "-p", "rate:=40"],
+     "pearl_sim_world: error: Trying to set parameter 'rate' to '40' of type 'INTEGER', expecting type "
+     "'DOUBLE': rate (a whole number where a decimal is declared: write it with a decimal point, e.g. 8.0)"),
     (["belief_tracker", "--ros-args", "-p", "timeout_observation:=silence"],
      "belief_tracker: error: parameter timeout_observation 'silence' is not an observation of pearl (valid: yes, "
      "no, time, weather, go, unknown, t_yes, t_no, t_time, t_weather, t_go, atRoom, atPhysio, atHome, navFailed, "

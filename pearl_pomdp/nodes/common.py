@@ -225,9 +225,13 @@ def load_domain_and_model(path: Path):
     return (None, loaded) if isinstance(loaded, Pomdp) else (loaded, loaded.compile())
 
 
-def _one_line(err: BaseException) -> str:
-    text = str(err).strip() or type(err).__name__
-    return " ".join(text.split())
+def one_line_error(err: BaseException) -> str:
+    """``err`` as one line; rclpy's type error for a whole number given to a double parameter (``-p
+    step_timeout:=8``, a launch argument ``rate:=40``) says how to write it."""
+    text = " ".join((str(err).strip() or type(err).__name__).split())
+    if isinstance(err, rclpy.exceptions.InvalidParameterTypeException) and "'INTEGER', expecting type 'DOUBLE'" in text:
+        text += " (a whole number where a decimal is declared: write it with a decimal point, e.g. 8.0)"
+    return text
 
 
 #: Seconds from the first SIGINT/SIGTERM to the end of the process, whatever it is doing then
@@ -360,7 +364,7 @@ def _init_spin_and_clean_up(node_class: Type[PearlNode], args: List[str], prog: 
     except KeyboardInterrupt:
         return 0
     except Exception as err:  # bad --ros-args syntax: rcl explains it in one line
-        print(f"{prog}: error: {_one_line(err)}", file=sys.stderr)
+        print(f"{prog}: error: {one_line_error(err)}", file=sys.stderr)
         return 2
     node = None
     executor = None
@@ -373,7 +377,7 @@ def _init_spin_and_clean_up(node_class: Type[PearlNode], args: List[str], prog: 
         except (PearlError, rclpy.exceptions.ParameterException, ValueError, OSError) as err:
             if not rclpy.ok() or stop.signum is not None:
                 return 0  # stopped while starting; the error is a consequence
-            print(f"{prog}: error: {_one_line(err)}", file=sys.stderr)
+            print(f"{prog}: error: {one_line_error(err)}", file=sys.stderr)
             return 2
         executor.add_node(node)
         if stop.signum is None:  # a signal between the node's last line and here: do not spin

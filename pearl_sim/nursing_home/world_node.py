@@ -330,7 +330,7 @@ def main(args: Optional[List[str]] = None) -> int:
     from rclpy.executors import SingleThreadedExecutor
 
     from pearl_pomdp.errors import PearlError
-    from pearl_pomdp.nodes.common import NodeSetupError
+    from pearl_pomdp.nodes.common import NodeSetupError, one_line_error
 
     rclpy.init(args=args if args is not None else sys.argv)
     node = None
@@ -338,8 +338,8 @@ def main(args: Optional[List[str]] = None) -> int:
     try:
         try:
             node = _make_node_class()()
-        except (ValueError, PearlError, NodeSetupError, OSError) as err:
-            print(f"pearl_sim_world: error: {err}", file=sys.stderr, flush=True)
+        except (ValueError, PearlError, NodeSetupError, OSError, rclpy.exceptions.ParameterException) as err:
+            print(f"pearl_sim_world: error: {one_line_error(err)}", file=sys.stderr, flush=True)
             return 2
         executor.add_node(node)
         while rclpy.ok() and not node.finished:
