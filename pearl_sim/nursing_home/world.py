@@ -26,6 +26,13 @@ is still busy driving) until the manager gives the drive up at its deadline
 (``navFailed``, :mod:`pearl_pomdp.tracking`) and takes its next action. The robot is then
 taken to be back where it started.
 
+Her physiotherapy session (docs/day.md, Part 1; here since protocol 4). A ``physio``
+appointment is :data:`REMINDER_LEAD` after its reminder; at the department she goes into
+her session then (or :data:`SETTLE_SECONDS` after arriving, if later) for
+:data:`SESSION_SECONDS`, during which she neither hears nor needs the robot. An episode
+lasts the scenario's ``max_steps``; :func:`until_pearl_leaves` ends one at Figure 4(f)
+instead (``pearl demo``).
+
 The world counts what an experimenter scores: reminders delivered, guidances
 completed and their duration, clarification questions, and *wrong actions*
 (reminding with nothing due, answering a question nobody asked, guiding a
