@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 from typing import Callable, List, Optional, Sequence
 
 from pearl_sim.nursing_home.scenario import Scenario
-from pearl_sim.nursing_home.world import World
+from pearl_sim.nursing_home.world import World, until_pearl_leaves
 
 
 @dataclass
@@ -96,13 +96,10 @@ def run_episode(scenario: Scenario, agent, domain, keyword_filter=None, seed: Op
         returns["discount"] *= model.discount
 
     callback = (lambda result, waits: on_step(world, result, waits, executive)) if on_step is not None else None
-    if until_left:
-        from pearl_sim.nursing_home.world import until_pearl_leaves
-
-        trace = run_loop(world, backend, on_action=callback, before_action=score, max_steps=sys.maxsize,
-                         stop_when=until_pearl_leaves(world))
-    else:
-        trace = run_loop(world, backend, on_action=callback, before_action=score)
+    # Until Pearl leaves, the step budget does not end the episode; the leaving rule (with its time limit) does.
+    trace = run_loop(world, backend, on_action=callback, before_action=score,
+                     max_steps=sys.maxsize if until_left else None,
+                     stop_when=until_pearl_leaves(world) if until_left else None)
     m = world.metrics
     needed = any(a.kind == "physio" for a in scenario.appointments)
     return EpisodeResult(
