@@ -44,13 +44,19 @@ class Rig:
         self.executor.add_node(self.probe.node)
         assert wait_for(lambda: not self.probe.unmatched([self.node]), 10.0, self.executor)
 
-    def run(self, action: str) -> None:
+    def run(self, action: str, says: int = 0, displays: int = 0, goals: int = 0) -> None:
+        """Publish ``action``; wait until the node has executed it and the probe has heard at least the
+        given numbers of new outputs (they cross DDS after the node's counter moves: under load that
+        takes longer than any fixed sleep), then a short settle so that an unexpected extra is heard."""
         counts = (len(self.say), len(self.display), len(self.goals), sum(self.node.executed.values()),
                   self.node.unknown)
         self.action.publish(cv.action_to_msg(action))
         assert wait_for(lambda: (sum(self.node.executed.values()), self.node.unknown) != counts[3:], 5.0,
                         self.executor)
-        wait_for(lambda: False, 0.05, self.executor)  # the outputs, published in the same callback
+        wanted = (counts[0] + says, counts[1] + displays, counts[2] + goals)
+        assert wait_for(lambda: len(self.say) >= wanted[0] and len(self.display) >= wanted[1]
+                        and len(self.goals) >= wanted[2], 5.0, self.executor), action
+        wait_for(lambda: False, 0.05, self.executor)
 
     def close(self):
         self.executor.shutdown()
@@ -79,8 +85,8 @@ def test_with_no_parameters_every_action_does_what_the_params_file_says(rig_fact
     assert rig.node.locations == {name: expected[f"locations.{name}"] for name in expected["location_names"]}
     for action in expected["action_names"]:
         before = (len(rig.say), len(rig.display), len(rig.goals))
-        rig.run(action)
         say, display, goal = (expected.get(f"actions.{action}.{k}", "") for k in ("say", "display", "goal"))
+        rig.run(action, says=int(bool(say)), displays=int(bool(display)), goals=int(bool(goal)))
         assert len(rig.say) - before[0] == (1 if say else 0), action
         assert len(rig.display) - before[1] == (1 if display else 0), action
         assert len(rig.goals) - before[2] == (1 if goal else 0), action
@@ -97,7 +103,7 @@ def test_with_no_parameters_every_action_does_what_the_params_file_says(rig_fact
 
 def test_a_guidance_drives_to_physio_on_goal_pose(rig_factory):
     rig = rig_factory()
-    rig.run("GuideToPhysio")
+    rig.run("GuideToPhysio", says=1, goals=1)
     assert rig.say[-1].data == "Please follow me."
     pose = cv.msg_to_pose(rig.goals[-1])
     assert (pose["x"], pose["y"], pose["frame_id"]) == (21.0, -4.0, "map")
@@ -106,7 +112,7 @@ def test_a_guidance_drives_to_physio_on_goal_pose(rig_factory):
 
 def test_overrides_beat_the_file_and_an_empty_defaults_file_configures_nothing(rig_factory):
     rig = rig_factory({"actions.GuideToPhysio.say": "This way, please.", "locations.physio": [20.0, -3.0, 0.0]})
-    rig.run("GuideToPhysio")
+    rig.run("GuideToPhysio", says=1, goals=1)
     assert rig.say[-1].data == "This way, please."
     assert cv.msg_to_pose(rig.goals[-1])["x"] == 20.0
     bare = rig_factory({"defaults_file": ""})

@@ -61,6 +61,9 @@ def test_a_jittery_arrival_at_physio_yields_atphysio_once(rig):
     assert crossings(points, PHYSIO, 1.0) >= 20
     for i, (x, y) in enumerate(points):
         rig.send(x, y, t=i * 0.1)
+    # every pose handled and the arrival heard (under load, later than any fixed sleep), then a settle
+    # in which a second, wrong arrival would be heard
+    assert wait_for(lambda: rig.node.counts["poses"] == len(points) and rig.laser, 10.0, rig.executor)
     wait_for(lambda: False, 0.2, rig.executor)
     assert [m.data for m in rig.laser] == ["atPhysio"]
     assert rig.node.counts == {"poses": len(points), "ignored_frame": 0, "ignored_uncertain": 0}
@@ -72,7 +75,7 @@ def test_poses_in_another_frame_or_too_uncertain_are_ignored(rig):
     rig.send(21.0, -4.0, frame="odom")           # right place, wrong frame
     rig.send(21.0, -4.0, stddev=3.0)             # right place, localisation lost
     rig.send(21.0, -4.0, stddev=float("nan"))
-    wait_for(lambda: False, 0.2, rig.executor)
+    assert wait_for(lambda: sum(rig.node.counts.values()) == 4, 10.0, rig.executor)
     assert rig.laser == []
     assert rig.node.counts == {"poses": 1, "ignored_frame": 1, "ignored_uncertain": 2}
     rig.send(21.0, -4.0)
