@@ -203,6 +203,41 @@ def test_a_background_write_is_in_place_before_its_fsync_and_on_disk_after_the_f
     assert j.path.resolve() in synced and j.path.parent.resolve() in synced
 
 
+def test_background_writes_faster_than_the_sync_interval_share_rounds_and_a_lone_write_is_synced_soon(
+        tmp_path, monkeypatch):
+    """``background``: 200 writes back to back (a flood, or steps back to back) cost a handful of fsync
+    rounds, not 200, and still reach the disk; a write after a quiet spell is on disk within about one
+    :data:`SYNC_INTERVAL`; a flush does not wait for the interval."""
+    import time
+
+    from pearl_pomdp.journal import SYNC_INTERVAL, flush_journals
+
+    assert flush_journals(timeout=10.0)            # nothing of another test pending
+    synced = _fsync_spy(monkeypatch)
+    j = journal(tmp_path, sync="background")
+    start = time.monotonic()
+    for step in range(200):
+        j.write({"step": step})
+    burst = time.monotonic() - start
+    assert flush_journals(timeout=10.0) is True
+    rounds = synced.count(j.path.resolve())
+    # one round per interval the burst lasted, plus the first and the flush's
+    assert 1 <= rounds <= burst / SYNC_INTERVAL + 3, f"{rounds} fsync rounds for 200 writes in {burst:.2f} s"
+    assert j.load().state == {"step": 199}
+    time.sleep(1.5 * SYNC_INTERVAL)                # a quiet spell
+    synced.clear()
+    j.write({"step": 200})
+    start = time.monotonic()
+    while j.path.resolve() not in synced and time.monotonic() - start < 5.0:
+        time.sleep(0.005)
+    assert j.path.resolve() in synced and time.monotonic() - start <= SYNC_INTERVAL + 0.5
+    synced.clear()
+    j.write({"step": 201})                         # inside the interval: held back ...
+    start = time.monotonic()
+    assert flush_journals(timeout=10.0) is True    # ... until the flush asks for it now
+    assert time.monotonic() - start < SYNC_INTERVAL / 2 and j.path.resolve() in synced
+
+
 def test_an_fsync_write_is_on_disk_when_it_returns(tmp_path, monkeypatch):
     synced = _fsync_spy(monkeypatch)
     j = journal(tmp_path, sync="fsync")
