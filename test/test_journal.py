@@ -238,6 +238,22 @@ def test_background_writes_faster_than_the_sync_interval_share_rounds_and_a_lone
     assert time.monotonic() - start < SYNC_INTERVAL / 2 and j.path.resolve() in synced
 
 
+@pytest.mark.parametrize("sync", ["background", "fsync", "none"])
+def test_a_written_journal_is_byte_for_byte_what_json_dumps_gives(tmp_path, sync):
+    """The write splices the base64 of large arrays in without ``json.dumps`` scanning them; the file is
+    still exactly the plain dump, with awkward strings (quotes, NUL, non-ASCII) beside two arrays."""
+    rng = np.random.default_rng(5)
+    big, small = rng.random(233_280), rng.random(3)
+    state = {"num_states": 233_280, "belief": encode_array(big), "open_action": 'Say "\0 hé"',
+             "queue": [{"topic": "speech", "text": "\u0000"}], "weights": encode_array(small), "step": 7}
+    j = journal(tmp_path, sync=sync)
+    j.write(state, now=1234.5)
+    body = {"format": FORMAT, "kind": j.kind, "domain": j.domain, "domain_hash": j.domain_hash,
+            "written_at": 1234.5, "state": state}
+    assert j.path.read_bytes() == json.dumps(body, separators=(",", ":")).encode("utf-8")
+    assert np.array_equal(decode_array(json.loads(j.path.read_text())["state"]["belief"]), big)
+
+
 def test_an_fsync_write_is_on_disk_when_it_returns(tmp_path, monkeypatch):
     synced = _fsync_spy(monkeypatch)
     j = journal(tmp_path, sync="fsync")
