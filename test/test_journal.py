@@ -165,9 +165,14 @@ def test_a_journal_state_that_does_not_fit_the_model_is_refused(pearl, field, va
 
 def _fsync_spy(monkeypatch, gate=None):
     """Record the path of every fd fsynced; ``gate``: an event the fsync thread's fsyncs wait for
-    (the thread held back), the caller's own fsyncs never wait."""
+    (the thread held back), the caller's own fsyncs never wait. An earlier test's background syncs are
+    flushed first (the thread holds them up to ``SYNC_INTERVAL``), so only this test's are seen."""
     import os
     import threading
+
+    from pearl_pomdp.journal import flush_journals
+
+    assert flush_journals(timeout=10.0)
 
     synced = []
     real = os.fsync
@@ -212,7 +217,6 @@ def test_background_writes_faster_than_the_sync_interval_share_rounds_and_a_lone
 
     from pearl_pomdp.journal import SYNC_INTERVAL, flush_journals
 
-    assert flush_journals(timeout=10.0)            # nothing of another test pending
     synced = _fsync_spy(monkeypatch)
     j = journal(tmp_path, sync="background")
     start = time.monotonic()
