@@ -21,7 +21,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -29,8 +29,9 @@ sys.path.insert(0, str(REPO))
 DRIVES = ("GoHome", "GotoPatientRoom", "GuideToPhysio", "RechargeBattery")
 
 
-def follow_day(controller, domain, model, case, noise: float) -> List[Dict[str, Any]]:
-    """Every question she voiced on one day, with its fate and the robot's steps while it was open."""
+def follow_day(controller, domain, model, case, noise: float) -> Tuple[List[Dict[str, Any]], Dict[str, Any]]:
+    """Every question she voiced on one day, with its fate and the robot's steps while it was open, and
+    the day's checklist (whose questions raised and answered these must match: raises if not)."""
     from pearl_sim.loop import ExecutiveBackend, run_episode
     from pearl_sim.nursing_home.day import DAY_SECONDS, DayWorld, day_scenario, plan_day
     from pearl_sim.nursing_home.experiment import episode_executive
@@ -75,11 +76,13 @@ def follow_day(controller, domain, model, case, noise: float) -> List[Dict[str, 
     run_episode(world, ExecutiveBackend(executive), on_action=on_action, stop_when=lambda: world.time >= DAY_SECONDS)
     if current is not None:
         close("open when the day ended")
-    raised = world.checklist()["questions_raised"]
-    if raised != len(questions):
-        raise AssertionError(f"{case.resident} day {case.day}: the checklist raised {raised} questions, "
-                             f"the events {len(questions)}")
-    return questions
+    checklist = world.checklist()
+    found = (len(questions), sum(q["fate"] == "answered" for q in questions))
+    if found != (checklist["questions_raised"], checklist["questions_answered"]):
+        raise AssertionError(f"{case.resident} day {case.day}: the checklist raised and answered "
+                             f"{checklist['questions_raised']} and {checklist['questions_answered']} questions, "
+                             f"the events {found[0]} and {found[1]}")
+    return questions, checklist
 
 
 def main() -> int:
@@ -107,7 +110,7 @@ def main() -> int:
     report: Dict[str, Any] = {"bench": "day_questions", "domain": args.domain, "resident_seed": args.resident_seed,
                               "residents": args.residents, "days": args.days, "noise": args.noise, "policies": {}}
     for name in policies:
-        questions = [q for case in cases for q in follow_day(agents[name], domain, model, case, args.noise)]
+        questions = [q for case in cases for q in follow_day(agents[name], domain, model, case, args.noise)[0]]
         fates = collections.Counter(q["fate"] for q in questions)
         unanswered = [q for q in questions if q["fate"] != "answered"]
         report["policies"][name] = {
