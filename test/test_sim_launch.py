@@ -51,3 +51,47 @@ def test_the_sim_world_node_rejects_a_bad_scenario_in_one_line(tmp_path):
         assert "pearl_sim_world: error:" in proc.stderr() and "/no/such.yaml" in proc.stderr()
     finally:
         proc.stop()
+
+
+@pytest.mark.slow
+def test_a_day_through_separate_processes_reports_each_nodes_memory_and_the_answers_per_hour(tmp_path):
+    """bench/day_processes.py: `pearl launch launch/pearl_sim.launch.xml day:=true` runs the day world against
+    the nodes in their own processes; the bench reads each process's memory per hour and bins the policy's
+    decision times by the hour of the day. Here the day's first 65 minutes (two hours' bins)."""
+    cmd = [sys.executable, str(REPO / "bench" / "day_processes.py"), "--until", "3900", "--rate", "400",
+           "--domain-id", str(allocate_domain_id()), "--run-dir", str(tmp_path / "run"), "--wall-timeout", "240"]
+    proc = Proc(cmd, ros_env(allocate_domain_id(), tmp_path), tmp_path, "day_processes")
+    try:
+        code = proc.wait(300)
+        assert code == 0, (proc.stdout() + proc.stderr())[-4000:]
+    finally:
+        proc.stop()
+    report = json.loads(proc.stdout())
+    assert report["exit_code"] == 0 and report["day"] == "G01-day0"
+    assert report["checklist"]["hours"] == pytest.approx(3900 / 3600, abs=0.01)   # the world ran to `until`
+    assert set(report["nodes"]) == {"belief_tracker", "hierarchical_policy", "action_executor",
+                                    "lifecycle_supervisor", "pearl_sim_world"}
+    for name, node in report["nodes"].items():
+        assert len(node["per_hour_mb"]) == 2 and all(20.0 < mb < 4000.0 for mb in node["per_hour_mb"]), (name, node)
+        assert node["growth"] == pytest.approx(node["last_hour_mb"] / node["first_hour_mb"] - 1.0, abs=0.01)
+    hours = report["decisions_per_hour"]
+    assert set(hours) == {"08", "09"}
+    # Steps of ~8 s: about 450 decisions in the first hour, a few in the 5 minutes after it.
+    assert 300 <= hours["08"]["decisions"] <= 600 and 5 <= hours["09"]["decisions"] <= 100
+    assert 0.0 < hours["08"]["p50_ms"] <= hours["08"]["p99_ms"] < 1000.0
+    assert report["actions"] >= hours["08"]["decisions"]
+
+
+@pytest.mark.parametrize("param, words", [("resident:=0", "parameter resident: 0 is outside [1, 200]"),
+                                           ("until:=50000.0", "parameter until: 50000.0 is outside (0, 43200] s"),
+                                           ("domain:=/no/day.yaml", "/no/day.yaml")])
+def test_the_sim_world_node_rejects_a_bad_day_parameter_in_one_line(tmp_path, param, words):
+    proc = Proc([str(Path(sys.executable).with_name("pearl_sim_world")), "--ros-args", "-p", "day:=true", "-p", param],
+                ros_env(allocate_domain_id(), tmp_path), tmp_path, "bad_day")
+    try:
+        assert proc.wait(60) == 2
+        err = proc.stderr()
+        assert "pearl_sim_world: error:" in err and words in err, err
+        assert len([line for line in err.splitlines() if line.startswith("pearl_sim_world: error:")]) == 1
+    finally:
+        proc.stop()

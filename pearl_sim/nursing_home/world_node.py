@@ -25,7 +25,16 @@ tracker closed (``/pearl/belief``) must get its action on ``/pearl/action`` with
 seconds, or the node exits 1 with one line naming the step),
 ``wall_timeout`` (double, s, default 600: the episode must end within this, else exit 1),
 ``journal`` (str, ``auto``: ``$ROS_HOME/pearl/journal/domain<ID>/pearl_sim_world.json``; ``''``: none)
-and ``journal_max_age`` (double, s, default 120).
+and ``journal_max_age`` (double, s, default 120), ``log_events`` (bool, false: log every event of the world —
+what the resident did, a wrong action, a question answered — with its simulated time).
+
+A working day instead of a scenario (``day`` true; docs/day.md): the day world of ``pearl day`` for the
+resident generator's ``resident`` (int, 1-based, default 1) at ``resident_seed`` (int, default 29), the
+day's ``seed`` (−1: 0) and the recogniser's word error rate ``noise`` (double, default 0.25), in the
+domain ``domain`` (str, default ``config/pearl_day.domain.yaml``: the one the manager's nodes run, whose
+battery reading this node then publishes too); it ends after ``until`` (double, s, default 43,200: the
+whole day from 08:00) and prints the nurse's checklist and the day score. ``bench/day_processes.py``
+runs it under the launch file and reads each node process's memory per hour.
 
 A simulator that dies loses nothing (docs/reliability.md, "Crashes"): the node journals what it did
 to the world — every ``act`` and ``wait`` call in order, the clock, how many of the actions' messages
@@ -68,6 +77,7 @@ import json
 import sys
 import time
 from collections import deque
+from pathlib import Path
 from typing import Deque, List, Optional
 
 __all__ = ["SimWorldNode", "main", "ACTIONS_KEPT"]
@@ -110,26 +120,39 @@ def _make_node_class():
                                         ("wall_timeout", self.wall_timeout, 1.0, 86400.0)):
                 if not lo <= value <= hi:
                     raise ValueError(f"parameter {name}: {value} is outside [{lo}, {hi}]")
-            path = resolve_path(scenario_path, "scenario")
-            self.scenario = load_scenarios(path)[0]
-            self.world = World(self.scenario, seed=None if seed < 0 else seed)
+            # A working day instead of an episode (docs/day.md): her routine from the resident generator.
+            self.day = bool(declare("day", False).value)
+            day_params = {"resident_seed": int(declare("resident_seed", 29).value),
+                          "resident": int(declare("resident", 1).value),
+                          "noise": float(declare("noise", 0.25).value),
+                          "domain": str(declare("domain", "config/pearl_day.domain.yaml").value)}
+            self.until = float(declare("until", 12 * 3600.0).value)
+            #: Log every world event (what the resident did, a wrong action, a question answered) as it happens.
+            self.log_events = bool(declare("log_events", False).value)
+            domain = None
+            if self.day:
+                path, ident, domain = self._day_world(seed, day_params)
+            else:
+                path = resolve_path(scenario_path, "scenario")
+                self.scenario = load_scenarios(path)[0]
+                self.world = World(self.scenario, seed=None if seed < 0 else seed)
+                ident = Path(path).read_bytes()
             self.journal = None
             if journal_path:
                 import os
-                from pathlib import Path
 
                 from pearl_pomdp.journal import Journal, default_path, domain_hash
 
                 where = (default_path("pearl_sim_world", int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))
                          if journal_path == "auto" else Path(journal_path))
-                # Tied to the scenario file's bytes and the seed: another episode's journal is refused.
-                ident = Path(path).read_bytes() + f"\nseed={self.world.seed}".encode()
+                # Tied to the scenario (file bytes, or the day's parameters) and the seed: another run's journal is refused.
+                ident += f"\nseed={self.world.seed}".encode()
                 self.journal = Journal(where, "pearl_sim_world", str(path), domain_hash(ident),
                                        max_age=journal_max_age, sync="none")
             self._Clock = Clock
             self.clock_pub = self.create_publisher(Clock, "/clock", 10)
             # The world's inputs, said text, true state and pose go out as pearl demo's do: one hardware for both.
-            self.hardware = SimulatedHardware(self.context, self.world, node=self)
+            self.hardware = SimulatedHardware(self.context, self.world, domain, node=self)
             self.truth_pub = self.hardware.truth   # what pearl fit counts from when /pearl/sim/truth is recorded
             from rclpy.qos import QoSProfile
 
@@ -166,6 +189,32 @@ def _make_node_class():
             self.get_logger().info(f"simulating {self.scenario.name} (seed {self.world.seed}) at {self.rate:g}x; "
                                    + (f"resumed at {self.now:.1f} s after {len(self.taken)} actions"
                                       if self.resumed else "waiting for the manager's first action"))
+
+        def _day_world(self, seed: int, params: dict):
+            """The day world of ``pearl day`` (its resident, day seed and noise): (domain path, journal
+            identity, domain). Raises ``ValueError`` naming the parameter that is out of range."""
+            from pearl_pomdp.model.domain_yaml import load_domain
+            from pearl_pomdp.nodes.common import resolve_path
+            from pearl_sim.nursing_home.day import DAY_SECONDS, DayWorld, day_scenario, plan_day
+            from pearl_sim.nursing_home.residents import MAX_GENERATED, effective_word_error_rate, generate_residents
+
+            if not 1 <= params["resident"] <= MAX_GENERATED:
+                raise ValueError(f"parameter resident: {params['resident']} is outside [1, {MAX_GENERATED}]")
+            if not 0.0 <= params["noise"] <= 1.0:
+                raise ValueError(f"parameter noise: {params['noise']} is outside [0, 1] (a word error rate)")
+            if not 0.0 < self.until <= DAY_SECONDS:
+                raise ValueError(f"parameter until: {self.until} is outside (0, {DAY_SECONDS:g}] s of the day")
+            day_seed = max(seed, 0)
+            path = resolve_path(params["domain"], "domain")
+            domain = load_domain(path)
+            profile = generate_residents(params["resident"], seed=params["resident_seed"])[-1]
+            plan = plan_day(day_seed)
+            self.scenario = day_scenario(dict(profile.fields), effective_word_error_rate(params["noise"],
+                                                                                         profile.articulation_wer),
+                                         day_seed, name=f"{profile.name}-day{day_seed}", plan=plan)
+            self.world = DayWorld(self.scenario, plan, domain=domain)
+            ident = json.dumps({**params, "day_seed": day_seed, "until": self.until}, sort_keys=True).encode()
+            return path, ident, domain
 
         # -------------------------------------------------------------- journal
         def _save(self) -> None:
@@ -256,7 +305,7 @@ def _make_node_class():
         def _advance(self) -> None:
             """One tick of the running world: the clock, the messages due, the next action."""
             answered = self.closed_steps >= len(self.taken)   # every step taken is closed
-            if answered and len(self.taken) >= self.scenario.max_steps:
+            if answered and (self.now >= self.until if self.day else len(self.taken) >= self.scenario.max_steps):
                 self._finish(None)
                 return
             if answered and not self.actions:
@@ -279,6 +328,7 @@ def _make_node_class():
                 try:
                     result = self.world.act(action)
                     self.calls.append(["act", action])
+                    self._log_events(action, result)
                 except ValueError as err:
                     self._finish(f"/pearl/action {action!r}: {err}")
                     return
@@ -304,8 +354,14 @@ def _make_node_class():
             """The robot waits: the world lives on (the scheduler may speak) until ``until``."""
             waited = self.world.wait(until)
             self.calls.append(["wait", until])
+            self._log_events("", waited)
             for message in waited.messages:
                 self._publish(message)
+
+        def _log_events(self, action: str, result) -> None:
+            if self.log_events and (result.events or result.wrong):
+                what = "; ".join(result.events + ([f"wrong: {result.wrong}"] if result.wrong else []))
+                self.get_logger().info(f"world {result.start:.1f}-{result.end:.1f} s {action or '(waiting)'}: {what}")
 
         def _finish(self, failure: Optional[str]) -> None:
             self.finished = True
@@ -313,6 +369,14 @@ def _make_node_class():
             self._drop_journal()   # the episode is over: a new launch starts afresh
 
         def summary(self) -> dict:
+            if self.day:   # the nurse's checklist of the day (so far, with until)
+                from pearl_sim.nursing_home.day import DayWorld, day_score
+
+                assert isinstance(self.world, DayWorld)
+                checklist = self.world.checklist()
+                return {"scenario": self.scenario.name, "seed": self.world.seed, "actions": len(self.taken),
+                        "sim_seconds": round(self.now, 3), "day_score": round(day_score(checklist), 2),
+                        "checklist": checklist}
             m = self.world.metrics
             return {"scenario": self.scenario.name, "seed": self.world.seed, "actions": len(self.taken),
                     "sim_seconds": round(self.now, 3), "guidances_started": m.guidances_started,

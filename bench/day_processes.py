@@ -1,0 +1,195 @@
+"""A working day through the Pearl nodes, each in its own process: memory and answer time per hour; one JSON object.
+
+``pearl launch launch/pearl_sim.launch.xml day:=true`` runs the day world (``pearl_sim_world``, which owns
+``/clock``) against the belief tracker, the hierarchical policy, the action executor and the lifecycle
+supervisor, each a process of its own, as on a robot. This bench watches from outside: at every hour of
+simulated time it reads each node process's resident memory (Linux ``/proc/PID/statm``), and it bins the
+policy's decision times (``latency_s`` of ``/pearl/decision``, the policy node's own measure from the
+belief's arrival to the action's publication) by the hour of the day. It reports, per node, the memory of
+the first and the last hour and the growth between them, the decisions' p50 / p99 per hour and the last
+hour's p99 against the first's (issue: "each node's RSS grows ≤ 10 % from the first to the last hour;
+decision p99 of the last hour within 20 % of the first"), the wall time (start-up and the day apart) and
+the day's checklist as the world counted it.
+
+Time runs ``--rate`` times the wall clock (ticks of ``--clock-period`` wall seconds) and stands still while
+the policy decides, so the day is the day world's under the robot's rules, not bit-identical to
+``pearl day`` (one process, lock-step clock).
+
+    python bench/day_processes.py [--resident-seed 29] [--resident 1] [--seed 0] [--noise 0.25]
+                                  [--until 43200] [--rate 400] [--clock-period 0.005] [--run-dir DIR]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Dict, List, Optional
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+HOUR_S = 3600.0
+NODES = ("belief_tracker", "hierarchical_policy", "action_executor", "lifecycle_supervisor", "pearl_sim_world")
+
+
+def node_pids(log: Path) -> Dict[str, int]:
+    """``{node: pid}`` from ``pearl launch``'s ``[launch] started NODE (pid N)`` lines (the latest per node:
+    a respawned node's new process)."""
+    pids: Dict[str, int] = {}
+    for line in log.read_text(errors="replace").splitlines():
+        if line.startswith("[launch] started ") and "(pid " in line:
+            pids[line.split()[2]] = int(line.rsplit("(pid ", 1)[1].rstrip(")"))
+    return pids
+
+
+def rss_mb(pid: int) -> Optional[float]:
+    """A process's resident memory in MB, or None when it is gone (an exited process reads 0)."""
+    try:
+        pages = int(Path(f"/proc/{pid}/statm").read_text().split()[1])
+    except (OSError, IndexError, ValueError):
+        return None
+    return pages * os.sysconf("SC_PAGE_SIZE") / 1e6 if pages > 0 else None
+
+
+def summarize(start: Dict[str, float], hourly: Dict[str, List[Optional[float]]],
+              decisions: Dict[int, List[float]]) -> Dict[str, object]:
+    """Per node: its memory when the clock started and at the end of each hour, and the growth from the
+    end of the first hour to the end of the last (and from the start); per hour: decision p50 / p99 (ms)."""
+    nodes = {}
+    for name, per_hour in hourly.items():
+        ends = [m for m in per_hour if m is not None]
+        if len(ends) >= 2:
+            nodes[name] = {"start_mb": None if start.get(name) is None else round(start[name], 1),
+                           "first_hour_mb": round(ends[0], 1), "last_hour_mb": round(ends[-1], 1),
+                           "growth": round(ends[-1] / ends[0] - 1.0, 4),
+                           "growth_from_start": (round(ends[-1] / start[name] - 1.0, 4) if start.get(name) else None),
+                           "per_hour_mb": [None if m is None else round(m, 1) for m in per_hour]}
+    hours = sorted(decisions)
+    per_hour = {h: {"decisions": len(decisions[h]), "p50_ms": round(float(np.percentile(decisions[h], 50)) * 1e3, 2),
+                    "p99_ms": round(float(np.percentile(decisions[h], 99)) * 1e3, 2)} for h in hours}
+    out: Dict[str, object] = {"nodes": nodes, "decisions_per_hour": {f"{8 + h:02d}": v for h, v in per_hour.items()}}
+    if len(hours) >= 2:
+        first, last = per_hour[hours[0]]["p99_ms"], per_hour[hours[-1]]["p99_ms"]
+        out["last_vs_first_hour_p99"] = round(last / first, 3) if first else None
+    if nodes:
+        out["max_node_growth"] = max(n["growth"] for n in nodes.values())
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--domain", default=str(REPO / "config/pearl_day.domain.yaml"))
+    ap.add_argument("--policy", default=str(REPO / "config/plans/pearl_day"), help="planned policy directory")
+    ap.add_argument("--resident-seed", type=int, default=29)
+    ap.add_argument("--resident", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0, help="the day's seed")
+    ap.add_argument("--noise", type=float, default=0.25)
+    ap.add_argument("--until", type=float, default=12 * HOUR_S, help="seconds of the day to run (from 08:00)")
+    ap.add_argument("--rate", type=float, default=400.0)
+    ap.add_argument("--clock-period", type=float, default=0.005)
+    ap.add_argument("--wall-timeout", type=float, default=3600.0)
+    ap.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default: one from this process's id)")
+    ap.add_argument("--run-dir", type=Path, default=None,
+                    help="where the launch's log and the nodes' ROS_HOME go (default: a new temporary folder)")
+    args = ap.parse_args()
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+    from rosgraph_msgs.msg import Clock
+
+    from pearl_interfaces.msg import Decision
+    from pearl_pomdp.nodes.common import EVENT_QOS
+
+    domain_id = args.domain_id if args.domain_id is not None else 1 + (os.getpid() * 7) % 101
+    run_dir = args.run_dir if args.run_dir is not None else Path(tempfile.mkdtemp(prefix="pearl_day_processes_"))
+    run_dir.mkdir(parents=True, exist_ok=True)
+    log = run_dir / "launch.log"
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_HOME=str(run_dir), ROS_LOG_DIR=str(run_dir))
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    command = [str(Path(sys.executable).parent / "pearl"), "launch", "launch/pearl_sim.launch.xml", "day:=true",
+               f"domain:={args.domain}", f"policy:={args.policy}", f"resident_seed:={args.resident_seed}",
+               f"resident:={args.resident}", f"seed:={args.seed}", f"noise:={args.noise}", f"until:={args.until}",
+               f"rate:={args.rate}", f"clock_period:={args.clock_period}", f"wall_timeout:={args.wall_timeout}"]
+    started = time.monotonic()
+    with open(log, "wb") as out:
+        launch = subprocess.Popen(command, cwd=REPO, env=env, stdout=out, stderr=subprocess.STDOUT)
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node("day_processes_probe", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    clock = {"now": 0.0, "first_tick_wall": None}
+    decisions: Dict[int, List[float]] = {}
+    node.create_subscription(Clock, "/clock", lambda m: clock.__setitem__(
+        "now", max(clock["now"], m.clock.sec + m.clock.nanosec * 1e-9)), 10)
+    hours = int(np.ceil(args.until / HOUR_S))
+    # A decision stamped at the day's very end (the answer to its last step) counts in the last hour.
+    node.create_subscription(Decision, "/pearl/decision", lambda m: decisions.setdefault(
+        min(int((m.stamp.sec + m.stamp.nanosec * 1e-9) // HOUR_S), hours - 1), []).append(float(m.latency_s)),
+        EVENT_QOS)
+    start: Dict[str, float] = {}
+    hourly: Dict[str, List[Optional[float]]] = {name: [None] * hours for name in NODES}
+
+    def read_all() -> Dict[str, float]:
+        return {name: m for name, pid in node_pids(log).items() if name in hourly and (m := rss_mb(pid)) is not None}
+
+    try:
+        while launch.poll() is None:
+            executor.spin_once(timeout_sec=0.05)
+            now = clock["now"]
+            if now > 0.0 and clock["first_tick_wall"] is None:
+                clock["first_tick_wall"] = time.monotonic()
+                start.update(read_all())
+            if now > 0.0:
+                # The hour the clock is in: its end-of-hour reading is the latest one taken in it (the last
+                # before the processes end, for the day's last hour).
+                hour = min(int(now // HOUR_S), hours - 1)
+                for name, mb in read_all().items():
+                    hourly[name][hour] = mb
+            if time.monotonic() - started > args.wall_timeout + 60:
+                raise SystemExit(f"bench/day_processes.py: the launch did not end within {args.wall_timeout + 60:g} s "
+                                 f"(log: {log})")
+    finally:
+        if launch.poll() is None:
+            launch.send_signal(signal.SIGINT)
+            try:
+                launch.wait(30)
+            except subprocess.TimeoutExpired:
+                launch.kill()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    ended = time.monotonic()
+    text = log.read_text(errors="replace")
+    finished = re.search(r"pearl_sim_world: finished (\S+): (\{.*\})", text)
+    report: Dict[str, object] = {"bench": "day_processes", "resident_seed": args.resident_seed,
+                                 "resident": args.resident, "seed": args.seed, "noise": args.noise,
+                                 "until_s": args.until, "rate": args.rate, "clock_period": args.clock_period,
+                                 "exit_code": launch.returncode, "log": str(log),
+                                 "startup_s": round((clock["first_tick_wall"] or ended) - started, 1),
+                                 "day_wall_s": round(ended - (clock["first_tick_wall"] or ended), 1),
+                                 "load_avg_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count()}
+    report.update(summarize(start, hourly, decisions))
+    if finished:
+        world = json.loads(finished.group(2))
+        report.update(day=finished.group(1), actions=world.get("actions"), day_score=world.get("day_score"),
+                      checklist=world.get("checklist"))
+    else:
+        report["error"] = "pearl_sim_world did not finish the day (see the log)"
+    print(json.dumps(report))
+    return 0 if finished and launch.returncode == 0 else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
