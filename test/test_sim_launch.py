@@ -84,7 +84,7 @@ def test_a_day_through_separate_processes_reports_each_nodes_memory_and_the_answ
 
 @pytest.mark.parametrize("param, words", [("resident:=0", "parameter resident: 0 is outside [1, 200]"),
                                            ("until:=50000.0", "parameter until: 50000.0 is outside (0, 43200] s"),
-                                           ("domain:=/no/day.yaml", "/no/day.yaml")])
+                                           ("day_domain:=/no/day.yaml", "/no/day.yaml")])
 def test_the_sim_world_node_rejects_a_bad_day_parameter_in_one_line(tmp_path, param, words):
     proc = Proc([str(Path(sys.executable).with_name("pearl_sim_world")), "--ros-args", "-p", "day:=true", "-p", param],
                 ros_env(allocate_domain_id(), tmp_path), tmp_path, "bad_day")

@@ -31,8 +31,8 @@ what the resident did, a wrong action, a question answered — with its simulate
 A working day instead of a scenario (``day`` true; docs/day.md): the day world of ``pearl day`` for the
 resident generator's ``resident`` (int, 1-based, default 1) at ``resident_seed`` (int, default 29), the
 day's ``seed`` (−1: 0) and the recogniser's word error rate ``noise`` (double, default 0.25), in the
-domain ``domain`` (str, default ``config/pearl_day.domain.yaml``: the one the manager's nodes run, whose
-battery reading this node then publishes too); it ends after ``until`` (double, s, default 43,200: the
+domain ``day_domain`` (str, default ``config/pearl_day.domain.yaml``: the one the manager's nodes run, whose
+battery reading this node then publishes too; not ``domain``, which a params file's ``/**`` gives every node); it ends after ``until`` (double, s, default 43,200: the
 whole day from 08:00) and prints the nurse's checklist and the day score. ``bench/day_processes.py``
 runs it under the launch file and reads each node process's memory per hour.
 
@@ -125,7 +125,7 @@ def _make_node_class():
             day_params = {"resident_seed": int(declare("resident_seed", 29).value),
                           "resident": int(declare("resident", 1).value),
                           "noise": float(declare("noise", 0.25).value),
-                          "domain": str(declare("domain", "config/pearl_day.domain.yaml").value)}
+                          "domain": str(declare("day_domain", "config/pearl_day.domain.yaml").value)}
             self.until = float(declare("until", 12 * 3600.0).value)
             #: Log every world event (what the resident did, a wrong action, a question answered) as it happens.
             self.log_events = bool(declare("log_events", False).value)
@@ -205,7 +205,7 @@ def _make_node_class():
             if not 0.0 < self.until <= DAY_SECONDS:
                 raise ValueError(f"parameter until: {self.until} is outside (0, {DAY_SECONDS:g}] s of the day")
             day_seed = max(seed, 0)
-            path = resolve_path(params["domain"], "domain")
+            path = resolve_path(params["domain"], "day_domain")
             domain = load_domain(path)
             profile = generate_residents(params["resident"], seed=params["resident_seed"])[-1]
             plan = plan_day(day_seed)
