@@ -97,6 +97,7 @@ def main() -> int:
     ap.add_argument("--clock-period", type=float, default=0.005)
     ap.add_argument("--wall-timeout", type=float, default=3600.0)
     ap.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default: one from this process's id)")
+    ap.add_argument("--log-events", action="store_true", help="the simulator logs every event of its world (in the log)")
     ap.add_argument("--run-dir", type=Path, default=None,
                     help="where the launch's log and the nodes' ROS_HOME go (default: a new temporary folder)")
     args = ap.parse_args()
@@ -120,7 +121,8 @@ def main() -> int:
     command = [str(Path(sys.executable).parent / "pearl"), "launch", "launch/pearl_sim.launch.xml", "day:=true",
                f"domain:={args.domain}", f"policy:={args.policy}", f"resident_seed:={args.resident_seed}",
                f"resident:={args.resident}", f"seed:={args.seed}", f"noise:={args.noise}", f"until:={args.until}",
-               f"rate:={args.rate}", f"clock_period:={args.clock_period}", f"wall_timeout:={args.wall_timeout}"]
+               f"rate:={args.rate}", f"clock_period:={args.clock_period}", f"wall_timeout:={args.wall_timeout}",
+               f"log_events:={'true' if args.log_events else 'false'}"]
     started = time.monotonic()
     with open(log, "wb") as out:
         launch = subprocess.Popen(command, cwd=REPO, env=env, stdout=out, stderr=subprocess.STDOUT)

@@ -303,42 +303,64 @@ def _make_node_class():
                 self._save()
 
         def _advance(self) -> None:
-            """One tick of the running world: the clock, the messages due, the next action."""
+            """One tick of the running world: the next action, or the messages due and then the clock.
+
+            The order is the fast path's (``pearl_sim.loop.run_episode``), as far as ticks allow:
+            an answer that came while the clock stood still is carried out at once, at the time it
+            was decided; what the world produced for a time inside the tick (an action's messages,
+            what she said or the scheduler announced while the robot waited) goes out before the
+            clock passes that time, so a step's deadline inside the tick never overtakes it; and an
+            answer waiting for the last of its action's messages is carried out when the world got
+            there, not a tick later. Otherwise what she said between the decision and the action
+            reached the tracker after the action had opened its step, and closed it — a walk's
+            step closed by a word of hers, then a silent step every 8 s for the rest of the walk
+            (docs/day.md)."""
             answered = self.closed_steps >= len(self.taken)   # every step taken is closed
             if answered and (self.now >= self.until if self.day else len(self.taken) >= self.scenario.max_steps):
                 self._finish(None)
+                return
+            if answered and self.actions and not self.pending:
+                self.held_since = None
+                if self.world.time > self.now:    # the last action ran on past its last message
+                    self.now = self.world.time
+                    self._publish_clock()
+                self._take(*self.actions.popleft())
                 return
             if answered and not self.actions:
                 self._hold()   # the policy is deciding: hold the clock until its action arrives
                 return
             self.held_since = None
-            self.now += self.rate * self.clock_period
+            target = self.now + self.rate * self.clock_period
+            # Messages that fall due in this tick: the world produced them for these times.
+            while self.pending and self.pending[0].time <= target + 1e-9:
+                self._publish(self.pending.popleft())
+            if not self.pending and self.actions and answered:
+                target = max(self.now, self.world.time)   # the answer is carried out where the world got to
+            elif not self.pending and self.world.time < target:
+                self._idle(target)
+            self.now = target
             self._publish_clock()
-            # Messages that fell due: the world produced them at these times.
+            if not self.pending and self.actions and answered:
+                self._take(*self.actions.popleft())
+
+        def _take(self, stamp, action: str) -> None:
+            """Carry out ``action`` at the clock's time (the world first lives up to it, if behind)."""
+            self.last_taken_stamp = stamp
+            if self.world.time < self.now:
+                self._idle(self.now)
+            self.hardware.publish_truth(self.now, "start", action)
+            try:
+                result = self.world.act(action)
+                self.calls.append(["act", action])
+                self._log_events(action, result)
+            except ValueError as err:
+                self._finish(f"/pearl/action {action!r}: {err}")
+                return
+            self.hardware.publish_truth(self.now, "end", action, result)
+            self.taken.append(action)
+            self.pending.extend(result.messages)
             while self.pending and self.pending[0].time <= self.now + 1e-9:
                 self._publish(self.pending.popleft())
-            if self.pending:
-                return
-            if self.actions and answered:
-                stamp, action = self.actions.popleft()
-                self.last_taken_stamp = stamp
-                if self.world.time < self.now:
-                    self._idle(self.now)       # the time the manager took to answer
-                self.hardware.publish_truth(self.now, "start", action)
-                try:
-                    result = self.world.act(action)
-                    self.calls.append(["act", action])
-                    self._log_events(action, result)
-                except ValueError as err:
-                    self._finish(f"/pearl/action {action!r}: {err}")
-                    return
-                self.hardware.publish_truth(self.now, "end", action, result)
-                self.taken.append(action)
-                self.pending.extend(result.messages)
-                while self.pending and self.pending[0].time <= self.now + 1e-9:
-                    self._publish(self.pending.popleft())
-            elif self.world.time < self.now:
-                self._idle(self.now)
 
         def _hold(self) -> None:
             """The clock stands still for the policy's answer: at most ``answer_timeout`` wall seconds."""
