@@ -37,6 +37,14 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 HOUR_S = 3600.0
+#: Why the simulator's own journal is off unless --sim-journal: it holds every call made on the world
+#: (a wait every idle tick) and is rewritten whole every tick, so over a day its cost grows to load the
+#: two cores the nodes share: with it the day took 189-195 s at load 3.4-4.6 and the decisions' p50
+#: climbed from 1.5 to 3.4 ms through the afternoon; with no journal at all, 141 s at load 2.0 and flat.
+#: The manager's nodes journal as on a robot.
+SIM_JOURNAL = False
+#: Seconds of the day between two /diagnostics summaries of a node (see main).
+DIAGNOSTICS_PERIOD = 600.0
 NODES = ("belief_tracker", "hierarchical_policy", "action_executor", "lifecycle_supervisor", "pearl_sim_world")
 
 
@@ -97,6 +105,9 @@ def main() -> int:
     ap.add_argument("--clock-period", type=float, default=0.005)
     ap.add_argument("--wall-timeout", type=float, default=3600.0)
     ap.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default: one from this process's id)")
+    ap.add_argument("--no-journal", action="store_true", help="journal:=false: no node journals its state")
+    ap.add_argument("--sim-journal", action="store_true",
+                    help="the simulator journals its world too (off by default: see SIM_JOURNAL)")
     ap.add_argument("--log-events", action="store_true", help="the simulator logs every event of its world (in the log)")
     ap.add_argument("--run-dir", type=Path, default=None,
                     help="where the launch's log and the nodes' ROS_HOME go (default: a new temporary folder)")
@@ -115,6 +126,16 @@ def main() -> int:
     run_dir = args.run_dir if args.run_dir is not None else Path(tempfile.mkdtemp(prefix="pearl_day_processes_"))
     run_dir.mkdir(parents=True, exist_ok=True)
     log = run_dir / "launch.log"
+    # The nodes' /diagnostics every 10 minutes of the day, as `pearl day --nodes` has them: their default
+    # (every second of the node's clock) is 400 summaries a wall second per node at 400x, load that a
+    # robot at 1x never has.
+    import yaml
+
+    nodes_params = yaml.safe_load((REPO / "config" / "pearl_nodes.yaml").read_text(encoding="utf-8"))
+    for name in ("belief_tracker", "hierarchical_policy", "action_executor"):
+        nodes_params.setdefault(name, {}).setdefault("ros__parameters", {})["diagnostics_period"] = DIAGNOSTICS_PERIOD
+    params_file = run_dir / "pearl_nodes.yaml"
+    params_file.write_text(yaml.safe_dump(nodes_params), encoding="utf-8")
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                ROS_HOME=str(run_dir), ROS_LOG_DIR=str(run_dir))
     env.pop("ROS_LOCALHOST_ONLY", None)
@@ -122,7 +143,9 @@ def main() -> int:
                f"domain:={args.domain}", f"policy:={args.policy}", f"resident_seed:={args.resident_seed}",
                f"resident:={args.resident}", f"seed:={args.seed}", f"noise:={args.noise}", f"until:={args.until}",
                f"rate:={args.rate}", f"clock_period:={args.clock_period}", f"wall_timeout:={args.wall_timeout}",
-               f"log_events:={'true' if args.log_events else 'false'}"]
+               f"log_events:={'true' if args.log_events else 'false'}", f"params_file:={params_file}",
+               f"sim_journal:={'true' if args.sim_journal and not args.no_journal else 'false'}"] + \
+        (["journal:=false"] if args.no_journal else [])
     started = time.monotonic()
     with open(log, "wb") as out:
         launch = subprocess.Popen(command, cwd=REPO, env=env, stdout=out, stderr=subprocess.STDOUT)
