@@ -33,14 +33,12 @@ def follow_day(controller, domain, model, case, noise: float) -> Tuple[List[Dict
     """Every question she voiced on one day, with its fate and the robot's steps while it was open, and
     the day's checklist (whose questions raised and answered these must match: raises if not)."""
     from pearl_sim.loop import ExecutiveBackend, run_episode
-    from pearl_sim.nursing_home.day import DAY_SECONDS, DayWorld, day_scenario, plan_day
+    from pearl_sim.nursing_home.day import DAY_SECONDS
+    from pearl_sim.nursing_home.day_study import day_world
     from pearl_sim.nursing_home.experiment import episode_executive
-    from pearl_sim.nursing_home.residents import effective_word_error_rate
 
-    plan = plan_day(case.seed)
-    scenario = day_scenario(dict(case.fields), effective_word_error_rate(noise, case.articulation_wer), case.seed,
-                            name=f"{case.resident}-day{case.day}", plan=plan)
-    world = DayWorld(scenario, plan, domain=domain)
+    world = day_world(case, domain, noise)
+    scenario = world.scenario
     executive = episode_executive(controller, domain, scenario, model)
     questions: List[Dict[str, Any]] = []
     current: Optional[Dict[str, Any]] = None

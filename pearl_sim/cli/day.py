@@ -65,8 +65,8 @@ def run(args: argparse.Namespace) -> int:
     from pearl_pomdp.model.domain_yaml import load_domain
     from pearl_sim.nursing_home.day import clock
     from pearl_sim.nursing_home.day_plot import plot_day
-    from pearl_sim.nursing_home.day_study import DAY_POLICY_NAMES, DayCase, day_agents, run_day
-    from pearl_sim.nursing_home.residents import MAX_GENERATED, generate_residents
+    from pearl_sim.nursing_home.day_study import DAY_POLICY_NAMES, day_agents, generated_case, run_day
+    from pearl_sim.nursing_home.residents import MAX_GENERATED
 
     started = time.perf_counter()
     if args.policy not in DAY_POLICY_NAMES:
@@ -81,14 +81,13 @@ def run(args: argparse.Namespace) -> int:
     require_file(args.domain, "domain file (--domain)")
     require_file(args.hierarchy, "hierarchy file (--hierarchy)")
     domain = load_domain(args.domain)
-    profile = generate_residents(args.resident, seed=args.resident_seed)[-1]
-    case = DayCase(profile.name, dict(profile.fields), float(profile.articulation_wer), args.seed, args.seed)
+    case = generated_case(args.resident_seed, args.resident, args.seed)
     out = Path(args.out) if args.out else Path("out") / f"day-{time.strftime('%Y%m%d-%H%M%S')}"
     out.mkdir(parents=True, exist_ok=True)
     if args.policy_dir:
         require_dir(args.policy_dir, "policy directory (--policy-dir, from `pearl plan`)")
     if args.nodes:
-        day = _run_nodes(args, domain, profile, case, until, out)
+        day = _run_nodes(args, domain, case, until, out)
     else:
         planned = _planned_policy_dir(args, domain) if args.policy == "hierarchical" else None
         if planned is not None:
@@ -99,13 +98,13 @@ def run(args: argparse.Namespace) -> int:
         else:
             controller = day_agents(domain, args.hierarchy, [args.policy])[args.policy]
         day = run_day(controller, domain, case, args.noise, timeline=True, until=until)
-    title = (f"{args.policy} · resident {profile.name} (generator seed {args.resident_seed}) · day seed {args.seed} · "
+    title = (f"{args.policy} · resident {case.resident} (generator seed {args.resident_seed}) · day seed {args.seed} · "
              f"noise {args.noise}")
     png = plot_day(day["timeline"], day["checklist"], out / "day.png", title)
     (out / "checklist.json").write_text(json.dumps({**{k: v for k, v in day.items() if k != "timeline"}},
                                                    indent=1), encoding="utf-8")
     (out / "timeline.json").write_text(json.dumps(day["timeline"]), encoding="utf-8")
-    report = {"policy": args.policy, "resident": profile.name, "resident_seed": args.resident_seed, "seed": args.seed,
+    report = {"policy": args.policy, "resident": case.resident, "resident_seed": args.resident_seed, "seed": args.seed,
               "noise": args.noise, "score": day["score"], "checklist": day["checklist"],
               "files": {"png": str(png), "checklist": str(out / "checklist.json"), "timeline": str(out / "timeline.json")},
               "day_seconds": day.get("seconds", day.get("wall_seconds")),
@@ -186,7 +185,7 @@ def _planned_policy_dir(args, domain) -> Optional[Path]:
     return shipped_day_plan(args.domain, args.hierarchy, domain)
 
 
-def _run_nodes(args, domain, profile, case, until: float, out: Path) -> dict:
+def _run_nodes(args, domain, case, until: float, out: Path) -> dict:
     """The day through the ROS 2 graph: a policy planned before (--policy-dir, or the shipped plan of
     the shipped domain) or planned now, then run_day_graph."""
     from pearl_pomdp.hierarchy import load_hierarchy, plan
@@ -200,4 +199,4 @@ def _run_nodes(args, domain, profile, case, until: float, out: Path) -> dict:
             print("pearl day: planning the hierarchical policy…", flush=True)
         policy_dir = plan(domain, load_hierarchy(args.hierarchy, domain)).save(out / "policy")
     return run_day_graph(args.domain, policy_dir, case.fields, case.articulation_wer, args.noise, case.seed, out,
-                         until=until, domain_id=args.domain_id, name=f"{profile.name}-day{case.seed}")
+                         until=until, domain_id=args.domain_id, name=f"{case.resident}-day{case.seed}")

@@ -15,7 +15,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from pearl_sim.nursing_home.day import DAY_SECONDS, DayPlan, DayWorld, day_scenario, day_score, plan_day
 
-__all__ = ["DayCase", "day_cases", "run_day", "run_days", "summarize", "BASELINE", "SCORED_ROWS", "day_agents",
+__all__ = ["DayCase", "day_cases", "generated_case", "day_world", "run_day", "run_days", "summarize", "BASELINE", "SCORED_ROWS", "day_agents",
            "twin_name", "fit_channel_twins", "plan_channel_twins", "snr_contrasts"]
 
 #: The day study's non-POMDP baseline: the episode tree with the day's Dock rule.
@@ -40,6 +40,28 @@ def day_cases(profiles, days: int, first_day: int = 0) -> List[DayCase]:
     """Every profile × ``days`` days; resident *i*'s day *k* has seed ``1000·i + k`` (the protocol's rule)."""
     return [DayCase(p.name, dict(p.fields), float(p.articulation_wer), k, 1000 * i + k)
             for i, p in enumerate(profiles) for k in range(first_day, first_day + int(days))]
+
+
+def generated_case(resident_seed: int, resident: int, seed: int) -> DayCase:
+    """Day ``seed`` of the generator's ``resident`` (1-based) at ``resident_seed``: what ``pearl day`` runs."""
+    from pearl_sim.nursing_home.residents import generate_residents
+
+    profile = generate_residents(resident, seed=resident_seed)[-1]
+    return DayCase(profile.name, dict(profile.fields), float(profile.articulation_wer), seed, seed)
+
+
+def day_world(case: DayCase, domain, noise: float, plan: Optional[DayPlan] = None,
+              channel: Optional[str] = None) -> DayWorld:
+    """The world of ``case``'s day in ``domain``: her speech through the recogniser at word error rate
+    ``noise`` (with her articulation), or with ``channel`` (a measured channel file) at ``noise`` dB SNR.
+    ``plan``: the day's draws (default :func:`plan_day` of its seed)."""
+    from pearl_sim.nursing_home.residents import effective_word_error_rate
+
+    plan = plan if plan is not None else plan_day(case.seed)
+    speech = ({"channel": "measured", "snr_db": float(noise), "measured": str(channel)} if channel else None)
+    scenario = day_scenario(dict(case.fields), effective_word_error_rate(noise, case.articulation_wer) if not channel
+                            else 0.0, case.seed, name=f"{case.resident}-day{case.day}", plan=plan, speech=speech)
+    return DayWorld(scenario, plan, domain=domain)
 
 
 def day_agents(domain, hierarchy_path, policies: Sequence[str], flat_trials: int = 100,
@@ -183,15 +205,10 @@ def run_day(controller, domain, case: DayCase, noise: float, model=None, record:
     """
     from pearl_sim.nursing_home.experiment import episode_executive
     from pearl_sim.loop import ExecutiveBackend, run_episode
-    from pearl_sim.nursing_home.residents import effective_word_error_rate
 
     t0 = time.perf_counter()
-    plan = plan if plan is not None else plan_day(case.seed)
-    fields = dict(case.fields)
-    speech = ({"channel": "measured", "snr_db": float(noise), "measured": str(channel)} if channel else None)
-    scenario = day_scenario(fields, effective_word_error_rate(noise, case.articulation_wer) if not channel else 0.0,
-                            case.seed, name=f"{case.resident}-day{case.day}", plan=plan, speech=speech)
-    world = DayWorld(scenario, plan, domain=domain)
+    world = day_world(case, domain, noise, plan, channel)
+    scenario = world.scenario
     # The robot's model: the controller's own (a twin planned on refitted speech rows) or the world's.
     own = getattr(controller, "domain", None)
     if own is not None and own_model is None:

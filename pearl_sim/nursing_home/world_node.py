@@ -195,8 +195,9 @@ def _make_node_class():
             identity, domain). Raises ``ValueError`` naming the parameter that is out of range."""
             from pearl_pomdp.model.domain_yaml import load_domain
             from pearl_pomdp.nodes.common import resolve_path
-            from pearl_sim.nursing_home.day import DAY_SECONDS, DayWorld, day_scenario, plan_day
-            from pearl_sim.nursing_home.residents import MAX_GENERATED, effective_word_error_rate, generate_residents
+            from pearl_sim.nursing_home.day import DAY_SECONDS
+            from pearl_sim.nursing_home.day_study import day_world, generated_case
+            from pearl_sim.nursing_home.residents import MAX_GENERATED
 
             if not 1 <= params["resident"] <= MAX_GENERATED:
                 raise ValueError(f"parameter resident: {params['resident']} is outside [1, {MAX_GENERATED}]")
@@ -207,12 +208,9 @@ def _make_node_class():
             day_seed = max(seed, 0)
             path = resolve_path(params["domain"], "day_domain")
             domain = load_domain(path)
-            profile = generate_residents(params["resident"], seed=params["resident_seed"])[-1]
-            plan = plan_day(day_seed)
-            self.scenario = day_scenario(dict(profile.fields), effective_word_error_rate(params["noise"],
-                                                                                         profile.articulation_wer),
-                                         day_seed, name=f"{profile.name}-day{day_seed}", plan=plan)
-            self.world = DayWorld(self.scenario, plan, domain=domain)
+            self.world = day_world(generated_case(params["resident_seed"], params["resident"], day_seed), domain,
+                                   params["noise"])
+            self.scenario = self.world.scenario
             ident = json.dumps({**params, "day_seed": day_seed, "until": self.until}, sort_keys=True).encode()
             return path, ident, domain
 
