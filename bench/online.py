@@ -487,51 +487,138 @@ def parse_despot_lasertag_rounds(text: str) -> List[dict]:
     return rounds
 
 
-def run_lasertag_paired(binary: str, budget: float, runs: int, steps: int, seed: int, max_minutes: float,
-                        clock: str = "process", regularization: float = 0.0, lower: str = "walk") -> dict:
-    """LaserTag side by side with DESPOT's own ``laser_tag``, episode by episode: each run of its code
-    (one process, seed ``seed + 1 + i``) draws a map and a true start; ours then plays an episode on
-    that map from that start (its own random stream for the opponent and the laser, seeded by
-    ``[seed, i]``: the two codes cannot share one). Returns both sides, and the paired difference
-    ours − DESPOT with Student's t 95 % interval over the episodes. No new pair is started after
-    ``max_minutes``; both sides count ``budget`` in CPU seconds of their own process by default."""
+def parse_despot_rocksample_rounds(text: str, n: int, k: int) -> List[dict]:
+    """Every round of a printout of DESPOT's ``rock_sample`` example (run without ``--silence``) for
+    RockSample(n, k): the rocks' cells ``(x, y)`` by index, which are good, the rover's start cell and
+    the round's discounted return. The code prints the grid with the row ``y = n - 1`` first
+    (``BaseRockSample::PrintState``), a cell as ``R `` (the rover), ``<i>$`` / ``<i>X`` (rock ``i``,
+    good / bad) or ``. ``. A rock under the rover's start is not printed, so such a round cannot be
+    replayed: raises ``ValueError`` naming the round, as for any printout that is not this one."""
+    import re
+
+    cell = re.compile(r"R |\. |(\d+)([$X])")
+    rounds = []
+    for number, chunk in enumerate(text.split("Initial state:")[1:]):
+        lines = [line.strip() for line in chunk.strip().splitlines()]
+        grid = lines[1:n + 1]
+        rocks: Dict[int, Tuple[Tuple[int, int], bool]] = {}
+        rover = []
+        for i, row in enumerate(grid):
+            y = n - 1 - i
+            body = row[2:-1] if row.startswith("# ") and row.endswith("#") else None
+            tokens = list(cell.finditer(body)) if body is not None else []
+            if body is None or "".join(t.group(0) for t in tokens) != body or len(tokens) != n:
+                raise ValueError(f"DESPOT rock_sample round {number}: 'Initial state:' is not followed by a border "
+                                 f"and {n} rows of {n} cells ('R ', '. ', '<rock>$', '<rock>X'): {row!r}")
+            for x, token in enumerate(tokens):
+                if token.group(0) == "R ":
+                    rover.append((x, y))
+                elif token.group(1) is not None:
+                    rocks[int(token.group(1))] = ((x, y), token.group(2) == "$")
+        if len(rover) != 1 or sorted(rocks) != list(range(k)):
+            raise ValueError(f"DESPOT rock_sample round {number}: the start shows {len(rover)} rover(s) and rocks "
+                             f"{sorted(rocks)}, not one rover and rocks 0..{k - 1} (a rock under the rover is not "
+                             f"printed)")
+        found = re.search(r"Total discounted reward = ([-\d.eE+]+)", chunk)
+        if found is None:
+            raise ValueError(f"DESPOT rock_sample round {number}: no 'Total discounted reward' line")
+        rounds.append({"rocks": [rocks[i][0] for i in range(k)], "good": [rocks[i][1] for i in range(k)],
+                       "rover": rover[0], "return": float(found.group(1))})
+    return rounds
+
+
+def _run_paired(problem: str, command: Callable[[int], List[str]], parse: Callable[[str], List[dict]],
+                instance: Callable[[dict], object], start_state: Callable[[object, dict], int], make_bounds,
+                budget: float, runs: int, steps: int, seed: int, max_minutes: float, clock: str,
+                regularization: float) -> dict:
+    """A problem side by side with DESPOT's own code, episode by episode: each run of its code (one
+    process, ``command(i)``) draws a true start (and, where it draws one, a layout), ``parse`` reads
+    it from the printout; ours then plays an episode of ``instance(round)`` from
+    ``start_state(model, round)`` (its own random stream for the world, seeded by ``[seed, i]``: the
+    two codes cannot share one). Returns both sides and the paired difference ours − DESPOT with
+    Student's t 95 % interval. DESPOT's runs take at most half of ``max_minutes``; ours stop
+    starting episodes when the rest is spent (the difference is over the pairs both played)."""
     import subprocess
 
-    from pearl_pomdp.online.lasertag import LaserTag
     from pearl_sim.stats import t_ci
 
     t0 = time.perf_counter()
     rounds, commands = [], []
     while len(rounds) < runs and (time.perf_counter() - t0) / 60.0 <= max_minutes / 2:
-        cmd = [binary, "-t", f"{budget:g}", "-s", str(steps), "--runs", "1", "-r", str(seed + 1 + len(rounds))]
+        cmd = command(len(rounds))
         done = subprocess.run(cmd, capture_output=True, text=True, check=False)
         if done.returncode != 0:
             raise RuntimeError(f"{' '.join(cmd)}: exit {done.returncode}: {done.stderr.strip()[-300:]}")
-        (this_run,) = parse_despot_lasertag_rounds(done.stdout)
+        (this_run,) = parse(done.stdout)
         rounds.append(this_run)
         commands.append(" ".join(cmd))
-        print(f"DESPOT lasertag {budget:g}s: {len(rounds)} runs, this one {this_run['return']:.2f}",
+        print(f"DESPOT {problem} {budget:g}s: {len(rounds)} runs, this one {this_run['return']:.2f}",
               file=sys.stderr, flush=True)
-    models: Dict[int, LaserTag] = {}
+    models: Dict[int, object] = {}
 
-    def instance(ep):
-        models[ep] = LaserTag(rounds[ep]["obstacles"])
+    def build(ep):
+        models[ep] = instance(rounds[ep])
         return models[ep]
 
-    def start_state(ep):
-        model = models[ep]
-        return model.index[tuple(rounds[ep]["robot"])] * model.n + model.index[tuple(rounds[ep]["opponent"])]
-
-    ours = _run_generative(instance, lambda model: LaserTagBounds(model, lower=lower), budget, len(rounds), steps, seed,
-                           max(max_minutes - (time.perf_counter() - t0) / 60.0, 0.0), clock, "despot", 0, start_state,
-                           regularization)
+    ours = _run_generative(build, make_bounds, budget, len(rounds), steps, seed,
+                           max(max_minutes - (time.perf_counter() - t0) / 60.0, 0.0), clock, "despot", 0,
+                           lambda ep: start_state(models[ep], rounds[ep]), regularization)
     played = rounds[:ours["episodes"]]
     peer = [r["return"] for r in played]
     differences = [a - b for a, b in zip(ours["returns"], peer)]
     return {"ours": ours, "despot": {"runs": len(peer), "returns": peer, "commands": commands,
-                                     "maps_and_starts": [{k: r[k] for k in ("obstacles", "robot", "opponent")} for r in played],
+                                     "starts": [{k: v for k, v in r.items() if k != "return"} for r in played],
                                      "budget_clock": "process (DESPOT's clock())", **t_ci(peer)},
             "paired_difference": t_ci(differences)}
+
+
+def run_lasertag_paired(binary: str, budget: float, runs: int, steps: int, seed: int, max_minutes: float,
+                        clock: str = "process", regularization: float = 0.0, lower: str = "walk") -> dict:
+    """LaserTag side by side with DESPOT's own ``laser_tag`` (:func:`_run_paired`): each run of its code
+    (seed ``seed + 1 + i``) draws a map and a true start; ours plays that map from that start."""
+    from pearl_pomdp.online.lasertag import LaserTag
+
+    def start_state(model, r):
+        return model.index[tuple(r["robot"])] * model.n + model.index[tuple(r["opponent"])]
+
+    return _run_paired("lasertag", lambda i: [binary, "-t", f"{budget:g}", "-s", str(steps), "--runs", "1", "-r",
+                                              str(seed + 1 + i)],
+                       parse_despot_lasertag_rounds, lambda r: LaserTag(r["obstacles"]), start_state,
+                       lambda model: LaserTagBounds(model, lower=lower), budget, runs, steps, seed, max_minutes, clock,
+                       regularization)
+
+
+def run_rocksample_paired(binary: str, problem: str, budget: float, runs: int, steps: int, seed: int,
+                          max_minutes: float, clock: str = "process", regularization: float = 0.0,
+                          lower: str = "check") -> dict:
+    """RockSample side by side with DESPOT's own ``rock_sample`` (:func:`_run_paired`): each run of its
+    code (``--size n --number k``, seed ``seed + 1 + i``) draws which rocks are good (and, for a size
+    without a standard layout, where the rocks are); ours plays that layout from that start — the
+    same start state, so the pair differs only by the planners and the check outcomes' draws."""
+    from pearl_pomdp.online.rocksample import RockSample
+
+    n, k = (int(v) for v in problem[2:].split("_"))
+
+    def start_state(model, r):
+        bits = sum(1 << i for i, good in enumerate(r["good"]) if good)
+        return model.encode(r["rover"][0], r["rover"][1], bits)
+
+    # One model and its bounds per layout (a standard size's runs all share one; the MDP upper bound
+    # takes seconds to minutes to set up).
+    layouts: Dict[tuple, Tuple[RockSample, RockSampleBounds]] = {}
+
+    def layout(r):
+        key = (tuple(r["rover"]), tuple(map(tuple, r["rocks"])))
+        if key not in layouts:
+            model = RockSample(n, r["rover"], r["rocks"], name=f"RockSample({n},{k}) as DESPOT laid it out")
+            layouts[key] = (model, RockSampleBounds(model, lower=lower))
+        return layouts[key]
+
+    return _run_paired(problem, lambda i: [binary, "--size", str(n), "--number", str(k), "-t", f"{budget:g}", "-s",
+                                           str(steps), "--runs", "1", "-r", str(seed + 1 + i)],
+                       lambda text: parse_despot_rocksample_rounds(text, n, k), lambda r: layout(r)[0], start_state,
+                       lambda model: next(b for m, b in layouts.values() if m is model), budget, runs, steps, seed,
+                       max_minutes, clock, regularization)
 
 
 def versus_published(problem: str, result: dict) -> dict:
@@ -646,8 +733,9 @@ def main(argv=None) -> int:
                     help="our search's λ, the price of a policy node (DespotSettings; DESPOT's code ships 0.01 for "
                          "Tag and LaserTag, 0 for RockSample)")
     ap.add_argument("--paired", action="store_true",
-                    help="with --despot-lasertag: ours plays each of DESPOT's runs again, on its map from its true "
-                         "start, and the paired difference is reported (ours takes no episodes of its own)")
+                    help="with --despot (RockSample) or --despot-lasertag: ours plays each of DESPOT's runs again, "
+                         "on its layout from its true start, and the paired difference is reported (ours takes no "
+                         "episodes of its own)")
     ap.add_argument("--sarsop", metavar="PATH",
                     help="APPL SARSOP's pomdpsol (built outside this repository): its offline policy on rs7_8 and "
                          "tag (the explicit files), --sarsop-time seconds, simulated on the same seeds")
@@ -676,11 +764,19 @@ def main(argv=None) -> int:
     for p in problems:
         out["results"][p] = {}
         for budget in budgets:
-            if args.paired and p == "lasertag":
-                if not args.despot_lasertag:
-                    ap.error("--paired needs --despot-lasertag PATH (DESPOT's laser_tag, built outside this repository)")
-                pair = run_lasertag_paired(args.despot_lasertag, budget, args.despot_runs, args.steps, args.seed,
-                                           args.max_minutes, args.clock, args.regularization, args.lasertag_lower)
+            if args.paired and p != "tag":
+                if p == "lasertag" and not args.despot_lasertag:
+                    ap.error("--paired on lasertag needs --despot-lasertag PATH (DESPOT's laser_tag, built outside "
+                             "this repository)")
+                if p != "lasertag" and not args.despot:
+                    ap.error(f"--paired on {p} needs --despot PATH (DESPOT's rock_sample, built outside this "
+                             f"repository)")
+                if p == "lasertag":
+                    pair = run_lasertag_paired(args.despot_lasertag, budget, args.despot_runs, args.steps, args.seed,
+                                               args.max_minutes, args.clock, args.regularization, args.lasertag_lower)
+                else:
+                    pair = run_rocksample_paired(args.despot, p, budget, args.despot_runs, args.steps, args.seed,
+                                                 args.max_minutes, args.clock, args.regularization, args.rs_lower)
                 out["results"][p][f"{budget:g}s"] = r = pair["ours"]
                 out.setdefault("paired", {}).setdefault(p, {})[f"{budget:g}s"] = {
                     "despot": pair["despot"], "difference": pair["paired_difference"]}

@@ -146,15 +146,103 @@ def test_paired_lasertag_replays_each_peer_run_on_its_map_from_its_start(online_
     peer.chmod(0o755)
     out = online_bench.run_lasertag_paired(str(peer), budget=0.01, runs=2, steps=3, seed=0, max_minutes=5)
     assert out["despot"]["returns"] == [-9.78315, -9.78315]
-    assert out["despot"]["maps_and_starts"][0]["robot"] == (3, 4)
+    assert out["despot"]["starts"][0]["robot"] == (3, 4)
     from pearl_pomdp.online.lasertag import LaserTag
 
-    model = LaserTag(out["despot"]["maps_and_starts"][0]["obstacles"])
+    model = LaserTag(out["despot"]["starts"][0]["obstacles"])
     assert out["ours"]["start_states"] == [model.index[(3, 4)] * model.n + model.index[(9, 5)]] * 2
     ours = out["ours"]["returns"]
     assert len(ours) == 2 and all(-3.0 <= r <= 10.0 for r in ours)   # 3 steps: −1 a move, ±10 a tag
     assert out["paired_difference"]["n"] == 2
     assert out["paired_difference"]["mean"] == pytest.approx(float(np.mean(ours)) + 9.78315)
+
+
+#: The start of a round of DESPOT's rock_sample for RockSample(7,8) (its standard layout, seed 4), as
+#: `despot_rock_sample --size 7 --number 8 -t 0.01 -s 3 --runs 1 -r 4` printed it, and its end.
+DESPOT_ROCKSAMPLE_ROUND = """\
+####################################### Round 0 #######################################
+Initial state: 
+
+# # # # # # # # # 
+# . 7X. . . . . #
+# . . . . . 6X. #
+# . . 4$5X. . . #
+# R . . . . . 3$#
+# . . . . . . . #
+# 1$. . 2X. . . #
+# . . 0X. . . . #
+# # # # # # # # # 
+
+-----------------------------------Round 0 Step 0-----------------------------------
+- Action = Check 4
+Simulation terminated in 3 steps
+Total discounted reward = 0
+Total undiscounted reward = 0
+"""
+
+
+def test_despot_rocksample_printout_gives_its_layout_start_and_return(online_bench):
+    (got,) = online_bench.parse_despot_rocksample_rounds(DESPOT_ROCKSAMPLE_ROUND, 7, 8)
+    from pearl_pomdp.online.rocksample import LAYOUTS
+
+    # The printout's top row is y = 6 (BaseRockSample::PrintState): DESPOT's layout is the standard one.
+    assert got["rocks"] == LAYOUTS["7_8"][2] and got["rover"] == LAYOUTS["7_8"][1] == (0, 3)
+    assert got["good"] == [False, True, False, True, True, False, False, False]
+    assert got["return"] == 0.0
+    # Rock numbers of two digits take three characters: RockSample(11,11)'s rock 10 at (9, 9) (its
+    # start as `despot_rock_sample --size 11 --number 11 ... -r 3` printed it).
+    eleven = """\
+# # # # # # # # # # # # # 
+# . . . . . . . . . . . #
+# . . . . . . . . . 10X. #
+# . 2X. 5$. 7X. . . . . #
+# 1X. . . . . . . . . . #
+# . . . . . . . . . . . #
+# R . . . . . . . . . . #
+# . . 3$. . . . . . . . #
+# 0$. . 4X6$. . . . 9$. #
+# . . . . . . . . . . . #
+# . . . . . . 8X. . . . #
+# . . . . . . . . . . . #
+# # # # # # # # # # # # # 
+"""
+    (big,) = online_bench.parse_despot_rocksample_rounds(f"Initial state:\n\n{eleven}\nTotal discounted reward = 8.14506\n",
+                                                          11, 11)
+    assert big["rocks"] == LAYOUTS["11_11"][2] and big["rocks"][10] == (9, 9) and big["rover"] == (0, 5)
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda t: t.replace("# R . . . . . 3$#", "# R . . . . 3$#"), "7 rows of 7 cells"),
+    (lambda t: t.replace("# R . . . . . 3$#", "# . . . . . . 3$#"), "0 rover"),
+    (lambda t: t.replace("# 1$. . 2X. . . #", "# . . . 2X. . . #"), "rocks [0, 2, 3, 4, 5, 6, 7]"),
+    (lambda t: t.replace("Total discounted reward", "Total reward"), "no 'Total discounted reward'"),
+])
+def test_despot_rocksample_printout_that_is_not_one_is_refused_naming_the_round(online_bench, edit, message):
+    with pytest.raises(ValueError, match="round 0") as err:
+        online_bench.parse_despot_rocksample_rounds(edit(DESPOT_ROCKSAMPLE_ROUND), 7, 8)
+    assert message in str(err.value)
+
+
+def test_paired_rocksample_replays_each_peer_run_from_its_start(online_bench, tmp_path):
+    """As the LaserTag pairing: a script prints the round above whatever its arguments; ours plays
+    RockSample(7,8) from that start (rover at (0, 3), rocks 1, 3 and 4 good)."""
+    peer = tmp_path / "rock_sample"
+    (tmp_path / "round.txt").write_text(DESPOT_ROCKSAMPLE_ROUND)
+    peer.write_text(f"#!/bin/sh\necho \"$@\" >> {tmp_path / 'args.txt'}\ncat {tmp_path / 'round.txt'}\n")
+    peer.chmod(0o755)
+    out = online_bench.run_rocksample_paired(str(peer), "rs7_8", budget=0.01, runs=2, steps=3, seed=0, max_minutes=5)
+    assert (tmp_path / "args.txt").read_text().splitlines() == [
+        "--size 7 --number 8 -t 0.01 -s 3 --runs 1 -r 1", "--size 7 --number 8 -t 0.01 -s 3 --runs 1 -r 2"]
+    assert out["despot"]["returns"] == [0.0, 0.0]
+    from pearl_pomdp.online.rocksample import rocksample
+
+    model = rocksample("7_8")
+    good = 0b00011010   # rocks 1, 3 and 4
+    assert out["ours"]["start_states"] == [model.encode(0, 3, good)] * 2
+    ours = out["ours"]["returns"]
+    assert len(ours) == 2 and all(-30.0 <= r <= 10.0 for r in ours)   # 3 steps: ±10 a sample, +10 the exit
+    assert out["paired_difference"]["n"] == 2
+    assert out["paired_difference"]["mean"] == pytest.approx(float(np.mean(ours)))
 
 
 def test_regularization_reaches_the_search_and_the_report(online_bench, monkeypatch, capsys):
