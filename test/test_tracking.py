@@ -60,3 +60,42 @@ def test_drives_never_time_out_and_come_from_the_drive_category():
     t.on_input("laser", "atPhysio", 200.0)
     t.on_action("DoNothing", 200.0)
     assert t.deadline() == 205.0 and t.on_tick(205.0).closed.source == "timeout"
+
+
+def test_a_word_during_a_drive_waits_for_the_step_after_it():
+    # She asks the time while Pearl guides her: GuideToPhysio's table gives no speech, so the word
+    # does not end the walk in the belief (before, it closed the step and the filter threw it away).
+    t = pearl(step_timeout=5.0, drive_category="Move")
+    t.on_action("GuideToPhysio", 0.0)
+    asked = t.on_input("speech", "what time is it", 40.0)
+    assert (asked.kind, asked.closed, asked.symbol) == ("queued", None, "time")
+    assert [e.kind for e in asked.events] == ["held"] and "'GuideToPhysio' never gives it" in asked.events[0].text
+    assert t.step_open and t.open_action == "GuideToPhysio" and t.pending == 1
+    assert t.counters()["held"] == 1 and t.counters()["zero_likelihood"] == 0
+    arrived = t.on_input("laser", "atPhysio", 200.0).closed
+    assert (arrived.action, arrived.observation, arrived.zero_likelihood) == ("GuideToPhysio", "atPhysio", False)
+    # After the drive the word is an early input like any other: the next action's step closes
+    # with it at once, here a wait (Figure 4 after the walk), whose table hears her questions.
+    heard = t.on_action("DoNothing", 201.0).closed
+    assert (heard.action, heard.observation, heard.source) == ("DoNothing", "time", "speech") and t.pending == 0
+    # (This model was certain she had no question, so the filter's recovery lets the word decide.)
+    marginals = t.marginals(heard.belief)["UserInfoGoal"]
+    assert marginals["wantTime"] > 0.9
+
+
+def test_only_drives_hold_what_they_cannot_give():
+    t = pearl(step_timeout=5.0, drive_category="Move")
+    # A question step closes with whatever comes first, even a word its table never gives (a
+    # misheard answer is still the answer): the filter's recovery, as before.
+    t.on_action("RemindPhysioAppt", 0.0)
+    closed = t.on_input("speech", "what time is it", 1.0).closed
+    assert closed is not None and closed.zero_likelihood and t.counters()["held"] == 0
+    # A word queued before a drive is not used up by it: the drive waits for its landmark.
+    t.on_input("speech", "what is the weather", 2.0)
+    assert t.on_action("GoHome", 3.0).closed is None and t.pending == 1
+    assert t.on_input("laser", "atHome", 30.0).closed.observation == "atHome"
+    assert t.on_action("DoNothing", 31.0).closed.observation == "weather"
+    # Without drives (no drive_category), every input closes the open step as before.
+    free = pearl(step_timeout=5.0)
+    free.on_action("GuideToPhysio", 0.0)
+    assert free.on_input("speech", "what time is it", 40.0).closed.observation == "time"

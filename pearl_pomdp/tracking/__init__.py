@@ -70,6 +70,14 @@ Each input is read by its kind:
   *queued* (FIFO, at most ``max_pending``; on overflow the oldest is dropped — counter
   ``dropped_overflow``); the next action closes its step at once with the oldest queued
   one. Counter ``queued``.
+* *An input during a drive that the drive can never give.* While a drive is open (an action of
+  ``no_timeout_actions``), an observation its observation table gives in no state — a word she
+  says while Pearl guides her, whose step only a landmark, ``navFailed`` or ``userLost`` closes in
+  Pearl's domain; a battery reading — does not close the step: closing it would end the drive
+  in the belief while the robot still drives (the filter throws such an observation away, and the
+  policy would act again mid-drive). It is queued as below (counter ``held``) and closes the first
+  step after the drive whose action can give it, or goes stale. Other actions' steps close with
+  whatever comes first, as before: a misheard word is still the answer to the question asked.
 * *Stale input.* With ``stale_after > 0`` a queued observation older than that when it
   would be used is dropped (``dropped_stale``): it answers a question no longer asked.
 * *A second action while a step is open*: the newer one replaces it, because the robot
@@ -106,7 +114,7 @@ __all__ = ["BeliefTracker", "InputOutcome", "StepResult", "StepSettings", "Setti
 #: adds the input mapping's: ``unknown_speech``, ``low_confidence``, ``invalid_<input>`` for
 #: every input and ``unchanged_<input>`` for every number input).
 COUNTERS = ("updates", "timeouts", "nav_failures", "queued", "dropped_stale", "dropped_overflow",
-            "replaced_actions", "unknown_actions", "zero_likelihood", "drive_progress", "deadline_moves")
+            "replaced_actions", "unknown_actions", "zero_likelihood", "drive_progress", "deadline_moves", "held")
 
 #: A step may close this much before its deadline (clock rounding: sim time travels in ns).
 _DEADLINE_SLACK = 1e-9
@@ -251,6 +259,9 @@ class _StepProtocol:
         self.stale_after = float(stale_after)
         self._action_index = {name: i for i, name in enumerate(model.actions)}
         self._obs_index = {name: i for i, name in enumerate(model.observations)}
+        #: ``[A, Z]``: whether action ``a``'s observation table gives ``o`` in some state (module doc,
+        #: *an input the open step can never get*).
+        self._possible = np.asarray(model.O).max(axis=1) > 0
         self.counters: Dict[str, int] = {}
         self.reset()
 
@@ -335,6 +346,8 @@ class _StepProtocol:
         self.opened_at = float(now)
         self.drive_limit = None if drive_limit is None else float(drive_limit)
         self.closest_remaining = None
+        kept: List[_Pending] = []   # queued inputs this action's step can never get: they wait on
+        closed = None
         while self.pending:
             item = self.pending.popleft()
             if self.stale_after > 0 and now - item.stamp > self.stale_after:
@@ -342,23 +355,39 @@ class _StepProtocol:
                 self.events.append(Event("warn", f"dropped stale observation {item.symbol!r} from {item.source} "
                                                  f"({now - item.stamp:.3f} s old > stale_after {self.stale_after} s)", kind="stale"))
                 continue
-            return self._close(item.symbol, item.source, now, item.text, item.confidence)
-        return None
+            if not self.can_close(item.symbol):
+                kept.append(item)
+                continue
+            closed = self._close(item.symbol, item.source, now, item.text, item.confidence)
+            break
+        self.pending.extendleft(reversed(kept))
+        return closed
+
+    def can_close(self, symbol: str) -> bool:
+        """Whether ``symbol`` may close the open step: False only while a drive (an action of
+        ``no_timeout_actions``) is open whose observation table gives ``symbol`` in no state."""
+        if self.current_action is None or self.current_action not in self.no_timeout_actions:
+            return True
+        return bool(self._possible[self._action_index[self.current_action], self._obs_index[symbol]])
 
     def on_observation(self, symbol: str, source: str, now: float, text: str = "",
                        confidence: float = 1.0) -> Tuple[str, Optional[StepResult]]:
         """An observation symbol arrived from ``source`` at time ``now`` (s).
 
-        Closes the open step, or queues the observation when no step is open. Returns
-        ``(kind, closed step)``: kind ``"closed"``, ``"queued"`` or ``"dropped"`` (``max_pending`` 0).
+        Closes the open step, or queues the observation when no step is open or the open action
+        can never give it (:meth:`can_close`). Returns ``(kind, closed step)``: kind ``"closed"``,
+        ``"queued"`` or ``"dropped"`` (``max_pending`` 0).
 
         Raises:
             ValueError: ``symbol`` is not an observation of the model (callers validate first).
         """
         if symbol not in self._obs_index:
             raise ValueError(f"{symbol!r} is not an observation of {self.model.name}")
-        if self.step_open:
+        if self.step_open and self.can_close(symbol):
             return "closed", self._close(symbol, source, now, text, confidence)
+        held = self.step_open
+        if held:
+            self.counters["held"] += 1
         if self.max_pending == 0 or len(self.pending) >= self.max_pending:
             if self.pending:
                 old: Optional[_Pending] = self.pending.popleft()
@@ -374,8 +403,10 @@ class _StepProtocol:
                 return "dropped", None
         self.pending.append(_Pending(symbol, source, float(now), text, confidence))
         self.counters["queued"] += 1
-        self.events.append(Event("info", f"queued observation {symbol!r} from {source}: no open step "
-                                         f"({len(self.pending)} waiting)", kind="queued"))
+        why = (f"{self.current_action!r} never gives it (its observation table), so it waits for a step that can"
+               if held else "no open step")
+        self.events.append(Event("info", f"queued observation {symbol!r} from {source}: {why} "
+                                         f"({len(self.pending)} waiting)", kind="held" if held else "queued"))
         return "queued", None
 
     def on_tick(self, now: float) -> Optional[StepResult]:
