@@ -259,9 +259,10 @@ class _StepProtocol:
         self.stale_after = float(stale_after)
         self._action_index = {name: i for i, name in enumerate(model.actions)}
         self._obs_index = {name: i for i, name in enumerate(model.observations)}
-        #: ``[A, Z]``: whether action ``a``'s observation table gives ``o`` in some state (module doc,
-        #: *an input the open step can never get*).
-        self._possible = np.asarray(model.O).max(axis=1) > 0
+        #: Per drive action index, ``[Z]``: whether its observation table gives ``o`` in some state
+        #: (module doc, *an input during a drive*); filled at a drive's first input (a large model's
+        #: table is read once per drive, not per tracker).
+        self._drive_gives: Dict[int, np.ndarray] = {}
         self.counters: Dict[str, int] = {}
         self.reset()
 
@@ -368,7 +369,11 @@ class _StepProtocol:
         ``no_timeout_actions``) is open whose observation table gives ``symbol`` in no state."""
         if self.current_action is None or self.current_action not in self.no_timeout_actions:
             return True
-        return bool(self._possible[self._action_index[self.current_action], self._obs_index[symbol]])
+        a = self._action_index[self.current_action]
+        gives = self._drive_gives.get(a)
+        if gives is None:
+            gives = self._drive_gives[a] = np.asarray(self.model.O[a]).max(axis=0) > 0
+        return bool(gives[self._obs_index[symbol]])
 
     def on_observation(self, symbol: str, source: str, now: float, text: str = "",
                        confidence: float = 1.0) -> Tuple[str, Optional[StepResult]]:
