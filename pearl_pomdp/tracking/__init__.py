@@ -76,7 +76,7 @@ Each input is read by its kind:
   Pearl's domain; a battery reading — does not close the step: closing it would end the drive
   in the belief while the robot still drives (the filter throws such an observation away, and the
   policy would act again mid-drive). It is queued as below (counter ``held``) and closes the first
-  step after the drive whose action can give it, or goes stale. Other actions' steps close with
+  step after the drive (a later drive that cannot give it leaves it waiting too), or goes stale. Other actions' steps close with
   whatever comes first, as before: a misheard word is still the answer to the question asked.
 * *Stale input.* With ``stale_after > 0`` a queued observation older than that when it
   would be used is dropped (``dropped_stale``): it answers a question no longer asked.
