@@ -9,7 +9,10 @@ belief's arrival to the action's publication) by the hour of the day. It reports
 the first and the last hour and the growth between them, the decisions' p50 / p99 per hour and the last
 hour's p99 against the first's (issue: "each node's RSS grows ≤ 10 % from the first to the last hour;
 decision p99 of the last hour within 20 % of the first"), the wall time (start-up and the day apart) and
-the day's checklist as the world counted it.
+the day's checklist as the world counted it. Each decision is also paired with the belief it answered
+(``belief_step`` of ``/pearl/decision`` with ``step`` of ``/pearl/belief``) and binned by that belief's
+support (the states it holds mass on): ``decisions_by_support`` gives p50 / p99 per support band and hour,
+so a rise through the day that follows the belief can be told from one that follows the nodes' age.
 
 Time runs ``--rate`` times the wall clock (ticks of ``--clock-period`` wall seconds) and stands still while
 the policy decides, so the day is the day world's under the robot's rules, not bit-identical to
@@ -67,6 +70,29 @@ def rss_mb(pid: int) -> Optional[float]:
     return pages * os.sysconf("SC_PAGE_SIZE") / 1e6 if pages > 0 else None
 
 
+#: Support bands (states with mass in the belief a decision answered), lower edges: a decision's work in the
+#: policy (EXECUTE's products, the belief's conversion) follows its support.
+SUPPORT_BANDS = (1, 25, 65, 129, 257)
+
+
+def support_band(support: int) -> str:
+    """The band of :data:`SUPPORT_BANDS` a support size falls in, as ``"lo-hi"`` (the last ``"lo+"``)."""
+    lower = [b for b in SUPPORT_BANDS if b <= support][-1] if support >= SUPPORT_BANDS[0] else SUPPORT_BANDS[0]
+    i = SUPPORT_BANDS.index(lower)
+    return f"{lower}-{SUPPORT_BANDS[i + 1] - 1}" if i + 1 < len(SUPPORT_BANDS) else f"{lower}+"
+
+
+def by_support(paired: List[tuple]) -> Dict[str, Dict[str, Dict[str, float]]]:
+    """``{band: {hour: {decisions, p50_ms, p99_ms}}}`` from ``(hour, support, latency_s)`` triples."""
+    cells: Dict[str, Dict[int, List[float]]] = {}
+    for hour, support, latency in paired:
+        cells.setdefault(support_band(support), {}).setdefault(hour, []).append(latency)
+    return {band: {f"{8 + h:02d}": {"decisions": len(v), "p50_ms": round(float(np.percentile(v, 50)) * 1e3, 2),
+                                    "p99_ms": round(float(np.percentile(v, 99)) * 1e3, 2)}
+                   for h, v in sorted(hours.items())}
+            for band, hours in sorted(cells.items(), key=lambda kv: int(kv[0].split("-")[0].rstrip("+")))}
+
+
 def summarize(start: Dict[str, float], hourly: Dict[str, List[Optional[float]]],
               decisions: Dict[int, List[float]]) -> Dict[str, object]:
     """Per node: its memory when the clock started and at the end of each hour, and the growth from the
@@ -119,7 +145,9 @@ def main() -> int:
     from rclpy.signals import SignalHandlerOptions
     from rosgraph_msgs.msg import Clock
 
-    from pearl_interfaces.msg import Decision
+    from pearl_interfaces.msg import Belief, Decision
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
     from pearl_pomdp.nodes.common import EVENT_QOS
 
     domain_id = args.domain_id if args.domain_id is not None else 1 + (os.getpid() * 7) % 101
@@ -160,9 +188,20 @@ def main() -> int:
         "now", max(clock["now"], m.clock.sec + m.clock.nanosec * 1e-9)), 10)
     hours = int(np.ceil(args.until / HOUR_S))
     # A decision stamped at the day's very end (the answer to its last step) counts in the last hour.
-    node.create_subscription(Decision, "/pearl/decision", lambda m: decisions.setdefault(
-        min(int((m.stamp.sec + m.stamp.nanosec * 1e-9) // HOUR_S), hours - 1), []).append(float(m.latency_s)),
-        EVENT_QOS)
+    # (run, step) is unique per belief; a decision names its belief's step. A respawned tracker starts a new
+    # run, so a step number seen twice keeps the latest belief's support (the decision follows it).
+    supports: Dict[int, int] = {}
+    answered: List[tuple] = []          # (hour, belief_step, latency_s)
+
+    def on_decision(m) -> None:
+        hour = min(int((m.stamp.sec + m.stamp.nanosec * 1e-9) // HOUR_S), hours - 1)
+        decisions.setdefault(hour, []).append(float(m.latency_s))
+        answered.append((hour, int(m.belief_step), float(m.latency_s)))
+
+    node.create_subscription(Decision, "/pearl/decision", on_decision, EVENT_QOS)
+    node.create_subscription(Belief, "/pearl/belief", lambda m: supports.__setitem__(
+        int(m.step), len(m.probabilities) if len(m.support) else int(np.count_nonzero(np.asarray(m.probabilities)))),
+        QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))   # every belief, none dropped
     start: Dict[str, float] = {}
     hourly: Dict[str, List[Optional[float]]] = {name: [None] * hours for name in NODES}
 
@@ -206,6 +245,9 @@ def main() -> int:
                                  "day_wall_s": round(ended - (clock["first_tick_wall"] or ended), 1),
                                  "load_avg_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count()}
     report.update(summarize(start, hourly, decisions))
+    paired = [(hour, supports[step], latency) for hour, step, latency in answered if step in supports]
+    report["decisions_paired_with_belief"] = len(paired)
+    report["decisions_by_support"] = by_support(paired)
     if finished:
         world = json.loads(finished.group(2))
         report.update(day=finished.group(1), actions=world.get("actions"), day_score=world.get("day_score"),

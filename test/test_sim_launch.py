@@ -78,8 +78,24 @@ def test_a_day_through_separate_processes_reports_each_nodes_memory_and_the_answ
     assert set(hours) == {"08", "09"}
     # Steps of ~8 s: about 450 decisions in the first hour, a few in the 5 minutes after it.
     assert 300 <= hours["08"]["decisions"] <= 600 and 5 <= hours["09"]["decisions"] <= 100
+    # Each decision paired with the belief it answered; before her first trip the belief holds mass on at
+    # most 24 states (docs/day.md), so the first hour's decisions all fall in the lowest support band.
+    total = sum(h["decisions"] for h in hours.values())
+    bands = report["decisions_by_support"]
+    assert report["decisions_paired_with_belief"] >= 0.95 * total
+    assert sum(c["decisions"] for band in bands.values() for c in band.values()) == report["decisions_paired_with_belief"]
+    assert bands["1-24"]["08"]["decisions"] >= 0.95 * hours["08"]["decisions"]
     assert 0.0 < hours["08"]["p50_ms"] <= hours["08"]["p99_ms"] < 1000.0
     assert report["actions"] >= hours["08"]["decisions"]
+
+
+def test_support_bands_of_the_day_bench_cover_every_size_once(load_bench):
+    bench = load_bench("day_processes")
+    assert [bench.support_band(n) for n in (1, 24, 25, 64, 65, 128, 129, 256, 257, 10_000)] == \
+        ["1-24", "1-24", "25-64", "25-64", "65-128", "65-128", "129-256", "129-256", "257+", "257+"]
+    table = bench.by_support([(0, 24, 0.001), (0, 24, 0.003), (2, 150, 0.002)])
+    assert table == {"1-24": {"08": {"decisions": 2, "p50_ms": 2.0, "p99_ms": 2.98}},
+                     "129-256": {"10": {"decisions": 1, "p50_ms": 2.0, "p99_ms": 2.0}}}
 
 
 @pytest.mark.parametrize("param, words", [("resident:=0", "parameter resident: 0 is outside [1, 200]"),
