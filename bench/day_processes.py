@@ -142,12 +142,11 @@ def main() -> int:
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
     from rosgraph_msgs.msg import Clock
 
     from pearl_interfaces.msg import Belief, Decision
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-
     from pearl_pomdp.nodes.common import EVENT_QOS
 
     domain_id = args.domain_id if args.domain_id is not None else 1 + (os.getpid() * 7) % 101
@@ -188,8 +187,8 @@ def main() -> int:
         "now", max(clock["now"], m.clock.sec + m.clock.nanosec * 1e-9)), 10)
     hours = int(np.ceil(args.until / HOUR_S))
     # A decision stamped at the day's very end (the answer to its last step) counts in the last hour.
-    # (run, step) is unique per belief; a decision names its belief's step. A respawned tracker starts a new
-    # run, so a step number seen twice keeps the latest belief's support (the decision follows it).
+    # A decision names its belief's step; the two are paired after the day. A step number seen twice (a
+    # respawned tracker's new run; nothing is killed here) keeps the later belief's support.
     supports: Dict[int, int] = {}
     answered: List[tuple] = []          # (hour, belief_step, latency_s)
 
