@@ -487,13 +487,19 @@ def parse_despot_lasertag_rounds(text: str) -> List[dict]:
     return rounds
 
 
+class UnreplayableRound(ValueError):
+    """A run of DESPOT's code whose start cannot be read whole from its printout (a rock under the
+    rover's start is not printed, so which state the run started in is unknown)."""
+
+
 def parse_despot_rocksample_rounds(text: str, n: int, k: int) -> List[dict]:
     """Every round of a printout of DESPOT's ``rock_sample`` example (run without ``--silence``) for
     RockSample(n, k): the rocks' cells ``(x, y)`` by index, which are good, the rover's start cell and
     the round's discounted return. The code prints the grid with the row ``y = n - 1`` first
     (``BaseRockSample::PrintState``), a cell as ``R `` (the rover), ``<i>$`` / ``<i>X`` (rock ``i``,
     good / bad) or ``. ``. A rock under the rover's start is not printed, so such a round cannot be
-    replayed: raises ``ValueError`` naming the round, as for any printout that is not this one."""
+    replayed: raises :class:`UnreplayableRound` naming the round; any printout that is not this one
+    raises ``ValueError`` naming the round."""
     import re
 
     cell = re.compile(r"R |\. |(\d+)([$X])")
@@ -515,6 +521,10 @@ def parse_despot_rocksample_rounds(text: str, n: int, k: int) -> List[dict]:
                     rover.append((x, y))
                 elif token.group(1) is not None:
                     rocks[int(token.group(1))] = ((x, y), token.group(2) == "$")
+        if len(rover) == 1 and len(rocks) == k - 1 and set(rocks) < set(range(k)):
+            raise UnreplayableRound(f"DESPOT rock_sample round {number}: the start shows rocks {sorted(rocks)}, so rock "
+                                    f"{sorted(set(range(k)) - set(rocks))[0]} is under the rover at {rover[0]}, "
+                                    f"where the printout does not say whether it is good")
         if len(rover) != 1 or sorted(rocks) != list(range(k)):
             raise ValueError(f"DESPOT rock_sample round {number}: the start shows {len(rover)} rover(s) and rocks "
                              f"{sorted(rocks)}, not one rover and rocks 0..{k - 1} (a rock under the rover is not "
@@ -537,19 +547,29 @@ def _run_paired(problem: str, command: Callable[[int], List[str]], parse: Callab
     ``start_state(model, round)`` (its own random stream for the world, seeded by ``[seed, i]``: the
     two codes cannot share one). Returns both sides and the paired difference ours − DESPOT with
     Student's t 95 % interval. DESPOT's runs take at most half of ``max_minutes``; ours stop
-    starting episodes when the rest is spent (the difference is over the pairs both played)."""
+    starting episodes when the rest is spent (the difference is over the pairs both played). A run
+    whose start cannot be read (:class:`UnreplayableRound`) is left out of both sides, named in
+    ``despot.skipped``, and the next seed is run in its place; the selection is by the start alone,
+    before either planner acts, so the pairs stay fair."""
     import subprocess
 
     from pearl_sim.stats import t_ci
 
     t0 = time.perf_counter()
-    rounds, commands = [], []
+    rounds, commands, skipped = [], [], []
+    attempt = 0
     while len(rounds) < runs and (time.perf_counter() - t0) / 60.0 <= max_minutes / 2:
-        cmd = command(len(rounds))
+        cmd = command(attempt)
+        attempt += 1
         done = subprocess.run(cmd, capture_output=True, text=True, check=False)
         if done.returncode != 0:
             raise RuntimeError(f"{' '.join(cmd)}: exit {done.returncode}: {done.stderr.strip()[-300:]}")
-        (this_run,) = parse(done.stdout)
+        try:
+            (this_run,) = parse(done.stdout)
+        except UnreplayableRound as err:
+            skipped.append({"command": " ".join(cmd), "why": str(err)})
+            print(f"DESPOT {problem} {budget:g}s: left out ({err})", file=sys.stderr, flush=True)
+            continue
         rounds.append(this_run)
         commands.append(" ".join(cmd))
         print(f"DESPOT {problem} {budget:g}s: {len(rounds)} runs, this one {this_run['return']:.2f}",
@@ -567,6 +587,7 @@ def _run_paired(problem: str, command: Callable[[int], List[str]], parse: Callab
     peer = [r["return"] for r in played]
     differences = [a - b for a, b in zip(ours["returns"], peer)]
     return {"ours": ours, "despot": {"runs": len(peer), "returns": peer, "commands": commands,
+                                     "skipped": skipped,
                                      "starts": [{k: v for k, v in r.items() if k != "return"} for r in played],
                                      "budget_clock": "process (DESPOT's clock())", **t_ci(peer)},
             "paired_difference": t_ci(differences)}

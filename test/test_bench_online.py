@@ -223,6 +223,29 @@ def test_despot_rocksample_printout_that_is_not_one_is_refused_naming_the_round(
     assert message in str(err.value)
 
 
+def test_a_peer_run_with_a_rock_under_the_rover_is_left_out_and_the_next_seed_taken(online_bench, tmp_path):
+    """DESPOT's random layouts (RockSample(15,15)) can put a rock under the rover's start, which its
+    printout hides: the parser says which rock and where, and the pairing leaves that run out of both
+    sides, names it, and runs the next seed in its place."""
+    hidden = DESPOT_ROCKSAMPLE_ROUND.replace("# R . . . . . 3$#", "# R . . . . . . #")
+    with pytest.raises(online_bench.UnreplayableRound, match="round 0") as err:
+        online_bench.parse_despot_rocksample_rounds(hidden, 7, 8)
+    assert "rock 3 is under the rover at (0, 3)" in str(err.value)
+    peer = tmp_path / "rock_sample"
+    (tmp_path / "hidden.txt").write_text(hidden)
+    (tmp_path / "round.txt").write_text(DESPOT_ROCKSAMPLE_ROUND)
+    # Seed 1 draws the hidden start, every other seed the whole one.
+    peer.write_text(f"#!/bin/sh\necho \"$@\" >> {tmp_path / 'args.txt'}\n"
+                    f"case \"$*\" in *'-r 1') cat {tmp_path / 'hidden.txt'};; *) cat {tmp_path / 'round.txt'};; esac\n")
+    peer.chmod(0o755)
+    out = online_bench.run_rocksample_paired(str(peer), "rs7_8", budget=0.01, runs=2, steps=2, seed=0, max_minutes=5)
+    assert [line.rsplit(" ", 1)[1] for line in (tmp_path / "args.txt").read_text().splitlines()] == ["1", "2", "3"]
+    assert out["despot"]["runs"] == 2 and out["paired_difference"]["n"] == 2
+    (skip,) = out["despot"]["skipped"]
+    assert skip["command"].endswith("-r 1") and "rock 3 is under the rover" in skip["why"]
+    assert [c.rsplit(" ", 1)[1] for c in out["despot"]["commands"]] == ["2", "3"]
+
+
 def test_paired_rocksample_replays_each_peer_run_from_its_start(online_bench, tmp_path):
     """As the LaserTag pairing: a script prints the round above whatever its arguments; ours plays
     RockSample(7,8) from that start (rover at (0, 3), rocks 1, 3 and 4 good)."""
