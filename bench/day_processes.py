@@ -24,6 +24,7 @@ the policy decides, so the day is the day world's under the robot's rules, not b
 from __future__ import annotations
 
 import argparse
+import bisect
 import json
 import os
 import re
@@ -77,20 +78,24 @@ SUPPORT_BANDS = (1, 25, 65, 129, 257)
 
 def support_band(support: int) -> str:
     """The band of :data:`SUPPORT_BANDS` a support size falls in, as ``"lo-hi"`` (the last ``"lo+"``)."""
-    lower = [b for b in SUPPORT_BANDS if b <= support][-1] if support >= SUPPORT_BANDS[0] else SUPPORT_BANDS[0]
-    i = SUPPORT_BANDS.index(lower)
-    return f"{lower}-{SUPPORT_BANDS[i + 1] - 1}" if i + 1 < len(SUPPORT_BANDS) else f"{lower}+"
+    i = max(bisect.bisect_right(SUPPORT_BANDS, support) - 1, 0)
+    return f"{SUPPORT_BANDS[i]}-{SUPPORT_BANDS[i + 1] - 1}" if i + 1 < len(SUPPORT_BANDS) else f"{SUPPORT_BANDS[i]}+"
+
+
+def latency_summary(latencies: List[float]) -> Dict[str, float]:
+    """``{decisions, p50_ms, p99_ms}`` of decision times in seconds."""
+    return {"decisions": len(latencies), "p50_ms": round(float(np.percentile(latencies, 50)) * 1e3, 2),
+            "p99_ms": round(float(np.percentile(latencies, 99)) * 1e3, 2)}
 
 
 def by_support(paired: List[tuple]) -> Dict[str, Dict[str, Dict[str, float]]]:
-    """``{band: {hour: {decisions, p50_ms, p99_ms}}}`` from ``(hour, support, latency_s)`` triples."""
-    cells: Dict[str, Dict[int, List[float]]] = {}
+    """``{band: {hour: {decisions, p50_ms, p99_ms}}}`` from ``(hour, support, latency_s)`` triples, the bands
+    from the smallest support up."""
+    cells: Dict[str, Dict[int, List[float]]] = {support_band(b): {} for b in SUPPORT_BANDS}
     for hour, support, latency in paired:
-        cells.setdefault(support_band(support), {}).setdefault(hour, []).append(latency)
-    return {band: {f"{8 + h:02d}": {"decisions": len(v), "p50_ms": round(float(np.percentile(v, 50)) * 1e3, 2),
-                                    "p99_ms": round(float(np.percentile(v, 99)) * 1e3, 2)}
-                   for h, v in sorted(hours.items())}
-            for band, hours in sorted(cells.items(), key=lambda kv: int(kv[0].split("-")[0].rstrip("+")))}
+        cells[support_band(support)].setdefault(hour, []).append(latency)
+    return {band: {f"{8 + h:02d}": latency_summary(v) for h, v in sorted(hours.items())}
+            for band, hours in cells.items() if hours}
 
 
 def summarize(start: Dict[str, float], hourly: Dict[str, List[Optional[float]]],
@@ -107,8 +112,7 @@ def summarize(start: Dict[str, float], hourly: Dict[str, List[Optional[float]]],
                            "growth_from_start": (round(ends[-1] / start[name] - 1.0, 4) if start.get(name) else None),
                            "per_hour_mb": [None if m is None else round(m, 1) for m in per_hour]}
     hours = sorted(decisions)
-    per_hour = {h: {"decisions": len(decisions[h]), "p50_ms": round(float(np.percentile(decisions[h], 50)) * 1e3, 2),
-                    "p99_ms": round(float(np.percentile(decisions[h], 99)) * 1e3, 2)} for h in hours}
+    per_hour = {h: latency_summary(decisions[h]) for h in hours}
     out: Dict[str, object] = {"nodes": nodes, "decisions_per_hour": {f"{8 + h:02d}": v for h, v in per_hour.items()}}
     if len(hours) >= 2:
         first, last = per_hour[hours[0]]["p99_ms"], per_hour[hours[-1]]["p99_ms"]
