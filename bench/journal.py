@@ -6,7 +6,8 @@ the belief as base64 float64, atomic replace) adds to every step's latency. Meas
 directory), in each ``journal_sync`` mode (:data:`pearl_pomdp.journal.SYNC_MODES`): ``fsync``
 (the file and its directory fsynced before the write returns), ``background`` (the caller's part;
 the fsync thread's is not in it) and ``none``. ``flush_ms``: background only, the wait at the end
-for the last write's fsync.
+for the last write's fsync. ``update_*``: a step's opening, which keeps the belief and goes to the
+journal's small update file.
 
     .venv/bin/python bench/journal.py [--writes 50] [--dir DIR]
 """
@@ -28,7 +29,7 @@ SIZES = {"pearl": 576, "ward": 233_280}
 
 
 def measure(states: int, writes: int, directory: Path, sync: str) -> dict:
-    from pearl_pomdp.journal import Journal, decode_array, encode_array, flush_journals
+    from pearl_pomdp.journal import Journal, decode_array, encode_array, flush_journals, update_path
 
     belief = np.random.default_rng(0).dirichlet(np.ones(states))
     journal = Journal(directory / f"tracker_{states}_{sync}.json", "belief_tracker", "bench", "sha256:0", sync=sync)
@@ -45,9 +46,21 @@ def measure(states: int, writes: int, directory: Path, sync: str) -> dict:
     load = time.perf_counter() - start
     assert found.state is not None and np.array_equal(decode_array(found.state["belief"]), belief)
     ms = np.array(seconds) * 1e3
+    # A step's opening: the same encoded belief, new small fields (the update file: pearl_pomdp/journal.py).
+    encoded, updates = encode_array(belief), []
+    journal.write({"belief": encoded, "step": writes, "open_action": None})
+    for step in range(writes):
+        start = time.perf_counter()
+        journal.write({"belief": encoded, "step": writes, "open_action": f"Action{step}"})
+        updates.append(time.perf_counter() - start)
+    flush_journals(timeout=10.0)
+    assert journal.updates == writes and journal.load().state["open_action"] == f"Action{writes - 1}"
+    up = np.array(updates) * 1e3
     return {"states": states, "bytes": journal.path.stat().st_size, "write_p50_ms": round(float(np.median(ms)), 3),
             "write_p99_ms": round(float(np.percentile(ms, 99)), 3), "load_ms": round(load * 1e3, 3),
-            **({"flush_ms": round(flush * 1e3, 3)} if sync == "background" else {})}
+            **({"flush_ms": round(flush * 1e3, 3)} if sync == "background" else {}),
+            "update_bytes": update_path(journal.path).stat().st_size,
+            "update_p50_ms": round(float(np.median(up)), 3), "update_p99_ms": round(float(np.percentile(up, 99)), 3)}
 
 
 def main() -> int:

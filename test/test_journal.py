@@ -252,8 +252,10 @@ def test_a_written_journal_is_byte_for_byte_what_json_dumps_gives(tmp_path, sync
              "queue": [{"topic": "speech", "text": "\u0000"}], "weights": encode_array(small), "step": 7}
     j = journal(tmp_path, sync=sync)
     j.write(state, now=1234.5)
+    token = json.loads(j.path.read_text())["base"]   # the whole write's random token (module doc)
+    assert isinstance(token, str) and len(token) == 16
     body = {"format": FORMAT, "kind": j.kind, "domain": j.domain, "domain_hash": j.domain_hash,
-            "written_at": 1234.5, "state": state}
+            "written_at": 1234.5, "base": token, "state": state}
     assert j.path.read_bytes() == json.dumps(body, separators=(",", ":")).encode("utf-8")
     assert np.array_equal(decode_array(json.loads(j.path.read_text())["state"]["belief"]), big)
 
@@ -327,4 +329,124 @@ def test_a_writer_killed_at_any_moment_leaves_a_journal_that_loads(tmp_path, syn
         found = Journal(path, "belief_tracker", "d", "sha256:0").load()
         assert found.state is not None, found.reason
         assert found.state["step"] >= reported and found.state["pad"] == "x" * (found.state["step"] % 9000)
+        Journal(path, "belief_tracker", "d", "sha256:0").remove()
+
+
+@pytest.mark.parametrize("sync", ["background", "fsync", "none"])
+def test_a_write_with_the_same_arrays_goes_to_the_small_update_file_and_loads_whole(tmp_path, sync):
+    """A step opening (same belief object, new small fields) replaces only ``name.update.json``; the
+    whole journal keeps its bytes; load() gives the state of the last write, arrays included."""
+    from pearl_pomdp.journal import update_path
+
+    belief = encode_array(np.random.default_rng(2).dirichlet(np.ones(233_280)))
+    j = journal(tmp_path, sync=sync)
+    j.write({"belief": belief, "step": 4, "open_action": None}, now=100.0)
+    whole = j.path.read_bytes()
+    j.write({"belief": belief, "step": 4, "open_action": "GuideToPhysio"}, now=101.0)
+    assert j.path.read_bytes() == whole and (j.writes, j.updates) == (2, 1)
+    assert update_path(j.path).name == "belief_tracker.update.json"
+    assert update_path(j.path).stat().st_size < 400 < len(whole) // 1000
+    found = j.load(now=102.0)
+    assert found.state == {"belief": belief, "step": 4, "open_action": "GuideToPhysio"}
+    assert found.age == pytest.approx(1.0)                     # the update's time, not the whole write's
+    # An equal array that is another object (a new belief equal in value) is written whole.
+    j.write({"belief": encode_array(decode_array(belief)), "step": 5, "open_action": None}, now=103.0)
+    assert j.path.read_bytes() != whole and j.updates == 1
+    assert j.load(now=103.0).state["step"] == 5
+    j.remove()
+    assert not update_path(j.path).exists() and j.load().state is None
+
+
+def test_an_update_of_an_older_whole_journal_is_never_applied(tmp_path):
+    """Whole write A, an update of A, whole write B: B loads without A's update (its token is A's). A
+    damaged or foreign update is left unused; the whole journal loads as it is."""
+    from pearl_pomdp.journal import _next_path, update_path
+
+    first, second = encode_array(np.array([0.25, 0.75])), encode_array(np.array([0.5, 0.5]))
+    j = journal(tmp_path, sync="none")
+    j.write({"belief": first, "step": 1, "open_action": None})
+    j.write({"belief": first, "step": 1, "open_action": "TellTime"})
+    stale = update_path(j.path).read_bytes()
+    j.write({"belief": second, "step": 2, "open_action": None})
+    assert j.load().state == {"belief": second, "step": 2, "open_action": None}
+    # as if killed after B's whole write, before its update: A's update is still there
+    update_path(j.path).write_bytes(stale)
+    assert j.load().state == {"belief": second, "step": 2, "open_action": None}
+    j.write({"belief": second, "step": 2, "open_action": "TellWeather"})
+    assert j.load().state["open_action"] == "TellWeather"
+    # the update's writer killed between unlinking and renaming: the next update is read
+    update_path(j.path).rename(_next_path(update_path(j.path)))
+    assert j.load().state["open_action"] == "TellWeather"
+    _next_path(update_path(j.path)).unlink()
+    for damaged in ('{"format": "pearl-jou', json.dumps({"format": FORMAT, "kind": "hierarchical_policy",
+                                                          "base": json.loads(j.path.read_text())["base"],
+                                                          "domain_hash": j.domain_hash, "written_at": 1.0,
+                                                          "state": {"step": 99}})):
+        update_path(j.path).write_text(damaged)
+        assert j.load().state == {"belief": second, "step": 2, "open_action": None}
+
+
+def test_a_tracker_journals_a_step_opening_as_an_update_and_resumes_it(pearl, tmp_path):
+    """The tracker keeps its encoded belief until the belief changes, so a step's opening and a
+    queued input are updates, and a closed step is written whole; each loads as the tracker was."""
+    t = tracker(pearl)
+    j = journal(tmp_path, sync="none")
+    j.write(t.journal_state())
+    t.on_action("GotoPatientRoom", 1.0)              # opens: the same belief
+    j.write(t.journal_state())
+    t.on_input("laser", "atRoom", 2.0)               # closes: a new belief
+    j.write(t.journal_state())
+    t.on_input("speech", "what time is it", 3.0)     # queued: no step open
+    j.write(t.journal_state())
+    t.on_action("RingDoorBell", 4.0)                 # the queued input closes it at once; a new belief
+    j.write(t.journal_state())
+    t.on_action("TellTime", 5.0)
+    j.write(t.journal_state())
+    assert (j.writes, j.updates) == (6, 3)
+    second = tracker(pearl)
+    second.resume(j.load().state)
+    assert np.array_equal(second.belief, t.belief)
+    assert (second.step, second.open_action, second.opened_at, second.run, second.pending) == \
+        (t.step, "TellTime", 5.0, t.run, 0)
+
+
+@pytest.mark.parametrize("sync", ["none", "background"])
+def test_a_writer_killed_at_any_moment_between_whole_writes_and_updates_loads_one_state(tmp_path, sync):
+    """SIGKILL a process that writes a new array every third write and only small fields between:
+    every time, the loaded small fields belong to the loaded array's write (never an update of
+    another), at a write at or after the one reported."""
+    import signal
+    import subprocess
+    import sys
+
+    writer = (
+        "import sys\n"
+        "import numpy as np\n"
+        "from pearl_pomdp.journal import Journal, encode_array\n"
+        f"j = Journal(sys.argv[1], 'belief_tracker', 'd', 'sha256:0', sync={sync!r})\n"
+        "step = 0\n"
+        "while True:\n"
+        "    if step % 3 == 0:\n"
+        "        arrays, of = encode_array(np.full(20_000, float(step))), step\n"
+        "    j.write({'belief': arrays, 'of': of, 'step': step})\n"
+        "    if step % 30 == 0:\n"
+        "        print(step, flush=True)\n"
+        "    step += 1\n")
+    path = tmp_path / "killed.json"
+    for round_ in range(12):
+        proc = subprocess.Popen([sys.executable, "-c", writer, str(path)], stdout=subprocess.PIPE, text=True,
+                                cwd=REPO)
+        try:
+            assert proc.stdout is not None
+            for _ in range(1 + round_ % 4):
+                reported = int(proc.stdout.readline())
+            time.sleep(0.003 * (round_ % 5))
+        finally:
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(10)
+        found = Journal(path, "belief_tracker", "d", "sha256:0").load()
+        assert found.state is not None, found.reason
+        state = found.state
+        assert state["step"] >= reported and state["of"] == state["step"] - state["step"] % 3
+        assert np.all(decode_array(state["belief"]) == state["of"])
         Journal(path, "belief_tracker", "d", "sha256:0").remove()
