@@ -34,6 +34,14 @@ a fresh random ``base`` token, and an update names the token of the whole journa
 :meth:`Journal.load` applies an update only to that journal, so a death between any two writes loads
 either the last whole journal with its latest update, or the last whole journal alone when the update
 was of an older one — never a belief with another write's step.
+
+**Fields that only grow go to a log.** A simulator journals every call it made on its world; rewritten
+whole after every tick, a day's list (tens of thousands of calls) made each tick's write slower than
+the last. :meth:`Journal.write`'s ``growing`` fields are appended instead: each write adds one line
+with the items new since the last (``<name>.<id>.log``, a fresh ``id`` for each :class:`Journal`), and
+the journal names the log and how many of its lines it covers; :meth:`Journal.load` puts the whole
+lists back into the state. A line is appended before the journal that counts it, so a death between
+the two leaves a line the journal does not count (ignored), never a journal with a line missing.
 """
 from __future__ import annotations
 
@@ -315,19 +323,33 @@ class Journal:
         #: The last whole write's ``base`` token and its :func:`encode_array` values (held, so that an
         #: unchanged array is recognised by identity, without comparing megabytes).
         self._base: Optional[tuple] = None
+        #: The ``growing`` fields' log: its id, lines written and items logged per field (None: none yet).
+        self._log: Optional[Dict[str, Any]] = None
 
-    def write(self, state: Mapping[str, Any], now: Optional[float] = None) -> None:
+    def log_path(self, log_id: str) -> Path:
+        """The log of ``growing`` fields with id ``log_id`` (see the module doc)."""
+        return self.path.with_name(f"{self.path.stem}.{log_id}.log")
+
+    def write(self, state: Mapping[str, Any], now: Optional[float] = None, *,
+              growing: Optional[Mapping[str, Sequence[Any]]] = None) -> None:
         """Replace the journal with ``state`` (JSON-serialisable), stamped ``now`` (wall clock s).
 
         When every :func:`encode_array` value of ``state`` is the object the last whole write had,
         only the other fields are written, to :func:`update_path` (the module doc says why and why a
         death cannot mix two writes); :meth:`load` gives the same state either way.
 
+        ``growing``: lists that only grow (the same keys at every write, none of them in ``state``);
+        only the items added since this journal's last write are written, appended to its log, and
+        :meth:`load` returns the whole lists as fields of the state.
+
         Raises:
             OSError: the file cannot be written (the old journal is left as it was).
+            ValueError: a ``growing`` list is shorter than already logged, or its keys changed.
         """
         state = dict(state)
         written_at = time.time() if now is None else float(now)
+        if growing is not None:
+            state["growing_log"] = self._append(growing)
         arrays = {key: value for key, value in state.items() if isinstance(value, _Base64Text)}
         base = self._base
         if (arrays and base is not None and arrays.keys() == base[1].keys()
@@ -344,6 +366,76 @@ class Journal:
             self._replace(self.path, _journal_bytes(body))
             self._base = (token, arrays) if arrays else None
         self.writes += 1
+        if self._log is not None and not self._log["cleaned"]:
+            # The journal now names this log: the logs of earlier runs (one this node resumed from) go.
+            self._log["cleaned"] = True
+            for old in self.path.parent.glob(f"{self.path.stem}.*.log"):
+                if old != self.log_path(self._log["id"]):
+                    old.unlink(missing_ok=True)
+
+    def _append(self, growing: Mapping[str, Sequence[Any]]) -> Dict[str, Any]:
+        """Append the ``growing`` lists' new items to the log as one line; what the journal records of it."""
+        log = self._log
+        if log is None:
+            log = self._log = {"id": os.urandom(8).hex(), "lines": 0, "logged": {k: 0 for k in growing},
+                               "cleaned": False}
+        logged = log["logged"]
+        if set(growing) != set(logged):
+            raise ValueError(f"journal {self.path}: growing fields {sorted(growing)}, this journal logs {sorted(logged)}")
+        short = [k for k, items in growing.items() if len(items) < logged[k]]
+        if short:
+            raise ValueError(f"journal {self.path}: growing field {short[0]!r} has {len(growing[short[0]])} items, "
+                             f"{logged[short[0]]} were logged (it may only grow)")
+        tails = {k: list(items[logged[k]:]) for k, items in growing.items()}
+        if any(tails.values()) or log["lines"] == 0:
+            line = json.dumps({"log": log["id"], "line": log["lines"], "items": tails}, separators=(",", ":")) + "\n"
+            path = self.log_path(log["id"])
+            if self._mode is None:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                self._mode = file_mode_for(self.path)
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, self._mode)
+            try:
+                data = line.encode("utf-8")
+                while data:   # an append of one line; a death inside it leaves a line no journal counts
+                    data = data[os.write(fd, data):]
+                if self.sync == "fsync":
+                    os.fsync(fd)
+            finally:
+                os.close(fd)
+            if self.sync == "background":
+                _BACKGROUND.request(path)
+            log["lines"] += 1
+            for k, items in growing.items():
+                logged[k] = len(items)
+        return {"id": log["id"], "lines": log["lines"], "fields": sorted(logged)}
+
+    def _read_log(self, ref: Any) -> Dict[str, List[Any]]:
+        """The whole ``growing`` lists a journal's ``growing_log`` names (``ValueError`` naming the log when
+        it has fewer whole lines than the journal counts)."""
+        if not (isinstance(ref, dict) and isinstance(ref.get("id"), str) and isinstance(ref.get("lines"), int)
+                and isinstance(ref.get("fields"), list)):
+            raise ValueError("its growing_log is malformed")
+        path = self.log_path(ref["id"])
+        lists: Dict[str, List[Any]] = {str(k): [] for k in ref["fields"]}
+        found = 0
+        try:
+            with open(path, encoding="utf-8") as lines:
+                for text in lines:
+                    if found == ref["lines"]:
+                        break   # lines appended after the journal was written: not counted
+                    line = json.loads(text)
+                    if line.get("log") != ref["id"] or line.get("line") != found or set(line["items"]) != set(lists):
+                        break
+                    for k, items in line["items"].items():
+                        lists[k].extend(items)
+                    found += 1
+        except FileNotFoundError:
+            pass
+        except (OSError, UnicodeDecodeError, ValueError, AttributeError, KeyError, TypeError):
+            pass   # a line cut short or damaged: counted below
+        if found < ref["lines"]:
+            raise ValueError(f"its log {path} has {found} of the {ref['lines']} whole lines it counts")
+        return lists
 
     def _replace(self, path: Path, pieces: List[bytes]) -> None:
         """Replace ``path`` with ``pieces`` as :attr:`sync` says (:data:`SYNC_MODES`)."""
@@ -360,12 +452,13 @@ class Journal:
     def remove(self) -> None:
         """Delete the journal and its update (and a next one a death left), so the next start begins afresh."""
         update = update_path(self.path)
-        for target in (self.path, _next_path(self.path), update, _next_path(update)):
+        for target in (self.path, _next_path(self.path), update, _next_path(update),
+                       *self.path.parent.glob(f"{self.path.stem}.*.log")):
             try:
                 target.unlink()
             except FileNotFoundError:
                 pass
-        self._base = None
+        self._base = self._log = None
 
     def load(self, now: Optional[float] = None) -> Resumed:
         """The journal's state if it may be resumed from, else ``None`` and the one-line reason
@@ -406,6 +499,11 @@ class Journal:
         if age < -self.max_age:
             return Resumed(None, f"refused {where}: written {-age:.1f} s in the future (the clock moved "
                                  f"back?); starting afresh", age)
+        if "growing_log" in body["state"]:
+            try:
+                body["state"].update(self._read_log(body["state"].pop("growing_log")))
+            except ValueError as err:
+                return Resumed(None, f"refused {where}: {err}; starting afresh", age)
         return Resumed(body["state"], f"resuming from {where}, written {max(age, 0.0):.1f} s ago", age)
 
     def _update_of(self, body: Mapping[str, Any]) -> Optional[Dict[str, Any]]:

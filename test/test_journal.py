@@ -450,3 +450,97 @@ def test_a_writer_killed_at_any_moment_between_whole_writes_and_updates_loads_on
         assert state["step"] >= reported and state["of"] == state["step"] - state["step"] % 3
         assert np.all(decode_array(state["belief"]) == state["of"])
         Journal(path, "belief_tracker", "d", "sha256:0").remove()
+
+
+def test_growing_lists_are_appended_to_a_log_and_load_whole(tmp_path):
+    """A simulator's calls only grow: each write appends the new ones as one line of the journal's log,
+    the journal itself stays the same size however long the lists get, and load() gives them whole."""
+    j = journal(tmp_path, sync="none")
+    calls: list = []
+    sizes = []
+    for tick in range(300):
+        calls.append(["wait", tick * 0.5])
+        if tick % 7 == 0:
+            calls.append(["act", f"A{tick}"])
+        j.write({"now": tick * 0.5}, growing={"calls": calls, "taken": [c[1] for c in calls if c[0] == "act"]})
+        sizes.append(j.path.stat().st_size)
+    # a few digits more (the time, the log's line count), never the lists: ~6 kB by the end
+    assert max(sizes) - min(sizes) <= 12 and len(json.dumps(calls)) > 10 * max(sizes)
+    logs = sorted(j.path.parent.glob("belief_tracker.*.log"))
+    assert len(logs) == 1 and len(logs[0].read_text().splitlines()) == 300
+    found = j.load()
+    assert found.state == {"now": 149.5, "calls": calls, "taken": [c[1] for c in calls if c[0] == "act"]}
+    with pytest.raises(ValueError, match=r"growing field 'calls' has 3 items, 343 were logged"):
+        j.write({}, growing={"calls": calls[:3], "taken": []})
+    with pytest.raises(ValueError, match=r"growing fields \['calls'\], this journal logs \['calls', 'taken'\]"):
+        j.write({}, growing={"calls": calls})
+
+
+def test_a_resumed_journal_starts_a_fresh_log_and_drops_the_old_one_once_it_is_written(tmp_path):
+    """A restarted node's Journal logs the whole lists it resumed in a log of its own; the old log is
+    removed only after the journal names the new one; remove() leaves no log."""
+    first = journal(tmp_path, sync="none")
+    first.write({"now": 1.0}, growing={"calls": [1, 2, 3]})
+    first.write({"now": 2.0}, growing={"calls": [1, 2, 3, 4]})
+    second = journal(tmp_path, sync="none")
+    state = second.load().state
+    assert state == {"now": 2.0, "calls": [1, 2, 3, 4]}
+    old = list(tmp_path.glob("j/*.log"))
+    second.write({"now": 3.0}, growing={"calls": state["calls"] + [5]})
+    new = list(tmp_path.glob("j/*.log"))
+    assert len(old) == len(new) == 1 and old != new
+    assert journal(tmp_path).load().state == {"now": 3.0, "calls": [1, 2, 3, 4, 5]}
+    second.remove()
+    assert not list(tmp_path.glob("j/*")) and second.load().state is None
+
+
+def test_a_journal_whose_log_lacks_a_line_it_counts_is_refused_and_an_uncounted_line_is_ignored(tmp_path):
+    j = journal(tmp_path, sync="none")
+    j.write({"now": 1.0}, growing={"calls": ["a"]})
+    counted = j.path.read_bytes()
+    j.write({"now": 2.0}, growing={"calls": ["a", "b"]})
+    j.path.write_bytes(counted)    # as if killed after the second line's append, before its journal
+    assert j.load().state == {"now": 1.0, "calls": ["a"]}
+    (log,) = tmp_path.glob("j/*.log")
+    log.write_text(log.read_text().splitlines()[0][:-5] + "\n")     # the counted line cut short
+    found = j.load()
+    assert found.state is None
+    assert f"refused journal {j.path}: its log {log} has 0 of the 1 whole lines it counts" in found.reason
+    log.unlink()
+    assert "has 0 of the 1 whole lines" in j.load().reason
+
+
+@pytest.mark.parametrize("sync", ["none", "background"])
+def test_a_writer_killed_at_any_moment_while_logging_loads_whole_lists(tmp_path, sync):
+    """SIGKILL a process that appends to a growing list and journals after every item: every time the
+    list loads whole (0..n-1, nothing missing or doubled) and agrees with the journal's own count."""
+    import signal
+    import subprocess
+    import sys
+
+    writer = (
+        "import sys\n"
+        "from pearl_pomdp.journal import Journal\n"
+        f"j = Journal(sys.argv[1], 'pearl_sim_world', 'd', 'sha256:0', sync={sync!r})\n"
+        "calls = []\n"
+        "while True:\n"
+        "    calls.append(len(calls))\n"
+        "    j.write({'n': len(calls)}, growing={'calls': calls})\n"
+        "    if len(calls) % 50 == 0:\n"
+        "        print(len(calls), flush=True)\n")
+    path = tmp_path / "killed.json"
+    for round_ in range(12):
+        proc = subprocess.Popen([sys.executable, "-c", writer, str(path)], stdout=subprocess.PIPE, text=True,
+                                cwd=REPO)
+        try:
+            assert proc.stdout is not None
+            for _ in range(1 + round_ % 4):
+                reported = int(proc.stdout.readline())
+            time.sleep(0.003 * (round_ % 5))
+        finally:
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(10)
+        found = Journal(path, "pearl_sim_world", "d", "sha256:0").load()
+        assert found.state is not None, found.reason
+        assert found.state["n"] >= reported and found.state["calls"] == list(range(found.state["n"]))
+        Journal(path, "pearl_sim_world", "d", "sha256:0").remove()

@@ -68,6 +68,9 @@ def test_a_day_through_separate_processes_reports_each_nodes_memory_and_the_answ
         proc.stop()
     report = json.loads(proc.stdout())
     assert report["exit_code"] == 0 and report["day"] == "G01-day0"
+    # Every node journals as on a robot, the simulator too (its calls appended to the journal's log).
+    assert report["journals"] == {"nodes": True, "simulator": True}
+    assert "pearl_sim_world: no journal" in Path(report["log"]).read_text()
     assert report["checklist"]["hours"] == pytest.approx(3900 / 3600, abs=0.01)   # the world ran to `until`
     assert set(report["nodes"]) == {"belief_tracker", "hierarchical_policy", "action_executor",
                                     "lifecycle_supervisor", "pearl_sim_world"}

@@ -42,7 +42,8 @@ are still due, the last action's stamp — after every tick that changed any of 
 own death; no fsync, since a restart of the simulator, not a power loss, is what it survives). The
 world is seeded, so a node started again within ``journal_max_age`` on the same scenario and seed
 replays those calls on a fresh world and has the very state that died (the resident, the scheduler,
-the base, every random stream; nothing is unpickled — plain JSON); its clock goes on one tick after
+the base, every random stream; nothing is unpickled — plain JSON; the calls and actions are appended
+to the journal's log, so a tick's write costs the same at 19:00 as at 08:00); its clock goes on one tick after
 the journal's, the latched last action is not carried out twice, and the manager's nodes see only a
 pause. The journal is removed when the episode ends or the node is stopped cleanly, so a new launch
 starts afresh.
@@ -219,10 +220,11 @@ def _make_node_class():
             """The world's state, for a restart (see the module doc); a failed write is logged, never fatal."""
             if self.journal is None:
                 return
-            state = {"calls": self.calls, "pending": len(self.pending), "taken": self.taken,
-                     "last_taken_stamp": self.last_taken_stamp, "now": self.now}
+            state = {"pending": len(self.pending), "last_taken_stamp": self.last_taken_stamp, "now": self.now}
             try:
-                self.journal.write(state)
+                # The calls and the actions only grow: appended to the journal's log, not rewritten
+                # (a day has tens of thousands of calls; pearl_pomdp.journal's module doc).
+                self.journal.write(state, growing={"calls": self.calls, "taken": self.taken})
             except OSError as err:
                 self.get_logger().warning(f"journal {self.journal.path}: {err}", once=True)
 
