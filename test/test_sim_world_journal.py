@@ -76,6 +76,57 @@ def test_a_restarted_simulator_resumes_the_world_it_journaled(ros_context, tmp_p
         second.destroy_node()
 
 
+def test_a_resumed_simulator_holds_its_clock_until_it_has_heard_the_latched_belief_and_action(ros_context, tmp_path):
+    """Resumed, the node must not run its clock before it knows the tracker's closed steps (its count
+    starts at 0, so the world would live on past steps the robot never answered) and before its action
+    topic has matched (actions published before are lost): a day once stopped at step 695 with 692
+    actions carried out. With every simulated input subscribed, it waits for the latched action and
+    the latched belief, then starts."""
+    import time
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from pearl_interfaces.msg import Belief
+
+    context, _ = ros_context
+    journal = tmp_path / "world.json"
+    first = make_node(context, journal)
+    try:
+        run_actions(first, ["DoNothing", "GotoPatientRoom"])
+    finally:
+        first.destroy_node()
+    second = make_node(context, journal)
+    tracker = rclpy.create_node("stand_in_tracker", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(tracker)
+    try:
+        for publisher in second.hardware.publishers.values():
+            tracker.create_subscription(publisher.msg_type, publisher.topic_name, lambda _msg: None, 10)
+        deadline = time.monotonic() + 10.0
+        while not all(p.get_subscription_count() for p in second.hardware.publishers.values()):
+            assert time.monotonic() < deadline, "the stand-in tracker's subscriptions never matched"
+            executor.spin_once(timeout_sec=0.05)
+        now = second.now
+        for _ in range(3):
+            second._tick()
+        assert second.resumed and not second.started and second.now == now
+        assert second._waiting_for() == ["the tracker's latched /pearl/belief", "the policy's latched /pearl/action"]
+        second._on_action(action("GotoPatientRoom", 11))      # the latched action, carried out already
+        second._tick()
+        assert not second.started and not second.actions
+        assert second._waiting_for() == ["the tracker's latched /pearl/belief"]
+        belief = Belief()
+        belief.step = 2
+        second._on_belief(belief)
+        second._tick()
+        assert second.started and second.closed_steps == 2
+    finally:
+        executor.shutdown()
+        tracker.destroy_node()
+        second.destroy_node()
+
+
 def test_a_journal_of_another_scenario_is_refused_and_an_ended_episode_leaves_none(ros_context, tmp_path):
     context, _ = ros_context
     journal = tmp_path / "world.json"

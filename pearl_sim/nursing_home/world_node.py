@@ -43,7 +43,9 @@ own death; no fsync, since a restart of the simulator, not a power loss, is what
 world is seeded, so a node started again within ``journal_max_age`` on the same scenario and seed
 replays those calls on a fresh world and has the very state that died (the resident, the scheduler,
 the base, every random stream; nothing is unpickled — plain JSON; the calls and actions are appended
-to the journal's log, so a tick's write costs the same at 19:00 as at 08:00); its clock goes on one tick after
+to the journal's log, so a tick's write costs the same at 19:00 as at 08:00); once it has heard the
+tracker's latched belief and the policy's latched action (so it knows which steps are closed, and no
+action can be published before its subscription matched) its clock goes on one tick after
 the journal's, the latched last action is not carried out twice, and the manager's nodes see only a
 pause. The journal is removed when the episode ends or the node is stopped cleanly, so a new launch
 starts afresh.
@@ -178,6 +180,10 @@ def _make_node_class():
             self.held_since: Optional[float] = None   # wall clock when the clock last stopped for the policy
             self.started = False
             self.resumed = False
+            # What a resumed node must hear before its clock runs (see _ready): the latched belief (the
+            # tracker's closed steps) and an action (the latched one proves the action topic matched).
+            self.belief_heard = False
+            self.action_heard = False
             self.finished = False
             self.failed: Optional[str] = None
             self.t0 = time.monotonic()
@@ -254,12 +260,14 @@ def _make_node_class():
 
         # --------------------------------------------------------------- inputs
         def _on_action(self, msg) -> None:
+            self.action_heard = True
             stamp = [int(msg.stamp.sec), int(msg.stamp.nanosec)]
             if self.resumed and stamp == self.last_taken_stamp:
                 return   # the latched action this world carried out before it was restarted
             self.actions.append((stamp, msg.name.strip()))
 
         def _on_belief(self, msg) -> None:
+            self.belief_heard = True
             self.closed_steps = max(self.closed_steps, int(msg.step))
 
         def _publish(self, message) -> None:
@@ -277,8 +285,22 @@ def _make_node_class():
         # ----------------------------------------------------------------- loop
         def _ready(self) -> bool:
             """The manager answered b0 (or, resumed, is still there) and our inputs reach its tracker."""
-            return (bool(self.actions) or self.resumed) and all(p.get_subscription_count() > 0
-                                                                for p in self.hardware.publishers.values())
+            return not self._waiting_for() and all(p.get_subscription_count() > 0
+                                                   for p in self.hardware.publishers.values())
+
+        def _waiting_for(self) -> List[str]:
+            """What the node has not heard from the manager yet and needs before its clock runs.
+
+            A fresh node waits for the answer to b0. A resumed one waits for the tracker's latched belief
+            and for an action (the latched last one, which proves the action topic matched): until the
+            belief comes it cannot know whether the step it last carried out is closed (its count starts
+            at 0, so the clock would run on past the robot's unanswered steps), and actions published
+            before the topic matched would be lost (a day once stopped at step 695 with 692 actions
+            carried out, its clock having run on for 40 s without them)."""
+            if not self.resumed:
+                return [] if self.actions else ["the answer to b0 on /pearl/action"]
+            return ([] if self.belief_heard else ["the tracker's latched /pearl/belief"]) + \
+                ([] if self.action_heard else ["the policy's latched /pearl/action"])
 
         def _tick(self) -> None:
             if self.finished:
@@ -290,7 +312,11 @@ def _make_node_class():
                     self.t0 = time.monotonic()
                     self.get_logger().info("the manager is up: starting the clock")
                 elif wall > self.start_timeout:
-                    self._finish(f"no first action on /pearl/action within {self.start_timeout:g} s")
+                    missing = self._waiting_for()
+                    self._finish((f"resumed, but {' and '.join(missing)} did not come" if self.resumed
+                                  else "no first action on /pearl/action came") + f" within {self.start_timeout:g} s"
+                                 if missing else "the manager's tracker did not subscribe to the simulated "
+                                                 f"inputs within {self.start_timeout:g} s")
                 else:
                     self._publish_clock()   # time 0 (or the journal's) until the manager is up
                 return
