@@ -51,11 +51,11 @@ NODES = ("belief_tracker", "hierarchical_policy", "action_executor", "lifecycle_
 
 
 def node_pids(log: Path) -> Dict[str, int]:
-    """``{node: pid}`` from ``pearl launch``'s ``[launch] started NODE (pid N)`` lines (the latest per node:
-    a respawned node's new process)."""
+    """``{node: pid}`` from ``pearl launch``'s ``[launch] started NODE (pid N)`` and ``[launch] respawned NODE
+    (pid N)`` lines (the latest per node: a respawned node's new process)."""
     pids: Dict[str, int] = {}
     for line in log.read_text(errors="replace").splitlines():
-        if line.startswith("[launch] started ") and "(pid " in line:
+        if line.startswith(("[launch] started ", "[launch] respawned ")) and "(pid " in line:
             pids[line.split()[2]] = int(line.rsplit("(pid ", 1)[1].rstrip(")"))
     return pids
 
@@ -136,6 +136,9 @@ def main() -> int:
     ap.add_argument("--no-journal", action="store_true", help="journal:=false: no node journals its state")
     ap.add_argument("--no-sim-journal", action="store_true", help="sim_journal:=false: the simulator keeps no journal")
     ap.add_argument("--log-events", action="store_true", help="the simulator logs every event of its world (in the log)")
+    ap.add_argument("--kill-simulator-at", type=float, default=None, metavar="S",
+                    help="SIGKILL the simulator once its clock has passed S seconds of the day: the launch respawns "
+                         "it and it resumes its world from its journal (reported under simulator_killed)")
     ap.add_argument("--run-dir", type=Path, default=None,
                     help="where the launch's log and the nodes' ROS_HOME go (default: a new temporary folder)")
     args = ap.parse_args()
@@ -205,6 +208,8 @@ def main() -> int:
     start: Dict[str, float] = {}
     hourly: Dict[str, List[Optional[float]]] = {name: [None] * hours for name in NODES}
 
+    killed: Dict[str, object] = {}
+
     def read_all() -> Dict[str, float]:
         return {name: m for name, pid in node_pids(log).items() if name in hourly and (m := rss_mb(pid)) is not None}
 
@@ -215,6 +220,11 @@ def main() -> int:
             if now > 0.0 and clock["first_tick_wall"] is None:
                 clock["first_tick_wall"] = time.monotonic()
                 start.update(read_all())
+            if args.kill_simulator_at is not None and not killed and now >= args.kill_simulator_at:
+                pid = node_pids(log).get("pearl_sim_world")
+                if pid is not None:
+                    os.kill(pid, signal.SIGKILL)
+                    killed.update(at_s=round(now, 1), pid=pid)
             if now > 0.0:
                 # The hour the clock is in: its end-of-hour reading is the latest one taken in it (the last
                 # before the processes end, for the day's last hour).
@@ -246,6 +256,11 @@ def main() -> int:
                                  "startup_s": round((clock["first_tick_wall"] or ended) - started, 1),
                                  "day_wall_s": round(ended - (clock["first_tick_wall"] or ended), 1),
                                  "load_avg_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count()}
+    if args.kill_simulator_at is not None:
+        # The respawned simulator's line "resumed at T s after N actions" (pearl_sim/nursing_home/world_node.py).
+        resumed = re.search(r"resumed at ([0-9.]+) s after ([0-9]+) actions", text)
+        report["simulator_killed"] = {**killed, "resumed_at_s": float(resumed.group(1)) if resumed else None,
+                                      "actions_before": int(resumed.group(2)) if resumed else None}
     report.update(summarize(start, hourly, decisions))
     paired = [(hour, supports[step], latency) for hour, step, latency in answered if step in supports]
     report["decisions_paired_with_belief"] = len(paired)

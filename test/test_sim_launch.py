@@ -54,11 +54,15 @@ def test_the_sim_world_node_rejects_a_bad_scenario_in_one_line(tmp_path):
 
 
 @pytest.mark.slow
-def test_a_day_through_separate_processes_reports_each_nodes_memory_and_the_answers_per_hour(tmp_path):
+def test_a_day_through_separate_processes_survives_its_simulator_killed_and_reports_memory_and_answers_per_hour(
+        tmp_path):
     """bench/day_processes.py: `pearl launch launch/pearl_sim.launch.xml day:=true` runs the day world against
     the nodes in their own processes; the bench reads each process's memory per hour and bins the policy's
-    decision times by the hour of the day. Here the day's first 65 minutes (two hours' bins)."""
+    decision times by the hour of the day. Here the day's first 65 minutes (two hours' bins), with the
+    simulator SIGKILLed at 25 minutes: the launch respawns it, it resumes its world from its journal and
+    the day runs to its end."""
     cmd = [sys.executable, str(REPO / "bench" / "day_processes.py"), "--until", "3900", "--rate", "400",
+           "--kill-simulator-at", "1500",
            "--domain-id", str(allocate_domain_id()), "--run-dir", str(tmp_path / "run"), "--wall-timeout", "240"]
     proc = Proc(cmd, ros_env(allocate_domain_id(), tmp_path), tmp_path, "day_processes")
     try:
@@ -70,7 +74,13 @@ def test_a_day_through_separate_processes_reports_each_nodes_memory_and_the_answ
     assert report["exit_code"] == 0 and report["day"] == "G01-day0"
     # Every node journals as on a robot, the simulator too (its calls appended to the journal's log).
     assert report["journals"] == {"nodes": True, "simulator": True}
-    assert "pearl_sim_world: no journal" in Path(report["log"]).read_text()
+    log = Path(report["log"]).read_text()
+    assert "pearl_sim_world: no journal" in log
+    killed = report["simulator_killed"]
+    assert 1500.0 <= killed["at_s"] < 3900.0 and "pearl_sim_world exited with code -9; respawning" in log
+    # It resumed where its journal was (at most a few ticks before the kill) and ran the day to its end.
+    assert 1400.0 <= killed["resumed_at_s"] <= killed["at_s"] + 60.0 and killed["actions_before"] >= 100
+    assert report["checklist"]["wrong_actions"] == 0
     assert report["checklist"]["hours"] == pytest.approx(3900 / 3600, abs=0.01)   # the world ran to `until`
     assert set(report["nodes"]) == {"belief_tracker", "hierarchical_policy", "action_executor",
                                     "lifecycle_supervisor", "pearl_sim_world"}
@@ -90,6 +100,15 @@ def test_a_day_through_separate_processes_reports_each_nodes_memory_and_the_answ
     assert bands["1-24"]["08"]["decisions"] >= 0.95 * hours["08"]["decisions"]
     assert 0.0 < hours["08"]["p50_ms"] <= hours["08"]["p99_ms"] < 1000.0
     assert report["actions"] >= hours["08"]["decisions"]
+
+
+def test_the_day_bench_follows_a_respawned_node_to_its_new_process(load_bench, tmp_path):
+    bench = load_bench("day_processes")
+    log = tmp_path / "launch.log"
+    log.write_text("[launch] started belief_tracker (pid 11)\n[launch] started pearl_sim_world (pid 12)\n"
+                   "[launch] pearl_sim_world exited with code -9; respawning in 1 s (restart 1 of at most 3 within 60 s)\n"
+                   "[launch] respawned pearl_sim_world (pid 13)\n")
+    assert bench.node_pids(log) == {"belief_tracker": 11, "pearl_sim_world": 13}
 
 
 def test_support_bands_of_the_day_bench_cover_every_size_once(load_bench):
