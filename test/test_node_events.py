@@ -36,11 +36,11 @@ def test_tracker_keeps_the_qos_warning_and_drops_the_type_handler(ros_context):
         subscriptions = list(node.subscriptions)
         assert not TYPE_EVENTS & set(kinds)
         # One incompatible-QoS handler per subscription (4 inputs + action + drive progress: Pearl's
-        # drives have deadlines) and per publisher created through rclpy's Python API (belief,
-        # diagnostics, parameter events).
+        # drives have deadlines) and per publisher created through rclpy's Python API (belief, step
+        # settings, diagnostics, parameter events).
         assert len(subscriptions) == 4 + 1 + 1
-        assert sum(k in QOS_EVENTS for k in kinds) == len(subscriptions) + 3
-        assert len(kinds) == len(subscriptions) + 3
+        assert sum(k in QOS_EVENTS for k in kinds) == len(subscriptions) + 4
+        assert len(kinds) == len(subscriptions) + 4
     finally:
         node.destroy_node()
 

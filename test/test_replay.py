@@ -162,6 +162,45 @@ def test_replay_feeds_recorded_drive_progress_to_the_tracker(tmp_path):
     assert not near.match and near.first_mismatch == 2 and near.expected_actions[2] == "RingDoorBell"
 
 
+def _with_step_settings(src: Path, dst: Path, published: bool) -> Path:
+    """``src`` (absolute custom_data paths) without ``pearl.tracker_params``, as ``pearl record`` beside a
+    launched graph writes it; with ``published``, the tracker's latched ``/belief_tracker/step_settings``
+    (those same values) before the first message, as such a recorder gets it."""
+    from rclpy.serialization import serialize_message
+
+    from pearl_pomdp.nodes import conversions as cv
+
+    reader = BagReader(src)
+    data = dict((reader.metadata or {}).get("custom_data") or {})
+    for key in ("pearl.domain", "pearl.policy"):
+        data[key] = str((src / data[key]).resolve())
+    settings = json.loads(data.pop("pearl.tracker_params"))
+    with BagWriter(dst, custom_data=data) as out:
+        for t in reader.topics.values():
+            _add_topic_as_recorded(out, t)
+        if published:
+            out.add_topic("/belief_tracker/step_settings", "rcl_interfaces/msg/ParameterEvent")
+            first = reader.messages[0].log_time
+            out.write("/belief_tracker/step_settings",
+                      serialize_message(cv.settings_to_msg("/belief_tracker", settings, 0.0)), first)
+        for m in reader.messages:
+            out.write(m.topic, m.data, m.log_time, m.publish_time, m.sequence)
+    return dst
+
+
+def test_a_bag_without_tracker_params_replays_with_the_step_settings_the_tracker_published(tmp_path):
+    """A bag `pearl record` made beside a launched graph has no pearl.tracker_params: the replay takes the
+    step rules and places the tracker published latched (its 8 s step timeout, the scenario's map);
+    without them it can only use the params file's 10 s, and the silent steps close at other times."""
+    configure_test_process(tmp_path)
+    src = REPO / "bags" / "figure4_guidance"
+    published = replay_bag(_with_step_settings(src, tmp_path / "published", True), domain_id=allocate_domain_id())
+    assert published.tracker_params_from == "belief_tracker/step_settings"
+    assert published.match and published.beliefs_match and published.max_belief_difference == 0.0
+    bare = replay_bag(_with_step_settings(src, tmp_path / "bare", False), domain_id=allocate_domain_id())
+    assert bare.tracker_params_from == "defaults" and not bare.match
+
+
 def test_altered_recording_is_a_mismatch(tmp_path, capsys):
     from pearl_pomdp.cli import main
 

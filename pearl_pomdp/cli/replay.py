@@ -71,6 +71,8 @@ def run(args: argparse.Namespace) -> int:
         status = "yes" if result.match else f"NO (first difference at action {result.first_mismatch})"
         print(f"match:     {status}")
         print(f"messages:  {result.messages} in {result.seconds:.3f} s ({result.messages_per_second:.0f} msg/s)")
+        print(f"tracker:   step rules and places from {result.tracker_params_from}"
+              + (" (the bag recorded none: the params file's)" if result.tracker_params_from == "defaults" else ""))
         if result.explanation is not None:
             print(format_explanation(result.explanation, result.divergence))
     return 0 if result.match else 1

@@ -37,7 +37,10 @@ compared, and its timers would only add stops to the lock-step.
 The graph's configuration comes from the bag's ``custom_data`` (written by the recording
 script): ``pearl.domain``, ``pearl.policy`` (paths relative to the bag directory; a policy may also be
 the spec ``online[:TRIALS]``, planned again at every belief),
-``pearl.tracker_params`` (JSON of belief-tracker parameter overrides) and, optionally,
+``pearl.tracker_params`` (JSON of belief-tracker parameter overrides; a bag without it — ``pearl record``
+beside a launched graph — uses the step rules and places the tracker published on
+``/belief_tracker/step_settings`` or declared on ``/parameter_events``: :func:`recorded_tracker_parameters`)
+and, optionally,
 ``pearl.policy_params`` (JSON of policy-node overrides: the autonomy level the run started with)
 and ``pearl.params_file`` (the robot's node params file, relative to the bag directory; empty: the
 nodes' code defaults, as a world without a params file ran them; absent: the shipped one, as for
@@ -56,7 +59,7 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Union
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 from pearl_pomdp.bags import well_known as wk
 from pearl_pomdp.bags.reader import BagError, BagReader, cdr_string
@@ -78,6 +81,7 @@ KEY_DOMAIN, KEY_POLICY, KEY_TRACKER = "pearl.domain", "pearl.policy", "pearl.tra
 KEY_POLICY_PARAMS = "pearl.policy_params"
 KEY_PARAMS_FILE = "pearl.params_file"
 OPERATOR_EVENTS_TOPIC = "/pearl/operator/events"
+PARAMETER_EVENTS_TOPIC = "/parameter_events"
 #: Recorded operator events a replay does again (the others follow from them and the inputs).
 REENACTED = ("autonomy", "confirmed", "declined")
 
@@ -104,6 +108,9 @@ class ReplayResult:
         beliefs_match: as many beliefs as recorded, each within :data:`BELIEF_TOLERANCE`.
         operator_events: the kinds of the operator events the replay produced, in order.
         expected_operator_events: the kinds recorded on ``/pearl/operator/events``.
+        tracker_params_from: where the tracker's step rules and places came from: ``custom_data``
+            (``pearl.tracker_params``), ``belief_tracker/step_settings`` or ``/parameter_events`` (what
+            the recorded tracker published), or ``defaults`` (the params file's: the bag says nothing).
     """
 
     bag: str
@@ -125,6 +132,7 @@ class ReplayResult:
     beliefs_match: bool = False
     operator_events: List[str] = field(default_factory=list)
     expected_operator_events: List[str] = field(default_factory=list)
+    tracker_params_from: str = "custom_data"
 
     def to_dict(self) -> Dict[str, Any]:
         out = {"bag": self.bag, "match": self.match, "actions": self.actions,
@@ -132,7 +140,8 @@ class ReplayResult:
                "messages": self.messages, "fed": self.fed, "seconds": round(self.seconds, 6),
                "messages_per_second": round(self.messages_per_second, 1), "clock_skipped": self.clock_skipped,
                "counters": self.counters, "beliefs": self.beliefs, "expected_beliefs": self.expected_beliefs,
-               "max_belief_difference": self.max_belief_difference, "beliefs_match": self.beliefs_match}
+               "max_belief_difference": self.max_belief_difference, "beliefs_match": self.beliefs_match,
+               "tracker_params_from": self.tracker_params_from}
         if self.operator_events or self.expected_operator_events:
             out["operator_events"] = self.operator_events
             out["expected_operator_events"] = self.expected_operator_events
@@ -215,8 +224,54 @@ def _check_topics(reader: BagReader, inputs: Optional[Dict[str, str]] = None) ->
                        f"replay needs {' or '.join(ACTION_TYPES)}")
 
 
+def recorded_tracker_parameters(reader: BagReader, node: str = "belief_tracker") -> Tuple[Dict[str, Any], str]:
+    """The belief tracker's step rules and places as the bag recorded them, and where from:
+
+    * ``<node>/step_settings``: what the tracker published, latched, when it was activated
+      (:data:`~pearl_pomdp.nodes.belief_tracker.STEP_SETTINGS_TOPIC`; a recorder started late gets it
+      too) — the first such message;
+    * else ``/parameter_events``: each setting's last value the node (in any namespace) declared or set
+      before the bag's first belief or action (a recorder that matched only later misses them);
+    * else nothing (``"defaults"``: the replay runs the params file's values).
+
+    So a bag that ``pearl record`` made beside a launched graph replays with the step timeout and the
+    places the robot ran with, not the shipped defaults (the simulator's launch file sets an 8 s step
+    timeout where the shipped params file has 10 s: every silent step then closed at another time)."""
+    from rclpy.serialization import deserialize_message
+
+    from pearl_pomdp.nodes import conversions as cv
+    from pearl_pomdp.nodes.belief_tracker import STEP_SETTINGS_TOPIC, is_replayed_setting
+
+    suffix = f"/{node}/{STEP_SETTINGS_TOPIC.lstrip('~/')}"
+    events: Dict[str, Any] = {}
+    before_first_step = True
+    for m in reader.messages:
+        if m.topic.endswith(suffix):
+            try:
+                values = cv.msg_to_settings(deserialize_message(m.data, cv.SettingsMsg))
+            except Exception:   # a damaged message is skipped; the next source stands
+                continue
+            return {k: v for k, v in values.items() if is_replayed_setting(k)}, suffix.lstrip("/")
+        if m.topic in (ACTION_TOPIC, BELIEF_TOPIC):
+            before_first_step = False   # later changes (a live parameter set mid-run) are not the run's start
+        if not before_first_step or m.topic != PARAMETER_EVENTS_TOPIC:
+            continue
+        try:
+            event = deserialize_message(m.data, cv.SettingsMsg)
+        except Exception:
+            continue
+        if event.node.rsplit("/", 1)[-1] == node:
+            renamed = cv.SettingsMsg(new_parameters=list(event.new_parameters) + list(event.changed_parameters))
+            events.update({k: v for k, v in cv.msg_to_settings(renamed).items() if is_replayed_setting(k)})
+    return (events, PARAMETER_EVENTS_TOPIC) if events else ({}, "defaults")
+
+
 def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optional[str] = None) -> Dict[str, Any]:
-    """Domain, policy and tracker parameters for replaying ``reader``'s bag (PearlError if missing)."""
+    """Domain, policy and tracker parameters for replaying ``reader``'s bag (PearlError if missing).
+
+    The tracker's parameters are the bag's ``pearl.tracker_params``; a bag without that key (one
+    ``pearl record`` made beside a launched graph) replays with those the tracker published or declared
+    in it (:func:`recorded_tracker_parameters`); ``tracker_params_from`` says which."""
     from pearl_pomdp.online.decider import online_trials
 
     custom = (reader.metadata or {}).get("custom_data") or {}
@@ -244,8 +299,12 @@ def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optio
             raise PearlError(f"{reader.path}: custom_data {key}: {err}") from None
         return value
 
+    if KEY_TRACKER in custom:
+        tracker, source = params_of(KEY_TRACKER), "custom_data"
+    else:
+        tracker, source = recorded_tracker_parameters(reader)
     return {"domain": path_of(KEY_DOMAIN, domain), "policy": path_of(KEY_POLICY, policy),
-            "tracker_params": params_of(KEY_TRACKER), "policy_params": params_of(KEY_POLICY_PARAMS),
+            "tracker_params": tracker, "tracker_params_from": source, "policy_params": params_of(KEY_POLICY_PARAMS),
             # Another robot's node params (its tracker rules); recorded empty: the nodes' code defaults
             # (a world without a params file); absent (an older bag): the shipped file.
             "params_file": (path_of(KEY_PARAMS_FILE, None) if custom.get(KEY_PARAMS_FILE)
@@ -594,4 +653,5 @@ def replay_bag(path: Union[str, Path], *, domain: Optional[str] = None, policy: 
                         explanation=explanation, divergence=divergence, beliefs=len(beliefs),
                         expected_beliefs=len(recorded), max_belief_difference=max_difference,
                         beliefs_match=beliefs_match, operator_events=operator_events,
-                        expected_operator_events=[str(e.get("event")) for e in _recorded_operator_events(reader)])
+                        expected_operator_events=[str(e.get("event")) for e in _recorded_operator_events(reader)],
+                        tracker_params_from=cfg["tracker_params_from"])

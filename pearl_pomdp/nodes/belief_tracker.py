@@ -47,6 +47,22 @@ def step_parameters() -> List[Param]:
             for spec in StepSettings.parameters()]
 
 
+#: The tracker's settings that decide its beliefs, published latched at activation on this topic
+#: (relative: ``/belief_tracker/step_settings`` for the launch files' node) so that a bag recorded
+#: beside the graph replays with them (:func:`pearl_pomdp.nodes.bag_replay.replay_config`).
+STEP_SETTINGS_TOPIC = "~/step_settings"
+
+
+def is_replayed_setting(name: str) -> bool:
+    """A tracker parameter a replay must have to close the robot's steps as it did: a step rule
+    (:class:`~pearl_pomdp.tracking.StepSettings`: the timeout, the drive deadlines …) or a place
+    (``location_names``, ``locations.<name>``), which the drive deadlines are measured from."""
+    return name in _STEP_RULES or name == "location_names" or name.startswith("locations.")
+
+
+_STEP_RULES = frozenset(spec.name for spec in StepSettings.parameters())
+
+
 def input_parameters(channel: InputChannel) -> List[Param]:
     """The node parameters of one input (declared at configure, when the domain is known): its
     topic, reliability and queue depth, defaulting to the domain's declaration."""
@@ -198,6 +214,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         self.journal.resume(self._resume)
 
         self.belief_pub = self.lifecycle_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
+        self.settings_pub = self.lifecycle_publisher(cv.SettingsMsg, STEP_SETTINGS_TOPIC, LATCHED_QOS)
         for reader, topic, qos in inputs:
             key = reader.channel.name
             callback = self._on_speech(key) if reader.channel.kind == "speech" else self._input_callback(key)
@@ -263,7 +280,10 @@ class BeliefTrackerNode(ManagedPearlNode):
 
     def activate_node(self) -> None:
         """Publish the current belief (b0 at first, or the journal's): the policy answers it (once:
-        it knows the run and step it answered) and the loop runs; a resumed step's deadline is armed."""
+        it knows the run and step it answered) and the loop runs; a resumed step's deadline is armed.
+        The step rules and places go out first, latched (:data:`STEP_SETTINGS_TOPIC`), for a recorder."""
+        settings = {name: value for name, value in self.params.items() if is_replayed_setting(name)}
+        self.settings_pub.publish(cv.settings_to_msg(self.get_fully_qualified_name(), settings, self.now_s()))
         self._publish_belief()
         self._arm_deadline()
 

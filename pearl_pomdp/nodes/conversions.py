@@ -72,6 +72,7 @@ from pearl_interfaces.msg import SearchBranch as SearchBranchMsg
 from pearl_interfaces.msg import SearchStats as SearchStatsMsg
 from pearl_interfaces.msg import TraceStep as TraceStepMsg
 from pearl_interfaces.msg import WorldTruth as WorldTruthMsg
+from rcl_interfaces.msg import ParameterEvent
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
@@ -96,6 +97,9 @@ __all__ = [
 
 #: Message classes used by the nodes (import them from here, not from the message packages).
 TextMsg = String
+#: A node's settings as one latched message (the tracker's ``~/step_settings``): rcl_interfaces'
+#: parameter event, its ``new_parameters`` the values.
+SettingsMsg = ParameterEvent
 PoseMsg = PoseStamped
 DiagnosticsMsg = DiagnosticArray
 ClockMsg = Clock
@@ -649,3 +653,24 @@ def msg_to_point(msg: PointStamped) -> Dict[str, float]:
     """``{"x", "y", "frame_id", "stamp"}`` of a PointStamped."""
     return {"x": msg.point.x, "y": msg.point.y, "frame_id": msg.header.frame_id,
             "stamp": time_to_seconds(msg.header.stamp)}
+
+
+def settings_to_msg(node: str, values: Mapping[str, Any], stamp_s: float) -> ParameterEvent:
+    """``values`` (name → bool, int, float, str or a list of one of them) as a parameter event of
+    ``node`` whose ``new_parameters`` hold them, in name order."""
+    from rclpy.parameter import Parameter
+
+    msg = ParameterEvent(node=node, stamp=seconds_to_time(stamp_s))
+    msg.new_parameters = [Parameter(name, value=values[name]).to_parameter_msg() for name in sorted(values)]
+    return msg
+
+
+def msg_to_settings(msg: ParameterEvent) -> Dict[str, Any]:
+    """The values of a :func:`settings_to_msg` (lists as lists)."""
+    from rclpy.parameter import parameter_value_to_python
+
+    out: Dict[str, Any] = {}
+    for parameter in msg.new_parameters:
+        value = parameter_value_to_python(parameter.value)
+        out[parameter.name] = list(value) if isinstance(value, (list, tuple, array.array)) else value
+    return out
