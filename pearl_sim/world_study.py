@@ -148,9 +148,9 @@ def run_world_experiment(args: argparse.Namespace, files: "SimWorld", world: Wor
     _jobs.update(agents=agents, domain=domain, params=params, model=domain.compile(), run_episode=world.run_episode)
     try:
         if args.jobs > 1:
-            import multiprocessing
+            from pearl_sim.workers import fork_pool
 
-            with multiprocessing.get_context("fork").Pool(args.jobs) as pool:
+            with fork_pool(args.jobs) as pool:
                 episodes: List[Any] = list(pool.imap(_one, items, chunksize=world.chunksize))
         else:
             from tqdm import tqdm

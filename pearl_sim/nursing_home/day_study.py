@@ -171,9 +171,9 @@ def plan_channel_twins(domain_path, hierarchy_path, channel_path, kind: str, lev
         extra = meanwhile() if meanwhile is not None else None
         seconds = [_plan_twin(t) for t in tasks]
     else:
-        import multiprocessing
+        from pearl_sim.workers import fork_pool
 
-        with multiprocessing.get_context("fork").Pool(min(jobs, len(tasks))) as pool:
+        with fork_pool(min(jobs, len(tasks))) as pool:
             pending = pool.map_async(_plan_twin, tasks, chunksize=1)
             extra = meanwhile() if meanwhile is not None else None
             seconds = pending.get()
@@ -297,10 +297,9 @@ def run_days(domain, agents, cases: Sequence[DayCase], noise_levels: Sequence[fl
     if jobs <= 1:
         _init_worker(domain, agents, by_level)
         return _progress(map(_run_job, work), len(work), progress, each)
-    import multiprocessing
+    from pearl_sim.workers import fork_pool
 
-    with multiprocessing.get_context("fork").Pool(jobs, initializer=_init_worker,
-                                                  initargs=(domain, agents, by_level)) as pool:
+    with fork_pool(jobs, initializer=_init_worker, initargs=(domain, agents, by_level)) as pool:
         return _progress(pool.imap(_run_job, work, chunksize=1), len(work), progress, each)
 
 

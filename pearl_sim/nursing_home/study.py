@@ -15,13 +15,13 @@ numbers do not depend on ``jobs`` (``test/test_study.py`` checks ``jobs=2`` agai
 from __future__ import annotations
 
 import csv
-import multiprocessing
 from dataclasses import dataclass, replace
 from typing import Dict, List, Optional, Sequence
 
 from pearl_sim.nursing_home.experiment import EpisodeResult, run_episode
 from pearl_sim.nursing_home.residents import StudyCase, effective_word_error_rate
 from pearl_sim.stats import proportion_ci, t_ci
+from pearl_sim.workers import fork_pool
 
 __all__ = ["Cell", "StudyEpisode", "cells", "run_cells", "per_policy", "paired", "acceptance", "write_csv",
            "plot_study", "BASELINE", "PAIRED_METRICS"]
@@ -157,8 +157,7 @@ def run_cells(domain, agents: Dict[str, object], cases: Sequence[StudyCase], gri
                 out.append(_run_one(job))
                 bar.update()
         else:
-            ctx = multiprocessing.get_context("fork")
-            with ctx.Pool(processes=int(jobs)) as pool:
+            with fork_pool(int(jobs)) as pool:
                 for episode in pool.imap(_run_one, work, chunksize=max(1, len(work) // (jobs * 16))):
                     out.append(episode)
                     bar.update()
