@@ -296,26 +296,15 @@ def test_a_writer_killed_between_unlinking_and_renaming_leaves_the_next_journal_
     assert j.load().state is None
 
 
-@pytest.mark.parametrize("sync", ["none", "background"])
-def test_a_writer_killed_at_any_moment_leaves_a_journal_that_loads(tmp_path, sync):
-    """SIGKILL a process that journals as fast as it can, 12 times at spread moments: every time the
-    journal loads whole, at a step at or after the one it had reported as written."""
+def _kill_a_writer_repeatedly(path: Path, writer: str, rounds: int, kind: str = "belief_tracker"):
+    """Run ``writer`` (Python that journals to ``sys.argv[1]`` as fast as it can and prints a count now
+    and then) and SIGKILL it ``rounds`` times at spread moments (after 1-4 printed counts, then 0-12 ms);
+    yield each time the count it had printed last and what :meth:`Journal.load` then finds."""
     import signal
     import subprocess
     import sys
 
-    writer = (
-        "import sys\n"
-        "from pearl_pomdp.journal import Journal\n"
-        f"j = Journal(sys.argv[1], 'belief_tracker', 'd', 'sha256:0', sync={sync!r})\n"
-        "step = 0\n"
-        "while True:\n"
-        "    j.write({'step': step, 'pad': 'x' * (step % 9000)})\n"
-        "    if step % 50 == 0:\n"
-        "        print(step, flush=True)\n"
-        "    step += 1\n")
-    path = tmp_path / "killed.json"
-    for round_ in range(12):
+    for round_ in range(rounds):
         proc = subprocess.Popen([sys.executable, "-c", writer, str(path)], stdout=subprocess.PIPE, text=True,
                                 cwd=REPO)
         try:
@@ -326,10 +315,28 @@ def test_a_writer_killed_at_any_moment_leaves_a_journal_that_loads(tmp_path, syn
         finally:
             proc.send_signal(signal.SIGKILL)
             proc.wait(10)
-        found = Journal(path, "belief_tracker", "d", "sha256:0").load()
+        found = Journal(path, kind, "d", "sha256:0").load()
         assert found.state is not None, found.reason
-        assert found.state["step"] >= reported and found.state["pad"] == "x" * (found.state["step"] % 9000)
-        Journal(path, "belief_tracker", "d", "sha256:0").remove()
+        yield reported, found.state
+        Journal(path, kind, "d", "sha256:0").remove()
+
+
+@pytest.mark.parametrize("sync", ["none", "background"])
+def test_a_writer_killed_at_any_moment_leaves_a_journal_that_loads(tmp_path, sync):
+    """SIGKILL a process that journals as fast as it can, 12 times at spread moments: every time the
+    journal loads whole, at a step at or after the one it had reported as written."""
+    writer = (
+        "import sys\n"
+        "from pearl_pomdp.journal import Journal\n"
+        f"j = Journal(sys.argv[1], 'belief_tracker', 'd', 'sha256:0', sync={sync!r})\n"
+        "step = 0\n"
+        "while True:\n"
+        "    j.write({'step': step, 'pad': 'x' * (step % 9000)})\n"
+        "    if step % 50 == 0:\n"
+        "        print(step, flush=True)\n"
+        "    step += 1\n")
+    for reported, state in _kill_a_writer_repeatedly(tmp_path / "killed.json", writer, 12):
+        assert state["step"] >= reported and state["pad"] == "x" * (state["step"] % 9000)
 
 
 @pytest.mark.parametrize("sync", ["background", "fsync", "none"])
@@ -416,10 +423,6 @@ def test_a_writer_killed_at_any_moment_between_whole_writes_and_updates_loads_on
     (8 rounds; the plain writer's test above has 12):
     every time, the loaded small fields belong to the loaded array's write (never an update of
     another), at a write at or after the one reported."""
-    import signal
-    import subprocess
-    import sys
-
     writer = (
         "import sys\n"
         "import numpy as np\n"
@@ -433,24 +436,9 @@ def test_a_writer_killed_at_any_moment_between_whole_writes_and_updates_loads_on
         "    if step % 30 == 0:\n"
         "        print(step, flush=True)\n"
         "    step += 1\n")
-    path = tmp_path / "killed.json"
-    for round_ in range(8):
-        proc = subprocess.Popen([sys.executable, "-c", writer, str(path)], stdout=subprocess.PIPE, text=True,
-                                cwd=REPO)
-        try:
-            assert proc.stdout is not None
-            for _ in range(1 + round_ % 4):
-                reported = int(proc.stdout.readline())
-            time.sleep(0.003 * (round_ % 5))
-        finally:
-            proc.send_signal(signal.SIGKILL)
-            proc.wait(10)
-        found = Journal(path, "belief_tracker", "d", "sha256:0").load()
-        assert found.state is not None, found.reason
-        state = found.state
+    for reported, state in _kill_a_writer_repeatedly(tmp_path / "killed.json", writer, 8):
         assert state["step"] >= reported and state["of"] == state["step"] - state["step"] % 3
         assert np.all(decode_array(state["belief"]) == state["of"])
-        Journal(path, "belief_tracker", "d", "sha256:0").remove()
 
 
 def test_growing_lists_are_appended_to_a_log_and_load_whole(tmp_path):
@@ -515,10 +503,6 @@ def test_a_journal_whose_log_lacks_a_line_it_counts_is_refused_and_an_uncounted_
 def test_a_writer_killed_at_any_moment_while_logging_loads_whole_lists(tmp_path, sync):
     """SIGKILL a process that appends to a growing list and journals after every item: every time the
     list loads whole (0..n-1, nothing missing or doubled) and agrees with the journal's own count."""
-    import signal
-    import subprocess
-    import sys
-
     writer = (
         "import sys\n"
         "from pearl_pomdp.journal import Journal\n"
@@ -529,19 +513,5 @@ def test_a_writer_killed_at_any_moment_while_logging_loads_whole_lists(tmp_path,
         "    j.write({'n': len(calls)}, growing={'calls': calls})\n"
         "    if len(calls) % 50 == 0:\n"
         "        print(len(calls), flush=True)\n")
-    path = tmp_path / "killed.json"
-    for round_ in range(8):
-        proc = subprocess.Popen([sys.executable, "-c", writer, str(path)], stdout=subprocess.PIPE, text=True,
-                                cwd=REPO)
-        try:
-            assert proc.stdout is not None
-            for _ in range(1 + round_ % 4):
-                reported = int(proc.stdout.readline())
-            time.sleep(0.003 * (round_ % 5))
-        finally:
-            proc.send_signal(signal.SIGKILL)
-            proc.wait(10)
-        found = Journal(path, "pearl_sim_world", "d", "sha256:0").load()
-        assert found.state is not None, found.reason
-        assert found.state["n"] >= reported and found.state["calls"] == list(range(found.state["n"]))
-        Journal(path, "pearl_sim_world", "d", "sha256:0").remove()
+    for reported, state in _kill_a_writer_repeatedly(tmp_path / "killed.json", writer, 8, "pearl_sim_world"):
+        assert state["n"] >= reported and state["calls"] == list(range(state["n"]))
