@@ -151,7 +151,7 @@ def run_world_experiment(args: argparse.Namespace, files: "SimWorld", world: Wor
             from pearl_sim.workers import fork_pool
 
             with fork_pool(args.jobs) as pool:
-                episodes: List[Any] = list(pool.imap(_one, items, chunksize=world.chunksize))
+                episodes: List[Any] = list(pool.map(_one, items, chunksize=world.chunksize))
         else:
             from tqdm import tqdm
 

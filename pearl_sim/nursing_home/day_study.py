@@ -174,9 +174,9 @@ def plan_channel_twins(domain_path, hierarchy_path, channel_path, kind: str, lev
         from pearl_sim.workers import fork_pool
 
         with fork_pool(min(jobs, len(tasks))) as pool:
-            pending = pool.map_async(_plan_twin, tasks, chunksize=1)
+            pending = pool.map(_plan_twin, tasks)      # submitted now: planned while `meanwhile` runs
             extra = meanwhile() if meanwhile is not None else None
-            seconds = pending.get()
+            seconds = list(pending)
     took = dict(zip([t[2] for t in tasks], seconds))
     by_level: Dict[float, Dict[str, Any]] = {}
     for record in records:
@@ -300,7 +300,7 @@ def run_days(domain, agents, cases: Sequence[DayCase], noise_levels: Sequence[fl
     from pearl_sim.workers import fork_pool
 
     with fork_pool(jobs, initializer=_init_worker, initargs=(domain, agents, by_level)) as pool:
-        return _progress(pool.imap(_run_job, work, chunksize=1), len(work), progress, each)
+        return _progress(pool.map(_run_job, work), len(work), progress, each)
 
 
 def _progress(iterator, total: int, show: bool, each=None) -> List[Dict[str, Any]]:

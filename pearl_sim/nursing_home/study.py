@@ -158,7 +158,7 @@ def run_cells(domain, agents: Dict[str, object], cases: Sequence[StudyCase], gri
                 bar.update()
         else:
             with fork_pool(int(jobs)) as pool:
-                for episode in pool.imap(_run_one, work, chunksize=max(1, len(work) // (jobs * 16))):
+                for episode in pool.map(_run_one, work, chunksize=max(1, len(work) // (jobs * 16))):
                     out.append(episode)
                     bar.update()
         bar.close()
