@@ -352,7 +352,7 @@ def test_pearl_beliefs_cross_dds_by_their_support_bit_for_bit_and_bad_ones_are_r
 
 def test_the_tracker_publishes_its_step_rules_and_places_latched_for_a_late_recorder(ros_context, pearl_policy):
     """A recorder that joins after activation still gets the tracker's step rules and places on
-    ``/belief_tracker/step_settings`` (TRANSIENT_LOCAL): what a replay of its bag needs to close the
+    ``/belief_tracker/settings`` (TRANSIENT_LOCAL): what a replay of its bag needs to close the
     robot's steps as it did (pearl_pomdp.nodes.bag_replay.recorded_tracker_parameters)."""
     from pearl_pomdp.hierarchy import load_hierarchical_policy
     from pearl_pomdp.model.domain_yaml import load_domain
@@ -369,9 +369,9 @@ def test_the_tracker_publishes_its_step_rules_and_places_latched_for_a_late_reco
         probe = _probe(g)
         assert _steps(g, probe, 1)                      # active: b0 answered
         late = Probe(g.add_node(rclpy.create_node("late_recorder", context=g.context)))
-        late.listen("/belief_tracker/step_settings", cv.SettingsMsg, LATCHED_QOS)
-        assert g.spin_until(lambda: late.received["/belief_tracker/step_settings"], 10.0)
-        (msg,) = late.received["/belief_tracker/step_settings"]
+        late.listen("/belief_tracker/settings", cv.SettingsMsg, LATCHED_QOS)
+        assert g.spin_until(lambda: late.received["/belief_tracker/settings"], 10.0)
+        (msg,) = late.received["/belief_tracker/settings"]
         settings = cv.msg_to_settings(msg)
         assert msg.node == "/belief_tracker" and settings["step_timeout"] == 7.5
         assert {k: settings[k] for k in places} == places

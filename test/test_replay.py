@@ -162,10 +162,12 @@ def test_replay_feeds_recorded_drive_progress_to_the_tracker(tmp_path):
     assert not near.match and near.first_mismatch == 2 and near.expected_actions[2] == "RingDoorBell"
 
 
-def _with_step_settings(src: Path, dst: Path, published: bool) -> Path:
-    """``src`` (absolute custom_data paths) without ``pearl.tracker_params``, as ``pearl record`` beside a
-    launched graph writes it; with ``published``, the tracker's latched ``/belief_tracker/step_settings``
-    (those same values) before the first message, as such a recorder gets it."""
+def _as_pearl_record_writes_it(src: Path, dst: Path, published: bool, keep_paths: bool = True) -> Path:
+    """``src`` without ``pearl.tracker_params`` (and, unless ``keep_paths``, without ``pearl.domain`` and
+    ``pearl.policy``), as ``pearl record`` beside a launched graph writes it; with ``published``, the
+    nodes' latched settings before the first message, as such a recorder gets them: the tracker's
+    ``/belief_tracker/settings`` (the bag's tracker parameters) and the policy's
+    ``/hierarchical_policy/settings`` (the domain and policy as absolute paths, autonomy full)."""
     from rclpy.serialization import serialize_message
 
     from pearl_pomdp.nodes import conversions as cv
@@ -174,31 +176,42 @@ def _with_step_settings(src: Path, dst: Path, published: bool) -> Path:
     data = dict((reader.metadata or {}).get("custom_data") or {})
     for key in ("pearl.domain", "pearl.policy"):
         data[key] = str((src / data[key]).resolve())
-    settings = json.loads(data.pop("pearl.tracker_params"))
+    tracker = json.loads(data.pop("pearl.tracker_params"))
+    policy = {"domain": data["pearl.domain"], "policy": data["pearl.policy"], "autonomy": "full",
+              "confirm_categories": [""]}
+    if not keep_paths:
+        del data["pearl.domain"], data["pearl.policy"]
     with BagWriter(dst, custom_data=data) as out:
         for t in reader.topics.values():
             _add_topic_as_recorded(out, t)
         if published:
-            out.add_topic("/belief_tracker/step_settings", "rcl_interfaces/msg/ParameterEvent")
             first = reader.messages[0].log_time
-            out.write("/belief_tracker/step_settings",
-                      serialize_message(cv.settings_to_msg("/belief_tracker", settings, 0.0)), first)
+            for node, values in (("belief_tracker", tracker), ("hierarchical_policy", policy)):
+                out.add_topic(f"/{node}/settings", "rcl_interfaces/msg/ParameterEvent")
+                out.write(f"/{node}/settings", serialize_message(cv.settings_to_msg(f"/{node}", values, 0.0)), first)
         for m in reader.messages:
             out.write(m.topic, m.data, m.log_time, m.publish_time, m.sequence)
     return dst
 
 
-def test_a_bag_without_tracker_params_replays_with_the_step_settings_the_tracker_published(tmp_path):
-    """A bag `pearl record` made beside a launched graph has no pearl.tracker_params: the replay takes the
-    step rules and places the tracker published latched (its 8 s step timeout, the scenario's map);
-    without them it can only use the params file's 10 s, and the silent steps close at other times."""
+def test_a_bag_of_pearl_record_replays_with_the_settings_the_nodes_published(tmp_path):
+    """A bag `pearl record` made beside a launched graph has no pearl.tracker_params, domain or policy: the
+    replay takes the step rules and places the tracker published latched (its 8 s step timeout, the
+    scenario's map) and the domain and policy the policy node published. Without the tracker's, it can
+    only use the params file's 10 s and the silent steps close at other times; without either, it says
+    what to pass."""
     configure_test_process(tmp_path)
     src = REPO / "bags" / "figure4_guidance"
-    published = replay_bag(_with_step_settings(src, tmp_path / "published", True), domain_id=allocate_domain_id())
-    assert published.tracker_params_from == "belief_tracker/step_settings"
+    published = replay_bag(_as_pearl_record_writes_it(src, tmp_path / "published", True, keep_paths=False),
+                           domain_id=allocate_domain_id())
+    assert published.tracker_params_from == "belief_tracker/settings"
     assert published.match and published.beliefs_match and published.max_belief_difference == 0.0
-    bare = replay_bag(_with_step_settings(src, tmp_path / "bare", False), domain_id=allocate_domain_id())
+    bare = replay_bag(_as_pearl_record_writes_it(src, tmp_path / "bare", False), domain_id=allocate_domain_id())
     assert bare.tracker_params_from == "defaults" and not bare.match
+    with pytest.raises(PearlError, match=r"custom_data has no 'pearl.domain' and the policy node published none: "
+                                         r"pass --domain to replay it"):
+        replay_bag(_as_pearl_record_writes_it(src, tmp_path / "nothing", False, keep_paths=False),
+                   domain_id=allocate_domain_id())
 
 
 def test_altered_recording_is_a_mismatch(tmp_path, capsys):
@@ -235,7 +248,8 @@ def test_broken_bags_are_errors_naming_file_and_problem(tmp_path, capsys):
         replay_bag(retyped)
     # no replay configuration
     bare = _copy_bag(src, tmp_path / "bare", custom={})
-    with pytest.raises(PearlError, match=r"bare: custom_data has no 'pearl.domain': pass --domain"):
+    with pytest.raises(PearlError, match=r"bare: custom_data has no 'pearl.domain' and the policy node published "
+                                         r"none: pass --domain"):
         replay_bag(bare)
     shutil.rmtree(cut)
 

@@ -39,7 +39,9 @@ script): ``pearl.domain``, ``pearl.policy`` (paths relative to the bag directory
 the spec ``online[:TRIALS]``, planned again at every belief),
 ``pearl.tracker_params`` (JSON of belief-tracker parameter overrides; a bag without it — ``pearl record``
 beside a launched graph — uses the step rules and places the tracker published on
-``/belief_tracker/step_settings`` or declared on ``/parameter_events``: :func:`recorded_tracker_parameters`)
+``/belief_tracker/settings`` or declared on ``/parameter_events``: :func:`recorded_tracker_parameters`;
+``pearl.domain``, ``pearl.policy`` and ``pearl.policy_params`` likewise come from what the policy node
+published on ``/hierarchical_policy/settings`` when the bag lacks them: :func:`recorded_settings`)
 and, optionally,
 ``pearl.policy_params`` (JSON of policy-node overrides: the autonomy level the run started with)
 and ``pearl.params_file`` (the robot's node params file, relative to the bag directory; empty: the
@@ -109,7 +111,7 @@ class ReplayResult:
         operator_events: the kinds of the operator events the replay produced, in order.
         expected_operator_events: the kinds recorded on ``/pearl/operator/events``.
         tracker_params_from: where the tracker's step rules and places came from: ``custom_data``
-            (``pearl.tracker_params``), ``belief_tracker/step_settings`` or ``/parameter_events`` (what
+            (``pearl.tracker_params``), ``belief_tracker/settings`` or ``/parameter_events`` (what
             the recorded tracker published), or ``defaults`` (the params file's: the bag says nothing).
     """
 
@@ -224,12 +226,30 @@ def _check_topics(reader: BagReader, inputs: Optional[Dict[str, str]] = None) ->
                        f"replay needs {' or '.join(ACTION_TYPES)}")
 
 
+def recorded_settings(reader: BagReader, node: str) -> Optional[Dict[str, Any]]:
+    """What the node named ``node`` (in any namespace) published, latched, on its
+    :data:`~pearl_pomdp.nodes.common.SETTINGS_TOPIC` when it was activated — the first such message
+    of the bag — or ``None`` (a bag from before the nodes published it, or without the topic)."""
+    from rclpy.serialization import deserialize_message
+
+    from pearl_pomdp.nodes import conversions as cv
+    from pearl_pomdp.nodes.common import SETTINGS_TOPIC
+
+    suffix = f"/{node}/{SETTINGS_TOPIC.lstrip('~/')}"
+    for m in reader.messages:
+        if m.topic.endswith(suffix):
+            try:
+                return cv.msg_to_settings(deserialize_message(m.data, cv.SettingsMsg))
+            except Exception:   # a damaged message: as if there were none
+                return None
+    return None
+
+
 def recorded_tracker_parameters(reader: BagReader, node: str = "belief_tracker") -> Tuple[Dict[str, Any], str]:
     """The belief tracker's step rules and places as the bag recorded them, and where from:
 
-    * ``<node>/step_settings``: what the tracker published, latched, when it was activated
-      (:data:`~pearl_pomdp.nodes.belief_tracker.STEP_SETTINGS_TOPIC`; a recorder started late gets it
-      too) — the first such message;
+    * ``<node>/settings``: what the tracker published, latched, when it was activated
+      (:func:`recorded_settings`; a recorder started late gets it too);
     * else ``/parameter_events``: each setting's last value the node (in any namespace) declared or set
       before the bag's first belief or action (a recorder that matched only later misses them);
     * else nothing (``"defaults"``: the replay runs the params file's values).
@@ -240,21 +260,16 @@ def recorded_tracker_parameters(reader: BagReader, node: str = "belief_tracker")
     from rclpy.serialization import deserialize_message
 
     from pearl_pomdp.nodes import conversions as cv
-    from pearl_pomdp.nodes.belief_tracker import STEP_SETTINGS_TOPIC, is_replayed_setting
+    from pearl_pomdp.nodes.belief_tracker import is_replayed_setting
 
-    suffix = f"/{node}/{STEP_SETTINGS_TOPIC.lstrip('~/')}"
+    published = recorded_settings(reader, node)
+    if published is not None:
+        return {k: v for k, v in published.items() if is_replayed_setting(k)}, f"{node}/settings"
     events: Dict[str, Any] = {}
-    before_first_step = True
     for m in reader.messages:
-        if m.topic.endswith(suffix):
-            try:
-                values = cv.msg_to_settings(deserialize_message(m.data, cv.SettingsMsg))
-            except Exception:   # a damaged message is skipped; the next source stands
-                continue
-            return {k: v for k, v in values.items() if is_replayed_setting(k)}, suffix.lstrip("/")
         if m.topic in (ACTION_TOPIC, BELIEF_TOPIC):
-            before_first_step = False   # later changes (a live parameter set mid-run) are not the run's start
-        if not before_first_step or m.topic != PARAMETER_EVENTS_TOPIC:
+            break   # later changes (a live parameter set mid-run) are not the run's start
+        if m.topic != PARAMETER_EVENTS_TOPIC:
             continue
         try:
             event = deserialize_message(m.data, cv.SettingsMsg)
@@ -276,11 +291,15 @@ def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optio
 
     custom = (reader.metadata or {}).get("custom_data") or {}
     base = reader.path if reader.path.is_dir() else reader.path.parent
+    # The policy node's own record of its domain, policy and starting autonomy (absolute paths of the
+    # machine that recorded): what a bag of `pearl record` beside `pearl launch` replays with.
+    policy_node = recorded_settings(reader, "hierarchical_policy") or {}
 
     def path_of(key: str, given: Optional[str]) -> str:
-        value = given if given is not None else custom.get(key)
+        value = given if given is not None else custom.get(key) or policy_node.get(key.split(".")[1])
         if not value:
-            raise PearlError(f"{reader.path}: custom_data has no {key!r}: pass --{key.split('.')[1]} to replay it")
+            raise PearlError(f"{reader.path}: custom_data has no {key!r} and the policy node published none: "
+                             f"pass --{key.split('.')[1]} to replay it")
         if key == KEY_POLICY and online_trials(value, key) is not None:
             return value      # planned online at every belief (a spec, not a file)
         p = Path(value)
@@ -303,8 +322,10 @@ def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optio
         tracker, source = params_of(KEY_TRACKER), "custom_data"
     else:
         tracker, source = recorded_tracker_parameters(reader)
+    policy_params = (params_of(KEY_POLICY_PARAMS) if KEY_POLICY_PARAMS in custom
+                     else {k: policy_node[k] for k in ("autonomy", "confirm_categories") if k in policy_node})
     return {"domain": path_of(KEY_DOMAIN, domain), "policy": path_of(KEY_POLICY, policy),
-            "tracker_params": tracker, "tracker_params_from": source, "policy_params": params_of(KEY_POLICY_PARAMS),
+            "tracker_params": tracker, "tracker_params_from": source, "policy_params": policy_params,
             # Another robot's node params (its tracker rules); recorded empty: the nodes' code defaults
             # (a world without a params file); absent (an older bag): the shipped file.
             "params_file": (path_of(KEY_PARAMS_FILE, None) if custom.get(KEY_PARAMS_FILE)

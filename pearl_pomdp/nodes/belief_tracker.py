@@ -23,8 +23,8 @@ from pearl_pomdp.channels import RELIABILITIES, InputChannel
 from pearl_pomdp.errors import SpecError
 from pearl_pomdp.nodes import conversions as cv
 from pearl_pomdp.nodes.channel_messages import qos_profile, reader_for
-from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Param, load_domain_and_model,
-                                      resolve_path, run_node)
+from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, SETTINGS_TOPIC, NodeSetupError, Param,
+                                      load_domain_and_model, resolve_path, run_node)
 from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.journaling import JOURNAL_PARAMETERS, NodeJournal
 from pearl_pomdp.nodes.managed import AUTOSTART, ManagedPearlNode
@@ -45,12 +45,6 @@ def step_parameters() -> List[Param]:
                   spec.description + ("; changeable at run time" if spec.live else ""),
                   read_only=not spec.live, range=spec.range)
             for spec in StepSettings.parameters()]
-
-
-#: The tracker's settings that decide its beliefs, published latched at activation on this topic
-#: (relative: ``/belief_tracker/step_settings`` for the launch files' node) so that a bag recorded
-#: beside the graph replays with them (:func:`pearl_pomdp.nodes.bag_replay.replay_config`).
-STEP_SETTINGS_TOPIC = "~/step_settings"
 
 
 def is_replayed_setting(name: str) -> bool:
@@ -214,7 +208,7 @@ class BeliefTrackerNode(ManagedPearlNode):
         self.journal.resume(self._resume)
 
         self.belief_pub = self.lifecycle_publisher(cv.BeliefMsg, p["belief_topic"], LATCHED_QOS)
-        self.settings_pub = self.lifecycle_publisher(cv.SettingsMsg, STEP_SETTINGS_TOPIC, LATCHED_QOS)
+        self.settings_pub = self.lifecycle_publisher(cv.SettingsMsg, SETTINGS_TOPIC, LATCHED_QOS)
         for reader, topic, qos in inputs:
             key = reader.channel.name
             callback = self._on_speech(key) if reader.channel.kind == "speech" else self._input_callback(key)
@@ -281,7 +275,8 @@ class BeliefTrackerNode(ManagedPearlNode):
     def activate_node(self) -> None:
         """Publish the current belief (b0 at first, or the journal's): the policy answers it (once:
         it knows the run and step it answered) and the loop runs; a resumed step's deadline is armed.
-        The step rules and places go out first, latched (:data:`STEP_SETTINGS_TOPIC`), for a recorder."""
+        The step rules and places go out first, latched (:data:`~pearl_pomdp.nodes.common.SETTINGS_TOPIC`),
+        for a recorder."""
         settings = {name: value for name, value in self.params.items() if is_replayed_setting(name)}
         self.settings_pub.publish(cv.settings_to_msg(self.get_fully_qualified_name(), settings, self.now_s()))
         self._publish_belief()

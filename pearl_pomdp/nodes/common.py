@@ -50,6 +50,11 @@ LATCHED_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=R
 #: (the executor must not re-say an old action when it restarts).
 EVENT_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
+#: What a replay of a recorded bag needs from a node (the tracker's step rules and places; the
+#: policy's domain, policy and starting autonomy), published latched when the node is activated on
+#: this topic, relative to the node (``/belief_tracker/settings``): a recorder started later gets it too
+#: (:func:`pearl_pomdp.nodes.bag_replay.replay_config`).
+SETTINGS_TOPIC = "~/settings"
 #: Sensor inputs: reliable, volatile, keep-last 20 (a burst of inputs is queued, not lost).
 INPUT_QOS = QoSProfile(depth=20, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)

@@ -97,7 +97,7 @@ __all__ = [
 
 #: Message classes used by the nodes (import them from here, not from the message packages).
 TextMsg = String
-#: A node's settings as one latched message (the tracker's ``~/step_settings``): rcl_interfaces'
+#: A node's settings as one latched message (``~/settings``: nodes.common.SETTINGS_TOPIC): rcl_interfaces'
 #: parameter event, its ``new_parameters`` the values.
 SettingsMsg = ParameterEvent
 PoseMsg = PoseStamped

@@ -24,7 +24,7 @@ from rclpy.parameter import Parameter
 from pearl_pomdp.errors import BeliefError, PolicyError
 from pearl_pomdp.online.decider import DEFAULT_TIME_GUARD
 from pearl_pomdp.nodes import conversions as cv
-from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, NodeSetupError, Param,
+from pearl_pomdp.nodes.common import (EVENT_QOS, LATCHED_QOS, SETTINGS_TOPIC, NodeSetupError, Param,
                                       load_domain_and_model, resolve_path, run_node)
 from pearl_pomdp.nodes.defaults import FileDefaults
 from pearl_pomdp.nodes.journaling import JOURNAL_PARAMETERS, NodeJournal
@@ -234,6 +234,7 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self.journal = NodeJournal(self, "hierarchical_policy", p, model,
                                    domain.source if domain is not None else p["domain"])
         self.journal.resume(self._resume)
+        self.settings_pub = self.lifecycle_publisher(cv.SettingsMsg, SETTINGS_TOPIC, LATCHED_QOS)
         self.action_pub = self.lifecycle_publisher(cv.ActionMsg, p["action_topic"], LATCHED_QOS)
         self.decision_pub = self.lifecycle_publisher(cv.DecisionMsg, p["decision_topic"], EVENT_QOS)
         self.proposal_pub = self.lifecycle_publisher(cv.OperatorProposalMsg, p["proposal_topic"], LATCHED_QOS)
@@ -272,9 +273,33 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         self._operator_srvs = []
         self._confirm_timer = None
 
+    def replay_settings(self) -> dict:
+        """What a replay of a recorded bag needs from this node: the domain and the policy it runs (as
+        files it resolved, or the ``online`` spec; the policy ``""`` when planned from the hierarchy at
+        start-up, which a replay cannot redo) and the operator settings it starts with."""
+        p = self.params
+
+        def resolved(name: str, kind: str) -> str:
+            value = str(p[name]).strip()
+            try:
+                return str(resolve_path(value, name, kind=kind)) if value else ""
+            except NodeSetupError:
+                return value
+        from pearl_pomdp.online.decider import online_trials
+
+        policy = str(p["policy"]).strip()
+        return {"domain": resolved("domain", "domain file"),
+                "policy": policy if not policy or online_trials(policy, "policy") is not None
+                else resolved("policy", "policy file or directory"),
+                "autonomy": self.gate.autonomy if self.gate is not None else str(p["autonomy"]),
+                "confirm_categories": list(p["confirm_categories"]) or [""]}
+
     def activate_node(self) -> None:
-        """Answer the latest belief that came while inactive (a restarted node gets the tracker's
-        latched belief between configure and activate): a step nobody answered would stall."""
+        """Publish :meth:`replay_settings` (latched, for a recorder), then answer the latest belief
+        that came while inactive (a restarted node gets the tracker's latched belief between
+        configure and activate): a step nobody answered would stall."""
+        self.settings_pub.publish(cv.settings_to_msg(self.get_fully_qualified_name(), self.replay_settings(),
+                                                     self.now_s()))
         held, self._held_belief = self._held_belief, None
         if held is not None:
             self._on_belief(held)
