@@ -4,8 +4,11 @@ simulated time) and compare the actions they publish with the /pearl/action reco
 The bag's recorded inputs (/pearl/speech, /pearl/touchscreen, /pearl/laser, /pearl/reminder)
 and /clock are published in file order, as the recorded bytes, into the real nodes; each
 message is fed once the graph has reacted to the previous one, so the result does not
-depend on the machine's speed. The domain and planned policy come from the bag's
-metadata.yaml custom_data (pearl.domain, pearl.policy), or from --domain / --policy.
+depend on the machine's speed. The domain and planned policy come from --domain / --policy,
+else the bag's metadata.yaml custom_data (pearl.domain, pearl.policy), else what the policy node
+published on /hierarchical_policy/settings; the tracker's step rules likewise from
+pearl.tracker_params or /belief_tracker/settings (a plain `pearl record` of a launched graph
+replays as it ran).
 
 Output: text, or with --json one object with "actions" (list), "expected_actions" (as
 recorded), "match" (bool), "messages", "messages_per_second" (replay loop only). Exit code
