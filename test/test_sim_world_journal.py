@@ -72,6 +72,11 @@ def test_a_restarted_simulator_resumes_the_world_it_journaled(ros_context, tmp_p
         assert not second.actions
         second._on_action(action("RemindPhysioAppt", 13))
         assert [a for _, a in second.actions] == ["RemindPhysioAppt"]
+        # Only the first action heard can be the latched one: a later action with the stamp of the last
+        # one carried out (decided while the clock stood still) is new, and is carried out.
+        second.last_taken_stamp = [13, 0]
+        second._on_action(action("TellTime", 13))
+        assert [a for _, a in second.actions] == ["RemindPhysioAppt", "TellTime"]
     finally:
         second.destroy_node()
 

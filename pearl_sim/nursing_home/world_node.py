@@ -260,10 +260,14 @@ def _make_node_class():
 
         # --------------------------------------------------------------- inputs
         def _on_action(self, msg) -> None:
-            self.action_heard = True
+            first, self.action_heard = not self.action_heard, True
             stamp = [int(msg.stamp.sec), int(msg.stamp.nanosec)]
-            if self.resumed and stamp == self.last_taken_stamp:
-                return   # the latched action this world carried out before it was restarted
+            if self.resumed and first and stamp == self.last_taken_stamp:
+                # The latched action this world carried out before it was restarted: only the first
+                # action a resumed node hears can be that one. A later action may carry the same stamp
+                # (decided while the clock stood still) and is new; dropping it stopped a resumed day
+                # 960 actions later, waiting for an answer it had thrown away.
+                return
             self.actions.append((stamp, msg.name.strip()))
 
         def _on_belief(self, msg) -> None:
