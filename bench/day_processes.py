@@ -192,7 +192,7 @@ def main() -> int:
     hours = int(np.ceil(args.until / HOUR_S))
     # A decision stamped at the day's very end (the answer to its last step) counts in the last hour.
     # A decision names its belief's step; the two are paired after the day. A step number seen twice (a
-    # respawned tracker's new run; nothing is killed here) keeps the later belief's support.
+    # respawned tracker's new run; this bench kills at most the simulator) keeps the later belief's support.
     supports: Dict[int, int] = {}
     answered: List[tuple] = []          # (hour, belief_step, latency_s)
 

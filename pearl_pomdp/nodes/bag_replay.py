@@ -226,30 +226,35 @@ def _check_topics(reader: BagReader, inputs: Optional[Dict[str, str]] = None) ->
                        f"replay needs {' or '.join(ACTION_TYPES)}")
 
 
-def recorded_settings(reader: BagReader, node: str) -> Optional[Dict[str, Any]]:
-    """What the node named ``node`` (in any namespace) published, latched, on its
-    :data:`~pearl_pomdp.nodes.common.SETTINGS_TOPIC` when it was activated — the first such message
-    of the bag — or ``None`` (a bag from before the nodes published it, or without the topic)."""
+def recorded_settings(reader: BagReader) -> Dict[str, Dict[str, Any]]:
+    """Node name (its namespace dropped) → what it published, latched, on its
+    :data:`~pearl_pomdp.nodes.common.SETTINGS_TOPIC` when it was activated: the first readable such
+    message of the bag per node, in one pass over it. A bag from before the nodes published them has none."""
     from rclpy.serialization import deserialize_message
 
     from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.common import SETTINGS_TOPIC
 
-    suffix = f"/{node}/{SETTINGS_TOPIC.lstrip('~/')}"
+    suffix = "/" + SETTINGS_TOPIC.lstrip("~/")
+    out: Dict[str, Dict[str, Any]] = {}
     for m in reader.messages:
         if m.topic.endswith(suffix):
-            try:
-                return cv.msg_to_settings(deserialize_message(m.data, cv.SettingsMsg))
-            except Exception:   # a damaged message: as if there were none
-                return None
-    return None
+            node = m.topic[:-len(suffix)].rsplit("/", 1)[-1]
+            if node not in out:
+                try:
+                    out[node] = cv.msg_to_settings(deserialize_message(m.data, cv.SettingsMsg))
+                except Exception:   # a damaged message: as if there were none
+                    continue
+    return out
 
 
-def recorded_tracker_parameters(reader: BagReader, node: str = "belief_tracker") -> Tuple[Dict[str, Any], str]:
+def recorded_tracker_parameters(reader: BagReader, published: Optional[Dict[str, Dict[str, Any]]] = None,
+                                node: str = "belief_tracker") -> Tuple[Dict[str, Any], str]:
     """The belief tracker's step rules and places as the bag recorded them, and where from:
 
     * ``<node>/settings``: what the tracker published, latched, when it was activated
-      (:func:`recorded_settings`; a recorder started late gets it too);
+      (``published``, :func:`recorded_settings` of the bag when not given; a recorder started late gets
+      it too);
     * else ``/parameter_events``: each setting's last value the node (in any namespace) declared or set
       before the bag's first belief or action (a recorder that matched only later misses them);
     * else nothing (``"defaults"``: the replay runs the params file's values).
@@ -262,9 +267,9 @@ def recorded_tracker_parameters(reader: BagReader, node: str = "belief_tracker")
     from pearl_pomdp.nodes import conversions as cv
     from pearl_pomdp.nodes.belief_tracker import is_replayed_setting
 
-    published = recorded_settings(reader, node)
-    if published is not None:
-        return {k: v for k, v in published.items() if is_replayed_setting(k)}, f"{node}/settings"
+    own = (recorded_settings(reader) if published is None else published).get(node)
+    if own is not None:
+        return {k: v for k, v in own.items() if is_replayed_setting(k)}, f"{node}/settings"
     events: Dict[str, Any] = {}
     for m in reader.messages:
         if m.topic in (ACTION_TOPIC, BELIEF_TOPIC):
@@ -293,7 +298,8 @@ def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optio
     base = reader.path if reader.path.is_dir() else reader.path.parent
     # The policy node's own record of its domain, policy and starting autonomy (absolute paths of the
     # machine that recorded): what a bag of `pearl record` beside `pearl launch` replays with.
-    policy_node = recorded_settings(reader, "hierarchical_policy") or {}
+    published = recorded_settings(reader)
+    policy_node = published.get("hierarchical_policy", {})
 
     def path_of(key: str, given: Optional[str]) -> str:
         value = given if given is not None else custom.get(key) or policy_node.get(key.split(".")[1])
@@ -321,7 +327,7 @@ def replay_config(reader: BagReader, domain: Optional[str] = None, policy: Optio
     if KEY_TRACKER in custom:
         tracker, source = params_of(KEY_TRACKER), "custom_data"
     else:
-        tracker, source = recorded_tracker_parameters(reader)
+        tracker, source = recorded_tracker_parameters(reader, published)
     policy_params = (params_of(KEY_POLICY_PARAMS) if KEY_POLICY_PARAMS in custom
                      else {k: policy_node[k] for k in ("autonomy", "confirm_categories") if k in policy_node})
     return {"domain": path_of(KEY_DOMAIN, domain), "policy": path_of(KEY_POLICY, policy),

@@ -38,6 +38,21 @@ OPERATOR_LIVE = ("autonomy", "confirm_categories", "confirm_timeout")
 __all__ = ["HierarchicalPolicyNode", "load_decider", "main"]
 
 
+def resolve_policy(policy: str) -> str:
+    """The ``policy`` parameter as the node loads it: a file or directory looked up as every node
+    parameter is (:func:`~pearl_pomdp.nodes.common.resolve_path`), an ``online[:TRIALS]`` spec or ``""``
+    as given.
+
+    Raises:
+        NodeSetupError: no such file or directory. PolicyError: a malformed ``online`` spec.
+    """
+    from pearl_pomdp.online.decider import online_trials
+
+    if policy and online_trials(policy, "parameter policy") is None:
+        return str(resolve_path(policy, "policy", kind="policy file or directory"))
+    return policy
+
+
 def load_decider(model, domain, policy: str, hierarchy: str, logger=None, time_guard: Optional[float] = None):
     """The decider the node runs: :func:`pearl_pomdp.deciders.load_decider` (the one reader of a
     policy spec: a saved hierarchical policy directory, a flat ``.npz`` policy, ``online[:TRIALS]``,
@@ -49,13 +64,11 @@ def load_decider(model, domain, policy: str, hierarchy: str, logger=None, time_g
         NodeSetupError: nothing to load, a missing file, a malformed spec or time guard.
     """
     from pearl_pomdp.deciders import load_decider as load_spec
-    from pearl_pomdp.online.decider import online_trials
 
     hierarchy_path = None
     try:
-        if policy and online_trials(policy, "parameter policy") is None:
-            policy = str(resolve_path(policy, "policy", kind="policy file or directory"))
-        elif not policy:
+        policy = resolve_policy(policy)
+        if not policy:
             if not hierarchy:
                 raise NodeSetupError("parameters policy and hierarchy are both empty: give a planned policy "
                                      "(policy:=DIR from `pearl plan --out DIR`) or a hierarchy to plan at start-up")
@@ -278,19 +291,11 @@ class HierarchicalPolicyNode(ManagedPearlNode):
         files it resolved, or the ``online`` spec; the policy ``""`` when planned from the hierarchy at
         start-up, which a replay cannot redo) and the operator settings it starts with."""
         p = self.params
-
-        def resolved(name: str, kind: str) -> str:
-            value = str(p[name]).strip()
-            try:
-                return str(resolve_path(value, name, kind=kind)) if value else ""
-            except NodeSetupError:
-                return value
-        from pearl_pomdp.online.decider import online_trials
-
-        policy = str(p["policy"]).strip()
-        return {"domain": resolved("domain", "domain file"),
-                "policy": policy if not policy or online_trials(policy, "policy") is not None
-                else resolved("policy", "policy file or directory"),
+        try:   # configure loaded both from these, so they resolve; a preloaded graph's may not
+            domain, policy = str(resolve_path(p["domain"], "domain")), resolve_policy(p["policy"])
+        except (NodeSetupError, PolicyError):
+            domain, policy = str(p["domain"]), str(p["policy"])
+        return {"domain": domain, "policy": policy,
                 "autonomy": self.gate.autonomy if self.gate is not None else str(p["autonomy"]),
                 "confirm_categories": list(p["confirm_categories"]) or [""]}
 

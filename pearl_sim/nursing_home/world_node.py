@@ -317,10 +317,13 @@ def _make_node_class():
                     self.get_logger().info("the manager is up: starting the clock")
                 elif wall > self.start_timeout:
                     missing = self._waiting_for()
-                    self._finish((f"resumed, but {' and '.join(missing)} did not come" if self.resumed
-                                  else "no first action on /pearl/action came") + f" within {self.start_timeout:g} s"
-                                 if missing else "the manager's tracker did not subscribe to the simulated "
-                                                 f"inputs within {self.start_timeout:g} s")
+                    if not missing:
+                        what = "the manager's tracker did not subscribe to the simulated inputs"
+                    elif self.resumed:
+                        what = f"resumed, but {' and '.join(missing)} did not come"
+                    else:
+                        what = "no first action on /pearl/action came"
+                    self._finish(f"{what} within {self.start_timeout:g} s")
                 else:
                     self._publish_clock()   # time 0 (or the journal's) until the manager is up
                 return
